@@ -1,0 +1,40 @@
+# Two commands do everything on a fresh machine: `make demo` and `make test`.
+# Each creates .venv/ and installs what is missing (PyPI wheels, incl. ROS 2 Jazzy).
+SHELL := /bin/bash
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+IFACE_STAMP := $(VENV)/.interfaces
+IFACE_SRC := $(shell find msg_defs -type f 2>/dev/null) scripts/build_interfaces.sh
+
+.PHONY: all setup demo test bench lint clean
+
+all: setup
+
+setup: $(IFACE_STAMP)
+
+$(STAMP): requirements.txt setup.py
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q -r requirements.txt
+	$(PY) -m pip install -q --no-deps -e .
+	touch $@
+
+$(IFACE_STAMP): $(STAMP) $(IFACE_SRC)
+	bash scripts/build_interfaces.sh
+	touch $@
+
+demo: $(IFACE_STAMP)
+	$(VENV)/bin/grasp-safety demo --out demo_output
+
+test: $(IFACE_STAMP)
+	$(PY) -m pytest -q test
+
+bench: $(IFACE_STAMP)
+	$(PY) bench/run.py --json bench/results.json
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check grasp_safety_ros test bench
+
+clean:
+	rm -rf $(VENV) build install log

@@ -1,0 +1,35 @@
+"""ROS-free core of grasp_safety_ros (numpy + pinocchio only)."""
+
+from .exceptions import FrameNotFoundError, GraspSafetyError, InvalidInputError, RobotModelError
+from .ik import IKConfig, IKSolver
+from .inertia import ObjectInertia, solid_box, solid_cylinder, solid_sphere
+from .ranking import (
+    METRICS,
+    EvaluationConfig,
+    Grasp,
+    GraspEvaluation,
+    GraspSafetyEvaluator,
+    Ranking,
+)
+from .robot import RobotModel
+from .trajectory import ObjectTrajectory
+
+__all__ = [
+    "METRICS",
+    "EvaluationConfig",
+    "FrameNotFoundError",
+    "Grasp",
+    "GraspEvaluation",
+    "GraspSafetyError",
+    "GraspSafetyEvaluator",
+    "IKConfig",
+    "IKSolver",
+    "InvalidInputError",
+    "ObjectInertia",
+    "ObjectTrajectory",
+    "Ranking",
+    "RobotModel",
+    "solid_box",
+    "solid_cylinder",
+    "solid_sphere",
+]

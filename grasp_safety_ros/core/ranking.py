@@ -1,0 +1,254 @@
+"""Evaluate candidate grasps along an object trajectory and rank them, safest first."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from .effective_mass import (
+    augmented_model,
+    effective_mass_along,
+    translational_mobility_in_base,
+    worst_direction,
+)
+from .exceptions import InvalidInputError
+from .ik import IKConfig, IKSolver
+from .inertia import ObjectInertia
+from .robot import RobotModel
+from .trajectory import ObjectTrajectory
+
+METRICS = ("mean", "max", "integral")
+"""Aggregates of the per-sample effective mass: mean [kg], max [kg], integral [kg s]."""
+
+STATIONARY_TANGENT_M = 1e-9
+"""Below this |d p_tip / ds| [m] the tip does not translate and the worst direction is used."""
+
+
+@dataclass(frozen=True)
+class Grasp:
+    """A candidate grasp.
+
+    Attributes:
+        transform_tip_to_object: Pose of the tip frame in the object frame.
+        name: Optional label.
+    """
+
+    transform_tip_to_object: pin.SE3
+    name: str = ""
+
+
+@dataclass(frozen=True)
+class EvaluationConfig:
+    """Settings of grasp evaluation.
+
+    Attributes:
+        metric: Aggregate used as the score: ``mean`` (default), ``max`` or ``integral``.
+        ik: IK settings.
+    """
+
+    metric: str = "mean"
+    ik: IKConfig = field(default_factory=IKConfig)
+
+    def __post_init__(self) -> None:
+        check_metric(self.metric)
+
+
+def check_metric(metric: str, field_name: str = "metric") -> str:
+    """Return ``metric`` if it is one of METRICS, else raise InvalidInputError."""
+    if metric not in METRICS:
+        raise InvalidInputError(field_name, f"must be one of {', '.join(METRICS)}, got {metric!r}")
+    return metric
+
+
+@dataclass(frozen=True)
+class GraspEvaluation:
+    """Effective mass of one grasp along the trajectory.
+
+    Per-sample arrays have one row per sample when feasible, none when infeasible.
+
+    Attributes:
+        index: Position in the candidate list.
+        name: Label of the grasp.
+        feasible: Whether the tip trajectory can be followed.
+        reason: Why not, when infeasible; empty otherwise.
+        score: Aggregate of the effective mass (kg, or kg s for ``integral``); NaN if infeasible.
+        times_s: Sample times [s].
+        joint_positions: Chain joint positions [rad or m], chain order.
+        directions_in_base: Unit direction of tip motion, base axes.
+        effective_mass_kg: Effective mass along that direction [kg].
+        direction_is_worst_case: True where the tip does not translate and the direction of
+            largest effective mass was used instead.
+        tip_speed_m_s: Tip speed along the trajectory [m/s].
+        ik_iterations: Gauss-Newton iterations per sample.
+    """
+
+    index: int
+    name: str
+    feasible: bool
+    reason: str
+    score: float
+    times_s: np.ndarray
+    joint_positions: np.ndarray
+    directions_in_base: np.ndarray
+    effective_mass_kg: np.ndarray
+    direction_is_worst_case: np.ndarray
+    tip_speed_m_s: np.ndarray
+    ik_iterations: np.ndarray
+
+    @property
+    def peak_effective_mass_kg(self) -> float:
+        """Largest per-sample effective mass [kg]; NaN if infeasible."""
+        return float(self.effective_mass_kg.max()) if self.feasible else float("nan")
+
+    @property
+    def mean_effective_mass_kg(self) -> float:
+        """Mean per-sample effective mass [kg]; NaN if infeasible."""
+        return float(self.effective_mass_kg.mean()) if self.feasible else float("nan")
+
+
+@dataclass(frozen=True)
+class Ranking:
+    """Grasps ranked by score, safest (lowest) first.
+
+    Attributes:
+        joint_names: Chain joint names, the column order of ``joint_positions``.
+        metric: The aggregate used.
+        order: Indices of the feasible grasps, safest first (ties keep input order).
+        evaluations: One per candidate, in candidate order.
+    """
+
+    joint_names: tuple[str, ...]
+    metric: str
+    order: tuple[int, ...]
+    evaluations: tuple[GraspEvaluation, ...]
+
+
+def aggregate(effective_mass_kg: np.ndarray, times_s: np.ndarray, metric: str) -> float:
+    """Score of per-sample effective masses: mean [kg], max [kg] or trapezoid integral [kg s]."""
+    check_metric(metric)
+    if metric == "mean":
+        return float(np.mean(effective_mass_kg))
+    if metric == "max":
+        return float(np.max(effective_mass_kg))
+    return float(np.trapezoid(effective_mass_kg, times_s)) if len(times_s) > 1 else 0.0
+
+
+def order_by_score(evaluations: Sequence[GraspEvaluation]) -> tuple[int, ...]:
+    """Indices of the feasible evaluations sorted by score ascending; ties keep input order."""
+    feasible = [e for e in evaluations if e.feasible]
+    return tuple(e.index for e in sorted(feasible, key=lambda e: e.score))
+
+
+class GraspSafetyEvaluator:
+    """Computes the effective mass of robot + object along each grasp's tip trajectory."""
+
+    def __init__(self, robot: RobotModel, config: EvaluationConfig | None = None) -> None:
+        self.robot = robot
+        self.config = config or EvaluationConfig()
+        self.ik = IKSolver(robot, self.config.ik)
+
+    def seed_q(self, seed_positions: Sequence[float] | np.ndarray | None) -> np.ndarray:
+        """Pinocchio configuration of an IK seed given in chain joint order (or the default)."""
+        if seed_positions is None:
+            return self.robot.q_from_positions(self.robot.default_seed_positions())
+        return self.robot.q_from_positions(
+            self.robot.check_positions(seed_positions, "robot.seed")
+        )
+
+    def evaluate(
+        self,
+        grasp: Grasp,
+        object_inertia: ObjectInertia,
+        trajectory: ObjectTrajectory,
+        index: int = 0,
+        seed_positions: Sequence[float] | np.ndarray | None = None,
+        metric: str | None = None,
+    ) -> GraspEvaluation:
+        """Evaluate one grasp: IK along its tip trajectory, then effective mass per sample."""
+        metric = check_metric(metric or self.config.metric)
+        times = trajectory.times_s()
+        s_values, s_rate, _ = trajectory.path_parameter(times)
+        poses, tangents = trajectory.tip_path(grasp.transform_tip_to_object, s_values)
+        ik = self.ik.solve_trajectory(poses, times, s_values, self.seed_q(seed_positions))
+        if not ik.feasible:
+            return _infeasible(index, grasp.name, ik.reason, self.robot.num_joints)
+        model = augmented_model(self.robot, object_inertia, grasp.transform_tip_to_object)
+        data = model.createData()
+        count = len(times)
+        masses = np.empty(count)
+        directions = np.empty((count, 3))
+        worst = np.zeros(count, dtype=bool)
+        tangent_norms = np.linalg.norm(tangents, axis=1)
+        for i in range(count):
+            mobility = translational_mobility_in_base(self.robot, model, data, ik.q[i])
+            if tangent_norms[i] < STATIONARY_TANGENT_M:
+                directions[i], masses[i] = worst_direction(mobility)
+                worst[i] = True
+            else:
+                directions[i] = tangents[i] / tangent_norms[i]
+                masses[i] = effective_mass_along(mobility, directions[i])
+        positions = np.array([self.robot.positions_from_q(q) for q in ik.q])
+        return GraspEvaluation(
+            index=index,
+            name=grasp.name,
+            feasible=True,
+            reason="",
+            score=aggregate(masses, times, metric),
+            times_s=times,
+            joint_positions=positions,
+            directions_in_base=directions,
+            effective_mass_kg=masses,
+            direction_is_worst_case=worst,
+            tip_speed_m_s=tangent_norms * s_rate,
+            ik_iterations=ik.iterations,
+        )
+
+    def rank(
+        self,
+        grasps: Sequence[Grasp],
+        object_inertia: ObjectInertia,
+        trajectory: ObjectTrajectory,
+        seed_positions: Sequence[float] | np.ndarray | None = None,
+        metric: str | None = None,
+        progress: Callable[[int, int], None] | None = None,
+    ) -> Ranking:
+        """Evaluate every grasp and rank the feasible ones, safest first.
+
+        Args:
+            progress: Called as ``progress(done, total)`` after each grasp.
+        """
+        metric = check_metric(metric or self.config.metric)
+        self.seed_q(seed_positions)  # validate once, before any work
+        evaluations = []
+        for index, grasp in enumerate(grasps):
+            evaluations.append(
+                self.evaluate(grasp, object_inertia, trajectory, index, seed_positions, metric)
+            )
+            if progress is not None:
+                progress(index + 1, len(grasps))
+        return Ranking(
+            joint_names=self.robot.joint_names,
+            metric=metric,
+            order=order_by_score(evaluations),
+            evaluations=tuple(evaluations),
+        )
+
+
+def _infeasible(index: int, name: str, reason: str, num_joints: int) -> GraspEvaluation:
+    return GraspEvaluation(
+        index=index,
+        name=name,
+        feasible=False,
+        reason=reason,
+        score=float("nan"),
+        times_s=np.empty(0),
+        joint_positions=np.empty((0, num_joints)),
+        directions_in_base=np.empty((0, 3)),
+        effective_mass_kg=np.empty(0),
+        direction_is_worst_case=np.empty(0, dtype=bool),
+        tip_speed_m_s=np.empty(0),
+        ik_iterations=np.empty(0, dtype=int),
+    )
