@@ -46,7 +46,7 @@ def translational_mobility_in_base(
     pin.computeJointJacobians(model, data, q)
     jacobian_world = pin.getFrameJacobian(
         model, data, robot.tip_frame_id, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-    )
+    ).reshape(6, model.nv)  # eigenpy returns a 6x1 matrix as a vector
     jacobian_base = robot.transform_base_to_world.rotation.T @ jacobian_world[:3]
     return jacobian_base @ minv @ jacobian_base.T
 

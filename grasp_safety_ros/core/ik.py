@@ -114,9 +114,10 @@ class IKSolver:
                 return q, True, iteration
             if iteration == config.max_iterations:
                 break
-            jacobian = pin.Jlog6(error_transform.inverse()) @ pin.computeFrameJacobian(
+            frame_jacobian = pin.computeFrameJacobian(
                 model, data, q, frame_id, pin.ReferenceFrame.LOCAL
-            )
+            ).reshape(6, n)  # eigenpy returns a 6x1 matrix as a vector
+            jacobian = pin.Jlog6(error_transform.inverse()) @ frame_jacobian
             damping = 1e-12 + 1e-3 * float(error @ error)
             if n >= 6:
                 step = jacobian.T @ np.linalg.solve(

@@ -1,0 +1,133 @@
+"""Command line: ``grasp-safety rank SCENARIO.yaml``, ``grasp-safety demo``, ``grasp-safety reproduce``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from .core.exceptions import GraspSafetyError
+from .core.ranking import METRICS, EvaluationConfig, GraspSafetyEvaluator, Ranking
+from .paths import config_file
+from .report import ranking_table, ranking_to_dict
+from .scenario import Scenario, load_scenario
+
+EXIT_BAD_INPUT = 2
+DEMO_SCENARIO = "book_baxter.yaml"
+PROGRESS_MIN_SAMPLES = 2000
+"""Show a progress bar (on a terminal) when grasps x samples reaches this."""
+
+
+def _progress_printer(total_samples: int) -> Callable[[int, int], None] | None:
+    if total_samples < PROGRESS_MIN_SAMPLES or not sys.stderr.isatty():
+        return None
+    started = time.perf_counter()
+
+    def show(done: int, total: int) -> None:
+        width = 30
+        filled = int(width * done / total)
+        elapsed = time.perf_counter() - started
+        sys.stderr.write(
+            f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{total} grasps {elapsed:5.1f} s"
+        )
+        if done == total:
+            sys.stderr.write("\n")
+        sys.stderr.flush()
+
+    return show
+
+
+def rank_scenario(scenario: Scenario, metric: str | None = None) -> Ranking:
+    """Load the scenario's robot and rank its grasps."""
+    robot = scenario.robot.load(scenario.base_dir)
+    evaluator = GraspSafetyEvaluator(robot, EvaluationConfig(metric=metric or scenario.metric))
+    progress = _progress_printer(len(scenario.grasps) * scenario.trajectory.num_samples)
+    return evaluator.rank(
+        scenario.grasps,
+        scenario.object_inertia,
+        scenario.trajectory,
+        seed_positions=scenario.robot.seed,
+        progress=progress,
+    )
+
+
+def _write_outputs(ranking: Ranking, json_path: Path | None, plot_path: Path | None, title: str) -> None:
+    if json_path is not None:
+        json_path.parent.mkdir(parents=True, exist_ok=True)
+        json_path.write_text(json.dumps(ranking_to_dict(ranking), indent=1), encoding="utf-8")
+        print(f"wrote {json_path}")
+    if plot_path is not None:
+        from .plotting import plot_ranking
+
+        plot_ranking(ranking, plot_path, title)
+        print(f"wrote {plot_path}")
+
+
+def _command_rank(args: argparse.Namespace) -> int:
+    scenario = load_scenario(args.scenario)
+    ranking = rank_scenario(scenario, args.metric)
+    print(ranking_table(ranking))
+    _write_outputs(ranking, args.json, args.plot, Path(args.scenario).name)
+    return 0
+
+
+def _command_demo(args: argparse.Namespace) -> int:
+    path = config_file(DEMO_SCENARIO)
+    print(f"demo: the paper's book experiment on Baxter ({path})")
+    scenario = load_scenario(path)
+    ranking = rank_scenario(scenario)
+    print(ranking_table(ranking))
+    out = Path(args.out)
+    _write_outputs(ranking, out / "ranking.json", out / "ranking.png", "book on Baxter (demo)")
+    return 0
+
+
+def _command_reproduce(args: argparse.Namespace) -> int:
+    from .validation import format_summary, reproduce
+
+    results = reproduce(Path(args.out), quick=args.quick)
+    print(format_summary(results))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``grasp-safety``."""
+    parser = argparse.ArgumentParser(
+        prog="grasp-safety",
+        description="Rank grasps by the effective mass of robot + object along the "
+        "post-grasp trajectory (lower = safer impacts).",
+    )
+    commands = parser.add_subparsers(dest="command", required=True)
+    rank = commands.add_parser("rank", help="rank the grasps of a scenario file")
+    rank.add_argument("scenario", help="scenario YAML file")
+    rank.add_argument("--json", type=Path, help="write the full result as JSON")
+    rank.add_argument("--plot", type=Path, help="write the heatmap and curves as PNG")
+    rank.add_argument("--metric", choices=METRICS, help="override the scenario's metric")
+    rank.set_defaults(handler=_command_rank)
+    demo = commands.add_parser("demo", help="the paper's book experiment on the bundled Baxter")
+    demo.add_argument("--out", default="demo_output", help="output folder (default: %(default)s)")
+    demo.set_defaults(handler=_command_demo)
+    reproduce = commands.add_parser(
+        "reproduce", help="validate with simulated impacts in MuJoCo (the paper's experiments)"
+    )
+    reproduce.add_argument("--out", default="validation_output", help="output folder")
+    reproduce.add_argument("--quick", action="store_true", help="a reduced, fast version")
+    reproduce.set_defaults(handler=_command_reproduce)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point; returns the exit code (2 on bad input, with one line on stderr)."""
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.handler(args))
+    except GraspSafetyError as error:
+        print(f"grasp-safety: error: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+
+
+if __name__ == "__main__":
+    sys.exit(main())

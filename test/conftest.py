@@ -1,0 +1,107 @@
+"""Shared fixtures: small robots from inline URDF, so unit tests are hermetic."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from grasp_safety_ros.core import RobotModel
+
+
+def _inertial(mass: float, inertia: Sequence[float], com: Sequence[float]) -> str:
+    ixx, iyy, izz = inertia
+    x, y, z = com
+    return (
+        f'<inertial><origin xyz="{x} {y} {z}"/><mass value="{mass}"/>'
+        f'<inertia ixx="{ixx}" ixy="0" ixz="0" iyy="{iyy}" iyz="0" izz="{izz}"/></inertial>'
+    )
+
+
+def serial_arm_urdf(
+    axes: Sequence[str],
+    mass_scale: float = 1.0,
+    joint_type: str = "revolute",
+    seed: int = 0,
+) -> str:
+    """A serial arm with generic link offsets (about 0.3 m), joints about ``axes``.
+
+    Link masses and inertias are random (fixed seed) times ``mass_scale``; the last link
+    carries the ``tool`` frame 0.1 m beyond its joint.
+    """
+    rng = np.random.default_rng(seed)
+    vectors = {"x": "1 0 0", "y": "0 1 0", "z": "0 0 1"}
+    parts = ['<robot name="arm">', '<link name="base_link"/>']
+    parent = "base_link"
+    for k, axis in enumerate(axes):
+        link = f"link{k + 1}"
+        mass = float(rng.uniform(0.5, 2.0)) * mass_scale
+        inertia = rng.uniform(0.005, 0.02, 3)
+        inertia = [
+            min(inertia[0], inertia[1] + inertia[2]),
+            min(inertia[1], inertia[0] + inertia[2]),
+            min(inertia[2], inertia[0] + inertia[1]),
+        ]
+        com = rng.uniform(-0.05, 0.1, 3)
+        parts.append(
+            f'<link name="{link}">'
+            + _inertial(mass, [i * mass_scale for i in inertia], com)
+            + "</link>"
+        )
+        offset = rng.uniform([-0.1, -0.1, 0.15], [0.2, 0.1, 0.3]) if k else [0.0, 0.0, 0.1]
+        origin = " ".join(f"{x:.4f}" for x in offset)
+        parts.append(
+            f'<joint name="j{k + 1}" type="{joint_type}"><parent link="{parent}"/>'
+            f'<child link="{link}"/><origin xyz="{origin}" rpy="0 0 0"/>'
+            f'<axis xyz="{vectors[axis]}"/>'
+            '<limit lower="-3.0" upper="3.0" effort="100" velocity="10"/></joint>'
+        )
+        parent = link
+    parts.append('<link name="tool"/>')
+    parts.append(
+        f'<joint name="tool_joint" type="fixed"><parent link="{parent}"/><child link="tool"/>'
+        '<origin xyz="0 0 0.1" rpy="0.3 -0.2 0.1"/></joint>'
+    )
+    parts.append("</robot>")
+    return "\n".join(parts)
+
+
+ARM6_AXES = ("z", "y", "y", "x", "y", "z")
+ARM7_AXES = ("z", "y", "z", "y", "z", "y", "x")
+
+
+@pytest.fixture(scope="session")
+def arm6() -> RobotModel:
+    """A 6-DOF arm."""
+    return RobotModel.from_urdf(serial_arm_urdf(ARM6_AXES), "base_link", "tool")
+
+
+@pytest.fixture(scope="session")
+def arm7() -> RobotModel:
+    """A 7-DOF (redundant) arm."""
+    return RobotModel.from_urdf(serial_arm_urdf(ARM7_AXES, seed=1), "base_link", "tool")
+
+
+@pytest.fixture(scope="session")
+def baxter() -> RobotModel:
+    """Baxter's right arm from example-robot-data."""
+    return RobotModel.from_urdf("example-robot-data:baxter", "base", "right_gripper")
+
+
+BAXTER_SEED = (0.0, -0.55, 0.0, 0.75, 0.0, 1.26, 0.0)
+
+
+def random_positions(robot: RobotModel, rng: np.random.Generator) -> np.ndarray:
+    """Joint positions drawn uniformly inside the limits (unlimited joints: [-pi, pi])."""
+    lower = np.where(np.isfinite(robot.lower_limits), robot.lower_limits, -np.pi)
+    upper = np.where(np.isfinite(robot.upper_limits), robot.upper_limits, np.pi)
+    return rng.uniform(lower, upper)
+
+
+def random_rotation(rng: np.random.Generator) -> np.ndarray:
+    """A uniformly random rotation matrix."""
+    quat = rng.normal(size=4)
+    quat /= np.linalg.norm(quat)
+    return pin.Quaternion(*quat).toRotationMatrix()

@@ -1,0 +1,115 @@
+"""Command line: the demo runs; every class of bad input gives exit 2 and names the field."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from grasp_safety_ros.cli import main
+from grasp_safety_ros.paths import config_file
+
+GOOD = yaml.safe_load(config_file("book_baxter.yaml").read_text())
+
+
+def test_demo_runs_and_writes_outputs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["demo", "--out", str(tmp_path)]) == 0
+    table = capsys.readouterr().out
+    assert "spine_0.0" in table and "rank" in table
+    result = json.loads((tmp_path / "ranking.json").read_text())
+    assert sorted(result["ranking"]) == [0, 1, 2]
+    assert len(result["joint_names"]) == 7
+    scores = [result["grasps"][i]["score"] for i in result["ranking"]]
+    assert scores == sorted(scores)
+    sample = result["grasps"][0]["samples"][0]
+    assert set(sample) >= {"t_s", "q", "direction_in_base", "effective_mass_kg"}
+    assert len(sample["q"]) == 7
+    assert (tmp_path / "ranking.png").stat().st_size > 10_000
+
+
+def test_rank_json_round_trip(tmp_path: Path) -> None:
+    scenario = tmp_path / "s.yaml"
+    data = {**GOOD, "trajectory": {**GOOD["trajectory"], "dt_s": 0.1}, "metric": "integral"}
+    scenario.write_text(yaml.safe_dump(data))
+    out = tmp_path / "out.json"
+    assert main(["rank", str(scenario), "--json", str(out)]) == 0
+    result = json.loads(out.read_text())
+    assert result["metric"] == "integral"
+    for grasp in result["grasps"]:
+        times = [s["t_s"] for s in grasp["samples"]]
+        masses = [s["effective_mass_kg"] for s in grasp["samples"]]
+        trapezoid = sum(
+            0.5 * (masses[i] + masses[i + 1]) * (times[i + 1] - times[i])
+            for i in range(len(times) - 1)
+        )
+        assert grasp["score"] == pytest.approx(trapezoid, rel=1e-12)
+
+
+def _mutate(path: str, value: object) -> dict:
+    data = json.loads(json.dumps(GOOD))
+    *parents, leaf = path.split(".")
+    node = data
+    for key in parents:
+        node = node[int(key)] if isinstance(node, list) else node[key]
+    if value is _DELETE:
+        del node[leaf]
+    else:
+        node[int(leaf) if isinstance(node, list) else leaf] = value
+    return data
+
+
+_DELETE = object()
+
+BAD_INPUTS = [
+    ("object.mass_kg", _DELETE, "object.mass_kg: is required"),
+    ("trajectory.duration_s", _DELETE, "trajectory.duration_s: is required"),
+    ("object.mass_kg", "heavy", "object.mass_kg: must be numeric"),
+    ("trajectory.dt_s", [0.1], "trajectory.dt_s: must have a number"),
+    ("object.mass_kg", -0.3, "object.mass_kg: must be in (0"),
+    ("trajectory.duration_s", float("nan"), "trajectory.duration_s: must be finite"),
+    ("trajectory.start.position_m", [1.0, float("inf"), 0.0], "trajectory.start.position_m"),
+    ("trajectory.goal.quat_xyzw", [0.0, 0.0, 0.0, 0.0], "trajectory.goal.quat_xyzw: must be a unit"),
+    ("robot.tip_frame", "no_such_frame", "robot.tip_frame: frame 'no_such_frame' not found"),
+    ("robot.urdf", "/nonexistent/robot.urdf", "robot.urdf: no URDF file"),
+    ("robot.urdf", "<robot name='x'><link></robot>", "robot.urdf: cannot read URDF XML"),
+    ("robot.urdf", "example-robot-data:nosuchbot", "robot.urdf: example-robot-data robot"),
+    ("robot.seed", [0.0, 0.0], "robot.seed: must have shape [7]"),
+    ("metric", "median", "metric: must be one of mean, max, integral"),
+    ("grasps", [], "grasps: must be a non-empty list"),
+    ("object.box_size_m", [0.1, -0.2, 0.3], "object.box_size_m: edges must be > 0"),
+]
+
+
+@pytest.mark.parametrize(("path", "value", "message"), BAD_INPUTS)
+def test_bad_input_exits_2_naming_the_field(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], path: str, value: object, message: str
+) -> None:
+    scenario = tmp_path / "bad.yaml"
+    scenario.write_text(yaml.safe_dump(_mutate(path, value)))
+    assert main(["rank", str(scenario)]) == 2
+    err = capsys.readouterr().err
+    assert message in err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_unreadable_and_invalid_yaml_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["rank", str(tmp_path / "missing.yaml")]) == 2
+    (tmp_path / "broken.yaml").write_text("robot: [unclosed")
+    assert main(["rank", str(tmp_path / "broken.yaml")]) == 2
+    err = capsys.readouterr().err
+    assert "cannot read" in err and "not valid YAML" in err
+
+
+def test_console_script_has_no_traceback_on_bad_input(tmp_path: Path) -> None:
+    scenario = tmp_path / "bad.yaml"
+    scenario.write_text(yaml.safe_dump(_mutate("object.mass_kg", -1.0)))
+    completed = subprocess.run(
+        [sys.executable, "-m", "grasp_safety_ros.cli", "rank", str(scenario)],
+        capture_output=True, text=True, check=False,
+    )
+    assert completed.returncode == 2
+    assert completed.stderr.startswith("grasp-safety: error: object.mass_kg")

@@ -1,0 +1,23 @@
+"""The core imports with rclpy (and mujoco) made unimportable."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+CODE = """
+import sys
+for name in ("rclpy", "mujoco", "yaml", "matplotlib"):
+    sys.modules[name] = None  # any import of these now raises ImportError
+import grasp_safety_ros.core as core
+import grasp_safety_ros.core.effective_mass, grasp_safety_ros.core.ik
+print(sorted(m for m, v in sys.modules.items() if v is not None and m.split(".")[0] in ("rclpy", "mujoco")))
+"""
+
+
+def test_core_imports_without_ros_or_mujoco() -> None:
+    completed = subprocess.run(
+        [sys.executable, "-c", CODE], capture_output=True, text=True, check=False
+    )
+    assert completed.returncode == 0, completed.stderr
+    assert completed.stdout.strip() == "[]"
