@@ -1,4 +1,4 @@
-"""Command line: ``grasp-safety rank SCENARIO.yaml``, ``grasp-safety demo``, ``grasp-safety reproduce``."""
+"""Command line: ``grasp-safety rank``, ``grasp-safety demo``, ``grasp-safety reproduce``."""
 
 from __future__ import annotations
 
@@ -54,7 +54,9 @@ def rank_scenario(scenario: Scenario, metric: str | None = None) -> Ranking:
     )
 
 
-def _write_outputs(ranking: Ranking, json_path: Path | None, plot_path: Path | None, title: str) -> None:
+def _write_outputs(
+    ranking: Ranking, json_path: Path | None, plot_path: Path | None, title: str
+) -> None:
     if json_path is not None:
         json_path.parent.mkdir(parents=True, exist_ok=True)
         json_path.write_text(json.dumps(ranking_to_dict(ranking), indent=1), encoding="utf-8")

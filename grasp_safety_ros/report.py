@@ -55,7 +55,10 @@ def ranking_to_dict(ranking: Ranking) -> dict[str, Any]:
 def ranking_table(ranking: Ranking) -> str:
     """Plain-text table: rank, index, name, score, mean and peak effective mass, or the reason."""
     unit = SCORE_UNITS[ranking.metric]
-    header = f"{'rank':>4}  {'index':>5}  {'name':<16} {f'score [{unit}]':>14} {'mean [kg]':>10} {'peak [kg]':>10}"
+    score = f"score [{unit}]"
+    header = (
+        f"{'rank':>4}  {'index':>5}  {'name':<16} {score:>14} {'mean [kg]':>10} {'peak [kg]':>10}"
+    )
     lines = [f"metric: {ranking.metric}", header, "-" * len(header)]
     for rank, index in enumerate(ranking.order, start=1):
         e = ranking.evaluations[index]

@@ -1,4 +1,4 @@
-"""Scenario files (YAML): robot, object, trajectory, grasps and metric, validated field by field."""
+"""Scenario files (YAML): robot, object, trajectory, grasps, metric; validated per field."""
 
 from __future__ import annotations
 
@@ -120,7 +120,9 @@ def parse_object(section: Any) -> ObjectInertia:
             f"{given or 'none'}",
         )
     if "inertia_about_com_kgm2" in obj:
-        tensor = finite_array(obj["inertia_about_com_kgm2"], "object.inertia_about_com_kgm2", (3, 3))
+        tensor = finite_array(
+            obj["inertia_about_com_kgm2"], "object.inertia_about_com_kgm2", (3, 3)
+        )
         return ObjectInertia(mass, com, tensor)
     if "box_size_m" in obj:
         return solid_box(mass, obj["box_size_m"], com)
@@ -138,7 +140,7 @@ def parse_object(section: Any) -> ObjectInertia:
     return solid_sphere(mass, _required(sphere, "radius_m", "object.sphere"), com)
 
 
-def _pose(section: Any, field: str):  # noqa: ANN202 - pin.SE3
+def _pose(section: Any, field: str):
     pose = _mapping(section, field)
     _check_keys(pose, {"position_m", "quat_xyzw", "name"}, field)
     return pose_from_position_quat(
@@ -200,4 +202,3 @@ def load_scenario(path: str | Path) -> Scenario:
     except yaml.YAMLError as error:
         raise InvalidInputError("scenario", f"'{path}' is not valid YAML: {error}") from None
     return parse_scenario(data, path.resolve().parent)
-

@@ -72,7 +72,11 @@ BAD_INPUTS = [
     ("object.mass_kg", -0.3, "object.mass_kg: must be in (0"),
     ("trajectory.duration_s", float("nan"), "trajectory.duration_s: must be finite"),
     ("trajectory.start.position_m", [1.0, float("inf"), 0.0], "trajectory.start.position_m"),
-    ("trajectory.goal.quat_xyzw", [0.0, 0.0, 0.0, 0.0], "trajectory.goal.quat_xyzw: must be a unit"),
+    (
+        "trajectory.goal.quat_xyzw",
+        [0.0, 0.0, 0.0, 0.0],
+        "trajectory.goal.quat_xyzw: must be a unit",
+    ),
     ("robot.tip_frame", "no_such_frame", "robot.tip_frame: frame 'no_such_frame' not found"),
     ("robot.urdf", "/nonexistent/robot.urdf", "robot.urdf: no URDF file"),
     ("robot.urdf", "<robot name='x'><link></robot>", "robot.urdf: cannot read URDF XML"),
@@ -96,7 +100,9 @@ def test_bad_input_exits_2_naming_the_field(
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1
 
 
-def test_unreadable_and_invalid_yaml_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_unreadable_and_invalid_yaml_exit_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     assert main(["rank", str(tmp_path / "missing.yaml")]) == 2
     (tmp_path / "broken.yaml").write_text("robot: [unclosed")
     assert main(["rank", str(tmp_path / "broken.yaml")]) == 2
@@ -109,7 +115,9 @@ def test_console_script_has_no_traceback_on_bad_input(tmp_path: Path) -> None:
     scenario.write_text(yaml.safe_dump(_mutate("object.mass_kg", -1.0)))
     completed = subprocess.run(
         [sys.executable, "-m", "grasp_safety_ros.cli", "rank", str(scenario)],
-        capture_output=True, text=True, check=False,
+        capture_output=True,
+        text=True,
+        check=False,
     )
     assert completed.returncode == 2
     assert completed.stderr.startswith("grasp-safety: error: object.mass_kg")

@@ -97,10 +97,18 @@ def test_free_rigid_body_closed_form() -> None:
         obj = random_object(rng)
         grasp = random_grasp(rng)
         positions = random_positions(robot, rng)
-        if np.linalg.svd(pin.computeFrameJacobian(
-            robot.model, robot.model.createData(), robot.q_from_positions(positions),
-            robot.tip_frame_id,
-        ), compute_uv=False)[-1] < 1e-2:
+        if (
+            np.linalg.svd(
+                pin.computeFrameJacobian(
+                    robot.model,
+                    robot.model.createData(),
+                    robot.q_from_positions(positions),
+                    robot.tip_frame_id,
+                ),
+                compute_uv=False,
+            )[-1]
+            < 1e-2
+        ):
             continue  # near a singularity the negligible robot inertia is not negligible
         direction = rng.normal(size=3)
         direction /= np.linalg.norm(direction)

@@ -34,8 +34,9 @@ def test_solve_reaches_random_reachable_poses(arm: str, request: pytest.FixtureR
         goal_positions = random_positions(robot, rng)
         target = robot.transform_tip_to_base(goal_positions)
         start = goal_positions + rng.uniform(-0.3, 0.3, robot.num_joints)
-        q, converged, _ = solver.solve(target, robot.q_from_positions(np.clip(
-            start, robot.lower_limits, robot.upper_limits)))
+        q, converged, _ = solver.solve(
+            target, robot.q_from_positions(np.clip(start, robot.lower_limits, robot.upper_limits))
+        )
         assert converged
         position_error, angle_error = pose_error(robot, robot.positions_from_q(q), target)
         assert position_error <= 1e-6 and angle_error <= 1e-6
@@ -58,11 +59,13 @@ def test_every_sample_reproduces_the_tip_pose(baxter: RobotModel) -> None:
     )
     assert evaluation.feasible, evaluation.reason
     s_values, _, _ = trajectory.path_parameter(evaluation.times_s)
-    for positions, s in zip(evaluation.joint_positions, s_values):
+    for positions, s in zip(evaluation.joint_positions, s_values, strict=True):
         target = trajectory.transform_object_to_base(float(s)) * grasp.transform_tip_to_object
         position_error, angle_error = pose_error(baxter, positions, target)
         assert position_error <= 1e-6 and angle_error <= 1e-6
-        assert np.all(positions >= baxter.lower_limits) and np.all(positions <= baxter.upper_limits)
+        assert np.all(positions >= baxter.lower_limits) and np.all(
+            positions <= baxter.upper_limits
+        )
 
 
 def test_unreachable_grasp_is_infeasible_with_a_reason(baxter: RobotModel) -> None:

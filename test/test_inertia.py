@@ -52,7 +52,9 @@ def test_tensor_object_keeps_mass_and_com_while_the_tensor_changes() -> None:
     inertias = [geometry.inertia(a, b) for a, b in configurations]
     for inertia in inertias:
         assert inertia.mass_kg == pytest.approx(0.43)
-        np.testing.assert_allclose(inertia.com_in_object_m, inertias[0].com_in_object_m, atol=1e-15)
+        np.testing.assert_allclose(
+            inertia.com_in_object_m, inertias[0].com_in_object_m, atol=1e-15
+        )
     # Moving the x rings out by d adds 2 m_ring d^2 to Iyy and Izz, nothing to Ixx.
     (a0, b0), (a1, b1) = configurations[0], configurations[-1]
     assert b0 != b1 or a0 != a1

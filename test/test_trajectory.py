@@ -78,8 +78,12 @@ def test_tip_path_tangent_matches_finite_differences() -> None:
 
 @pytest.mark.parametrize(
     ("duration", "dt", "field"),
-    [(0.0, 0.1, "trajectory.duration_s"), (1.0, 2.0, "trajectory.dt_s"),
-     (float("nan"), 0.1, "trajectory.duration_s"), (1e6, 1e-3, "trajectory.dt_s")],
+    [
+        (0.0, 0.1, "trajectory.duration_s"),
+        (1.0, 2.0, "trajectory.dt_s"),
+        (float("nan"), 0.1, "trajectory.duration_s"),
+        (1e6, 1e-3, "trajectory.dt_s"),
+    ],
 )
 def test_bad_timing_is_refused(duration: float, dt: float, field: str) -> None:
     with pytest.raises(InvalidInputError, match=field.replace(".", r"\.")):

@@ -29,6 +29,7 @@ __all__ = [
     "ObjectTrajectory",
     "Ranking",
     "RobotModel",
+    "RobotModelError",
     "solid_box",
     "solid_cylinder",
     "solid_sphere",

@@ -72,7 +72,7 @@ class ObjectTrajectory:
     @property
     def num_samples(self) -> int:
         """N + 1 samples, N = ceil(T/dt) up to a 1e-9 rounding tolerance."""
-        return int(math.ceil(self.duration_s / self.dt_s - 1e-9)) + 1
+        return math.ceil(self.duration_s / self.dt_s - 1e-9) + 1
 
     def times_s(self) -> np.ndarray:
         """Sample times t_i = min(i·dt, T) [s]."""

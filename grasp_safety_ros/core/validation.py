@@ -36,7 +36,7 @@ def finite_float(
     maximum: float | None = None,
     strict_minimum: bool = False,
 ) -> float:
-    """Return ``value`` as a finite float in ``[minimum, maximum]`` (``(minimum, ...`` if strict)."""
+    """Return ``value`` as a finite float in [minimum, maximum] (open at minimum if strict)."""
     if isinstance(value, bool):
         raise InvalidInputError(field, f"must be a number, got {value!r}")
     number = float(finite_array(value, field, ()))
