@@ -1,0 +1,264 @@
+"""Joint effort needed to carry the object along the trajectory (inverse dynamics, gravity on).
+
+Joint positions q(t) come from the GraspEvaluation (or redundancy-resolved ones). Velocities
+and accelerations follow from the tip's twist, exact in task space:
+
+    J q̇ = ξ,        ξ = [d p_tip/ds · ṡ ; ω_obj · ṡ]                     (world axes)
+    J q̈ = ξ̇ − J̇ q̇,  ξ̇ = [d²p_tip/ds² · ṡ² + d p_tip/ds · s̈ ; ω_obj · s̈]
+
+(ω_obj: the object's constant angular velocity per unit s, the geodesic's log, rotated into
+world axes; J̇ q̇: the tip's classical acceleration at q̈ = 0), solved with the pseudo-inverse
+J⁺. For a redundant chain the null-space part, which the tip trajectory does not fix, comes from
+the actual samples: the IK makes q a function of the path parameter s alone, so
+q̇_fd = q'(s)·ṡ and q̈_fd = q''(s)·ṡ² + q'(s)·s̈ with q', q'' from finite differences over s
+(numpy.gradient), and q̇ = J⁺ξ + (I − J⁺J) q̇_fd, likewise for q̈. Both vanish where the quintic
+is at rest (t = 0 and T). For chains with at most 6 joints away from singularities the null
+space is empty and the result is exact.
+
+Torques: τ = RNEA(q, q̇, q̈) of the augmented model (the object merged into the tip body,
+core.effective_mass.augmented_model), with the model's gravity in its world frame. Efforts are
+N m for revolute joints and N for prismatic ones; limits are the URDF's ``effort`` (a limit
+<= 0 or missing counts as unknown: NaN fractions).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from .effective_mass import augmented_model
+from .exceptions import InvalidInputError
+from .inertia import ObjectInertia
+from .ranking import Grasp, GraspEvaluation
+from .robot import RobotModel
+from .trajectory import ObjectTrajectory
+
+EFFORT_CRITERIA = ("peak_fraction", "rms_fraction")
+"""Effort scores: max over joints of peak |τ| / limit, or of RMS τ / limit (lower is better)."""
+
+
+def check_effort_criterion(criterion: str, field: str = "effort_criterion") -> str:
+    """Return ``criterion`` if it is one of EFFORT_CRITERIA, else raise InvalidInputError."""
+    if criterion not in EFFORT_CRITERIA:
+        raise InvalidInputError(
+            field, f"must be one of {', '.join(EFFORT_CRITERIA)}, got {criterion!r}"
+        )
+    return criterion
+
+
+@dataclass(frozen=True)
+class EffortEvaluation:
+    """Joint efforts of one grasp along the trajectory (N samples, n chain joints).
+
+    Attributes:
+        index, name, feasible: As in the grasp's GraspEvaluation.
+        times_s: (N,) sample times [s].
+        joint_velocities: (N, n) q̇ [rad/s or m/s], chain order.
+        joint_accelerations: (N, n) q̈ [rad/s² or m/s²].
+        joint_torques: (N, n) τ [N m or N], gravity included.
+        peak_abs_torque: (n,) max_t |τ| [N m or N].
+        rms_torque: (n,) sqrt(mean_t τ²) over the samples [N m or N].
+        effort_limits: (n,) URDF effort limits [N m or N]; NaN where unknown.
+        peak_fraction_of_limit: (n,) peak_abs_torque / effort_limits (NaN if unknown).
+        rms_fraction_of_limit: (n,) rms_torque / effort_limits (NaN if unknown).
+    """
+
+    index: int
+    name: str
+    feasible: bool
+    times_s: np.ndarray
+    joint_velocities: np.ndarray
+    joint_accelerations: np.ndarray
+    joint_torques: np.ndarray
+    peak_abs_torque: np.ndarray
+    rms_torque: np.ndarray
+    effort_limits: np.ndarray
+    peak_fraction_of_limit: np.ndarray
+    rms_fraction_of_limit: np.ndarray
+
+    @property
+    def max_peak_fraction(self) -> float:
+        """Largest peak fraction of the limit over joints with a known limit (NaN if none)."""
+        return _nanmax(self.peak_fraction_of_limit)
+
+    @property
+    def max_rms_fraction(self) -> float:
+        """Largest RMS fraction of the limit over joints with a known limit (NaN if none)."""
+        return _nanmax(self.rms_fraction_of_limit)
+
+    def score(self, criterion: str = "peak_fraction") -> float:
+        """The effort criterion (EFFORT_CRITERIA); NaN if infeasible or no limit is known."""
+        check_effort_criterion(criterion)
+        if not self.feasible:
+            return float("nan")
+        return self.max_peak_fraction if criterion == "peak_fraction" else self.max_rms_fraction
+
+
+def _nanmax(values: np.ndarray) -> float:
+    finite = values[np.isfinite(values)]
+    return float(finite.max()) if finite.size else float("nan")
+
+
+def _read_only(array: np.ndarray) -> np.ndarray:
+    array = np.array(array, dtype=float)
+    array.setflags(write=False)
+    return array
+
+
+def effort_limits(robot: RobotModel) -> np.ndarray:
+    """(n,) URDF effort limits in chain order [N m or N]; NaN where <= 0 or not finite."""
+    limits = np.array(robot.model.effortLimit, dtype=float)
+    return np.where(np.isfinite(limits) & (limits > 0.0), limits, np.nan)
+
+
+def tip_twist_and_derivative(
+    trajectory: ObjectTrajectory,
+    transform_tip_to_object: pin.SE3,
+    times_s: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Tip twist (N, 6) [m/s, rad/s] and its time derivative (N, 6), base axes.
+
+    Linear part: velocity / classical acceleration of the tip origin; angular part: angular
+    velocity / acceleration of the object (= of the tip).
+    """
+    grasp = pin.SE3(transform_tip_to_object)
+    times = np.asarray(times_s, dtype=float)
+    s_values, s_rate, s_accel = trajectory.path_parameter(times)
+    _, tangents = trajectory.tip_path(grasp, s_values)
+    omega = trajectory.rotation_log_in_object  # object angular velocity per unit s, object axes
+    curvature_in_object = np.cross(omega, np.cross(omega, grasp.translation))
+    twist = np.empty((len(times), 6))
+    twist_rate = np.empty((len(times), 6))
+    for i, s in enumerate(s_values):
+        rotation = trajectory.transform_object_to_base(float(s)).rotation
+        angular = rotation @ omega
+        second = rotation @ curvature_in_object  # d² p_tip / ds²
+        twist[i, :3] = tangents[i] * s_rate[i]
+        twist[i, 3:] = angular * s_rate[i]
+        twist_rate[i, :3] = second * s_rate[i] ** 2 + tangents[i] * s_accel[i]
+        twist_rate[i, 3:] = angular * s_accel[i]
+    return twist, twist_rate
+
+
+def evaluate_effort(
+    robot: RobotModel,
+    evaluation: GraspEvaluation,
+    object_inertia: ObjectInertia,
+    grasp: Grasp,
+    trajectory: ObjectTrajectory,
+    joint_positions: np.ndarray | None = None,
+) -> EffortEvaluation:
+    """Joint velocities, accelerations and torques with the object, per sample, and summaries.
+
+    Args:
+        joint_positions: (N, n) positions to use instead of the evaluation's (e.g.
+            RedundancyResolution.joint_positions); same samples and tip poses.
+    """
+    n = robot.num_joints
+    limits = effort_limits(robot)
+    if not evaluation.feasible:
+        per_joint = _read_only(np.full(n, np.nan))
+        per_sample = _read_only(np.empty((0, n)))
+        return EffortEvaluation(
+            index=evaluation.index,
+            name=evaluation.name,
+            feasible=False,
+            times_s=_read_only(np.empty(0)),
+            joint_velocities=per_sample,
+            joint_accelerations=per_sample,
+            joint_torques=per_sample,
+            peak_abs_torque=per_joint,
+            rms_torque=per_joint,
+            effort_limits=_read_only(limits),
+            peak_fraction_of_limit=per_joint,
+            rms_fraction_of_limit=per_joint,
+        )
+    times = np.asarray(evaluation.times_s, dtype=float)
+    positions = np.asarray(
+        evaluation.joint_positions if joint_positions is None else joint_positions, dtype=float
+    )
+    if positions.shape != (len(times), n) or not np.all(np.isfinite(positions)):
+        raise InvalidInputError(
+            "joint_positions",
+            f"must be finite with shape {[len(times), n]}, got {list(positions.shape)}",
+        )
+    kinematic_model = robot.model
+    kinematics = kinematic_model.createData()
+    model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
+    data = model.createData()
+    q_all = [robot.q_from_positions(p) for p in positions]
+    # The IK makes q a function of the path parameter s only: null-space rates from
+    # differences over s (unwrapped for continuous joints), then the chain rule in time.
+    s_values, s_rate, s_accel = trajectory.path_parameter(times)
+    unwrapped = np.empty_like(positions)
+    unwrapped[0] = positions[0]
+    for i in range(1, len(times)):
+        unwrapped[i] = unwrapped[i - 1] + pin.difference(kinematic_model, q_all[i - 1], q_all[i])
+    if len(times) > 1 and np.all(np.diff(s_values) > 0):
+        dq_ds = np.gradient(unwrapped, s_values, axis=0)
+        d2q_ds2 = np.gradient(dq_ds, s_values, axis=0)
+    else:  # a single sample, or a path parameter that does not advance: no self-motion
+        dq_ds = d2q_ds2 = np.zeros_like(positions)
+    velocity_fd = dq_ds * s_rate[:, None]
+    acceleration_fd = d2q_ds2 * s_rate[:, None] ** 2 + dq_ds * s_accel[:, None]
+    twist_base, twist_rate_base = tip_twist_and_derivative(
+        trajectory, grasp.transform_tip_to_object, times
+    )
+    rotation = robot.transform_base_to_world.rotation
+    velocities = np.empty_like(positions)
+    accelerations = np.empty_like(positions)
+    torques = np.empty_like(positions)
+    zero = np.zeros(kinematic_model.nv)
+    for i, q in enumerate(q_all):
+        pin.computeJointJacobians(kinematic_model, kinematics, q)
+        jacobian = pin.getFrameJacobian(
+            kinematic_model,
+            kinematics,
+            robot.tip_frame_id,
+            pin.ReferenceFrame.LOCAL_WORLD_ALIGNED,
+        ).reshape(6, kinematic_model.nv)
+        pseudo_inverse = np.linalg.pinv(jacobian, rcond=1e-10)
+        null = np.eye(kinematic_model.nv) - pseudo_inverse @ jacobian
+        twist = np.concatenate([rotation @ twist_base[i, :3], rotation @ twist_base[i, 3:]])
+        twist_rate = np.concatenate(
+            [rotation @ twist_rate_base[i, :3], rotation @ twist_rate_base[i, 3:]]
+        )
+        v = pseudo_inverse @ twist + null @ velocity_fd[i]
+        pin.forwardKinematics(kinematic_model, kinematics, q, v, zero)
+        drift = pin.getFrameClassicalAcceleration(
+            kinematic_model,
+            kinematics,
+            robot.tip_frame_id,
+            pin.ReferenceFrame.LOCAL_WORLD_ALIGNED,
+        ).vector
+        a = pseudo_inverse @ (twist_rate - drift) + null @ acceleration_fd[i]
+        velocities[i], accelerations[i] = v, a
+        torques[i] = pin.rnea(model, data, q, v, a)
+    peak = np.abs(torques).max(axis=0)
+    rms = np.sqrt(np.mean(torques**2, axis=0))
+    return EffortEvaluation(
+        index=evaluation.index,
+        name=evaluation.name,
+        feasible=True,
+        times_s=_read_only(times),
+        joint_velocities=_read_only(velocities),
+        joint_accelerations=_read_only(accelerations),
+        joint_torques=_read_only(torques),
+        peak_abs_torque=_read_only(peak),
+        rms_torque=_read_only(rms),
+        effort_limits=_read_only(limits),
+        peak_fraction_of_limit=_read_only(peak / limits),
+        rms_fraction_of_limit=_read_only(rms / limits),
+    )
+
+
+def order_by_effort(
+    efforts: Sequence[EffortEvaluation], criterion: str = "peak_fraction"
+) -> tuple[int, ...]:
+    """Indices of feasible grasps with a finite effort score, lowest first (ties: input order)."""
+    check_effort_criterion(criterion)
+    scored = [(e.score(criterion), k) for k, e in enumerate(efforts) if e.feasible]
+    return tuple(efforts[k].index for _, k in sorted(s for s in scored if np.isfinite(s[0])))

@@ -1,0 +1,365 @@
+"""Effective mass at exposed points of the carried object (corners, rims), not at the wrist.
+
+A point p of the object is rigidly attached to the tip, so its velocity is v_p = v_tip + ω × r
+(r = tip -> p, world axes) and its Jacobian J_p = J_v − r̂ J_ω. With the object merged into the
+tip body (the augmented joint-space inertia M_aug), the point's translational mobility is
+A_p = J_p M_aug⁻¹ J_pᵀ [1/kg] and its effective mass along its own unit direction of motion u_p
+is M_eff,p = 1 / (u_pᵀ A_p u_p). u_p is the tangent d p/ds of the point's path (like the tip's
+in ObjectTrajectory.tip_path); where a point does not translate (|d p/ds| < 1e-9 m), its
+direction of largest effective mass is used, as for the tip.
+
+Per sample, the *leading point* is the one furthest ahead along its own direction of motion,
+measured from the centroid p̄ of the points: argmax_k (p_k − p̄)·u_k over the points that
+translate (for a pure translation: the point with the largest p·u). The *worst point* is the
+one with the largest effective mass. Ties go to the lower point index.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from .effective_mass import augmented_model
+from .exceptions import InvalidInputError
+from .inertia import ObjectInertia
+from .ranking import Grasp, GraspEvaluation, aggregate, check_metric
+from .robot import RobotModel
+from .trajectory import ObjectTrajectory
+from .validation import finite_array, finite_float
+
+METRIC_POINTS = ("tip", "leading_point", "worst_point")
+"""Which point's effective mass a score uses: the tip, the leading point, the worst point."""
+
+STATIONARY_TANGENT_M = 1e-9
+"""Below this |d p/ds| [m] a point does not translate (same threshold as for the tip)."""
+
+
+def check_metric_point(metric_point: str, field: str = "metric_point") -> str:
+    """Return ``metric_point`` if it is one of METRIC_POINTS, else raise InvalidInputError."""
+    if metric_point not in METRIC_POINTS:
+        raise InvalidInputError(
+            field, f"must be one of {', '.join(METRIC_POINTS)}, got {metric_point!r}"
+        )
+    return metric_point
+
+
+def box_corners_in_object(
+    size_m: Sequence[float] | np.ndarray,
+    center_in_object_m: Sequence[float] | np.ndarray = (0.0, 0.0, 0.0),
+) -> np.ndarray:
+    """The 8 corners (8, 3) [m] of a box with edges ``size_m`` along the object axes."""
+    size = finite_array(size_m, "object.box_size_m", (3,))
+    if np.any(size <= 0.0):
+        raise InvalidInputError("object.box_size_m", f"edges must be > 0, got {size.tolist()}")
+    center = finite_array(center_in_object_m, "object.box_center_in_object_m", (3,))
+    signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+    return _read_only(center + 0.5 * signs * size)
+
+
+def cylinder_rim_points_in_object(
+    radius_m: float,
+    length_m: float,
+    center_in_object_m: Sequence[float] | np.ndarray = (0.0, 0.0, 0.0),
+    points_per_rim: int = 8,
+) -> np.ndarray:
+    """Points (2·points_per_rim, 3) [m] on both rims of a cylinder whose axis is object z.
+
+    The first rim is at z = −length/2, the second at +length/2 (about the centre); points are
+    at angles 2πj/points_per_rim from the object x axis.
+    """
+    radius = finite_float(radius_m, "object.cylinder.radius_m", 0.0, None, True)
+    length = finite_float(length_m, "object.cylinder.length_m", 0.0, None, True)
+    center = finite_array(center_in_object_m, "object.cylinder.center_in_object_m", (3,))
+    if (
+        not isinstance(points_per_rim, int)
+        or isinstance(points_per_rim, bool)
+        or (points_per_rim < 3)
+    ):
+        raise InvalidInputError(
+            "object.cylinder.points_per_rim", f"must be an integer >= 3, got {points_per_rim!r}"
+        )
+    angles = 2.0 * np.pi * np.arange(points_per_rim) / points_per_rim
+    ring = np.stack([radius * np.cos(angles), radius * np.sin(angles)], axis=1)
+    rims = [np.column_stack([ring, np.full(points_per_rim, z)]) for z in (-length / 2, length / 2)]
+    return _read_only(center + np.vstack(rims))
+
+
+def check_points_in_object(points_in_object_m: Any, field: str = "object.points_m") -> np.ndarray:
+    """Validate a (K, 3) array of points [m] in the object frame, K >= 1."""
+    points = finite_array(points_in_object_m, field)
+    if points.ndim != 2 or points.shape[1] != 3 or points.shape[0] < 1:
+        raise InvalidInputError(
+            field, f"must be a list of [x, y, z] points (K x 3, K >= 1), got {list(points.shape)}"
+        )
+    return points
+
+
+def point_jacobian_in_base(
+    robot: RobotModel,
+    model: pin.Model,
+    data: pin.Data,
+    q: np.ndarray,
+    point_in_tip_m: np.ndarray,
+) -> np.ndarray:
+    """Jacobians (K, 3, nv) of points rigidly attached to the tip, base axes.
+
+    ``point_in_tip_m`` (K, 3) [m] are points in the tip frame; ``model`` is the chain model
+    or an augmented copy (same kinematics). J_p = J_v − r̂ J_ω with r = tip -> p (world axes).
+    """
+    pin.computeJointJacobians(model, data, q)
+    rotation_tip = pin.updateFramePlacement(model, data, robot.tip_frame_id).rotation
+    jacobian_world = pin.getFrameJacobian(
+        model, data, robot.tip_frame_id, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+    ).reshape(6, model.nv)
+    return _point_jacobians(robot, jacobian_world, rotation_tip, np.atleast_2d(point_in_tip_m))
+
+
+def _point_jacobians(
+    robot: RobotModel, jacobian_world: np.ndarray, rotation_tip: np.ndarray, points: np.ndarray
+) -> np.ndarray:
+    levers = points @ rotation_tip.T  # (K, 3): tip -> point, world axes
+    linear, angular = jacobian_world[:3], jacobian_world[3:]
+    # r × (J_ω col) for every column: J_p = J_v − r̂ J_ω = J_v + J_ω-columns × r
+    cross = np.cross(angular.T[None, :, :], levers[:, None, :])  # (K, nv, 3): ω_j × r
+    jacobians = linear[None] + np.transpose(cross, (0, 2, 1))
+    return np.einsum("ab,kbn->kan", robot.transform_base_to_world.rotation.T, jacobians)
+
+
+def point_mobility_in_base(
+    robot: RobotModel,
+    model: pin.Model,
+    data: pin.Data,
+    q: np.ndarray,
+    point_in_tip_m: np.ndarray,
+) -> np.ndarray:
+    """Translational mobilities A_p = J_p M⁻¹ J_pᵀ (K, 3, 3) [1/kg] of tip-fixed points.
+
+    ``model`` is usually the augmented model (core.effective_mass.augmented_model).
+    """
+    pin.computeMinverse(model, data, q)
+    minv_upper = np.triu(data.Minv)
+    minv = minv_upper + np.triu(minv_upper, 1).T
+    jacobians = point_jacobian_in_base(robot, model, data, q, point_in_tip_m)
+    return np.einsum("kan,nm,kbm->kab", jacobians, minv, jacobians)
+
+
+def _worst_directions(mobility: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    eigenvalues, eigenvectors = np.linalg.eigh(0.5 * (mobility + np.swapaxes(mobility, -1, -2)))
+    return eigenvectors[..., :, 0], 1.0 / eigenvalues[..., 0]
+
+
+@dataclass(frozen=True)
+class ExposedPointsEvaluation:
+    """Effective mass at K object points along one grasp's trajectory (N samples).
+
+    Attributes:
+        index, name: The grasp, as in its GraspEvaluation.
+        feasible: False when the grasp's trajectory is infeasible (then arrays are empty).
+        times_s: Sample times (N,) [s].
+        points_in_object_m: The points (K, 3) [m], object frame.
+        positions_in_base_m: Point positions (N, K, 3) [m], base frame.
+        directions_in_base: Unit directions of motion (N, K, 3), base axes.
+        direction_is_worst_case: (N, K) True where the point does not translate and its
+            direction of largest effective mass was used.
+        speed_m_s: Point speeds (N, K) [m/s].
+        effective_mass_kg: Effective mass (N, K) [kg] at each point along its direction.
+        leading_point_index: (N,) index of the leading point per sample.
+        worst_point_index: (N,) index of the point of largest effective mass per sample.
+    """
+
+    index: int
+    name: str
+    feasible: bool
+    times_s: np.ndarray
+    points_in_object_m: np.ndarray
+    positions_in_base_m: np.ndarray
+    directions_in_base: np.ndarray
+    direction_is_worst_case: np.ndarray
+    speed_m_s: np.ndarray
+    effective_mass_kg: np.ndarray
+    leading_point_index: np.ndarray
+    worst_point_index: np.ndarray
+
+    def _pick(self, values: np.ndarray, which: np.ndarray) -> np.ndarray:
+        return values[np.arange(len(which)), which]
+
+    @property
+    def leading_effective_mass_kg(self) -> np.ndarray:
+        """(N,) effective mass at the leading point [kg]."""
+        return self._pick(self.effective_mass_kg, self.leading_point_index)
+
+    @property
+    def leading_speed_m_s(self) -> np.ndarray:
+        """(N,) speed of the leading point [m/s]."""
+        return self._pick(self.speed_m_s, self.leading_point_index)
+
+    @property
+    def worst_effective_mass_kg(self) -> np.ndarray:
+        """(N,) largest effective mass over the points [kg]."""
+        return self._pick(self.effective_mass_kg, self.worst_point_index)
+
+    @property
+    def worst_speed_m_s(self) -> np.ndarray:
+        """(N,) speed of the worst point [m/s]."""
+        return self._pick(self.speed_m_s, self.worst_point_index)
+
+
+def _read_only(array: np.ndarray) -> np.ndarray:
+    array = np.asarray(array)
+    array.setflags(write=False)
+    return array
+
+
+def evaluate_exposed_points(
+    robot: RobotModel,
+    evaluation: GraspEvaluation,
+    object_inertia: ObjectInertia,
+    grasp: Grasp,
+    trajectory: ObjectTrajectory,
+    points_in_object_m: Any,
+) -> ExposedPointsEvaluation:
+    """Effective mass, speed and direction of motion at each object point, per sample.
+
+    Reuses the evaluation's joint positions (no IK). ``grasp`` and ``trajectory`` must be the
+    ones the evaluation was computed with.
+    """
+    points = check_points_in_object(points_in_object_m)
+    count_points = len(points)
+    if not evaluation.feasible:
+        per_point = np.empty((0, count_points))
+        return ExposedPointsEvaluation(
+            index=evaluation.index,
+            name=evaluation.name,
+            feasible=False,
+            times_s=np.empty(0),
+            points_in_object_m=points,
+            positions_in_base_m=np.empty((0, count_points, 3)),
+            directions_in_base=np.empty((0, count_points, 3)),
+            direction_is_worst_case=per_point.astype(bool),
+            speed_m_s=per_point,
+            effective_mass_kg=per_point,
+            leading_point_index=np.empty(0, dtype=int),
+            worst_point_index=np.empty(0, dtype=int),
+        )
+    times = np.asarray(evaluation.times_s, dtype=float)
+    if len(times) != evaluation.joint_positions.shape[0]:
+        raise InvalidInputError("evaluation.times_s", "must have one entry per joint sample")
+    s_values, s_rate, _ = trajectory.path_parameter(times)
+    count = len(times)
+    grasp_pose = pin.SE3(grasp.transform_tip_to_object)
+    points_in_tip = points @ grasp_pose.rotation  # R_otᵀ (p − t_ot), row-wise
+    points_in_tip -= grasp_pose.translation @ grasp_pose.rotation
+    positions = np.empty((count, count_points, 3))
+    tangents = np.empty((count, count_points, 3))
+    for k, point in enumerate(points):
+        poses, point_tangents = trajectory.tip_path(pin.SE3(np.eye(3), point), s_values)
+        positions[:, k] = [pose.translation for pose in poses]
+        tangents[:, k] = point_tangents
+    model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
+    data = model.createData()
+    mobilities = np.empty((count, count_points, 3, 3))
+    for i, positions_i in enumerate(evaluation.joint_positions):
+        q = robot.q_from_positions(positions_i)
+        mobilities[i] = point_mobility_in_base(robot, model, data, q, points_in_tip)
+    norms = np.linalg.norm(tangents, axis=2)
+    stationary = norms < STATIONARY_TANGENT_M
+    directions = tangents / np.where(stationary, 1.0, norms)[..., None]
+    masses = 1.0 / np.einsum("nka,nkab,nkb->nk", directions, mobilities, directions)
+    if stationary.any():
+        worst_dirs, worst_masses = _worst_directions(mobilities[stationary])
+        directions[stationary] = worst_dirs
+        masses[stationary] = worst_masses
+    centroid = positions.mean(axis=1, keepdims=True)
+    ahead = np.einsum("nka,nka->nk", positions - centroid, directions)
+    ahead = np.where(stationary, -np.inf, ahead)
+    leading = np.argmax(ahead, axis=1)
+    worst = np.argmax(masses, axis=1)
+    leading = np.where(stationary.all(axis=1), worst, leading)
+    return ExposedPointsEvaluation(
+        index=evaluation.index,
+        name=evaluation.name,
+        feasible=True,
+        times_s=_read_only(times.copy()),
+        points_in_object_m=points,
+        positions_in_base_m=_read_only(positions),
+        directions_in_base=_read_only(directions),
+        direction_is_worst_case=_read_only(stationary),
+        speed_m_s=_read_only(norms * s_rate[:, None]),
+        effective_mass_kg=_read_only(masses),
+        leading_point_index=_read_only(leading),
+        worst_point_index=_read_only(worst),
+    )
+
+
+def metric_point_series(
+    evaluation: GraspEvaluation,
+    exposed: ExposedPointsEvaluation | None,
+    metric_point: str,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per-sample (effective mass [kg], speed [m/s]) of the chosen metric point.
+
+    ``exposed`` may be None only for ``metric_point="tip"``.
+    """
+    check_metric_point(metric_point)
+    if metric_point == "tip":
+        return evaluation.effective_mass_kg, evaluation.tip_speed_m_s
+    if exposed is None:
+        raise InvalidInputError(
+            "metric_point", f"{metric_point!r} needs the object's points (shape or point list)"
+        )
+    if exposed.index != evaluation.index or exposed.feasible != evaluation.feasible:
+        raise InvalidInputError(
+            "exposed_points", f"belongs to grasp {exposed.index}, not {evaluation.index}"
+        )
+    if metric_point == "leading_point":
+        return exposed.leading_effective_mass_kg, exposed.leading_speed_m_s
+    return exposed.worst_effective_mass_kg, exposed.worst_speed_m_s
+
+
+def score_with_metric_point(
+    evaluation: GraspEvaluation,
+    exposed: ExposedPointsEvaluation | None,
+    metric_point: str,
+    metric: str,
+) -> float:
+    """Score of one grasp (core.ranking.aggregate of the chosen point's mass); NaN if infeasible.
+
+    ``metric_point="tip"`` reproduces evaluation.score computed with the same metric.
+    """
+    check_metric(metric)
+    if not evaluation.feasible:
+        return float("nan")
+    masses, _ = metric_point_series(evaluation, exposed, metric_point)
+    return aggregate(masses, evaluation.times_s, metric)
+
+
+def order_by_metric_point(
+    evaluations: Sequence[GraspEvaluation],
+    exposed: Sequence[ExposedPointsEvaluation | None],
+    metric_point: str,
+    metric: str,
+) -> tuple[tuple[int, ...], np.ndarray]:
+    """Feasible grasp indices, safest first, and the scores (NaN if infeasible) per grasp.
+
+    ``exposed[i]`` belongs to ``evaluations[i]`` (None allowed for ``tip``); ties keep input
+    order, as core.ranking.order_by_score does.
+    """
+    check_metric_point(metric_point)
+    if len(exposed) != len(evaluations):
+        raise InvalidInputError(
+            "exposed_points",
+            f"must have one entry per grasp ({len(evaluations)}), got {len(exposed)}",
+        )
+    scores = np.array(
+        [
+            score_with_metric_point(e, x, metric_point, metric)
+            for e, x in zip(evaluations, exposed, strict=True)
+        ]
+    )
+    feasible = [k for k, e in enumerate(evaluations) if e.feasible]
+    order = tuple(evaluations[k].index for k in sorted(feasible, key=lambda k: scores[k]))
+    return order, _read_only(scores)

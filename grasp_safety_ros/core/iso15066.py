@@ -1,0 +1,407 @@
+"""Power and force limiting after ISO/TS 15066 (transient contact, Annex A).
+
+For a transient contact of the moving robot + object (effective mass m_r along the direction of
+motion, speed v) with a body region (effective mass m_h, spring constant k), the TS models the
+collision as two masses and a spring:
+
+    μ = (1/m_h + 1/m_r)⁻¹,   F = v·sqrt(μ·k),   v_max = F_max / sqrt(μ·k),   E = F² / (2k).
+
+F_max is the region's maximum permissible *transient* force F_tr. Regions where transient
+contact is not permitted (the head: F_tr is null in the table) get v_max = 0, a force ratio of
+inf at every sample where the tip moves (0 where it is at rest), are never admissible for a
+moving tip, and need an infinite duration. Here m_r is the pose-dependent effective mass of
+robot + object (GraspEvaluation.effective_mass_kg), not ISO's shortcut m_r = M/2 + m_L.
+
+Minimum duration: the effective mass along the path does not depend on the duration T (the IK
+depends only on the path parameter) and the speed of a quintic scales as 1/T, so re-timing to
+T' multiplies every force ratio by T/T'; the shortest admissible duration is
+T_min = T · max_t F(t)/F_max (for a ratio <= 1 the motion is admissible as it is, and T_min <= T
+is still reported). All maxima are over the trajectory samples.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+
+from .exceptions import GraspSafetyError, InvalidInputError
+from .ranking import GraspEvaluation
+from .validation import finite_array, finite_float
+
+N_PER_MM_IN_N_PER_M = 1000.0
+"""1 N/mm = 1000 N/m: the table gives k in N/mm, the core works in N/m."""
+
+ADMISSIBLE_RATIO_TOLERANCE = 1e-9
+"""A force ratio F/F_tr up to 1 + this counts as admissible (absorbs rounding only)."""
+
+DATA_FILE_NAME = "iso_ts_15066_body_regions.yaml"
+"""Name of the package's data file (in grasp_safety_ros/data/) holding the same table."""
+
+# ISO/TS 15066:2016 Annex A, Tables A.2 and A.3, as commonly quoted; carried over from the
+# project's shared data file (shared/data/iso_ts_15066_body_regions.yaml), cross-checked between
+# several public transcriptions; the TS itself is the authority. The package ships the same
+# table as data/iso_ts_15066_body_regions.yaml; test/test_iso15066.py checks that both agree.
+# Columns: name, F_qs [N], F_tr [N] (None: transient contact not permitted), k [N/mm], m_h [kg].
+REGION_TABLE: tuple[tuple[str, float, float | None, float, float], ...] = (
+    ("skull_forehead", 130.0, None, 150.0, 4.4),
+    ("face", 65.0, None, 75.0, 4.4),
+    ("neck", 150.0, None, 50.0, 1.2),
+    ("back_shoulders", 210.0, 420.0, 35.0, 40.0),
+    ("chest", 140.0, 280.0, 25.0, 40.0),
+    ("abdomen", 110.0, 220.0, 10.0, 40.0),
+    ("pelvis", 180.0, 360.0, 25.0, 40.0),
+    ("upper_arm_elbow", 150.0, 300.0, 30.0, 3.0),
+    ("lower_arm_wrist", 160.0, 320.0, 40.0, 2.0),
+    ("hand_fingers", 140.0, 280.0, 75.0, 0.6),
+    ("thigh_knee", 220.0, 440.0, 50.0, 75.0),
+    ("lower_leg", 130.0, 260.0, 60.0, 75.0),
+)
+"""The body-region table in the data file's own units (k in N/mm)."""
+
+
+@dataclass(frozen=True)
+class BodyRegion:
+    """One body region's limits and biomechanical model, in SI units.
+
+    Attributes:
+        name: Region name, e.g. ``chest``.
+        max_quasi_static_force_n: F_qs [N], > 0.
+        max_transient_force_n: F_tr [N], > 0; None when transient contact is not permitted.
+        spring_constant_n_per_m: k [N/m], > 0 (the table's N/mm times 1000).
+        effective_mass_kg: m_h [kg], > 0; may be inf (an immovable region: μ = m_r).
+    """
+
+    name: str
+    max_quasi_static_force_n: float
+    max_transient_force_n: float | None
+    spring_constant_n_per_m: float
+    effective_mass_kg: float
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name:
+            raise InvalidInputError(
+                "region.name", f"must be a non-empty string, got {self.name!r}"
+            )
+        where = f"region '{self.name}'"
+        f_qs = finite_float(self.max_quasi_static_force_n, f"{where}.F_qs", 0.0, None, True)
+        f_tr = self.max_transient_force_n
+        if f_tr is not None:
+            f_tr = finite_float(f_tr, f"{where}.F_tr", 0.0, None, True)
+        k = finite_float(self.spring_constant_n_per_m, f"{where}.k", 0.0, None, True)
+        m_h = self.effective_mass_kg
+        if not (isinstance(m_h, (int, float, np.floating)) and not isinstance(m_h, bool)) or not (
+            m_h > 0.0
+        ):
+            raise InvalidInputError(f"{where}.m_h", f"must be a number in (0, inf], got {m_h!r}")
+        object.__setattr__(self, "max_quasi_static_force_n", f_qs)
+        object.__setattr__(self, "max_transient_force_n", f_tr)
+        object.__setattr__(self, "spring_constant_n_per_m", k)
+        object.__setattr__(self, "effective_mass_kg", float(m_h))
+
+    @property
+    def transient_contact_permitted(self) -> bool:
+        """False for regions where the TS permits no transient contact (F_tr is None)."""
+        return self.max_transient_force_n is not None
+
+    @classmethod
+    def from_table_units(
+        cls, name: str, f_qs_n: float, f_tr_n: float | None, k_n_per_mm: float, m_h_kg: float
+    ) -> BodyRegion:
+        """Build from the table's units: forces [N], k [N/mm], m_h [kg]."""
+        k = finite_float(k_n_per_mm, f"region '{name}'.k", 0.0, None, True)
+        return cls(name, f_qs_n, f_tr_n, k * N_PER_MM_IN_N_PER_M, m_h_kg)
+
+
+BODY_REGIONS: Mapping[str, BodyRegion] = MappingProxyType(
+    {row[0]: BodyRegion.from_table_units(*row) for row in REGION_TABLE}
+)
+"""Every region of REGION_TABLE by name, in table order."""
+
+
+def body_regions_from_mapping(
+    table: Mapping[str, Any], field: str = "regions"
+) -> dict[str, BodyRegion]:
+    """Regions from a mapping name -> {F_qs [N], F_tr [N] or None, k [N/mm], m_h [kg]}.
+
+    This is the ``regions`` mapping of the YAML data file, parsed by any YAML loader.
+    """
+    if not isinstance(table, Mapping) or not table:
+        raise InvalidInputError(field, f"must be a non-empty mapping, got {table!r}")
+    regions: dict[str, BodyRegion] = {}
+    for name, row in table.items():
+        keys = ("F_qs", "F_tr", "k", "m_h")
+        if not isinstance(row, Mapping) or set(row) != set(keys):
+            raise InvalidInputError(
+                f"{field}.{name}", f"must be a mapping with exactly the keys {keys}, got {row!r}"
+            )
+        regions[str(name)] = BodyRegion.from_table_units(
+            str(name), row["F_qs"], row["F_tr"], row["k"], row["m_h"]
+        )
+    return regions
+
+
+def data_file_path() -> Path:
+    """Path of the package's copy of the table (grasp_safety_ros/data/)."""
+    return Path(__file__).resolve().parent.parent / "data" / DATA_FILE_NAME
+
+
+def load_body_regions(path: str | Path | None = None) -> dict[str, BodyRegion]:
+    """Read a region table file (default: the package's data file). Needs PyYAML.
+
+    The core itself does not need this: BODY_REGIONS holds the same table.
+    """
+    try:
+        import yaml
+    except ImportError:
+        raise GraspSafetyError(
+            "reading a body-region file needs PyYAML; use iso15066.BODY_REGIONS instead"
+        ) from None
+    file = Path(path) if path is not None else data_file_path()
+    try:
+        content = yaml.safe_load(file.read_text(encoding="utf-8"))
+    except (OSError, yaml.YAMLError) as error:
+        raise InvalidInputError(
+            "iso15066.regions_file", f"cannot read '{file}': {error}"
+        ) from None
+    if not isinstance(content, Mapping) or "regions" not in content:
+        raise InvalidInputError("iso15066.regions_file", f"'{file}' has no 'regions' mapping")
+    return body_regions_from_mapping(content["regions"])
+
+
+def select_regions(
+    regions: Sequence[str | BodyRegion] | Mapping[str, BodyRegion] | None = None,
+) -> tuple[BodyRegion, ...]:
+    """Regions to assess: None -> all of BODY_REGIONS; names are looked up in BODY_REGIONS."""
+    if regions is None:
+        return tuple(BODY_REGIONS.values())
+    if isinstance(regions, Mapping):
+        regions = list(regions.values())
+    if isinstance(regions, str) or not isinstance(regions, Sequence) or not regions:
+        raise InvalidInputError(
+            "iso15066.regions", f"must be a non-empty list of region names, got {regions!r}"
+        )
+    selected: list[BodyRegion] = []
+    for region in regions:
+        if isinstance(region, BodyRegion):
+            selected.append(region)
+        elif region in BODY_REGIONS:
+            selected.append(BODY_REGIONS[region])
+        else:
+            raise InvalidInputError(
+                "iso15066.regions",
+                f"unknown body region {region!r}; regions: {', '.join(BODY_REGIONS)}",
+            )
+    names = [region.name for region in selected]
+    if len(set(names)) != len(names):
+        raise InvalidInputError("iso15066.regions", f"regions repeat: {names}")
+    return tuple(selected)
+
+
+def reduced_mass_kg(human_mass_kg: float, robot_effective_mass_kg: Any) -> np.ndarray:
+    """μ = (1/m_h + 1/m_r)⁻¹ [kg], elementwise; m_h = inf gives μ = m_r."""
+    robot = np.asarray(robot_effective_mass_kg, dtype=float)
+    return 1.0 / (1.0 / human_mass_kg + 1.0 / robot)
+
+
+def transient_contact_force_n(
+    speed_m_s: Any, robot_effective_mass_kg: Any, region: BodyRegion
+) -> np.ndarray:
+    """Predicted peak transient contact force F = v·sqrt(μ·k) [N], elementwise."""
+    mu = reduced_mass_kg(region.effective_mass_kg, robot_effective_mass_kg)
+    return np.asarray(speed_m_s, dtype=float) * np.sqrt(mu * region.spring_constant_n_per_m)
+
+
+def max_permissible_speed_m_s(robot_effective_mass_kg: Any, region: BodyRegion) -> np.ndarray:
+    """v_max = F_tr / sqrt(μ·k) [m/s], elementwise; 0 where transient contact is not permitted."""
+    mu = reduced_mass_kg(region.effective_mass_kg, robot_effective_mass_kg)
+    if region.max_transient_force_n is None:
+        return np.zeros_like(mu)
+    return region.max_transient_force_n / np.sqrt(mu * region.spring_constant_n_per_m)
+
+
+@dataclass(frozen=True)
+class RegionAssessment:
+    """Transient contact with one body region along one trajectory (per sample arrays: (N,)).
+
+    Attributes:
+        region: The body region.
+        contact_force_n: Predicted transient contact force F(t) [N].
+        max_permissible_speed_m_s: v_max(t) [m/s] for the effective mass at t (0 if not
+            permitted).
+        force_ratio: F(t)/F_tr; where transient contact is not permitted: inf where the tip
+            moves, 0 where it is at rest.
+        worst_force_ratio: max_t of force_ratio (0 for an empty or motionless trajectory).
+        worst_sample: Sample index of the worst ratio (first one on ties).
+        peak_contact_force_n: max_t F(t) [N].
+        admissible: worst_force_ratio <= 1 (+ ADMISSIBLE_RATIO_TOLERANCE).
+        min_duration_s: T · worst_force_ratio [s]: the shortest duration of the same quintic
+            path for which this region is admissible (inf if not permitted and moving).
+    """
+
+    region: BodyRegion
+    contact_force_n: np.ndarray
+    max_permissible_speed_m_s: np.ndarray
+    force_ratio: np.ndarray
+    worst_force_ratio: float
+    worst_sample: int
+    peak_contact_force_n: float
+    admissible: bool
+    min_duration_s: float
+
+    @property
+    def transient_contact_permitted(self) -> bool:
+        """Whether the TS permits transient contact with this region."""
+        return self.region.transient_contact_permitted
+
+
+@dataclass(frozen=True)
+class PowerForceLimitAssessment:
+    """ISO/TS 15066 power-and-force-limiting check of one grasp's trajectory.
+
+    Attributes:
+        index, name: The grasp, as in its GraspEvaluation.
+        feasible: False when the grasp's trajectory is infeasible (then nothing is assessed).
+        duration_s: T of the assessed trajectory [s]; NaN if infeasible.
+        regions: One RegionAssessment per assessed region, in the order asked.
+        admissible: Every assessed region admissible (never, for a moving tip, when a region
+            that permits no transient contact is assessed).
+        admissible_where_permitted: Every assessed region that permits transient contact is
+            admissible.
+        min_duration_s: Shortest duration [s] admissible for every assessed region that
+            permits transient contact (NaN if none is assessed or infeasible).
+        limiting_region: The permitted region with the largest worst ratio ("" if none).
+        regions_not_permitted: Names of assessed regions that permit no transient contact.
+    """
+
+    index: int
+    name: str
+    feasible: bool
+    duration_s: float
+    regions: tuple[RegionAssessment, ...]
+    admissible: bool
+    admissible_where_permitted: bool
+    min_duration_s: float
+    limiting_region: str
+    regions_not_permitted: tuple[str, ...]
+
+    def region(self, name: str) -> RegionAssessment:
+        """The assessment of the region called ``name``."""
+        for assessment in self.regions:
+            if assessment.region.name == name:
+                return assessment
+        raise InvalidInputError(
+            "iso15066.region",
+            f"region {name!r} was not assessed; assessed: "
+            f"{', '.join(a.region.name for a in self.regions)}",
+        )
+
+
+def _read_only(array: np.ndarray) -> np.ndarray:
+    array.setflags(write=False)
+    return array
+
+
+def assess_region(
+    speed_m_s: np.ndarray, effective_mass_kg: np.ndarray, duration_s: float, region: BodyRegion
+) -> RegionAssessment:
+    """Assess one region for per-sample speeds [m/s] and effective masses [kg] (validated)."""
+    force = transient_contact_force_n(speed_m_s, effective_mass_kg, region)
+    v_max = max_permissible_speed_m_s(effective_mass_kg, region)
+    if region.max_transient_force_n is None:
+        ratio = np.where(speed_m_s > 0.0, np.inf, 0.0)
+    else:
+        ratio = force / region.max_transient_force_n
+    worst_sample = int(np.argmax(ratio)) if len(ratio) else 0
+    worst = float(ratio[worst_sample]) if len(ratio) else 0.0
+    return RegionAssessment(
+        region=region,
+        contact_force_n=_read_only(force),
+        max_permissible_speed_m_s=_read_only(np.asarray(v_max, dtype=float)),
+        force_ratio=_read_only(ratio),
+        worst_force_ratio=worst,
+        worst_sample=worst_sample,
+        peak_contact_force_n=float(force.max()) if len(force) else 0.0,
+        admissible=worst <= 1.0 + ADMISSIBLE_RATIO_TOLERANCE,
+        min_duration_s=duration_s * worst if worst > 0.0 else 0.0,
+    )
+
+
+def assess_motion(
+    speed_m_s: Any,
+    effective_mass_kg: Any,
+    duration_s: float,
+    regions: Sequence[str | BodyRegion] | Mapping[str, BodyRegion] | None = None,
+    index: int = 0,
+    name: str = "",
+) -> PowerForceLimitAssessment:
+    """Assess per-sample speeds [m/s] and effective masses [kg] of a quintic of duration T [s].
+
+    Use this for any point of the moving body (e.g. an exposed point of the object); for the
+    tip of an evaluated grasp use ``assess_grasp``.
+    """
+    speed = finite_array(speed_m_s, "iso15066.speed_m_s")
+    if speed.ndim != 1 or np.any(speed < 0.0):
+        raise InvalidInputError("iso15066.speed_m_s", "must be a 1-D array of speeds >= 0")
+    mass = finite_array(effective_mass_kg, "iso15066.effective_mass_kg", speed.shape)
+    if np.any(mass <= 0.0):
+        raise InvalidInputError("iso15066.effective_mass_kg", "must be > 0 at every sample")
+    duration = finite_float(duration_s, "iso15066.duration_s", 0.0, None, True)
+    assessed = tuple(assess_region(speed, mass, duration, r) for r in select_regions(regions))
+    permitted = [a for a in assessed if a.transient_contact_permitted]
+    limiting = max(permitted, key=lambda a: a.worst_force_ratio) if permitted else None
+    return PowerForceLimitAssessment(
+        index=index,
+        name=name,
+        feasible=True,
+        duration_s=duration,
+        regions=assessed,
+        admissible=all(a.admissible for a in assessed),
+        admissible_where_permitted=all(a.admissible for a in permitted),
+        min_duration_s=limiting.min_duration_s if limiting is not None else math.nan,
+        limiting_region=limiting.region.name if limiting is not None else "",
+        regions_not_permitted=tuple(
+            a.region.name for a in assessed if not a.transient_contact_permitted
+        ),
+    )
+
+
+def assess_grasp(
+    evaluation: GraspEvaluation,
+    regions: Sequence[str | BodyRegion] | Mapping[str, BodyRegion] | None = None,
+) -> PowerForceLimitAssessment:
+    """Assess a grasp's tip motion: tip speed and effective mass along the direction of motion.
+
+    The duration T is the evaluation's last sample time (trajectories always sample t = T).
+    An infeasible evaluation gives an assessment with ``feasible`` False, no regions, NaN
+    duration and ``admissible`` False.
+    """
+    if not evaluation.feasible:
+        selected = select_regions(regions)
+        return PowerForceLimitAssessment(
+            index=evaluation.index,
+            name=evaluation.name,
+            feasible=False,
+            duration_s=math.nan,
+            regions=(),
+            admissible=False,
+            admissible_where_permitted=False,
+            min_duration_s=math.nan,
+            limiting_region="",
+            regions_not_permitted=tuple(
+                r.name for r in selected if not r.transient_contact_permitted
+            ),
+        )
+    return assess_motion(
+        evaluation.tip_speed_m_s,
+        evaluation.effective_mass_kg,
+        float(evaluation.times_s[-1]),
+        regions,
+        evaluation.index,
+        evaluation.name,
+    )

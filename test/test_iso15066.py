@@ -1,0 +1,268 @@
+"""ISO/TS 15066 power and force limiting: table, units, closed forms, re-timing identity."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from conftest import BAXTER_SEED
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from grasp_safety_ros.core import (
+    EvaluationConfig,
+    Grasp,
+    GraspSafetyEvaluator,
+    IKConfig,
+    InvalidInputError,
+    ObjectTrajectory,
+    RobotModel,
+    iso15066,
+    solid_box,
+)
+from grasp_safety_ros.core.iso15066 import (
+    BODY_REGIONS,
+    BodyRegion,
+    assess_grasp,
+    assess_motion,
+    max_permissible_speed_m_s,
+    transient_contact_force_n,
+)
+from grasp_safety_ros.core.validation import pose_from_position_quat
+
+SHARED_TABLE = (
+    Path(__file__).resolve().parents[1].parent
+    / "shared"
+    / "data"
+    / ("iso_ts_15066_body_regions.yaml")
+)
+HEAD_REGIONS = ("skull_forehead", "face", "neck")
+
+
+def book_trajectory(duration_s: float, dt_s: float) -> ObjectTrajectory:
+    return ObjectTrajectory(
+        pose_from_position_quat([1.0, 0.0, 0.03], [0.5, 0.5, 0.5, 0.5], "start"),
+        pose_from_position_quat([1.1, -0.38, 0.16], [0.5, 0.5, 0.5, 0.5], "goal"),
+        duration_s,
+        dt_s,
+    )
+
+
+BOOK = solid_box(0.34, [0.15, 0.22, 0.015])
+SPINE = Grasp(pose_from_position_quat([-0.075, 0.1, 0.0], [0, 0, 0, 1], "grasp"), "spine")
+FAST = EvaluationConfig(ik=IKConfig(check_velocity_limits=False))
+
+
+def test_package_data_file_agrees_with_the_constant_table() -> None:
+    assert iso15066.load_body_regions() == dict(BODY_REGIONS)
+    content = yaml.safe_load(iso15066.data_file_path().read_text(encoding="utf-8"))
+    assert list(content["regions"]) == [row[0] for row in iso15066.REGION_TABLE]
+    assert content["units"]["k"] == "N/mm"
+
+
+@pytest.mark.skipif(not SHARED_TABLE.is_file(), reason="shared data folder not present")
+def test_package_table_carries_the_shared_facts() -> None:
+    shared = yaml.safe_load(SHARED_TABLE.read_text(encoding="utf-8"))["regions"]
+    package = yaml.safe_load(iso15066.data_file_path().read_text(encoding="utf-8"))["regions"]
+    assert package == shared
+
+
+def test_units_and_head_regions() -> None:
+    chest = BODY_REGIONS["chest"]
+    assert chest.spring_constant_n_per_m == 25_000.0  # 25 N/mm
+    assert chest.max_transient_force_n == 280.0 and chest.max_quasi_static_force_n == 140.0
+    assert chest.effective_mass_kg == 40.0
+    assert {r.name for r in BODY_REGIONS.values() if not r.transient_contact_permitted} == set(
+        HEAD_REGIONS
+    )
+    for region in BODY_REGIONS.values():
+        if region.transient_contact_permitted:
+            assert region.max_transient_force_n == 2.0 * region.max_quasi_static_force_n
+
+
+def test_force_and_speed_limit_by_hand() -> None:
+    """Chest, robot 2 kg at 0.5 m/s: μ = 80/42 kg, F = 0.5·sqrt(μ · 25 N/mm · 1000 mm/m)."""
+    chest = BODY_REGIONS["chest"]
+    mu = 40.0 * 2.0 / 42.0
+    stiffness = 25.0 * 1000.0
+    assert float(transient_contact_force_n(0.5, 2.0, chest)) == pytest.approx(
+        0.5 * math.sqrt(mu * stiffness), rel=1e-14
+    )
+    assert float(transient_contact_force_n(0.5, 2.0, chest)) == pytest.approx(109.1089451, 1e-9)
+    assert float(max_permissible_speed_m_s(2.0, chest)) == pytest.approx(
+        280.0 / math.sqrt(mu * stiffness), rel=1e-14
+    )
+    assert float(max_permissible_speed_m_s(2.0, BODY_REGIONS["face"])) == 0.0
+
+
+@settings(max_examples=50, deadline=None)
+@given(
+    speed=st.floats(0.0, 3.0),
+    robot_mass=st.floats(0.01, 100.0),
+    stiffness=st.floats(1.0, 200.0),
+)
+def test_immovable_body_region_gives_the_robot_mass(
+    speed: float, robot_mass: float, stiffness: float
+) -> None:
+    """m_h → ∞: μ = M_eff, so F = v·sqrt(M_eff·k)."""
+    rigid = BodyRegion("rigid", 100.0, 200.0, stiffness * 1000.0, math.inf)
+    expected = speed * math.sqrt(robot_mass * stiffness * 1000.0)
+    assert float(transient_contact_force_n(speed, robot_mass, rigid)) == pytest.approx(
+        expected, rel=1e-12, abs=1e-12
+    )
+
+
+@settings(max_examples=50, deadline=None)
+@given(robot_mass=st.floats(0.01, 100.0), region=st.sampled_from(sorted(BODY_REGIONS)))
+def test_force_at_the_speed_limit_is_the_force_limit(robot_mass: float, region: str) -> None:
+    body = BODY_REGIONS[region]
+    v_max = float(max_permissible_speed_m_s(robot_mass, body))
+    force = float(transient_contact_force_n(v_max, robot_mass, body))
+    assert force == pytest.approx(body.max_transient_force_n or 0.0, rel=1e-12)
+
+
+def test_synthetic_motion_ratios_admissibility_and_min_duration() -> None:
+    speed = np.array([0.0, 0.2, 0.5, 0.2, 0.0])
+    mass = np.array([3.0, 2.0, 2.0, 1.0, 1.0])
+    assessment = assess_motion(speed, mass, 2.0, ["chest", "hand_fingers", "face"])
+    chest = assessment.region("chest")
+    expected = speed * np.sqrt(40.0 * mass / (40.0 + mass) * 25_000.0) / 280.0
+    np.testing.assert_allclose(chest.force_ratio, expected, rtol=1e-14)
+    assert chest.worst_sample == 2
+    assert chest.min_duration_s == pytest.approx(2.0 * expected.max(), rel=1e-14)
+    face = assessment.region("face")
+    assert not face.transient_contact_permitted and not face.admissible
+    np.testing.assert_array_equal(face.force_ratio, [0.0, np.inf, np.inf, np.inf, 0.0])
+    assert face.min_duration_s == math.inf
+    assert assessment.regions_not_permitted == ("face",)
+    assert not assessment.admissible
+    hand = assessment.region("hand_fingers")
+    assert (
+        assessment.limiting_region
+        == max((chest, hand), key=lambda a: a.worst_force_ratio).region.name
+    )
+    assert assessment.admissible_where_permitted == (
+        max(chest.worst_force_ratio, hand.worst_force_ratio) <= 1.0
+    )
+    assert assessment.min_duration_s == pytest.approx(
+        2.0 * max(chest.worst_force_ratio, hand.worst_force_ratio), rel=1e-14
+    )
+
+
+def test_motionless_tip_is_admissible_even_for_the_head() -> None:
+    assessment = assess_motion(np.zeros(4), np.ones(4), 1.0, list(HEAD_REGIONS))
+    assert assessment.admissible
+    assert all(a.worst_force_ratio == 0.0 and a.min_duration_s == 0.0 for a in assessment.regions)
+    assert math.isnan(assessment.min_duration_s) and assessment.limiting_region == ""
+
+
+def test_minimum_duration_makes_the_retimed_trajectory_exactly_admissible(
+    baxter: RobotModel,
+) -> None:
+    """Re-timing to T_min (same τ samples) scales every ratio by T/T_min: the worst becomes 1."""
+    evaluator = GraspSafetyEvaluator(baxter, FAST)
+    duration, dt = 0.5, 0.0125
+    fast = evaluator.evaluate(
+        SPINE, BOOK, book_trajectory(duration, dt), seed_positions=BAXTER_SEED
+    )
+    assert fast.feasible, fast.reason
+    assessment = assess_grasp(fast)
+    assert not assessment.admissible_where_permitted
+    t_min = assessment.min_duration_s
+    assert t_min > duration
+    retimed = evaluator.evaluate(
+        SPINE, BOOK, book_trajectory(t_min, dt * t_min / duration), seed_positions=BAXTER_SEED
+    )
+    np.testing.assert_allclose(retimed.times_s, fast.times_s * t_min / duration, rtol=1e-12)
+    again = assess_grasp(retimed)
+    assert again.region(assessment.limiting_region).worst_force_ratio == pytest.approx(
+        1.0, rel=1e-6
+    )
+    for before, after in zip(assessment.regions, again.regions, strict=True):
+        if before.transient_contact_permitted:
+            np.testing.assert_allclose(
+                after.force_ratio, before.force_ratio * duration / t_min, rtol=1e-6, atol=1e-12
+            )
+            assert after.min_duration_s == pytest.approx(before.min_duration_s, rel=1e-6)
+    slower = evaluator.evaluate(
+        SPINE, BOOK, book_trajectory(1.001 * t_min, dt), seed_positions=BAXTER_SEED
+    )
+    assert assess_grasp(slower).admissible_where_permitted
+    assert not assess_grasp(slower).admissible  # head regions: never with a moving tip
+
+
+def test_assess_grasp_uses_tip_speed_and_effective_mass(baxter: RobotModel) -> None:
+    evaluation = GraspSafetyEvaluator(baxter).evaluate(
+        SPINE, BOOK, book_trajectory(2.0, 0.05), seed_positions=BAXTER_SEED
+    )
+    assessment = assess_grasp(evaluation, ["pelvis"])
+    assert assessment.duration_s == 2.0 and assessment.index == evaluation.index
+    pelvis = assessment.region("pelvis")
+    np.testing.assert_allclose(
+        pelvis.contact_force_n,
+        evaluation.tip_speed_m_s
+        * np.sqrt(
+            40.0 * evaluation.effective_mass_kg / (40.0 + evaluation.effective_mass_kg) * 25_000.0
+        ),
+        rtol=1e-13,
+    )
+
+
+def test_infeasible_grasp_is_not_assessed(baxter: RobotModel) -> None:
+    far = Grasp(pose_from_position_quat([0.0, 0.0, 3.0], [0, 0, 0, 1], "grasp"), "far")
+    evaluation = GraspSafetyEvaluator(baxter).evaluate(
+        far, BOOK, book_trajectory(2.0, 0.1), seed_positions=BAXTER_SEED
+    )
+    assessment = assess_grasp(evaluation)
+    assert not assessment.feasible and not assessment.admissible and assessment.regions == ()
+    assert math.isnan(assessment.min_duration_s)
+
+
+@pytest.mark.parametrize(
+    ("call", "field"),
+    [
+        (lambda: assess_motion([-0.1, 0.2], [1.0, 1.0], 1.0), "iso15066.speed_m_s"),
+        (lambda: assess_motion([0.1, 0.2], [1.0], 1.0), "iso15066.effective_mass_kg"),
+        (lambda: assess_motion([0.1, 0.2], [1.0, 0.0], 1.0), "iso15066.effective_mass_kg"),
+        (lambda: assess_motion([0.1], [1.0], 0.0), "iso15066.duration_s"),
+        (lambda: assess_motion([0.1], [1.0], 1.0, ["elbow"]), "iso15066.regions"),
+        (lambda: assess_motion([0.1], [1.0], 1.0, ["chest", "chest"]), "iso15066.regions"),
+        (lambda: BodyRegion("x", 10.0, -1.0, 1.0, 1.0), r"region 'x'\.F_tr"),
+        (lambda: BodyRegion("x", 10.0, None, 1.0, 0.0), r"region 'x'\.m_h"),
+        (lambda: iso15066.body_regions_from_mapping({"a": {"F_qs": 1}}), r"regions\.a"),
+    ],
+)
+def test_bad_input_is_refused(call: object, field: str) -> None:
+    with pytest.raises(InvalidInputError, match=field):
+        call()  # type: ignore[operator]
+
+
+NEW_MODULES = (
+    "iso15066",
+    "exposed_points",
+    "uncertainty",
+    "multi_objective",
+    "redundancy",
+    "effort",
+)
+
+
+def test_new_core_modules_import_without_yaml_or_ros() -> None:
+    code = (
+        "import sys\n"
+        "for name in ('rclpy', 'yaml', 'matplotlib', 'scipy'):\n"
+        "    sys.modules[name] = None\n"
+        + "".join(f"import grasp_safety_ros.core.{m}\n" for m in NEW_MODULES)
+        + "from grasp_safety_ros.core.iso15066 import BODY_REGIONS\n"
+        "print(len(BODY_REGIONS))\n"
+    )
+    completed = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=False
+    )
+    assert completed.returncode == 0, completed.stderr
+    assert completed.stdout.strip() == "12"
