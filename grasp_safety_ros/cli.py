@@ -9,10 +9,11 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from .core.analysis import SafetyReport, analyse
 from .core.exceptions import GraspSafetyError
-from .core.ranking import METRICS, EvaluationConfig, GraspSafetyEvaluator, Ranking
+from .core.ranking import METRICS, EvaluationConfig, GraspSafetyEvaluator
 from .paths import config_file
-from .report import ranking_table, ranking_to_dict
+from .report import report_text, report_to_dict
 from .scenario import Scenario, load_scenario
 
 EXIT_BAD_INPUT = 2
@@ -40,39 +41,48 @@ def _progress_printer(total_samples: int) -> Callable[[int, int], None] | None:
     return show
 
 
-def rank_scenario(scenario: Scenario, metric: str | None = None) -> Ranking:
-    """Load the scenario's robot and rank its grasps."""
+def rank_scenario(scenario: Scenario, metric: str | None = None) -> SafetyReport:
+    """Load the scenario's robot, rank its grasps and run the analyses the scenario asks for."""
     robot = scenario.robot.load(scenario.base_dir)
     evaluator = GraspSafetyEvaluator(robot, EvaluationConfig(metric=metric or scenario.metric))
     progress = _progress_printer(len(scenario.grasps) * scenario.trajectory.num_samples)
-    return evaluator.rank(
+    ranking = evaluator.rank(
         scenario.grasps,
         scenario.object_inertia,
         scenario.trajectory,
         seed_positions=scenario.robot.seed,
         progress=progress,
     )
+    return analyse(
+        evaluator,
+        scenario.grasps,
+        scenario.object_inertia,
+        scenario.trajectory,
+        scenario.options,
+        ranking=ranking,
+    )
 
 
 def _write_outputs(
-    ranking: Ranking, json_path: Path | None, plot_path: Path | None, title: str
+    report: SafetyReport, json_path: Path | None, plot_path: Path | None, title: str
 ) -> None:
     if json_path is not None:
         json_path.parent.mkdir(parents=True, exist_ok=True)
-        json_path.write_text(json.dumps(ranking_to_dict(ranking), indent=1), encoding="utf-8")
+        text = json.dumps(report_to_dict(report), indent=1, allow_nan=False)
+        json_path.write_text(text, encoding="utf-8")
         print(f"wrote {json_path}")
     if plot_path is not None:
-        from .plotting import plot_ranking
+        from .plotting import plot_report
 
-        plot_ranking(ranking, plot_path, title)
+        plot_report(report, plot_path, title)
         print(f"wrote {plot_path}")
 
 
 def _command_rank(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
-    ranking = rank_scenario(scenario, args.metric)
-    print(ranking_table(ranking))
-    _write_outputs(ranking, args.json, args.plot, Path(args.scenario).name)
+    report = rank_scenario(scenario, args.metric)
+    print(report_text(report))
+    _write_outputs(report, args.json, args.plot, Path(args.scenario).name)
     return 0
 
 
@@ -80,10 +90,10 @@ def _command_demo(args: argparse.Namespace) -> int:
     path = config_file(DEMO_SCENARIO)
     print(f"demo: the paper's book experiment on Baxter ({path})")
     scenario = load_scenario(path)
-    ranking = rank_scenario(scenario)
-    print(ranking_table(ranking))
+    report = rank_scenario(scenario)
+    print(report_text(report))
     out = Path(args.out)
-    _write_outputs(ranking, out / "ranking.json", out / "ranking.png", "book on Baxter (demo)")
+    _write_outputs(report, out / "ranking.json", out / "ranking.png", "book on Baxter (demo)")
     return 0
 
 

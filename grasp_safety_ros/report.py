@@ -1,22 +1,35 @@
-"""Rankings as JSON-ready dictionaries and as a text table."""
+"""Safety reports as JSON-ready dictionaries and as text tables (no NaN or inf in JSON)."""
 
 from __future__ import annotations
 
 import math
 from typing import Any
 
+import numpy as np
+
+from .core.analysis import SafetyReport
+from .core.iso15066 import PowerForceLimitAssessment
 from .core.ranking import GraspEvaluation, Ranking
 
 SCORE_UNITS = {"mean": "kg", "max": "kg", "integral": "kg*s"}
 
 
-def _number(value: float) -> float | None:
-    """JSON has no NaN: infeasible scores become null."""
-    return None if math.isnan(value) else float(value)
+def number(value: float) -> float | None:
+    """A finite float, or None (JSON null) for NaN and inf."""
+    value = float(value)
+    return value if math.isfinite(value) else None
+
+
+def numbers(values: np.ndarray) -> list[Any]:
+    """Nested lists of finite floats, with None for NaN and inf."""
+    array = np.asarray(values, dtype=float)
+    if array.ndim == 0:
+        return number(array)  # type: ignore[return-value]
+    return [numbers(row) for row in array] if array.ndim > 1 else [number(v) for v in array]
 
 
 def evaluation_to_dict(evaluation: GraspEvaluation) -> dict[str, Any]:
-    """One grasp in the JSON shape of the CLI (samples carry q in joint_names order)."""
+    """One grasp of the paper's ranking (samples carry q in joint_names order)."""
     samples = [
         {
             "t_s": float(evaluation.times_s[i]),
@@ -34,15 +47,15 @@ def evaluation_to_dict(evaluation: GraspEvaluation) -> dict[str, Any]:
         "name": evaluation.name,
         "feasible": evaluation.feasible,
         "reason": evaluation.reason,
-        "score": _number(evaluation.score),
-        "mean_effective_mass_kg": _number(evaluation.mean_effective_mass_kg),
-        "peak_effective_mass_kg": _number(evaluation.peak_effective_mass_kg),
+        "score": number(evaluation.score),
+        "mean_effective_mass_kg": number(evaluation.mean_effective_mass_kg),
+        "peak_effective_mass_kg": number(evaluation.peak_effective_mass_kg),
         "samples": samples,
     }
 
 
 def ranking_to_dict(ranking: Ranking) -> dict[str, Any]:
-    """The CLI's JSON output: joint names, metric, ranking (indices) and per-grasp results."""
+    """The paper's ranking: joint names, metric, ranking (indices) and per-grasp results."""
     return {
         "joint_names": list(ranking.joint_names),
         "metric": ranking.metric,
@@ -50,6 +63,123 @@ def ranking_to_dict(ranking: Ranking) -> dict[str, Any]:
         "ranking": list(ranking.order),
         "grasps": [evaluation_to_dict(e) for e in ranking.evaluations],
     }
+
+
+def iso_to_dict(assessment: PowerForceLimitAssessment) -> dict[str, Any]:
+    """ISO/TS 15066 power and force limiting of one grasp, per body region."""
+    return {
+        "admissible": assessment.admissible,
+        "admissible_where_permitted": assessment.admissible_where_permitted,
+        "min_duration_s": number(assessment.min_duration_s),
+        "limiting_region": assessment.limiting_region,
+        "regions_not_permitted": list(assessment.regions_not_permitted),
+        "regions": {
+            r.region.name: {
+                "transient_contact_permitted": r.transient_contact_permitted,
+                "worst_force_ratio": number(r.worst_force_ratio),
+                "peak_contact_force_n": number(r.peak_contact_force_n),
+                "max_transient_force_n": r.region.max_transient_force_n,
+                "min_max_permissible_speed_m_s": number(np.min(r.max_permissible_speed_m_s)),
+                "admissible": r.admissible,
+                "min_duration_s": number(r.min_duration_s),
+            }
+            for r in assessment.regions
+        },
+    }
+
+
+def report_to_dict(report: SafetyReport) -> dict[str, Any]:
+    """The CLI's JSON: the paper's ranking plus every analysis the options asked for.
+
+    ``ranking`` is the final order (safety, safety + quality, or effort); ``safety_ranking``
+    orders by the safety score alone (with the chosen ``metric_point``).
+    """
+    result = ranking_to_dict(report.ranking)
+    options = report.options
+    result.update(
+        {
+            "ranking": list(report.order),
+            "safety_ranking": list(report.safety_order),
+            "paper_ranking": list(report.ranking.order),
+            "metric_point": options.metric_point,
+            "rank_by": options.rank_by,
+            "safety_weight": options.safety_weight if options.grasp_quality is not None else None,
+            "pareto_set": list(report.quality.pareto_set)
+            if options.grasp_quality is not None
+            else None,
+        }
+    )
+    if report.uncertainty is not None:
+        u = report.uncertainty
+        result["uncertainty"] = {
+            "mass_fraction": u.uncertainty.mass_fraction,
+            "com_offset_m": u.uncertainty.com_offset_m,
+            "inertia_fraction": u.uncertainty.inertia_fraction,
+            "percentile": u.uncertainty.percentile,
+            "perturbations": len(u.perturbations.inertias),
+            "ranking_flips": u.ranking_flips,
+            "order_stability": number(u.order_stability),
+            "worst_case_ranking": list(u.worst_case_order),
+            "message": u.message,
+        }
+    iso = {a.index: a for a in report.iso}
+    for k, grasp in enumerate(result["grasps"]):
+        grasp["safety_score"] = number(report.scores[k])
+        if k in iso:
+            grasp["iso_ts_15066"] = iso_to_dict(iso[k])
+        if options.grasp_quality is not None:
+            grasp["quality"] = options.grasp_quality[k]
+            grasp["combined_score"] = number(report.quality.combined[k])
+            grasp["pareto_optimal"] = k in report.quality.pareto_set
+        if report.uncertainty is not None:
+            g = report.uncertainty.grasps[k]
+            grasp["uncertainty"] = {
+                "worst_case_score": number(g.worst_case_score),
+                "percentile_score": number(g.percentile_score),
+                "probability_safest": number(g.probability_safest),
+            }
+        _add_per_grasp_series(report, k, grasp)
+    return result
+
+
+def _add_per_grasp_series(report: SafetyReport, k: int, grasp: dict[str, Any]) -> None:
+    samples = grasp["samples"]
+    if report.exposed:
+        exposed = report.exposed[k]
+        grasp["exposed_points_in_object_m"] = exposed.points_in_object_m.tolist()
+        for i, sample in enumerate(samples):
+            sample["leading_point_index"] = int(exposed.leading_point_index[i])
+            sample["leading_point_effective_mass_kg"] = number(
+                exposed.leading_effective_mass_kg[i]
+            )
+            sample["worst_point_index"] = int(exposed.worst_point_index[i])
+            sample["worst_point_effective_mass_kg"] = number(exposed.worst_effective_mass_kg[i])
+    if report.redundancy:
+        resolution = report.redundancy[k]
+        grasp["redundancy"] = {
+            "applied": resolution.applied,
+            "reason": resolution.reason,
+            "score": number(resolution.score),
+            "score_without": number(resolution.original_score),
+        }
+        if resolution.applied:
+            for i, sample in enumerate(samples):
+                sample["q_redundancy"] = resolution.joint_positions[i].tolist()
+                sample["effective_mass_redundancy_kg"] = float(resolution.effective_mass_kg[i])
+    if report.effort:
+        effort = report.effort[k]
+        if effort.feasible:
+            grasp["effort"] = {
+                "peak_abs_torque": effort.peak_abs_torque.tolist(),
+                "rms_torque": effort.rms_torque.tolist(),
+                "effort_limits": numbers(effort.effort_limits),
+                "peak_fraction_of_limit": numbers(effort.peak_fraction_of_limit),
+                "rms_fraction_of_limit": numbers(effort.rms_fraction_of_limit),
+                "score": number(effort.score(report.options.effort_criterion)),
+                "criterion": report.options.effort_criterion,
+            }
+            for i, sample in enumerate(samples):
+                sample["joint_torques"] = effort.joint_torques[i].tolist()
 
 
 def ranking_table(ranking: Ranking) -> str:
@@ -70,4 +200,88 @@ def ranking_table(ranking: Ranking) -> str:
     for e in ranking.evaluations:
         if not e.feasible:
             lines.append(f"{'-':>4}  {e.index:>5}  {e.name[:16]:<16} infeasible: {e.reason}")
+    return "\n".join(lines)
+
+
+def _ratio(value: float) -> str:
+    return "n/p" if math.isinf(value) else f"{value:.2f}"
+
+
+ISO_COLUMNS = 8
+"""Grasps shown in the ISO/TS 15066 table (the first ones of the final ranking)."""
+
+
+def _iso_lines(report: SafetyReport) -> list[str]:
+    """Worst transient F/F_max per body region (rows) for the best-ranked grasps (columns)."""
+    by_index = {a.index: a for a in report.iso if a.feasible}
+    shown = [by_index[k] for k in report.order if k in by_index][:ISO_COLUMNS]
+    if not shown:
+        return []
+    lines = [
+        "",
+        "ISO/TS 15066 transient contact, worst F/F_max over the trajectory "
+        "(n/p: transient contact not permitted; > 1: too fast)",
+        f"{'region':<16} " + " ".join(f"{a.name[:12]:>12}" for a in shown),
+    ]
+    for j, region in enumerate(shown[0].regions):
+        cells = " ".join(f"{_ratio(a.regions[j].worst_force_ratio):>12}" for a in shown)
+        lines.append(f"{region.region.name[:16]:<16} {cells}")
+    lines.append(
+        f"{'admissible':<16} "
+        + " ".join(f"{'yes' if a.admissible_where_permitted else 'no':>12}" for a in shown)
+    )
+    lines.append(f"{'T_min [s]':<16} " + " ".join(f"{a.min_duration_s:>12.3f}" for a in shown))
+    if len(by_index) > len(shown):
+        lines.append(f"({len(by_index) - len(shown)} more feasible grasps in the JSON output)")
+    return lines
+
+
+def report_text(report: SafetyReport) -> str:
+    """The ranking table followed by one section per analysis that was run."""
+    options = report.options
+    lines = [ranking_table(report.ranking)]
+    evaluations = report.ranking.evaluations
+    if options.metric_point != "tip" or report.redundancy or options.grasp_quality is not None:
+        lines.append("")
+        what = f"metric point: {options.metric_point}"
+        if report.redundancy and options.metric_point == "tip":
+            what += ", redundancy resolved"
+        if options.grasp_quality is not None:
+            what += f", quality weight {1 - options.safety_weight:g}"
+        lines.append(f"final ranking ({what}, rank_by={options.rank_by}):")
+        for rank, k in enumerate(report.order, start=1):
+            extra = ""
+            if options.grasp_quality is not None:
+                pareto = " pareto" if k in report.quality.pareto_set else ""
+                extra = f"  quality {options.grasp_quality[k]:.3f}{pareto}"
+            lines.append(
+                f"{rank:>4}  {k:>5}  {evaluations[k].name[:16]:<16} "
+                f"safety score {report.scores[k]:.4f}{extra}"
+            )
+    if report.iso:
+        lines += _iso_lines(report)
+    if report.uncertainty is not None:
+        lines += ["", f"inertia uncertainty (tip effective mass): {report.uncertainty.message}"]
+        for g in report.uncertainty.grasps:
+            if g.feasible:
+                lines.append(
+                    f"  {g.name[:16]:<16} nominal {g.nominal_score:.4f}  worst case "
+                    f"{g.worst_case_score:.4f}  p{report.uncertainty.uncertainty.percentile:g} "
+                    f"{g.percentile_score:.4f}  P(safest) {g.probability_safest:.2f}"
+                )
+    if report.redundancy:
+        lines += ["", "redundancy (null-space) resolution, tip effective mass:"]
+        for r in report.redundancy:
+            if r.applied:
+                lines.append(f"  {r.name[:16]:<16} score {r.original_score:.4f} -> {r.score:.4f}")
+            else:
+                lines.append(f"  {r.name[:16]:<16} not applied: {r.reason}")
+    if report.effort:
+        lines += ["", f"joint effort ({options.effort_criterion} of the torque limits):"]
+        for e in report.effort:
+            if e.feasible:
+                lines.append(
+                    f"  {e.name[:16]:<16} peak |tau| max {np.max(e.peak_abs_torque):.2f} N m, "
+                    f"{options.effort_criterion} {e.score(options.effort_criterion):.3f}"
+                )
     return "\n".join(lines)

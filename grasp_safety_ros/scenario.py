@@ -3,17 +3,21 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
 
+from .core.analysis import RANK_BY, AnalysisOptions
 from .core.exceptions import InvalidInputError
+from .core.exposed_points import box_corners_in_object, cylinder_rim_points_in_object
 from .core.inertia import ObjectInertia, solid_box, solid_cylinder, solid_sphere
 from .core.ranking import METRICS, Grasp, check_metric
 from .core.robot import RobotModel
 from .core.trajectory import ObjectTrajectory
+from .core.uncertainty import InertiaUncertainty
 from .core.validation import finite_array, finite_float, pose_from_position_quat
 
 
@@ -43,7 +47,12 @@ class RobotSpec:
 
 @dataclass(frozen=True)
 class Scenario:
-    """Everything a ranking needs, as read from a scenario file."""
+    """Everything a ranking needs, as read from a scenario file.
+
+    Attributes:
+        options: The analyses beyond the paper (metric point, ISO/TS 15066, uncertainty,
+            grasp quality, redundancy, effort), from the optional sections of the file.
+    """
 
     robot: RobotSpec
     object_inertia: ObjectInertia
@@ -51,6 +60,7 @@ class Scenario:
     grasps: tuple[Grasp, ...]
     metric: str
     base_dir: Path
+    options: AnalysisOptions = field(default_factory=AnalysisOptions)
 
 
 def _mapping(value: Any, field: str) -> Mapping[str, Any]:
@@ -103,11 +113,36 @@ def parse_robot(section: Any) -> RobotSpec:
     )
 
 
-def parse_object(section: Any) -> ObjectInertia:
-    """Parse the ``object`` section: mass, optional CoM, and a tensor or a primitive shape."""
+def parse_object(section: Any) -> tuple[ObjectInertia, np.ndarray | None]:
+    """Parse the ``object`` section: mass, optional CoM, a tensor or a primitive shape, points.
+
+    Returns:
+        The inertia, and the exposed points [m] (object frame): ``points_m`` when given, else
+        the corners of a box or the rims of a cylinder, else None.
+    """
     obj = _mapping(section, "object")
+    inertia = _parse_inertia(obj)
+    if "points_m" in obj:
+        points = finite_array(obj["points_m"], "object.points_m")
+        if points.ndim != 2 or points.shape[1] != 3 or len(points) == 0:
+            raise InvalidInputError(
+                "object.points_m", f"must be a list of [x, y, z], got shape {list(points.shape)}"
+            )
+        return inertia, points
+    com = inertia.com_in_object_m
+    if "box_size_m" in obj:
+        return inertia, box_corners_in_object(obj["box_size_m"], com)
+    if "cylinder" in obj:
+        cylinder = obj["cylinder"]
+        return inertia, cylinder_rim_points_in_object(
+            cylinder["radius_m"], cylinder["length_m"], com
+        )
+    return inertia, None
+
+
+def _parse_inertia(obj: Mapping[str, Any]) -> ObjectInertia:
     shapes = {"inertia_about_com_kgm2", "box_size_m", "cylinder", "sphere"}
-    _check_keys(obj, {"mass_kg", "com_in_object_m"} | shapes, "object")
+    _check_keys(obj, {"mass_kg", "com_in_object_m", "points_m"} | shapes, "object")
     mass = finite_float(
         _required(obj, "mass_kg", "object"), "object.mass_kg", minimum=0.0, strict_minimum=True
     )
@@ -142,7 +177,7 @@ def parse_object(section: Any) -> ObjectInertia:
 
 def _pose(section: Any, field: str):
     pose = _mapping(section, field)
-    _check_keys(pose, {"position_m", "quat_xyzw", "name"}, field)
+    _check_keys(pose, {"position_m", "quat_xyzw", "name", "quality"}, field)
     return pose_from_position_quat(
         _required(pose, "position_m", field), _required(pose, "quat_xyzw", field), field
     )
@@ -160,33 +195,116 @@ def parse_trajectory(section: Any) -> ObjectTrajectory:
     )
 
 
-def parse_grasps(section: Any) -> tuple[Grasp, ...]:
-    """Parse the ``grasps`` list (tip-frame poses in the object frame)."""
+def parse_grasps(section: Any) -> tuple[tuple[Grasp, ...], tuple[float, ...] | None]:
+    """Parse the ``grasps`` list (tip-frame poses in the object frame) and their qualities.
+
+    Returns:
+        The grasps, and the ``quality`` of each (higher is better) when every grasp has one,
+        None when none has.
+    """
     if not isinstance(section, list) or not section:
         raise InvalidInputError("grasps", "must be a non-empty list of poses")
     grasps = []
+    qualities = []
     for i, item in enumerate(section):
         field = f"grasps[{i}]"
         pose = _pose(item, field)
-        name = _mapping(item, field).get("name", f"grasp_{i}")
-        grasps.append(Grasp(pose, str(name)))
-    return tuple(grasps)
+        entry = _mapping(item, field)
+        grasps.append(Grasp(pose, str(entry.get("name", f"grasp_{i}"))))
+        if "quality" in entry:
+            qualities.append(finite_float(entry["quality"], f"{field}.quality"))
+    if qualities and len(qualities) != len(grasps):
+        raise InvalidInputError("grasps", "give a quality for every grasp or for none")
+    return tuple(grasps), tuple(qualities) if qualities else None
+
+
+OPTIONAL_SECTIONS = {
+    "metric_point",
+    "iso_ts_15066",
+    "uncertainty",
+    "safety_weight",
+    "redundancy",
+    "effort",
+    "rank_by",
+}
+
+
+def _flag(value: Any, field: str) -> bool:
+    if not isinstance(value, bool):
+        raise InvalidInputError(field, f"must be true or false, got {value!r}")
+    return value
+
+
+def parse_options(
+    root: Mapping[str, Any], points: np.ndarray | None, quality: tuple[float, ...] | None
+) -> AnalysisOptions:
+    """Parse the optional sections beyond the paper into AnalysisOptions."""
+    iso = _mapping(root.get("iso_ts_15066", {}), "iso_ts_15066")
+    _check_keys(iso, {"regions"}, "iso_ts_15066")
+    regions = iso.get("regions")
+    if regions is not None and not (
+        isinstance(regions, list) and all(isinstance(r, str) for r in regions)
+    ):
+        raise InvalidInputError(
+            "iso_ts_15066.regions", f"must be a list of names, got {regions!r}"
+        )
+    uncertainty = None
+    if "uncertainty" in root:
+        section = _mapping(root["uncertainty"], "uncertainty")
+        allowed = {
+            "mass_fraction",
+            "com_offset_m",
+            "inertia_fraction",
+            "samples",
+            "percentile",
+            "seed",
+        }
+        _check_keys(section, allowed, "uncertainty")
+        renamed = {("num_random_samples" if k == "samples" else k): v for k, v in section.items()}
+        uncertainty = InertiaUncertainty(**renamed)
+    effort = _mapping(root.get("effort", {}), "effort")
+    _check_keys(effort, {"enabled", "criterion"}, "effort")
+    rank_by = root.get("rank_by", "safety")
+    if rank_by not in RANK_BY:
+        raise InvalidInputError("rank_by", f"must be one of {', '.join(RANK_BY)}, got {rank_by!r}")
+    metric_point = root.get("metric_point", "tip")
+    if metric_point != "tip" and points is None:
+        raise InvalidInputError(
+            "metric_point",
+            f"{metric_point!r} needs object.points_m or a box or cylinder object",
+        )
+    return AnalysisOptions(
+        metric_point=metric_point,
+        points_in_object_m=points,
+        iso_regions=None if regions is None else tuple(regions),
+        uncertainty=uncertainty,
+        grasp_quality=quality,
+        safety_weight=finite_float(root.get("safety_weight", 0.5), "safety_weight", 0.0, 1.0),
+        redundancy=_flag(root.get("redundancy", False), "redundancy"),
+        effort=_flag(effort.get("enabled", True), "effort.enabled"),
+        rank_by=rank_by,
+        effort_criterion=effort.get("criterion", "peak_fraction"),
+    )
 
 
 def parse_scenario(data: Any, base_dir: Path) -> Scenario:
     """Validate a scenario mapping (as loaded from YAML)."""
     root = _mapping(data, "scenario")
-    _check_keys(root, {"robot", "object", "trajectory", "grasps", "metric"}, "")
+    required = {"robot", "object", "trajectory", "grasps", "metric"}
+    _check_keys(root, required | OPTIONAL_SECTIONS, "")
     metric = root.get("metric", "mean")
     if not isinstance(metric, str):
         raise InvalidInputError("metric", f"must be one of {', '.join(METRICS)}, got {metric!r}")
+    object_inertia, points = parse_object(_required(root, "object", ""))
+    grasps, quality = parse_grasps(_required(root, "grasps", ""))
     return Scenario(
         robot=parse_robot(_required(root, "robot", "")),
-        object_inertia=parse_object(_required(root, "object", "")),
+        object_inertia=object_inertia,
         trajectory=parse_trajectory(_required(root, "trajectory", "")),
-        grasps=parse_grasps(_required(root, "grasps", "")),
+        grasps=grasps,
         metric=check_metric(metric),
         base_dir=base_dir,
+        options=parse_options(root, points, quality),
     )
 
 

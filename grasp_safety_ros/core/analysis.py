@@ -1,0 +1,231 @@
+"""One safety report per request: the paper's ranking plus the analyses beyond it.
+
+Combines, on top of GraspSafetyEvaluator.rank: effective mass at exposed object points
+(``metric_point``), ISO/TS 15066 power and force limiting, inertia uncertainty, grasp quality
+(weighted sum + Pareto set), null-space redundancy resolution and joint effort. The CLI and
+the ROS node both serialise a SafetyReport; neither computes anything itself.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .effort import EffortEvaluation, check_effort_criterion, evaluate_effort, order_by_effort
+from .exceptions import InvalidInputError
+from .exposed_points import (
+    ExposedPointsEvaluation,
+    check_metric_point,
+    check_points_in_object,
+    evaluate_exposed_points,
+    metric_point_series,
+)
+from .inertia import ObjectInertia
+from .iso15066 import PowerForceLimitAssessment, assess_grasp, assess_motion, select_regions
+from .multi_objective import QualityRanking, rank_with_quality
+from .ranking import Grasp, GraspSafetyEvaluator, Ranking, aggregate
+from .redundancy import RedundancyConfig, RedundancyResolution, resolve_redundancy
+from .trajectory import ObjectTrajectory
+from .uncertainty import InertiaUncertainty, UncertaintyAnalysis, analyse_inertia_uncertainty
+
+RANK_BY = ("safety", "effort")
+"""What orders the final ranking: the safety score (with quality, when given) or the effort."""
+
+
+@dataclass(frozen=True)
+class AnalysisOptions:
+    """What to compute beyond the tip effective mass (all off except ISO/TS 15066 by default).
+
+    Attributes:
+        metric_point: ``tip`` (the paper), ``leading_point`` or ``worst_point`` of the object.
+        points_in_object_m: (K, 3) exposed points of the object [m], object frame; needed for
+            the point metrics (the CLI derives them from the object's primitive shape).
+        iso_regions: ISO/TS 15066 body regions to assess; None: all, empty tuple: none.
+        uncertainty: Bounds on the object-inertia error; None: no uncertainty analysis.
+        grasp_quality: Quality per candidate (higher is better); None: pure safety ranking.
+        safety_weight: w of the weighted sum w·safety + (1 − w)·quality, in [0, 1].
+        redundancy: Null-space optimisation of the effective mass (arms with > 6 joints);
+            when on, the tip score uses the optimised effective mass.
+        effort: Compute joint torques along the trajectory.
+        rank_by: ``safety`` or ``effort`` (then ``effort_criterion`` orders the grasps).
+        effort_criterion: ``peak_fraction`` or ``rms_fraction`` of the torque limits.
+    """
+
+    metric_point: str = "tip"
+    points_in_object_m: np.ndarray | None = None
+    iso_regions: tuple[str, ...] | None = None
+    uncertainty: InertiaUncertainty | None = None
+    grasp_quality: tuple[float, ...] | None = None
+    safety_weight: float = 0.5
+    redundancy: bool = False
+    effort: bool = False
+    rank_by: str = "safety"
+    effort_criterion: str = "peak_fraction"
+
+    def __post_init__(self) -> None:
+        check_metric_point(self.metric_point)
+        if self.points_in_object_m is not None:
+            object.__setattr__(
+                self,
+                "points_in_object_m",
+                check_points_in_object(self.points_in_object_m, "object.points_m"),
+            )
+        elif self.metric_point != "tip":
+            raise InvalidInputError(
+                "metric_point",
+                f"{self.metric_point!r} needs the object's points (a box or cylinder shape, "
+                "or object.points_m)",
+            )
+        if self.iso_regions is not None:
+            select_regions(list(self.iso_regions))  # raises on unknown names
+        if self.rank_by not in RANK_BY:
+            raise InvalidInputError(
+                "rank_by", f"must be one of {', '.join(RANK_BY)}, got {self.rank_by!r}"
+            )
+        check_effort_criterion(self.effort_criterion, "effort.criterion")
+        if self.rank_by == "effort" and not self.effort:
+            object.__setattr__(self, "effort", True)
+
+
+@dataclass(frozen=True)
+class SafetyReport:
+    """Everything computed for one set of candidates; per-grasp tuples in candidate order.
+
+    Attributes:
+        ranking: The paper's tip ranking (nominal inertia, no redundancy).
+        options: The options used.
+        scores: Safety score per grasp with the chosen metric point (and redundancy, if on);
+            NaN for infeasible grasps.
+        safety_order: Feasible grasps by ``scores``, safest first.
+        order: The final order (safety, the safety/quality combination, or effort).
+        exposed: Exposed-point evaluations, when points were given.
+        iso: ISO/TS 15066 assessment per grasp (on the metric point's mass and speed).
+        uncertainty: Inertia-uncertainty analysis, when bounds were given.
+        quality: Safety/quality combination and Pareto set (pure safety when no quality).
+        redundancy: Null-space resolution per grasp, when on.
+        effort: Joint effort per grasp, when on.
+    """
+
+    ranking: Ranking
+    options: AnalysisOptions
+    scores: np.ndarray
+    safety_order: tuple[int, ...]
+    order: tuple[int, ...]
+    quality: QualityRanking
+    iso: tuple[PowerForceLimitAssessment, ...] = ()
+    exposed: tuple[ExposedPointsEvaluation, ...] = ()
+    uncertainty: UncertaintyAnalysis | None = None
+    redundancy: tuple[RedundancyResolution, ...] = ()
+    effort: tuple[EffortEvaluation, ...] = ()
+
+
+def analyse(
+    evaluator: GraspSafetyEvaluator,
+    grasps: Sequence[Grasp],
+    object_inertia: ObjectInertia,
+    trajectory: ObjectTrajectory,
+    options: AnalysisOptions | None = None,
+    seed_positions: Sequence[float] | np.ndarray | None = None,
+    metric: str | None = None,
+    ranking: Ranking | None = None,
+) -> SafetyReport:
+    """Rank the grasps (unless ``ranking`` is given) and run the analyses ``options`` ask for."""
+    options = options or AnalysisOptions()
+    if options.grasp_quality is not None and len(options.grasp_quality) != len(grasps):
+        raise InvalidInputError(
+            "grasp_quality",
+            f"must have one value per grasp ({len(grasps)}), got {len(options.grasp_quality)}",
+        )
+    if ranking is None:
+        ranking = evaluator.rank(grasps, object_inertia, trajectory, seed_positions, metric)
+    robot = evaluator.robot
+    evaluations = ranking.evaluations
+    metric = ranking.metric
+
+    exposed: tuple[ExposedPointsEvaluation, ...] = ()
+    if options.points_in_object_m is not None:
+        exposed = tuple(
+            evaluate_exposed_points(
+                robot, e, object_inertia, g, trajectory, options.points_in_object_m
+            )
+            for e, g in zip(evaluations, grasps, strict=True)
+        )
+    redundancy: tuple[RedundancyResolution, ...] = ()
+    if options.redundancy:
+        config = RedundancyConfig(metric=metric, max_joint_step=evaluator.config.ik.max_joint_step)
+        redundancy = tuple(
+            resolve_redundancy(robot, e, object_inertia, g, trajectory, config)
+            for e, g in zip(evaluations, grasps, strict=True)
+        )
+
+    scores = np.full(len(evaluations), np.nan)
+    iso: list[PowerForceLimitAssessment] = []
+    regions = None if options.iso_regions is None else list(options.iso_regions)
+    for k, evaluation in enumerate(evaluations):
+        if not evaluation.feasible:
+            if options.iso_regions != ():
+                iso.append(assess_grasp(evaluation, regions))
+            continue
+        masses, speeds = metric_point_series(
+            evaluation, exposed[k] if exposed else None, options.metric_point
+        )
+        if redundancy and options.metric_point == "tip":
+            masses = redundancy[k].effective_mass_kg
+        scores[k] = aggregate(masses, evaluation.times_s, metric)
+        if options.iso_regions != ():
+            iso.append(
+                assess_motion(
+                    speeds,
+                    masses,
+                    trajectory.duration_s,
+                    regions,
+                    index=evaluation.index,
+                    name=evaluation.name,
+                )
+            )
+    feasible = np.flatnonzero(~np.isnan(scores))
+    safety_order = tuple(int(k) for k in sorted(feasible, key=lambda k: (scores[k], k)))
+    quality = rank_with_quality(
+        scores,
+        None if options.grasp_quality is None else np.array(options.grasp_quality),
+        options.safety_weight if options.grasp_quality is not None else 1.0,
+    )
+    uncertainty = None
+    if options.uncertainty is not None:
+        uncertainty = analyse_inertia_uncertainty(
+            robot, evaluations, grasps, object_inertia, options.uncertainty, metric
+        )
+    effort: tuple[EffortEvaluation, ...] = ()
+    if options.effort:
+        effort = tuple(
+            evaluate_effort(
+                robot,
+                e,
+                object_inertia,
+                g,
+                trajectory,
+                redundancy[k].joint_positions if redundancy and redundancy[k].applied else None,
+            )
+            for k, (e, g) in enumerate(zip(evaluations, grasps, strict=True))
+        )
+    if options.rank_by == "effort":
+        order = order_by_effort(effort, options.effort_criterion)
+    elif options.grasp_quality is not None:
+        order = quality.order
+    else:
+        order = safety_order
+    return SafetyReport(
+        ranking=ranking,
+        options=options,
+        scores=scores,
+        safety_order=safety_order,
+        order=order,
+        quality=quality,
+        iso=tuple(iso),
+        exposed=exposed,
+        uncertainty=uncertainty,
+        redundancy=redundancy,
+        effort=effort,
+    )

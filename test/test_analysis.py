@@ -1,0 +1,111 @@
+"""The safety report that combines the paper's ranking with the analyses beyond it."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from grasp_safety_ros.cli import main, rank_scenario
+from grasp_safety_ros.core.analysis import AnalysisOptions
+from grasp_safety_ros.core.exceptions import InvalidInputError
+from grasp_safety_ros.paths import config_file
+from grasp_safety_ros.scenario import load_scenario, parse_scenario
+
+EXTENDED = yaml.safe_load(config_file("book_baxter_extended.yaml").read_text())
+
+
+def coarse(data: dict, **changes: object) -> dict:
+    """The scenario with a coarse time step (fast tests) and top-level changes."""
+    result = json.loads(json.dumps(data))
+    result["trajectory"]["dt_s"] = 0.1
+    result["uncertainty"] = {**result.get("uncertainty", {}), "samples": 8}
+    result.update(changes)
+    return {k: v for k, v in result.items() if v is not None}
+
+
+def test_default_options_reproduce_the_paper_ranking() -> None:
+    scenario = load_scenario(config_file("book_baxter.yaml"))
+    report = rank_scenario(scenario)
+    assert report.order == report.ranking.order == report.safety_order
+    for k, evaluation in enumerate(report.ranking.evaluations):
+        assert report.scores[k] == evaluation.score
+
+
+def test_extended_scenario_json(tmp_path: Path) -> None:
+    path = tmp_path / "extended.yaml"
+    path.write_text(yaml.safe_dump(coarse(EXTENDED)))
+    out = tmp_path / "out.json"
+    assert main(["rank", str(path), "--json", str(out), "--plot", str(tmp_path / "p.png")]) == 0
+    result = json.loads(out.read_text())  # strict JSON: no NaN or Infinity
+    assert result["metric_point"] == "leading_point"
+    grasps = result["grasps"]
+    # The final ranking sorts by the documented combination, best first.
+    combined = [grasps[k]["combined_score"] for k in result["ranking"]]
+    assert combined == sorted(combined, reverse=True)
+    # The safety ranking sorts by the leading point's score, safest first.
+    safety = [grasps[k]["safety_score"] for k in result["safety_ranking"]]
+    assert safety == sorted(safety)
+    for grasp in grasps:
+        masses = [s["leading_point_effective_mass_kg"] for s in grasp["samples"]]
+        assert grasp["safety_score"] == pytest.approx(np.mean(masses), rel=1e-12)
+        assert set(grasp["iso_ts_15066"]["regions"]) == {
+            "chest",
+            "upper_arm_elbow",
+            "lower_arm_wrist",
+            "hand_fingers",
+            "face",
+        }
+        assert grasp["iso_ts_15066"]["regions"]["face"]["worst_force_ratio"] is None
+        assert grasp["redundancy"]["score"] <= grasp["redundancy"]["score_without"] + 1e-9
+        assert len(grasp["samples"][0]["joint_torques"]) == 7
+        assert grasp["uncertainty"]["worst_case_score"] >= grasp["score"] - 1e-12
+    assert result["uncertainty"]["perturbations"] > 8
+    pareto = set(result["pareto_set"])
+    assert pareto and pareto <= set(result["ranking"])
+
+
+def test_rank_by_effort_orders_by_the_effort_score(tmp_path: Path) -> None:
+    data = coarse(EXTENDED, rank_by="effort", redundancy=False, uncertainty=None)
+    scenario = parse_scenario(data, tmp_path)
+    report = rank_scenario(scenario)
+    scores = [report.effort[k].score("peak_fraction") for k in report.order]
+    assert scores == sorted(scores)
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"metric_point": "corner"}, "metric_point: must be one of"),
+        ({"safety_weight": 1.5}, r"safety_weight: must be in \[0, 1\]"),
+        ({"uncertainty": {"mass_fraction": 1.5}}, "uncertainty.mass_fraction"),
+        ({"uncertainty": {"spread": 0.1}}, "uncertainty.spread: unknown field"),
+        ({"iso_ts_15066": {"regions": ["tail"]}}, "tail"),
+        ({"redundancy": "yes"}, "redundancy: must be true or false"),
+        ({"effort": {"criterion": "max"}}, "effort.criterion: must be one of"),
+        ({"rank_by": "price"}, "rank_by: must be one of safety, effort"),
+    ],
+)
+def test_bad_options_name_the_field(tmp_path: Path, changes: dict, message: str) -> None:
+    with pytest.raises(InvalidInputError, match=message):
+        parse_scenario(coarse(EXTENDED, **changes), tmp_path)
+
+
+def test_point_metric_needs_points(tmp_path: Path) -> None:
+    data = coarse(EXTENDED)
+    data["object"] = {"mass_kg": 0.3, "inertia_about_com_kgm2": np.eye(3).tolist()}
+    data["object"]["inertia_about_com_kgm2"] = (np.eye(3) * 1e-3).tolist()
+    with pytest.raises(InvalidInputError, match="metric_point: 'leading_point' needs"):
+        parse_scenario(data, tmp_path)
+    with pytest.raises(InvalidInputError, match="metric_point"):
+        AnalysisOptions(metric_point="worst_point")
+
+
+def test_partial_quality_is_refused(tmp_path: Path) -> None:
+    data = coarse(EXTENDED)
+    del data["grasps"][1]["quality"]
+    with pytest.raises(InvalidInputError, match="grasps: give a quality for every grasp"):
+        parse_scenario(data, tmp_path)
