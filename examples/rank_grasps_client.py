@@ -1,0 +1,91 @@
+"""Call the grasp_safety node's ~/rank_grasps service with the paper's book scenario.
+
+Start the node first (config/grasp_safety_node.yaml is the book on Baxter), then:
+    .venv/bin/python examples/rank_grasps_client.py            # here (venv)
+    python3 examples/rank_grasps_client.py                    # ROS install, workspace sourced
+Exit status 0 when the node ranked the grasps, 1 otherwise.
+
+Note: write float literals (1.0, not 1) in float64 message fields: rclpy accepts an int there
+but puts garbage on the wire.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import rclpy
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Point, Pose, PoseArray, PoseStamped, Quaternion
+from grasp_safety_msgs.srv import RankGrasps
+from nav_msgs.msg import Path
+from std_msgs.msg import Header
+
+SERVICE = "/grasp_safety/rank_grasps"
+
+
+def pose(position_m: tuple[float, float, float], quat_xyzw: tuple[float, ...]) -> Pose:
+    """A Pose from a position [m] and a quaternion in ROS order (x, y, z, w)."""
+    x, y, z = (float(v) for v in position_m)
+    qx, qy, qz, qw = (float(v) for v in quat_xyzw)
+    return Pose(position=Point(x=x, y=y, z=z), orientation=Quaternion(x=qx, y=qy, z=qz, w=qw))
+
+
+def book_request() -> RankGrasps.Request:
+    """Three grasps on the book's spine; the object moves for 2 s; the node's default object."""
+    request = RankGrasps.Request()
+    # Tip poses in the object frame (frame_id = the node's object_frame parameter).
+    request.grasps = PoseArray(
+        header=Header(frame_id="object"),
+        poses=[pose((-0.075, y, 0.0), (0.0, 0.0, 0.0, 1.0)) for y in (-0.1, 0.0, 0.1)],
+    )
+    # Object start and goal in the base frame; the duration is the stamp difference.
+    request.object_trajectory = Path(
+        header=Header(frame_id="base"),
+        poses=[
+            PoseStamped(header=Header(stamp=Time(sec=0)), pose=pose((1.0, 0.0, 0.03), (0.5,) * 4)),
+            PoseStamped(
+                header=Header(stamp=Time(sec=2)), pose=pose((1.1, -0.38, 0.16), (0.5,) * 4)
+            ),
+        ],
+    )
+    # request.object_inertia.m == 0: use the node's object.* parameters. metric "": its default.
+    return request
+
+
+def main(args: list[str] | None = None) -> int:
+    rclpy.init(args=args)
+    node = rclpy.create_node("rank_grasps_example")
+    try:
+        client = node.create_client(RankGrasps, SERVICE)
+        if not client.wait_for_service(timeout_sec=10.0):
+            print(f"no service {SERVICE}: is the node running (same ROS_DOMAIN_ID)?")
+            return 1
+        future = client.call_async(book_request())
+        rclpy.spin_until_future_complete(node, future, timeout_sec=120.0)
+        response = future.result()
+        if response is None:
+            print("no answer within 120 s")
+            return 1
+        if not response.success:
+            print(f"refused: {response.message}")
+            return 1
+        ranking = response.ranking
+        print(f"metric {ranking.metric}, computed in {ranking.compute_time_s:.3f} s")
+        print("rank  index  score      peak [kg]  samples")
+        for rank, index in enumerate(ranking.order, start=1):
+            e = ranking.evaluations[index]
+            print(
+                f"{rank:>4}  {index:>5}  {e.score:<9.4f}  {e.peak_effective_mass_kg:<9.4f}  "
+                f"{len(e.effective_mass_kg)}"
+            )
+        for e in ranking.evaluations:
+            if not e.feasible:
+                print(f"   -  {e.index:>5}  infeasible: {e.reason}")
+        return 0
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,375 @@
+"""Conversions between ROS messages and core types; needs message packages, not rclpy.
+
+The quaternion order is fixed here and only here: ROS messages are (x, y, z, w), Pinocchio's
+constructor is (w, x, y, z); every conversion goes through quat_xyzw_from_msg and
+quaternion_msg_from_rotation. Each function raises InvalidInputError naming the message field
+(e.g. ``grasps.poses[2].orientation``), so the node can answer with that message.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+import pinocchio as pin
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Inertia, Point, Pose, PoseArray, Quaternion, Vector3
+from grasp_safety_msgs.msg import GraspEvaluation as GraspEvaluationMsg
+from grasp_safety_msgs.msg import GraspRanking
+from nav_msgs.msg import Path
+from std_msgs.msg import ColorRGBA, Header
+from visualization_msgs.msg import Marker, MarkerArray
+
+from ..core.exceptions import InvalidInputError
+from ..core.inertia import ObjectInertia
+from ..core.ranking import Grasp, GraspEvaluation, Ranking
+from ..core.robot import RobotModel
+from ..core.trajectory import ObjectTrajectory
+from ..core.validation import (
+    finite_array,
+    finite_float,
+    quat_xyzw_from_rotation,
+    rotation_from_quat_xyzw,
+)
+from .parameters import inertia_tensor_from_components
+
+SCORE_UNITS = {"mean": "kg", "max": "kg", "integral": "kg*s"}
+ARROW_LENGTH_M = 0.08
+"""Length of the grasp arrows in RViz; they end at the grasp point along the tip z axis."""
+INFEASIBLE_RGBA = (0.5, 0.5, 0.5, 0.6)
+LABEL_OFFSET_M = np.array([0.0, 0.0, 0.03])
+"""Labels float this far above the grasp point (base axes)."""
+
+
+# --- Poses -----------------------------------------------------------------------------------
+
+
+def quat_xyzw_from_msg(quaternion: Quaternion) -> np.ndarray:
+    """The (x, y, z, w) array of a geometry_msgs/Quaternion (the one place the order is set)."""
+    return np.array([quaternion.x, quaternion.y, quaternion.z, quaternion.w], dtype=float)
+
+
+def quaternion_msg_from_rotation(rotation: np.ndarray) -> Quaternion:
+    """geometry_msgs/Quaternion of a rotation matrix (w >= 0)."""
+    x, y, z, w = quat_xyzw_from_rotation(rotation)
+    return Quaternion(x=float(x), y=float(y), z=float(z), w=float(w))
+
+
+def transform_from_pose_msg(pose: Pose, field: str) -> pin.SE3:
+    """Rigid transform of a geometry_msgs/Pose; checks finiteness and a unit quaternion."""
+    quat_xyzw = quat_xyzw_from_msg(pose.orientation)
+    rotation = rotation_from_quat_xyzw(quat_xyzw, f"{field}.orientation")
+    position = finite_array(
+        [pose.position.x, pose.position.y, pose.position.z], f"{field}.position", (3,)
+    )
+    return pin.SE3(rotation, np.array(position))
+
+
+def pose_msg_from_transform(transform: pin.SE3) -> Pose:
+    """geometry_msgs/Pose of a rigid transform."""
+    x, y, z = (float(v) for v in transform.translation)
+    return Pose(
+        position=Point(x=x, y=y, z=z), orientation=quaternion_msg_from_rotation(transform.rotation)
+    )
+
+
+def vector3_msg(vector: Sequence[float] | np.ndarray) -> Vector3:
+    """geometry_msgs/Vector3 of three numbers."""
+    x, y, z = (float(v) for v in vector)
+    return Vector3(x=x, y=y, z=z)
+
+
+def check_frame_id(frame_id: str, accepted: Sequence[str], field: str) -> str:
+    """Return ``frame_id`` if it is one of ``accepted``, else raise naming both."""
+    if frame_id not in accepted:
+        names = " or ".join(f"'{name}'" for name in accepted)
+        raise InvalidInputError(field, f"unknown frame_id '{frame_id}'; accepted: {names}")
+    return frame_id
+
+
+def stamp_to_seconds(stamp: Time) -> float:
+    """Seconds of a builtin_interfaces/Time."""
+    return float(stamp.sec) + 1e-9 * float(stamp.nanosec)
+
+
+# --- Trajectory, grasps, inertia -------------------------------------------------------------
+
+
+def trajectory_from_path(
+    path: Path,
+    base_frame: str,
+    dt_s: float,
+    default_duration_s: float,
+    max_samples: int,
+    field: str = "object_trajectory",
+) -> ObjectTrajectory:
+    """The object trajectory of a nav_msgs/Path of exactly two object poses in the base frame.
+
+    The core trajectory is one quintic segment, so a Path must hold exactly the start and the
+    goal; more poses are refused rather than silently dropped (their waypoints would change
+    the motion being assessed). The duration is the stamp difference of the two poses, or
+    ``default_duration_s`` when the stamps are equal (e.g. both zero).
+    """
+    check_frame_id(path.header.frame_id, [base_frame], f"{field}.header.frame_id")
+    count = len(path.poses)
+    if count != 2:
+        raise InvalidInputError(
+            f"{field}.poses",
+            f"has {count} pose{'s' if count != 1 else ''}; exactly 2 (start, goal) are needed: "
+            "the trajectory is one quintic segment from the first pose to the second",
+        )
+    for i, stamped in enumerate(path.poses):
+        if stamped.header.frame_id:
+            check_frame_id(stamped.header.frame_id, [base_frame], f"{field}.poses[{i}].header")
+    start = transform_from_pose_msg(path.poses[0].pose, f"{field}.poses[0].pose")
+    goal = transform_from_pose_msg(path.poses[1].pose, f"{field}.poses[1].pose")
+    t_start = stamp_to_seconds(path.poses[0].header.stamp)
+    t_goal = stamp_to_seconds(path.poses[1].header.stamp)
+    if t_goal < t_start:
+        raise InvalidInputError(
+            f"{field}.poses",
+            f"stamps are not in order: the goal ({t_goal:.9f} s) is before the start "
+            f"({t_start:.9f} s)",
+        )
+    duration = t_goal - t_start if t_goal > t_start else default_duration_s
+    if dt_s > duration:
+        raise InvalidInputError(
+            f"{field}.poses",
+            f"duration {duration:g} s is shorter than trajectory.dt_s={dt_s:g} s",
+        )
+    samples = math.ceil(duration / dt_s - 1e-9) + 1
+    if samples > max_samples:
+        raise InvalidInputError(
+            f"{field}.poses",
+            f"duration {duration:g} s at trajectory.dt_s={dt_s:g} s gives {samples} samples; "
+            f"at most max_samples={max_samples} are allowed",
+        )
+    return ObjectTrajectory(start, goal, duration, dt_s)
+
+
+def check_grasp_array(
+    grasps: PoseArray, object_frame: str, base_frame: str, max_grasps: int, field: str = "grasps"
+) -> list[pin.SE3]:
+    """Validate a PoseArray of grasps (frame, count, values); return the poses as given."""
+    check_frame_id(grasps.header.frame_id, [object_frame, base_frame], f"{field}.header.frame_id")
+    count = len(grasps.poses)
+    if count == 0:
+        raise InvalidInputError(f"{field}.poses", "is empty; give at least one grasp")
+    if count > max_grasps:
+        raise InvalidInputError(
+            f"{field}.poses", f"has {count} grasps; at most max_grasps={max_grasps} are allowed"
+        )
+    return [transform_from_pose_msg(p, f"{field}.poses[{i}]") for i, p in enumerate(grasps.poses)]
+
+
+def grasps_from_pose_array(
+    grasps: PoseArray,
+    object_frame: str,
+    base_frame: str,
+    trajectory: ObjectTrajectory,
+    max_grasps: int,
+    field: str = "grasps",
+) -> list[Grasp]:
+    """Core grasps (tip poses in the object frame) of a PoseArray of tip poses.
+
+    frame_id ``object_frame``: the poses are the tip in the object frame. frame_id
+    ``base_frame``: the poses are the tip in the base frame with the object at the start of
+    ``trajectory``; T_object_tip = T_base_object(start)⁻¹ · T_base_tip.
+    """
+    poses = check_grasp_array(grasps, object_frame, base_frame, max_grasps, field)
+    if grasps.header.frame_id == base_frame:
+        start = trajectory.transform_object_to_base_start
+        poses = [start.actInv(pose) for pose in poses]
+    return [Grasp(pose, f"grasp_{i}") for i, pose in enumerate(poses)]
+
+
+def object_inertia_from_msg(
+    inertia: Inertia, max_mass_kg: float, field: str = "object_inertia"
+) -> ObjectInertia | None:
+    """ObjectInertia of a geometry_msgs/Inertia (CoM and tensor about the CoM, object frame).
+
+    Returns:
+        None when ``m`` is exactly 0 (meaning: use the configured object).
+    """
+    if inertia.m == 0.0:
+        return None
+    mass = finite_float(inertia.m, f"{field}.m", minimum=0.0, strict_minimum=True)
+    if mass > max_mass_kg:
+        raise InvalidInputError(
+            f"{field}.m", f"must be at most max_mass_kg={max_mass_kg:g}, got {mass:g}"
+        )
+    com = finite_array([inertia.com.x, inertia.com.y, inertia.com.z], f"{field}.com", (3,))
+    components = [inertia.ixx, inertia.ixy, inertia.ixz, inertia.iyy, inertia.iyz, inertia.izz]
+    tensor = inertia_tensor_from_components(components, f"{field}.ixx..izz")
+    try:
+        return ObjectInertia(mass, np.array(com), tensor)
+    except InvalidInputError as error:
+        message = str(error).split(": ", 1)[-1]
+        raise InvalidInputError(f"{field}.ixx..izz", message) from None
+
+
+def inertia_msg_from_object(inertia: ObjectInertia) -> Inertia:
+    """geometry_msgs/Inertia of an ObjectInertia (round trip of object_inertia_from_msg)."""
+    tensor = inertia.inertia_about_com_kgm2
+    return Inertia(
+        m=float(inertia.mass_kg),
+        com=vector3_msg(inertia.com_in_object_m),
+        ixx=float(tensor[0, 0]),
+        ixy=float(tensor[0, 1]),
+        ixz=float(tensor[0, 2]),
+        iyy=float(tensor[1, 1]),
+        iyz=float(tensor[1, 2]),
+        izz=float(tensor[2, 2]),
+    )
+
+
+def seed_from_joint_state(
+    names: Sequence[str], positions: Sequence[float], robot: RobotModel
+) -> np.ndarray | None:
+    """Chain joint positions from a JointState's names/positions, or None if unusable.
+
+    Usable means: every chain joint is named, names and positions have the same length, and
+    the chain's positions are finite and inside the joint limits.
+    """
+    if len(names) != len(positions):
+        return None
+    by_name = dict(zip(names, positions, strict=True))
+    if not all(name in by_name for name in robot.joint_names):
+        return None
+    seed = np.array([by_name[name] for name in robot.joint_names], dtype=float)
+    try:
+        return robot.check_positions(seed, "joint_states")
+    except InvalidInputError:
+        return None
+
+
+# --- Results ---------------------------------------------------------------------------------
+
+
+def evaluation_msg(evaluation: GraspEvaluation) -> GraspEvaluationMsg:
+    """grasp_safety_msgs/GraspEvaluation of a core evaluation (NaN scores when infeasible)."""
+    return GraspEvaluationMsg(
+        index=int(evaluation.index),
+        name=evaluation.name,
+        feasible=bool(evaluation.feasible),
+        reason=evaluation.reason,
+        score=float(evaluation.score),
+        peak_effective_mass_kg=float(evaluation.peak_effective_mass_kg),
+        mean_effective_mass_kg=float(evaluation.mean_effective_mass_kg),
+        time_from_start_s=np.asarray(evaluation.times_s, dtype=float).tolist(),
+        effective_mass_kg=np.asarray(evaluation.effective_mass_kg, dtype=float).tolist(),
+        direction=[
+            Vector3(x=x, y=y, z=z)
+            for x, y, z in np.asarray(evaluation.directions_in_base, dtype=float).tolist()
+        ],
+        direction_is_worst_case=np.asarray(evaluation.direction_is_worst_case, bool).tolist(),
+    )
+
+
+def ranked_pose_array(grasps: PoseArray, order: Sequence[int]) -> PoseArray:
+    """The feasible grasps of a request, safest first, in the request's frame (poses as given)."""
+    return PoseArray(
+        header=Header(stamp=grasps.header.stamp, frame_id=grasps.header.frame_id),
+        poses=[_copy_pose(grasps.poses[i]) for i in order],
+    )
+
+
+def _copy_pose(pose: Pose) -> Pose:
+    p, q = pose.position, pose.orientation
+    return Pose(
+        position=Point(x=p.x, y=p.y, z=p.z), orientation=Quaternion(x=q.x, y=q.y, z=q.z, w=q.w)
+    )
+
+
+def ranking_msg(
+    ranking: Ranking,
+    grasps: PoseArray,
+    base_frame: str,
+    stamp: Time,
+    compute_time_s: float,
+) -> GraspRanking:
+    """grasp_safety_msgs/GraspRanking of a core ranking of the grasps in ``grasps``."""
+    return GraspRanking(
+        header=Header(stamp=stamp, frame_id=base_frame),
+        metric=ranking.metric,
+        order=[int(i) for i in ranking.order],
+        ranked_grasps=ranked_pose_array(grasps, ranking.order),
+        evaluations=[evaluation_msg(e) for e in ranking.evaluations],
+        joint_names=list(ranking.joint_names),
+        compute_time_s=float(compute_time_s),
+    )
+
+
+def rank_color(rank: int, count: int) -> tuple[float, float, float, float]:
+    """RGBA from green (rank 0, safest) to red (rank count-1, least safe)."""
+    fraction = rank / (count - 1) if count > 1 else 0.0
+    return (fraction, 1.0 - fraction, 0.0, 1.0)
+
+
+def markers_msg(
+    ranking: Ranking,
+    grasps: Sequence[Grasp],
+    trajectory: ObjectTrajectory,
+    base_frame: str,
+    stamp: Time,
+) -> MarkerArray:
+    """RViz markers of a ranking: per grasp an arrow and a label, in the base frame.
+
+    The first marker deletes the previous ranking's markers. Each grasp is drawn with the
+    object at its start pose: an ARROW of ARROW_LENGTH_M along the tip z axis ending at the
+    tip (namespace ``grasps``) and a TEXT_VIEW_FACING label with rank and score (namespace
+    ``labels``); ids are the candidate indices. Feasible grasps go from green (safest) to red
+    (least safe), infeasible ones are grey.
+    """
+    header = Header(stamp=stamp, frame_id=base_frame)
+    markers = [Marker(header=header, action=Marker.DELETEALL)]
+    rank_of = {index: rank for rank, index in enumerate(ranking.order)}
+    unit = SCORE_UNITS.get(ranking.metric, "")
+    start = trajectory.transform_object_to_base_start
+    for evaluation, grasp in zip(ranking.evaluations, grasps, strict=True):
+        tip_in_base = start * grasp.transform_tip_to_object
+        tip = tip_in_base.translation
+        tail = tip - ARROW_LENGTH_M * tip_in_base.rotation[:, 2]
+        index = evaluation.index
+        if index in rank_of:
+            rgba = rank_color(rank_of[index], len(ranking.order))
+            text = f"#{rank_of[index] + 1} {evaluation.name}: {evaluation.score:.3f} {unit}"
+        else:
+            rgba = INFEASIBLE_RGBA
+            text = f"{evaluation.name}: infeasible"
+        color = ColorRGBA(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3])
+        identity = Pose(orientation=Quaternion(w=1.0))
+        markers.append(
+            Marker(
+                header=header,
+                ns="grasps",
+                id=index,
+                type=Marker.ARROW,
+                action=Marker.ADD,
+                pose=identity,
+                points=[_point(tail), _point(tip)],
+                scale=Vector3(x=0.008, y=0.016, z=0.02),
+                color=color,
+            )
+        )
+        label_pose = Pose(position=_point(tip + LABEL_OFFSET_M), orientation=Quaternion(w=1.0))
+        markers.append(
+            Marker(
+                header=header,
+                ns="labels",
+                id=index,
+                type=Marker.TEXT_VIEW_FACING,
+                action=Marker.ADD,
+                pose=label_pose,
+                scale=Vector3(z=0.02),
+                color=color,
+                text=text,
+            )
+        )
+    return MarkerArray(markers=markers)
+
+
+def _point(vector: np.ndarray) -> Point:
+    x, y, z = (float(v) for v in vector)
+    return Point(x=x, y=y, z=z)

@@ -1,0 +1,654 @@
+"""The ``grasp_safety`` node: ranks candidate grasps with the core, over a service and topics.
+
+A thin adapter: messages are converted in conversions.py, parameters validated in
+parameters.py, the work is GraspSafetyEvaluator.rank. See docs/ros.md for the interface.
+
+Threads: a MultiThreadedExecutor with EXECUTOR_THREADS threads. The service sits in its own
+reentrant callback group, the input topics in a mutually exclusive one, everything else
+(parameters, /robot_description, /joint_states, the diagnostics timer) in the default group.
+One ranking runs at a time (the compute lock: the core's solvers keep scratch data); a request
+that cannot get the lock within ``service_busy_timeout_s`` is answered busy, and a ranking
+longer than ``max_compute_time_s`` is abandoned, so a slow request never blocks the next one
+for ever. The GIL still makes a long ranking share the CPU with the other callbacks.
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+import time
+import traceback
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Inertia, InertiaStamped, PoseArray
+from grasp_safety_msgs.msg import GraspRanking
+from grasp_safety_msgs.srv import RankGrasps
+from nav_msgs.msg import Path
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.exceptions import InvalidParameterValueException
+from rclpy.executors import Executor, ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import (
+    DurabilityPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+    qos_profile_sensor_data,
+)
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Header, String
+from visualization_msgs.msg import MarkerArray
+
+from ..core.exceptions import GraspSafetyError, InvalidInputError
+from ..core.inertia import ObjectInertia
+from ..core.ranking import check_metric
+from .conversions import (
+    check_frame_id,
+    check_grasp_array,
+    grasps_from_pose_array,
+    markers_msg,
+    object_inertia_from_msg,
+    ranking_msg,
+    seed_from_joint_state,
+    trajectory_from_path,
+)
+from .parameters import (
+    PARAMETERS,
+    ROBOT_PARAMETERS,
+    NodeSettings,
+    RobotBundle,
+    build_robot,
+    check_parameter,
+    settings_from_parameters,
+)
+
+NODE_NAME = "grasp_safety"
+EXECUTOR_THREADS = 4
+"""Service calls, topic input and parameter/diagnostics callbacks each get a thread."""
+
+LATCHED = QoSProfile(
+    depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+)
+"""Results: late subscribers (RViz, ``ros2 topic echo``) get the last ranking."""
+INPUT = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+_STANDARD_OVERRIDES = ("use_sim_time", "qos_overrides.", "start_type_description_service")
+
+
+class StartupError(GraspSafetyError):
+    """The node cannot start: bad parameters or no usable robot description."""
+
+
+class NotReadyError(GraspSafetyError):
+    """No robot model yet."""
+
+
+class BusyError(GraspSafetyError):
+    """Another ranking held the compute lock for longer than service_busy_timeout_s."""
+
+
+class ComputeTimeExceededError(GraspSafetyError):
+    """A ranking ran longer than max_compute_time_s and was abandoned."""
+
+
+@dataclass
+class _Status:
+    """What /diagnostics reports (guarded by the node's state lock)."""
+
+    rankings: int = 0
+    refused: int = 0
+    last_compute_time_s: float = 0.0
+    last_feasible: int = 0
+    last_infeasible: int = 0
+    last_source: str = ""
+    last_error: str = ""
+    last_was_error: bool = False
+
+
+@dataclass(frozen=True)
+class _Snapshot:
+    """Consistent view of the state one ranking uses."""
+
+    settings: NodeSettings
+    bundle: RobotBundle | None
+    joint_state: tuple[Sequence[str], Sequence[float]] | None
+    inertia_override: ObjectInertia | None
+
+
+class GraspSafetyNode(Node):
+    """Ranks grasps by the effective mass of robot + object along the object's trajectory.
+
+    Args:
+        **kwargs: Passed to rclpy.node.Node (e.g. ``context``, ``parameter_overrides``).
+
+    Raises:
+        StartupError: a parameter is invalid or the robot description cannot be used.
+    """
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        try:
+            self._setup()
+        except StartupError:
+            self.destroy_node()
+            raise
+
+    # --- Set-up ------------------------------------------------------------------------------
+
+    def _setup(self) -> None:
+        self._state_lock = threading.Lock()
+        self._compute_lock = threading.Lock()
+        self._started = False
+        self._startup_rejection = ""
+        self._startup_failure = ""
+        self._waiting_for_robot = False
+        self._topic_description: str | None = None
+        self._joint_state: tuple[Sequence[str], Sequence[float]] | None = None
+        self._candidates: PoseArray | None = None
+        self._candidates_pending = False
+        self._trajectory: Path | None = None
+        self._inertia_override: ObjectInertia | None = None
+        self._status = _Status()
+
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        declarations = [
+            (
+                name,
+                spec.default,
+                ParameterDescriptor(description=spec.description, dynamic_typing=True),
+            )
+            for name, spec in PARAMETERS.items()
+        ]
+        try:
+            self.declare_parameters("", declarations)
+        except InvalidParameterValueException:
+            raise StartupError(self._startup_rejection or "invalid parameter") from None
+        self._values = {name: self.get_parameter(name).value for name in PARAMETERS}
+        try:
+            self._settings = settings_from_parameters(self._values)
+            self._robot = build_robot(self._settings, None)
+        except GraspSafetyError as error:
+            raise StartupError(str(error)) from None
+        self._warn_unknown_overrides()
+
+        self._service_group = ReentrantCallbackGroup()
+        self._topic_group = MutuallyExclusiveCallbackGroup()
+        self._ranking_pub = self.create_publisher(GraspRanking, "~/ranking", LATCHED)
+        self._ranked_pub = self.create_publisher(PoseArray, "~/ranked_grasps", LATCHED)
+        self._markers_pub = self.create_publisher(MarkerArray, "~/markers", LATCHED)
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.create_service(
+            RankGrasps,
+            "~/rank_grasps",
+            self._on_rank_grasps,
+            callback_group=self._service_group,
+        )
+        self.create_subscription(
+            PoseArray,
+            "~/candidate_grasps",
+            self._on_candidates,
+            INPUT,
+            callback_group=self._topic_group,
+        )
+        self.create_subscription(
+            Path,
+            "~/object_trajectory",
+            self._on_trajectory,
+            INPUT,
+            callback_group=self._topic_group,
+        )
+        self.create_subscription(
+            InertiaStamped,
+            "~/object_inertia",
+            self._on_inertia,
+            INPUT,
+            callback_group=self._topic_group,
+        )
+        self.create_subscription(
+            JointState, "/joint_states", self._on_joint_states, qos_profile_sensor_data
+        )
+        self.create_subscription(String, "/robot_description", self._on_robot_description, LATCHED)
+        self._diagnostics_timer = self.create_timer(
+            self._settings.diagnostics_period_s, self._publish_diagnostics
+        )
+        self._started = True
+        if self._robot is not None:
+            self._log_robot(self._robot)
+
+    def _warn_unknown_overrides(self) -> None:
+        for name in sorted(self._parameter_overrides):
+            if name not in PARAMETERS and not name.startswith(_STANDARD_OVERRIDES):
+                self.get_logger().warning(
+                    f"ignoring unknown parameter '{name}'; parameters: {', '.join(PARAMETERS)}"
+                )
+
+    def _log_robot(self, bundle: RobotBundle) -> None:
+        robot = bundle.robot
+        self.get_logger().info(
+            f"robot from {bundle.origin}: {robot.base_frame} -> {robot.tip_frame}, "
+            f"{robot.num_joints} joints ({', '.join(robot.joint_names)})"
+        )
+
+    @property
+    def has_robot(self) -> bool:
+        """Whether a robot model is loaded (requests can be answered)."""
+        with self._state_lock:
+            return self._robot is not None
+
+    def wait_for_robot(self, executor: Executor) -> None:
+        """Spin ``executor`` until a robot model is loaded (at start-up, from the topic).
+
+        Raises:
+            StartupError: nothing usable arrived within robot_description_timeout_s.
+        """
+        if self.has_robot:
+            return
+        timeout = self._settings.robot_description_timeout_s
+        self.get_logger().info(
+            "parameters robot_description and urdf are empty: waiting "
+            + (f"up to {timeout:g} s" if timeout > 0 else "for ever")
+            + " for /robot_description"
+        )
+        deadline = time.monotonic() + timeout
+        self._waiting_for_robot = True
+        try:
+            self._spin_until_robot(executor, timeout, deadline)
+        finally:
+            self._waiting_for_robot = False
+
+    def _spin_until_robot(self, executor: Executor, timeout: float, deadline: float) -> None:
+        while not self.has_robot:
+            if self._startup_failure:
+                raise StartupError(self._startup_failure)
+            if timeout > 0 and time.monotonic() > deadline:
+                raise StartupError(
+                    "no robot description: parameters robot_description and urdf are empty and "
+                    f"nothing arrived on /robot_description within {timeout:g} s "
+                    "(robot_description_timeout_s)"
+                )
+            if not self.context.ok():
+                raise ExternalShutdownException()
+            executor.spin_once(timeout_sec=0.1)
+
+    # --- Parameters --------------------------------------------------------------------------
+
+    def _on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
+        try:
+            if not self._started:  # declaration: one parameter at a time, checked alone
+                for parameter in parameters:
+                    check_parameter(parameter.name, parameter.value)
+            else:
+                self._apply_parameters({p.name: p.value for p in parameters})
+        except GraspSafetyError as error:
+            reason = str(error)
+            if self._started:
+                self.get_logger().warning(f"refused parameter change: {reason}")
+            else:
+                self._startup_rejection = reason
+            return SetParametersResult(successful=False, reason=reason)
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, changes: dict[str, Any]) -> None:
+        changes = {name: value for name, value in changes.items() if name in PARAMETERS}
+        if not changes:
+            return
+        with self._state_lock:
+            values = {**self._values, **changes}
+            settings = settings_from_parameters(values)
+            bundle = self._robot
+            if set(changes) & {*ROBOT_PARAMETERS, "ik_seed"}:
+                bundle = build_robot(settings, self._topic_description)
+            period_changed = settings.diagnostics_period_s != self._settings.diagnostics_period_s
+            robot_changed = bundle is not self._robot
+            self._values, self._settings, self._robot = values, settings, bundle
+        self.get_logger().info(f"parameters set: {', '.join(sorted(changes))}")
+        if robot_changed and bundle is not None:
+            self._log_robot(bundle)
+        if period_changed:
+            self._diagnostics_timer.cancel()
+            self.destroy_timer(self._diagnostics_timer)
+            self._diagnostics_timer = self.create_timer(
+                settings.diagnostics_period_s, self._publish_diagnostics
+            )
+
+    # --- Robot description and joint states --------------------------------------------------
+
+    def _on_robot_description(self, msg: String) -> None:
+        with self._state_lock:
+            self._topic_description = msg.data
+            settings = self._settings
+        if settings.robot_source:
+            self.get_logger().debug("/robot_description ignored: parameters give the robot")
+            return
+        try:
+            bundle = build_robot(settings, msg.data)
+        except GraspSafetyError as error:
+            if self._waiting_for_robot:
+                # wait_for_robot raises it, main() logs it once
+                self._startup_failure = f"robot from /robot_description: {error}"
+            else:
+                self._report_error("/robot_description", error)
+            return
+        with self._state_lock:
+            if _robot_key(self._settings) != _robot_key(settings):
+                return  # robot parameters changed meanwhile; they rebuilt the model
+            self._robot = bundle
+        if bundle is not None:
+            self._log_robot(bundle)
+
+    def _on_joint_states(self, msg: JointState) -> None:
+        with self._state_lock:
+            self._joint_state = (list(msg.name), list(msg.position))
+
+    # --- Service -----------------------------------------------------------------------------
+
+    def _on_rank_grasps(
+        self, request: RankGrasps.Request, response: RankGrasps.Response
+    ) -> RankGrasps.Response:
+        try:
+            response.ranking = self._rank(
+                request.grasps,
+                request.object_trajectory,
+                request.object_inertia,
+                request.metric,
+                source="rank_grasps",
+                grasps_field="grasps",
+            )
+            response.success = True
+        except GraspSafetyError as error:
+            response.success = False
+            response.message = str(error)
+            self._report_error("rank_grasps", error)
+        except Exception as error:  # last resort: answer and log rather than drop the request
+            self.get_logger().error(f"rank_grasps: internal error:\n{traceback.format_exc()}")
+            response.success = False
+            response.message = f"internal error: {type(error).__name__}: {error}"
+            self._report_error("rank_grasps", error)
+        return response
+
+    # --- Topics ------------------------------------------------------------------------------
+
+    def _on_candidates(self, msg: PoseArray) -> None:
+        settings = self._snapshot().settings
+        try:
+            check_grasp_array(
+                msg,
+                settings.object_frame,
+                settings.base_frame,
+                settings.max_grasps,
+                "candidate_grasps",
+            )
+        except GraspSafetyError as error:
+            self._report_error("candidate_grasps", error)
+            return
+        with self._state_lock:
+            self._candidates, self._candidates_pending = msg, True
+        self._rank_topics()
+
+    def _on_trajectory(self, msg: Path) -> None:
+        settings = self._snapshot().settings
+        try:
+            trajectory_from_path(
+                msg,
+                settings.base_frame,
+                settings.trajectory_dt_s,
+                settings.trajectory_duration_s,
+                settings.max_samples,
+            )
+        except GraspSafetyError as error:
+            self._report_error("object_trajectory", error)
+            return
+        with self._state_lock:
+            self._trajectory = msg
+        self._rank_topics()
+
+    def _on_inertia(self, msg: InertiaStamped) -> None:
+        settings = self._snapshot().settings
+        try:
+            check_frame_id(
+                msg.header.frame_id, [settings.object_frame], "object_inertia.header.frame_id"
+            )
+            override = object_inertia_from_msg(msg.inertia, settings.max_mass_kg)
+        except GraspSafetyError as error:
+            self._report_error("object_inertia", error)
+            return
+        with self._state_lock:
+            self._inertia_override = override
+        self.get_logger().info(
+            "object inertia override "
+            + (f"set: {override.mass_kg:g} kg" if override else "cleared (m = 0)")
+        )
+
+    def _rank_topics(self) -> None:
+        """Rank the candidate set if it is new (not ranked yet) and a trajectory is known."""
+        with self._state_lock:
+            grasps, path = self._candidates, self._trajectory
+            if grasps is None or path is None or not self._candidates_pending:
+                return
+            self._candidates_pending = False
+        try:
+            self._rank(grasps, path, None, "", source="topics", grasps_field="candidate_grasps")
+        except NotReadyError as error:
+            with self._state_lock:
+                self._candidates_pending = True  # retried with the next trajectory
+            self._report_error("topics", error)
+        except GraspSafetyError as error:
+            self._report_error("topics", error)
+
+    # --- Ranking -----------------------------------------------------------------------------
+
+    def _snapshot(self) -> _Snapshot:
+        with self._state_lock:
+            return _Snapshot(
+                self._settings, self._robot, self._joint_state, self._inertia_override
+            )
+
+    def _rank(
+        self,
+        grasps_msg: PoseArray,
+        path_msg: Path,
+        inertia_msg: Inertia | None,
+        metric: str,
+        source: str,
+        grasps_field: str,
+    ) -> GraspRanking:
+        """Convert, rank, publish; return the GraspRanking. Raises GraspSafetyError."""
+        state = self._snapshot()
+        settings, bundle = state.settings, state.bundle
+        if bundle is None:
+            raise NotReadyError(
+                "no robot description yet: set the robot_description or urdf parameter or "
+                "publish the URDF on /robot_description"
+            )
+        trajectory = trajectory_from_path(
+            path_msg,
+            settings.base_frame,
+            settings.trajectory_dt_s,
+            settings.trajectory_duration_s,
+            settings.max_samples,
+        )
+        grasps = grasps_from_pose_array(
+            grasps_msg,
+            settings.object_frame,
+            settings.base_frame,
+            trajectory,
+            settings.max_grasps,
+            grasps_field,
+        )
+        total = len(grasps) * trajectory.num_samples
+        if total > settings.max_total_samples:
+            raise InvalidInputError(
+                f"{grasps_field}.poses",
+                f"{len(grasps)} grasps x {trajectory.num_samples} samples = {total} samples; at "
+                f"most max_total_samples={settings.max_total_samples} are allowed",
+            )
+        object_inertia = state.inertia_override
+        if inertia_msg is not None:
+            object_inertia = object_inertia_from_msg(inertia_msg, settings.max_mass_kg)
+        object_inertia = object_inertia or settings.object_inertia
+        if object_inertia is None:
+            raise InvalidInputError(
+                "object_inertia",
+                "m is 0 and no default object is configured (parameters object.mass_kg, "
+                "object.inertia_about_com_kgm2)",
+            )
+        metric = check_metric(metric or settings.metric, "metric")
+        seed = bundle.seed
+        if seed is None and settings.use_joint_states_seed and state.joint_state is not None:
+            seed = seed_from_joint_state(*state.joint_state, bundle.robot)
+
+        if not self._compute_lock.acquire(timeout=settings.service_busy_timeout_s):
+            raise BusyError(
+                f"busy: another ranking has been running for more than "
+                f"service_busy_timeout_s={settings.service_busy_timeout_s:g} s; try again"
+            )
+        try:
+            started = time.perf_counter()
+            ranking = bundle.evaluator.rank(
+                grasps,
+                object_inertia,
+                trajectory,
+                seed_positions=seed,
+                metric=metric,
+                progress=_deadline_check(started + settings.max_compute_time_s, settings),
+            )
+            compute_time_s = time.perf_counter() - started
+        finally:
+            self._compute_lock.release()
+
+        stamp = self.get_clock().now().to_msg()
+        result = ranking_msg(ranking, grasps_msg, settings.base_frame, stamp, compute_time_s)
+        self._ranking_pub.publish(result)
+        self._ranked_pub.publish(result.ranked_grasps)
+        self._markers_pub.publish(
+            markers_msg(ranking, grasps, trajectory, settings.base_frame, stamp)
+        )
+        feasible = len(ranking.order)
+        with self._state_lock:
+            status = self._status
+            status.rankings += 1
+            status.last_compute_time_s = compute_time_s
+            status.last_feasible = feasible
+            status.last_infeasible = len(ranking.evaluations) - feasible
+            status.last_source = source
+            status.last_was_error = False
+        self.get_logger().info(
+            f"{source}: ranked {len(grasps)} grasps ({feasible} feasible) in "
+            f"{compute_time_s:.3f} s; order {list(ranking.order)}"
+        )
+        self._publish_diagnostics()
+        return result
+
+    # --- Diagnostics -------------------------------------------------------------------------
+
+    def _report_error(self, source: str, error: BaseException) -> None:
+        with self._state_lock:
+            self._status.refused += 1
+            self._status.last_error = f"{source}: {error}"
+            self._status.last_source = source
+            self._status.last_was_error = True
+        self.get_logger().warning(f"{source}: refused: {error}")
+        self._publish_diagnostics()
+
+    def diagnostics_status(self) -> DiagnosticStatus:
+        """The node's current DiagnosticStatus (also published on /diagnostics)."""
+        with self._state_lock:
+            status, settings, bundle = self._status, self._settings, self._robot
+            if bundle is None:
+                level, message = DiagnosticStatus.ERROR, "no robot description yet"
+            elif status.last_was_error:
+                level, message = DiagnosticStatus.WARN, f"input refused: {status.last_error}"
+            elif status.rankings:
+                level = DiagnosticStatus.OK
+                message = (
+                    f"last ranking: {status.last_feasible} feasible, "
+                    f"{status.last_infeasible} infeasible"
+                )
+            else:
+                level, message = DiagnosticStatus.OK, "ready, no ranking yet"
+            values = {
+                "robot_source": bundle.origin if bundle else "",
+                "base_frame": settings.base_frame,
+                "tip_frame": settings.tip_frame,
+                "rankings": status.rankings,
+                "refused_inputs": status.refused,
+                "last_source": status.last_source,
+                "last_compute_time_s": f"{status.last_compute_time_s:.6f}",
+                "last_feasible_grasps": status.last_feasible,
+                "last_infeasible_grasps": status.last_infeasible,
+                "last_error": status.last_error,
+            }
+        return DiagnosticStatus(
+            level=level,
+            name=f"{NODE_NAME}: grasp ranking",
+            message=message,
+            hardware_id=f"{settings.base_frame}->{settings.tip_frame}",
+            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()],
+        )
+
+    def _publish_diagnostics(self) -> None:
+        self._diagnostics_pub.publish(
+            DiagnosticArray(
+                header=Header(stamp=self.get_clock().now().to_msg()),
+                status=[self.diagnostics_status()],
+            )
+        )
+
+
+def _robot_key(settings: NodeSettings) -> tuple[Any, ...]:
+    """The settings a robot model depends on."""
+    return (settings.robot_source, settings.base_frame, settings.tip_frame, settings.ik_seed)
+
+
+def _deadline_check(deadline: float, settings: NodeSettings) -> Callable[[int, int], None]:
+    """A progress callback for rank() that abandons the ranking after the deadline."""
+
+    def check(done: int, total: int) -> None:
+        if done < total and time.perf_counter() > deadline:
+            raise ComputeTimeExceededError(
+                f"ranking abandoned after {done} of {total} grasps: longer than "
+                f"max_compute_time_s={settings.max_compute_time_s:g} s; send fewer grasps or "
+                "raise trajectory.dt_s"
+            )
+
+    return check
+
+
+def main(args: list[str] | None = None) -> int:
+    """Run the node until shut down. Exit status 1 on a start-up error (one log line)."""
+    logger = rclpy.logging.get_logger(NODE_NAME)
+    try:
+        rclpy.init(args=args)
+    except RuntimeError as error:  # rclpy's RCLError: bad --ros-args or params file
+        first_line = str(error).strip().splitlines()[0] if str(error).strip() else "rcl error"
+        logger.error(f"start-up failed: {first_line}")
+        return 1
+    node: GraspSafetyNode | None = None
+    executor: MultiThreadedExecutor | None = None
+    status = 0
+    try:
+        node = GraspSafetyNode()
+        executor = MultiThreadedExecutor(num_threads=EXECUTOR_THREADS)
+        executor.add_node(node)
+        node.wait_for_robot(executor)
+        executor.spin()
+    except StartupError as error:
+        logger.error(f"start-up failed: {error}")
+        status = 1
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if executor is not None:
+            executor.shutdown()
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main())

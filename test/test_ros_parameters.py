@@ -1,0 +1,183 @@
+"""Node parameter validation, without rclpy: every bad value is refused naming the parameter."""
+
+from __future__ import annotations
+
+import array
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+from conftest import ARM6_AXES, serial_arm_urdf
+
+from grasp_safety_ros.core import FrameNotFoundError, InvalidInputError, solid_box
+from grasp_safety_ros.paths import config_file
+from grasp_safety_ros.ros.parameters import (
+    PARAMETERS,
+    build_robot,
+    check_parameter,
+    settings_from_parameters,
+)
+
+MINIMAL = {"base_frame": "base_link", "tip_frame": "tool"}
+
+
+def flatten(tree: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Nested params-file keys to dotted parameter names, as rcl does."""
+    flat: dict[str, Any] = {}
+    for key, value in tree.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            flat.update(flatten(value, f"{name}."))
+        else:
+            flat[name] = value
+    return flat
+
+
+def node_yaml() -> dict[str, Any]:
+    data = yaml.safe_load(config_file("grasp_safety_node.yaml").read_text())
+    return flatten(data["grasp_safety"]["ros__parameters"])
+
+
+def test_params_file_declares_exactly_the_node_parameters() -> None:
+    assert set(node_yaml()) == set(PARAMETERS)
+
+
+def test_every_parameter_is_documented() -> None:
+    docs = (Path(__file__).resolve().parents[1] / "docs" / "ros.md").read_text()
+    for name in PARAMETERS:
+        assert f"| `{name}` |" in docs, name
+
+
+def test_params_file_is_the_book_scenario() -> None:
+    settings = settings_from_parameters(node_yaml())
+    book = solid_box(0.34, [0.15, 0.22, 0.015])
+    assert settings.object_inertia is not None
+    assert settings.object_inertia.mass_kg == book.mass_kg
+    np.testing.assert_allclose(
+        settings.object_inertia.inertia_about_com_kgm2, book.inertia_about_com_kgm2, rtol=1e-15
+    )
+    assert settings.ik_seed == (0.0, -0.55, 0.0, 0.75, 0.0, 1.26, 0.0)
+    assert (settings.base_frame, settings.tip_frame) == ("base", "right_gripper")
+    bundle = build_robot(settings, None)
+    assert bundle is not None and bundle.origin == "urdf" and bundle.robot.num_joints == 7
+
+
+def test_defaults() -> None:
+    settings = settings_from_parameters(MINIMAL)
+    assert settings.object_inertia is None  # object.mass_kg 0: no default object
+    assert settings.ik_seed is None
+    assert settings.metric == "mean"
+    assert settings.object_frame == "object"
+    assert settings.robot_source == ""
+    assert build_robot(settings, None) is None
+
+
+def test_parameter_types_from_rclpy_are_accepted() -> None:
+    values = {
+        **MINIMAL,
+        "ik_seed": array.array("d", [0.1] * 6),  # DOUBLE_ARRAY values arrive as array.array
+        "object.mass_kg": 1,  # an integer where a double is meant
+        "object.inertia_about_com_kgm2": array.array("q", [1, 0, 0, 1, 0, 1]),
+        "object.com_in_object_m": None,  # an empty list in a params file arrives NOT_SET
+    }
+    with pytest.raises(InvalidInputError, match=r"object\.com_in_object_m: must have shape"):
+        settings_from_parameters(values)
+    values["object.com_in_object_m"] = [0.0, 0.0, 0.1]
+    settings = settings_from_parameters(values)
+    assert settings.ik_seed == (0.1,) * 6
+    assert settings.object_inertia is not None and settings.object_inertia.mass_kg == 1.0
+    assert settings_from_parameters({**MINIMAL, "ik_seed": None}).ik_seed is None
+    assert settings_from_parameters({**MINIMAL, "ik_seed": []}).ik_seed is None
+
+
+BAD: list[tuple[dict[str, Any], str]] = [
+    ({"base_frame": ""}, r"^base_frame: must be set"),
+    ({"tip_frame": 3}, r"^tip_frame: must be a string, got 3"),
+    ({"object_frame": ""}, r"^object_frame: must be a non-empty frame name"),
+    ({"object_frame": "base_link"}, r"^object_frame: must differ from base_frame"),
+    ({"robot_description": "robots/arm.urdf"}, r"^robot_description: must be URDF XML"),
+    ({"metric": "median"}, r"^metric: must be one of mean, max, integral, got 'median'"),
+    ({"ik_seed": ["a", "b"]}, r"^ik_seed: must be a list of numbers"),
+    ({"ik_seed": [0.0, float("nan")]}, r"^ik_seed: must be finite"),
+    ({"ik_seed": 0.5}, r"^ik_seed: must be a list of numbers"),
+    ({"use_joint_states_seed": "yes"}, r"^use_joint_states_seed: must be true or false"),
+    ({"object.mass_kg": -1.0}, r"^object\.mass_kg: must be in \[0, inf\], got -1"),
+    ({"object.mass_kg": float("inf")}, r"^object\.mass_kg: must be finite"),
+    ({"object.mass_kg": 2000.0}, r"^object\.mass_kg: must be at most max_mass_kg=1000"),
+    ({"object.mass_kg": True}, r"^object\.mass_kg: must be a number"),
+    ({"object.mass_kg": 1.0}, r"^object\.inertia_about_com_kgm2: must be positive definite"),
+    ({"object.inertia_about_com_kgm2": [1.0] * 5}, r"inertia_about_com_kgm2: must have shape"),
+    (
+        {"object.mass_kg": 1.0, "object.inertia_about_com_kgm2": [1.0, 0, 0, 1.0, 0, 5.0]},
+        r"^object\.inertia_about_com_kgm2: principal moments must satisfy the triangle",
+    ),
+    ({"object.com_in_object_m": [0.0, 0.0]}, r"^object\.com_in_object_m: must have shape \[3\]"),
+    ({"trajectory.dt_s": 0.0}, r"^trajectory\.dt_s: must be in \(0, inf\], got 0"),
+    ({"trajectory.dt_s": 3.0}, r"^trajectory\.dt_s: must be at most trajectory\.duration_s=2"),
+    ({"trajectory.dt_s": 1e-5}, r"^trajectory\.dt_s: gives 200001 samples .* max_samples=20000"),
+    ({"trajectory.duration_s": -2.0}, r"^trajectory\.duration_s: must be in \(0, inf\]"),
+    ({"max_grasps": 0}, r"^max_grasps: must be in \[1, "),
+    ({"max_grasps": 10.0}, r"^max_grasps: must be an integer, got 10\.0"),
+    ({"max_samples": False}, r"^max_samples: must be an integer"),
+    ({"max_mass_kg": 0.0}, r"^max_mass_kg: must be in \(0, inf\]"),
+    ({"max_compute_time_s": float("nan")}, r"^max_compute_time_s: must be finite"),
+    ({"service_busy_timeout_s": -1.0}, r"^service_busy_timeout_s: must be in \(0, inf\]"),
+    ({"diagnostics_period_s": "1"}, r"^diagnostics_period_s: must be a number"),
+    ({"robot_description_timeout_s": -1.0}, r"^robot_description_timeout_s: must be in \[0,"),
+]
+
+
+@pytest.mark.parametrize(("change", "pattern"), BAD, ids=[p for _, p in BAD])
+def test_bad_parameter_is_refused_naming_it(change: dict[str, Any], pattern: str) -> None:
+    with pytest.raises(InvalidInputError, match=pattern):
+        settings_from_parameters({**MINIMAL, **change})
+
+
+def test_single_parameter_check_ignores_foreign_names() -> None:
+    assert check_parameter("use_sim_time", True) is True
+    assert check_parameter("trajectory.dt_s", 1) == 1.0
+    with pytest.raises(InvalidInputError, match=r"^metric:"):
+        check_parameter("metric", "median")
+
+
+# --- Robot -------------------------------------------------------------------------------------
+
+URDF = serial_arm_urdf(ARM6_AXES)
+
+
+def test_robot_sources_in_order_of_precedence(tmp_path: Any) -> None:
+    path = tmp_path / "arm.urdf"
+    path.write_text(URDF)
+    from_xml = build_robot(settings_from_parameters({**MINIMAL, "robot_description": URDF}), "x")
+    from_path = build_robot(settings_from_parameters({**MINIMAL, "urdf": str(path)}), "x")
+    from_topic = build_robot(settings_from_parameters(MINIMAL), URDF)
+    both = settings_from_parameters({**MINIMAL, "robot_description": URDF, "urdf": "nonsense"})
+    assert from_xml is not None and from_xml.origin == "robot_description"
+    assert from_path is not None and from_path.origin == "urdf"
+    assert from_topic is not None and from_topic.origin == "/robot_description"
+    bundle = build_robot(both, None)
+    assert bundle is not None and bundle.origin == "robot_description"
+    assert bundle.robot.num_joints == 6
+
+
+def test_robot_errors_name_the_parameter() -> None:
+    with pytest.raises(FrameNotFoundError, match=r"^tip_frame: frame 'flange' not found") as info:
+        build_robot(settings_from_parameters({**MINIMAL, "tip_frame": "flange"}), URDF)
+    assert "tool" in info.value.available
+    with pytest.raises(FrameNotFoundError, match=r"^base_frame: frame 'world' not found"):
+        build_robot(settings_from_parameters({**MINIMAL, "base_frame": "world"}), URDF)
+    with pytest.raises(InvalidInputError, match=r"^ik_seed: must have shape \[6\], got shape"):
+        build_robot(settings_from_parameters({**MINIMAL, "ik_seed": [0.0, 0.0]}), URDF)
+    with pytest.raises(InvalidInputError, match=r"^ik_seed: joint 'j2' = 4 is outside its limits"):
+        build_robot(settings_from_parameters({**MINIMAL, "ik_seed": [0, 4, 0, 0, 0, 0]}), URDF)
+    with pytest.raises(InvalidInputError, match=r"^urdf: no URDF file at '/nonexistent.urdf'"):
+        build_robot(settings_from_parameters({**MINIMAL, "urdf": "/nonexistent.urdf"}), None)
+    with pytest.raises(InvalidInputError, match=r"^urdf: example-robot-data robot 'r2d2' not"):
+        build_robot(settings_from_parameters({**MINIMAL, "urdf": "example-robot-data:r2d2"}), None)
+    broken = settings_from_parameters({**MINIMAL, "robot_description": "<robot><link"})
+    with pytest.raises(InvalidInputError, match=r"^robot_description: cannot read URDF XML"):
+        build_robot(broken, None)
+    with pytest.raises(InvalidInputError, match=r"^/robot_description: cannot read URDF XML"):
+        build_robot(settings_from_parameters(MINIMAL), "<robot><link")
