@@ -14,28 +14,39 @@ class InvalidInputError(GraspSafetyError, ValueError):
 
     Attributes:
         field: Dotted name of the offending field, e.g. ``object.mass_kg``.
+        reason: What is wrong and what is allowed, without the field name.
     """
 
     def __init__(self, field: str, message: str) -> None:
         self.field = field
+        self.reason = message
         super().__init__(f"{field}: {message}")
+
+
+MAX_LISTED_FRAMES = 40
+"""Frame names listed in a FrameNotFoundError message (all are in its ``available``)."""
 
 
 class FrameNotFoundError(GraspSafetyError, KeyError):
     """A frame name is not in the robot model.
 
     Attributes:
+        field: Name of the offending field.
         frame: The requested frame name.
         available: Frame names that exist in the model.
+        reason: The message without the field name.
     """
 
     def __init__(self, field: str, frame: str, available: Iterable[str]) -> None:
         self.field = field
         self.frame = frame
         self.available = sorted(set(available))
-        super().__init__(
-            f"{field}: frame '{frame}' not found; available frames: {', '.join(self.available)}"
-        )
+        listed = ", ".join(self.available[:MAX_LISTED_FRAMES])
+        more = len(self.available) - MAX_LISTED_FRAMES
+        if more > 0:
+            listed += f" and {more} more"
+        self.reason = f"frame '{frame}' not found; available frames: {listed}"
+        super().__init__(f"{field}: {self.reason}")
 
     def __str__(self) -> str:  # KeyError would add quotes around the message
         return str(self.args[0])
