@@ -1,0 +1,653 @@
+"""The paper's two simulated experiments (tensor object, book) on the bundled Baxter, and the
+free-impact check of the effective mass; ``reproduce`` runs them and writes the outputs."""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+from scipy.stats import spearmanr
+
+from ..core.effective_mass import effective_mass_along, translational_mobility_in_base
+from ..core.inertia import (
+    ObjectInertia,
+    TensorObjectGeometry,
+    solid_box,
+    tensor_object_configurations,
+)
+from ..core.ranking import Grasp, GraspEvaluation, GraspSafetyEvaluator
+from ..core.robot import RobotModel
+from ..core.trajectory import ObjectTrajectory
+from ..core.validation import pose_from_position_quat
+from .scene import ContactConfig, ObjectShape, SensorConfig
+from .simulation import (
+    CollisionResult,
+    CollisionSetup,
+    ControllerGains,
+    ImpulseCase,
+    ImpulseChecker,
+    ImpulseSetup,
+    simulate_collision,
+)
+
+ROBOT_SOURCE = "example-robot-data:baxter"
+BASE_FRAME = "base"
+TIP_FRAME = "right_gripper"
+SEED_POSITIONS = (0.0, -0.55, 0.0, 0.75, 0.0, 1.26, 0.0)
+"""IK seed of the right arm (right_s0 .. right_w2) [rad]."""
+
+START_POSITION_M = (1.0, 0.0, 0.03)
+GOAL_POSITION_M = (1.1, -0.38, 0.16)
+QUAT_XYZW = (0.5, 0.5, 0.5, 0.5)
+DURATION_S = 2.0
+SAMPLE_PERIOD_S = 0.01
+IMPACT_TIME_S = 1.5
+
+BOOK_MASS_KG = 0.34
+BOOK_SIZE_M = (0.15, 0.22, 0.015)
+"""Book: x across the pages (15 cm), y along the spine (22 cm), z through it (1.5 cm)."""
+BOOK_SPINE_X_M = -0.075
+BOOK_GRASP_Y_M = (-0.1, 0.0, 0.1)
+
+TENSOR_GRASP_ROTATION = np.array([[0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+"""Tip axes in the tensor object's frame: tip z (approach) = -x, tip x = +y, tip y = -z."""
+
+PAPER_BOOK_PEAK_FORCES_N = (100.0, 130.0)
+"""Gazebo peak impact forces of the safest and least safe book grasps in the paper [N]."""
+
+COMMAND = ".venv/bin/grasp-safety reproduce --out {out}"
+
+
+@dataclass(frozen=True)
+class CandidateGrasp:
+    """One grasp of one experiment: the object as held, and the grasp pose.
+
+    Attributes:
+        name: Label.
+        object_inertia: Inertia of the object (object frame).
+        transform_tip_to_object: Pose of the tip frame in the object frame.
+        parameters: Values that define the grasp, written to results.json.
+    """
+
+    name: str
+    object_inertia: ObjectInertia
+    transform_tip_to_object: pin.SE3
+    parameters: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """Grasps that share an object trajectory and an object shape."""
+
+    key: str
+    title: str
+    grasps: tuple[CandidateGrasp, ...]
+    trajectory: ObjectTrajectory
+    shape: ObjectShape
+    description: str
+
+
+def tip_start_goal() -> tuple[pin.SE3, pin.SE3]:
+    """The paper's end-effector start and goal poses in the base frame."""
+    return (
+        pose_from_position_quat(START_POSITION_M, QUAT_XYZW, "start"),
+        pose_from_position_quat(GOAL_POSITION_M, QUAT_XYZW, "goal"),
+    )
+
+
+def tensor_grasp_pose(geometry: TensorObjectGeometry) -> pin.SE3:
+    """The tip holds the end of the handle (+x rod), the handle along the approach axis."""
+    return pin.SE3(TENSOR_GRASP_ROTATION, np.array([geometry.rod_length_m, 0.0, 0.0]))
+
+
+def tensor_shape(geometry: TensorObjectGeometry) -> ObjectShape:
+    """Five rods as capsules (visual only)."""
+    length, radius = geometry.rod_length_m, geometry.rod_radius_m
+    ends = ((length, 0, 0), (-length, 0, 0), (0, length, 0), (0, -length, 0), (0, 0, length))
+    return ObjectShape(capsules=tuple(((0.0, 0.0, 0.0), end, radius) for end in ends))
+
+
+def tensor_experiment(indices: Sequence[int] | None = None) -> Experiment:
+    """The tensor object: 20 ring configurations, one grasp pose, one tip trajectory.
+
+    The end-effector moves from p0 to pf with constant orientation (the paper's tip
+    trajectory), so the object trajectory is the tip's composed with the inverse grasp.
+    """
+    geometry = TensorObjectGeometry()
+    grasp = tensor_grasp_pose(geometry)
+    configurations = tensor_object_configurations(geometry)
+    chosen = range(len(configurations)) if indices is None else indices
+    grasps = tuple(
+        CandidateGrasp(
+            name=f"T{index + 1:02d}",
+            object_inertia=geometry.inertia(*configurations[index]),
+            transform_tip_to_object=grasp,
+            parameters={
+                "configuration": index + 1,
+                "x_ring_distance_m": configurations[index][0],
+                "y_ring_distance_m": configurations[index][1],
+            },
+        )
+        for index in chosen
+    )
+    tip_start, tip_goal = tip_start_goal()
+    trajectory = ObjectTrajectory(
+        tip_start * grasp.inverse(), tip_goal * grasp.inverse(), DURATION_S, SAMPLE_PERIOD_S
+    )
+    return Experiment(
+        key="tensor_object",
+        title="Tensor object (0.43 kg, 20 ring configurations)",
+        grasps=grasps,
+        trajectory=trajectory,
+        shape=tensor_shape(geometry),
+        description=(
+            "Core model of the tensor object (TensorObjectGeometry: five 0.15 m rods, paired "
+            "sliding rings, 0.43 kg). The tip holds the end of the +x rod (the handle) with the "
+            "handle along the gripper's approach axis; configuration k sets the x and y ring "
+            "distances (a 5 x 4 grid). The tip moves from p0 to pf in 2 s with constant "
+            "orientation; the joint trajectory is the same for every configuration."
+        ),
+    )
+
+
+def book_experiment() -> Experiment:
+    """The book: three grasps along the spine; the book follows the paper's trajectory."""
+    book = solid_box(BOOK_MASS_KG, BOOK_SIZE_M)
+    grasps = tuple(
+        CandidateGrasp(
+            name=f"spine {y:+.1f} m",
+            object_inertia=book,
+            transform_tip_to_object=pin.SE3(np.eye(3), np.array([BOOK_SPINE_X_M, y, 0.0])),
+            parameters={"spine_position_m": y},
+        )
+        for y in BOOK_GRASP_Y_M
+    )
+    start, goal = tip_start_goal()  # the paper's poses, used here for the book's frame
+    half = tuple(0.5 * s for s in BOOK_SIZE_M)
+    return Experiment(
+        key="book",
+        title="Book (22 x 15 x 1.5 cm, 0.34 kg, 3 grasps on the spine)",
+        grasps=grasps,
+        trajectory=ObjectTrajectory(start, goal, DURATION_S, SAMPLE_PERIOD_S),
+        shape=ObjectShape(boxes=(((0.0, 0.0, 0.0), half),)),
+        description=(
+            "Solid box 0.15 x 0.22 x 0.015 m (x, y, z), 0.34 kg, frame at its centre; the spine "
+            "is the edge x = -0.075 m and the grasps hold it at y = -0.1, 0, +0.1 m with the "
+            "tip axes parallel to the book's (as config/book_baxter.yaml). The book's frame "
+            "follows p0 -> pf in 2 s with constant orientation, so each grasp gives another "
+            "wrist trajectory."
+        ),
+    )
+
+
+@dataclass(frozen=True)
+class Variant:
+    """An ablation of the pillar experiment: other contact / sensor / controller settings."""
+
+    key: str
+    description: str
+    contact: ContactConfig | None = None
+    sensor: SensorConfig | None = None
+    gains: ControllerGains | None = None
+    end_time_s: float | None = None
+
+
+VARIANTS = (
+    Variant(
+        "main_from_1.3s",
+        "the main settings, simulated from 1.3 s instead of 0 s: the baseline of the other "
+        "ablations and a measure of the numerical noise of the peak force",
+    ),
+    Variant(
+        "frictionless",
+        "frictionless contact (condim 1): the impulse is along the normal only, as in the "
+        "effective-mass model",
+        contact=ContactConfig(friction=0.0),
+    ),
+    Variant(
+        "rigid_plate",
+        "sensor plate welded to the pillar (no load cell); force = MuJoCo's soft contact force "
+        "(solref 0.3 ms), which MuJoCo scales with the effective mass of the contact",
+        sensor=SensorConfig(stiffness_n_m=None),
+    ),
+    Variant(
+        "no_torque_limits",
+        "joint torques not clipped to the URDF effort limits (simulated to 3 s)",
+        gains=ControllerGains(clip_to_effort_limits=False),
+        end_time_s=3.0,
+    ),
+    Variant(
+        "control_1khz",
+        "controller updated at 1 kHz with a zero-order hold instead of at every physics step",
+        gains=ControllerGains(period_s=1e-3),
+    ),
+)
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """What ``reproduce`` runs.
+
+    Attributes:
+        tensor_indices: Tensor configurations (0-based), None for all 20.
+        setup: The main pillar experiment.
+        variant_setup: Start/end times of the ablations (they start on the reference).
+        variants: Ablations to run.
+        impulse_times_s: Trajectory times of the free-impact samples, per grasp.
+        impulse: Settings of the free impacts.
+    """
+
+    tensor_indices: tuple[int, ...] | None
+    setup: CollisionSetup
+    variant_setup: CollisionSetup
+    variants: tuple[Variant, ...]
+    impulse_times_s: tuple[float, ...]
+    impulse: ImpulseSetup = field(default_factory=ImpulseSetup)
+
+
+FULL = RunConfig(
+    tensor_indices=None,
+    setup=CollisionSetup(start_time_s=0.0, end_time_s=3.0),
+    variant_setup=CollisionSetup(start_time_s=1.3, end_time_s=1.6),
+    variants=VARIANTS,
+    impulse_times_s=(0.4, 0.8, 1.2, 1.5, 1.8),
+)
+"""The full run: every grasp, tracked from t = 0, records 3 s as the paper did."""
+
+QUICK = RunConfig(
+    tensor_indices=(0, 3, 9, 10, 16, 19),  # the 4 corners and 2 middle cells of the 5 x 4 grid
+    setup=CollisionSetup(start_time_s=1.3, end_time_s=1.6),
+    variant_setup=CollisionSetup(start_time_s=1.3, end_time_s=1.6),
+    variants=(),
+    impulse_times_s=(0.75, 1.5),
+)
+"""The quick run (CI): 6 tensor configurations and the book, simulated from 1.3 s to 1.6 s."""
+
+
+@dataclass
+class GraspRun:
+    """Everything measured for one grasp (kept in memory for the figures)."""
+
+    grasp: CandidateGrasp
+    evaluation: GraspEvaluation
+    collision: CollisionResult
+    variants: dict[str, CollisionResult]
+    impulse_cases: list[tuple[float, ImpulseCase]]
+    robot_only_effective_mass_kg: np.ndarray
+    """Effective mass of the arm alone (no object) at the same samples [kg]."""
+
+
+def _rank_correlation(x: Sequence[float], y: Sequence[float]) -> float:
+    if len(x) < 2 or np.ptp(x) == 0.0 or np.ptp(y) == 0.0:
+        return float("nan")
+    return float(spearmanr(x, y).statistic)
+
+
+def run_experiment(
+    robot: RobotModel,
+    experiment: Experiment,
+    config: RunConfig,
+    log: Callable[[str], None] | None = None,
+) -> list[GraspRun]:
+    """Core evaluation, pillar impacts (main + variants) and free impacts of each grasp."""
+    evaluator = GraspSafetyEvaluator(robot)
+    runs = []
+    for candidate in experiment.grasps:
+        evaluation = evaluator.evaluate(
+            Grasp(candidate.transform_tip_to_object, candidate.name),
+            candidate.object_inertia,
+            experiment.trajectory,
+            seed_positions=SEED_POSITIONS,
+        )
+        arguments = (
+            robot,
+            ROBOT_SOURCE,
+            candidate.object_inertia,
+            candidate.transform_tip_to_object,
+            evaluation,
+        )
+        collision = simulate_collision(*arguments, config.setup, experiment.shape)
+        variants = {}
+        for variant in config.variants:
+            setup = replace(
+                config.variant_setup,
+                contact=variant.contact or config.variant_setup.contact,
+                sensor=variant.sensor or config.variant_setup.sensor,
+                gains=variant.gains or config.variant_setup.gains,
+                end_time_s=variant.end_time_s or config.variant_setup.end_time_s,
+            )
+            variants[variant.key] = simulate_collision(*arguments, setup, experiment.shape)
+        checker = ImpulseChecker(
+            robot,
+            ROBOT_SOURCE,
+            candidate.object_inertia,
+            candidate.transform_tip_to_object,
+            config.impulse,
+        )
+        cases = []
+        for sample_time in config.impulse_times_s:
+            index = int(np.argmin(np.abs(evaluation.times_s - sample_time)))
+            cases.append(
+                (
+                    float(evaluation.times_s[index]),
+                    checker.run(
+                        evaluation.joint_positions[index],
+                        evaluation.directions_in_base[index],
+                        float(evaluation.effective_mass_kg[index]),
+                    ),
+                )
+            )
+        robot_only = _robot_only_effective_mass(robot, evaluation)
+        runs.append(GraspRun(candidate, evaluation, collision, variants, cases, robot_only))
+        if log is not None:
+            log(
+                f"  {experiment.key} {candidate.name}: M_eff at impact "
+                f"{collision.effective_mass_at_impact_kg:.4f} kg, peak force "
+                f"{collision.peak_force_n:.2f} N"
+            )
+    return runs
+
+
+def _robot_only_effective_mass(robot: RobotModel, evaluation: GraspEvaluation) -> np.ndarray:
+    data = robot.model.createData()
+    masses = np.empty(len(evaluation.times_s))
+    for i, positions in enumerate(evaluation.joint_positions):
+        mobility = translational_mobility_in_base(
+            robot, robot.model, data, robot.q_from_positions(positions)
+        )
+        masses[i] = effective_mass_along(mobility, evaluation.directions_in_base[i])
+    return masses
+
+
+def _finite(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None
+
+
+def _collision_dict(result: CollisionResult) -> dict[str, Any]:
+    record_peak = float(np.max(result.sensor_force_n)) if len(result.sensor_force_n) else math.nan
+    return {
+        "contact_time_s": _finite(result.contact_time_s),
+        "effective_mass_at_impact_kg": _finite(result.effective_mass_at_impact_kg),
+        "peak_force_n": _finite(result.peak_force_n),
+        "peak_time_s": _finite(result.peak_time_s),
+        "impulse_n_s": _finite(result.impulse_n_s),
+        "peak_contact_force_n": _finite(result.peak_contact_force_n),
+        "approach_speed_m_s": _finite(result.approach_speed_m_s),
+        "max_force_whole_record_n": _finite(record_peak),
+        "final_force_n": _finite(float(result.sensor_force_n[-1])),
+        "tracking_error_before_contact_rad": result.tracking_error_rad,
+        "first_torque_saturation_time_s": _finite(result.first_saturation_time_s),
+        "first_torque_saturation_joint": result.first_saturation_joint or None,
+    }
+
+
+def _ordering(names: Sequence[str], values: Sequence[float]) -> list[str]:
+    return [names[k] for k in np.argsort(values, kind="stable")]
+
+
+def summarise_experiment(runs: Sequence[GraspRun], variants: Sequence[Variant]) -> dict[str, Any]:
+    """The per-experiment part of results.json."""
+    names = [run.grasp.name for run in runs]
+    at_impact = [run.collision.effective_mass_at_impact_kg for run in runs]
+    mean_mass = [run.evaluation.mean_effective_mass_kg for run in runs]
+    peaks = [run.collision.peak_force_n for run in runs]
+    impulses = [run.collision.impulse_n_s for run in runs]
+    grasps = []
+    for run in runs:
+        entry: dict[str, Any] = {"name": run.grasp.name, **run.grasp.parameters}
+        entry["mean_effective_mass_kg"] = run.evaluation.mean_effective_mass_kg
+        entry.update(_collision_dict(run.collision))
+        entry["robot_only_effective_mass_at_impact_kg"] = _finite(
+            float(
+                np.interp(
+                    run.collision.contact_time_s,
+                    run.evaluation.times_s,
+                    run.robot_only_effective_mass_kg,
+                )
+            )
+        )
+        entry["variants"] = {
+            key: {
+                "peak_force_n": _finite(result.peak_force_n),
+                "impulse_n_s": _finite(result.impulse_n_s),
+                "effective_mass_at_impact_kg": _finite(result.effective_mass_at_impact_kg),
+                "first_torque_saturation_time_s": _finite(result.first_saturation_time_s),
+                "max_force_whole_record_n": _finite(float(np.max(result.sensor_force_n))),
+            }
+            for key, result in run.variants.items()
+        }
+        grasps.append(entry)
+    summary: dict[str, Any] = {
+        "spearman_meff_vs_peak_force": _rank_correlation(at_impact, peaks),
+        "spearman_meff_vs_impulse": _rank_correlation(at_impact, impulses),
+        "spearman_mean_meff_vs_peak_force": _rank_correlation(mean_mass, peaks),
+        "peak_force_ratio_worst_to_best": float(max(peaks) / min(peaks)),
+        "effective_mass_ratio_worst_to_best": float(max(at_impact) / min(at_impact)),
+        "order_by_effective_mass_at_impact": _ordering(names, at_impact),
+        "order_by_mean_effective_mass": _ordering(names, mean_mass),
+        "order_by_peak_force": _ordering(names, peaks),
+    }
+    summary["ordering_holds"] = (
+        summary["order_by_effective_mass_at_impact"] == summary["order_by_peak_force"]
+    )
+    summary["variants"] = {}
+    for variant in variants:
+        variant_peaks = [run.variants[variant.key].peak_force_n for run in runs]
+        variant_impulses = [run.variants[variant.key].impulse_n_s for run in runs]
+        variant_mass = [run.variants[variant.key].effective_mass_at_impact_kg for run in runs]
+        ratios = np.array(variant_peaks) / np.array(peaks)
+        summary["variants"][variant.key] = {
+            "description": variant.description,
+            "spearman_meff_vs_peak_force": _rank_correlation(variant_mass, variant_peaks),
+            "spearman_meff_vs_impulse": _rank_correlation(variant_mass, variant_impulses),
+            "peak_force_ratio_worst_to_best": float(max(variant_peaks) / min(variant_peaks)),
+            "peak_force_min_n": float(min(variant_peaks)),
+            "peak_force_max_n": float(max(variant_peaks)),
+            "peak_force_over_main_min": float(ratios.min()),
+            "peak_force_over_main_max": float(ratios.max()),
+            "order_by_peak_force": _ordering(names, variant_peaks),
+            "ordering_holds": _ordering(names, variant_mass) == _ordering(names, variant_peaks),
+        }
+    summary["grasps"] = grasps
+    return summary
+
+
+def summarise_impulses(
+    experiments: Sequence[tuple[str, Sequence[GraspRun]]], setup: ImpulseSetup
+) -> dict[str, Any]:
+    """The impulse_check part of results.json."""
+    per_case = []
+    for key, runs in experiments:
+        for run in runs:
+            for sample_time, case in run.impulse_cases:
+                per_case.append(
+                    {
+                        "experiment": key,
+                        "grasp": run.grasp.name,
+                        "time_s": sample_time,
+                        "effective_mass_kg": case.effective_mass_kg,
+                        "engine_effective_mass_kg": case.engine_effective_mass_kg,
+                        "impulse_n_s": case.impulse_n_s,
+                        "predicted_impulse_n_s": case.predicted_impulse_n_s,
+                        "restitution": case.restitution,
+                        "rel_error": case.rel_error,
+                        "contact_duration_s": case.duration_s,
+                        "joint_limit_active": case.limit_active,
+                    }
+                )
+    errors = [case["rel_error"] for case in per_case]
+    engine = [
+        abs(case["engine_effective_mass_kg"] / case["effective_mass_kg"] - 1.0)
+        for case in per_case
+    ]
+    restitution = [case["restitution"] for case in per_case]
+    return {
+        "worst_rel_error": float(max(errors)),
+        "mean_rel_error": float(np.mean(errors)),
+        "cases": len(per_case),
+        "speed_m_s": setup.speed_m_s,
+        "timestep_s": setup.timestep_s,
+        "contact_solref": [setup.contact.timeconst_s, setup.contact.dampratio],
+        "restitution_min": float(min(restitution)),
+        "restitution_max": float(max(restitution)),
+        "engine_vs_core_effective_mass_max_rel_diff": float(max(engine)),
+        "joint_limit_active_cases": int(sum(case["joint_limit_active"] for case in per_case)),
+        "per_case": per_case,
+    }
+
+
+def _package_version(name: str) -> str:
+    try:
+        return version(name)
+    except PackageNotFoundError:
+        return "unknown"
+
+
+def _setup_dict(config: RunConfig, quick: bool) -> dict[str, Any]:
+    setup = config.setup
+    return {
+        "quick": quick,
+        "robot": {
+            "urdf": ROBOT_SOURCE,
+            "base_frame": BASE_FRAME,
+            "tip_frame": TIP_FRAME,
+            "seed": list(SEED_POSITIONS),
+        },
+        "tip_or_object_trajectory": {
+            "start_position_m": list(START_POSITION_M),
+            "goal_position_m": list(GOAL_POSITION_M),
+            "quat_xyzw": list(QUAT_XYZW),
+            "duration_s": DURATION_S,
+            "dt_s": SAMPLE_PERIOD_S,
+        },
+        "pillar": {
+            "planned_impact_time_s": setup.impact_time_s,
+            "simulated_from_s": setup.start_time_s,
+            "simulated_to_s": setup.end_time_s,
+            "timestep_s": setup.timestep_s,
+            "impact_timestep_s": setup.impact_timestep_s,
+            "tip_sphere_radius_m": setup.tip_sphere_radius_m,
+            "peak_window_s": setup.peak_window_s,
+            "contact": vars(setup.contact),
+            "sensor": vars(setup.sensor),
+            "controller": vars(setup.gains),
+        },
+        "variants_simulated_from_to_s": [
+            config.variant_setup.start_time_s,
+            config.variant_setup.end_time_s,
+        ],
+        "impulse_sample_times_s": list(config.impulse_times_s),
+        "versions": {
+            name: _package_version(name)
+            for name in ("mujoco", "pin", "example-robot-data", "numpy", "scipy")
+        },
+    }
+
+
+def reproduce(
+    out_dir: Path, quick: bool = False, log: Callable[[str], None] | None = None
+) -> dict[str, Any]:
+    """Run the validation, write results.json, results.md and the figures into ``out_dir``.
+
+    Args:
+        out_dir: Output folder (created).
+        quick: The reduced run (QUICK) instead of the full one (FULL).
+        log: Called with one progress line per grasp, if given.
+
+    Returns:
+        The results, as written to results.json.
+    """
+    from .figures import write_figures
+    from .report import results_markdown
+
+    started = time.perf_counter()
+    config = QUICK if quick else FULL
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    robot = RobotModel.from_urdf(ROBOT_SOURCE, BASE_FRAME, TIP_FRAME)
+    tensor = tensor_experiment(config.tensor_indices)
+    book = book_experiment()
+    tensor_runs = run_experiment(robot, tensor, config, log)
+    book_runs = run_experiment(robot, book, config, log)
+    simulated = time.perf_counter()
+    command = COMMAND.format(out=out_dir) + (" --quick" if quick else "")
+    results: dict[str, Any] = {
+        "schema_version": 1,
+        "command": command,
+        "setup": _setup_dict(config, quick),
+        "tensor_object": {
+            "description": tensor.description,
+            **summarise_experiment(tensor_runs, config.variants),
+        },
+        "book": {
+            "description": book.description,
+            **summarise_experiment(book_runs, config.variants),
+        },
+        "impulse_check": summarise_impulses(
+            [(tensor.key, tensor_runs), (book.key, book_runs)], config.impulse
+        ),
+    }
+    low, high = PAPER_BOOK_PEAK_FORCES_N
+    results["book"]["paper_gazebo"] = {
+        "peak_force_safest_n": low,
+        "peak_force_least_safe_n": high,
+        "peak_force_ratio_worst_to_best": high / low,
+    }
+    figures = write_figures(out_dir, tensor, tensor_runs, book, book_runs, results)
+    results["figures"] = [path.name for path in figures]
+    results["timing_s"] = {
+        "simulation": round(simulated - started, 2),
+        "total": round(time.perf_counter() - started, 2),
+    }
+    results = _json_safe(results)
+    (out_dir / "results.json").write_text(
+        json.dumps(results, indent=1, allow_nan=False) + "\n", encoding="utf-8"
+    )
+    (out_dir / "results.md").write_text(results_markdown(results), encoding="utf-8")
+    return results
+
+
+def _json_safe(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {key: _json_safe(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(item) for item in value]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    return value
+
+
+def format_summary(results: dict[str, Any]) -> str:
+    """The headline figures, for the terminal."""
+    tensor, book, impulse = results["tensor_object"], results["book"], results["impulse_check"]
+    paper = book["paper_gazebo"]
+    lines = [
+        f"validation ({'quick' if results['setup']['quick'] else 'full'} run, "
+        f"{results['timing_s']['total']:.1f} s)",
+        f"  tensor object: Spearman(M_eff at impact, peak force) = "
+        f"{tensor['spearman_meff_vs_peak_force']:.3f} over {len(tensor['grasps'])} grasps; "
+        f"peak force worst/best = {tensor['peak_force_ratio_worst_to_best']:.4f} "
+        f"(M_eff worst/best = {tensor['effective_mass_ratio_worst_to_best']:.4f})",
+        f"  book: peak force worst/best = {book['peak_force_ratio_worst_to_best']:.4f} "
+        f"({min(g['peak_force_n'] for g in book['grasps']):.1f} N to "
+        f"{max(g['peak_force_n'] for g in book['grasps']):.1f} N); paper (Gazebo): "
+        f"{paper['peak_force_ratio_worst_to_best']:.2f} ({paper['peak_force_safest_n']:.0f} N to "
+        f"{paper['peak_force_least_safe_n']:.0f} N); ordering by M_eff holds: "
+        f"{'yes' if book['ordering_holds'] else 'NO'}",
+        f"  impulse check: worst |P - (1+e) M_eff v| / P_pred = "
+        f"{impulse['worst_rel_error']:.2e} over {impulse['cases']} free impacts "
+        f"(e = {impulse['restitution_min']:.3f}..{impulse['restitution_max']:.3f})",
+    ]
+    return "\n".join(lines)
