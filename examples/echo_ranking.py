@@ -32,10 +32,13 @@ def describe(ranking: GraspRanking) -> str:
     ]
     for rank, index in enumerate(ranking.order, start=1):
         e = ranking.evaluations[index]
+        iso = "" if e.iso_admissible or not e.iso_ts_15066 else ", ISO/TS 15066: not admissible"
         lines.append(
             f"  #{rank} candidate {index}: score {e.score:.4f}, "
-            f"peak {e.peak_effective_mass_kg:.4f} kg over {len(e.effective_mass_kg)} samples"
+            f"peak {e.peak_effective_mass_kg:.4f} kg over {len(e.effective_mass_kg)} samples{iso}"
         )
+    if ranking.uncertainty_message:
+        lines.append(f"  inertia uncertainty: {ranking.uncertainty_message}")
     lines += [f"  candidate {e.index}: infeasible ({e.reason})" for e in ranking.evaluations
               if not e.feasible]  # fmt: skip
     return "\n".join(lines)

@@ -3,6 +3,8 @@
 Start the node first (config/grasp_safety_node.yaml is the book on Baxter), then:
     .venv/bin/python examples/rank_grasps_client.py            # here (venv)
     python3 examples/rank_grasps_client.py                    # ROS install, workspace sourced
+    .venv/bin/python examples/rank_grasps_client.py --quality 0.2 0.9 0.5 \
+        --metric-point leading_point                          # with grasp quality
 Exit status 0 when the node ranked the grasps, 1 otherwise.
 
 Note: write float literals (1.0, not 1) in float64 message fields: rclpy accepts an int there
@@ -11,6 +13,8 @@ but puts garbage on the wire.
 
 from __future__ import annotations
 
+import argparse
+import math
 import sys
 
 import rclpy
@@ -52,15 +56,22 @@ def book_request() -> RankGrasps.Request:
     return request
 
 
-def main(args: list[str] | None = None) -> int:
-    rclpy.init(args=args)
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quality", type=float, nargs=3, help="grasp quality of the 3 grasps")
+    parser.add_argument("--metric-point", default="", help="tip | leading_point | worst_point")
+    options, ros_args = parser.parse_known_args(argv)
+    request = book_request()
+    request.grasp_quality = [float(q) for q in options.quality or []]
+    request.metric_point = options.metric_point
+    rclpy.init(args=ros_args)
     node = rclpy.create_node("rank_grasps_example")
     try:
         client = node.create_client(RankGrasps, SERVICE)
         if not client.wait_for_service(timeout_sec=10.0):
             print(f"no service {SERVICE}: is the node running (same ROS_DOMAIN_ID)?")
             return 1
-        future = client.call_async(book_request())
+        future = client.call_async(request)
         rclpy.spin_until_future_complete(node, future, timeout_sec=120.0)
         response = future.result()
         if response is None:
@@ -70,13 +81,19 @@ def main(args: list[str] | None = None) -> int:
             print(f"refused: {response.message}")
             return 1
         ranking = response.ranking
-        print(f"metric {ranking.metric}, computed in {ranking.compute_time_s:.3f} s")
-        print("rank  index  score      peak [kg]  samples")
+        print(
+            f"metric {ranking.metric}, metric point {ranking.metric_point}, rank by "
+            f"{ranking.rank_by}, computed in {ranking.compute_time_s:.3f} s"
+        )
+        print("rank  index  score      peak [kg]  samples  safety     ISO/TS 15066   quality")
         for rank, index in enumerate(ranking.order, start=1):
             e = ranking.evaluations[index]
+            iso = f"ok, T>={e.iso_min_duration_s:.2f}s" if e.iso_admissible else "not admissible"
+            quality = "" if math.isnan(e.grasp_quality) else f"{e.grasp_quality:g}"
+            quality += " pareto" if e.pareto_optimal else ""
             print(
                 f"{rank:>4}  {index:>5}  {e.score:<9.4f}  {e.peak_effective_mass_kg:<9.4f}  "
-                f"{len(e.effective_mass_kg)}"
+                f"{len(e.effective_mass_kg):<7}  {e.safety_score:<9.4f}  {iso:<13}  {quality}"
             )
         for e in ranking.evaluations:
             if not e.feasible:

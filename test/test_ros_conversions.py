@@ -24,7 +24,10 @@ from grasp_safety_ros.core import (
     RobotModel,
     solid_box,
 )
+from grasp_safety_ros.core.analysis import AnalysisOptions, SafetyReport, analyse
+from grasp_safety_ros.core.exposed_points import box_corners_in_object
 from grasp_safety_ros.core.ranking import GraspEvaluation, Ranking
+from grasp_safety_ros.core.uncertainty import InertiaUncertainty
 from grasp_safety_ros.ros.conversions import (
     check_grasp_array,
     grasps_from_pose_array,
@@ -35,6 +38,7 @@ from grasp_safety_ros.ros.conversions import (
     quat_xyzw_from_msg,
     rank_color,
     ranking_msg,
+    report_msg,
     seed_from_joint_state,
     trajectory_from_path,
     transform_from_pose_msg,
@@ -357,3 +361,147 @@ def test_infeasible_evaluation_fields_are_empty() -> None:
     message = ranking_msg(ranking, PoseArray(poses=[Pose()]), "b", Time(), 0.0)
     assert list(message.order) == [] and list(message.ranked_grasps.poses) == []
     assert message.evaluations[0].direction == []
+
+
+# --- Safety reports (issue #6) -----------------------------------------------------------------
+
+
+def _report(arm6: RobotModel, **options: object) -> tuple[SafetyReport, PoseArray]:
+    ranking, grasps, trajectory = _ranking(arm6)
+    inertia = solid_box(0.5, [0.1, 0.1, 0.1])
+    report = analyse(
+        GraspSafetyEvaluator(arm6),
+        grasps,
+        inertia,
+        trajectory,
+        AnalysisOptions(**options),  # type: ignore[arg-type]
+        ranking=ranking,
+    )
+    request = PoseArray(
+        header=Header(frame_id="object"),
+        poses=[pose_msg_from_transform(g.transform_tip_to_object) for g in grasps],
+    )
+    return report, request
+
+
+def test_report_message_with_default_options_is_the_ranking_message(arm6: RobotModel) -> None:
+    report, request = _report(arm6)
+    message = report_msg(report, request, "base_link", Time(sec=3), 0.5)
+    plain = ranking_msg(report.ranking, request, "base_link", Time(sec=3), 0.5)
+    assert list(message.order) == list(plain.order) == list(report.ranking.order)
+    assert list(message.safety_order) == list(message.paper_order) == list(message.order)
+    assert list(message.ranked_grasps.poses) == list(plain.ranked_grasps.poses)
+    assert (message.metric_point, message.rank_by) == ("tip", "safety")
+    assert list(message.pareto_set) == [] and math.isnan(message.safety_weight)
+    assert math.isnan(message.order_stability) and message.uncertainty_message == ""
+    for got, old in zip(message.evaluations, plain.evaluations, strict=True):
+        for name in ("index", "feasible", "effective_mass_kg", "time_from_start_s"):
+            assert getattr(got, name) == getattr(old, name)
+        assert got.score == old.score or (math.isnan(got.score) and math.isnan(old.score))
+        for name in ("grasp_quality", "combined_score", "worst_case_score", "effort_score"):
+            assert math.isnan(getattr(got, name)), name
+        assert len(got.leading_point_effective_mass_kg) == len(got.peak_abs_torque) == 0
+        assert not got.redundancy_applied and math.isnan(got.score_without_redundancy)
+        if got.feasible:
+            assert got.safety_score == got.score
+            assert len(got.iso_ts_15066) == 12  # every region by default
+        else:
+            assert math.isnan(got.safety_score) and got.iso_ts_15066 == []
+            assert not got.iso_admissible and math.isnan(got.iso_min_duration_s)
+
+
+def test_report_message_carries_every_analysis(arm6: RobotModel) -> None:
+    points = box_corners_in_object([0.1, 0.1, 0.1])
+    report, request = _report(
+        arm6,
+        metric_point="worst_point",
+        points_in_object_m=points,
+        iso_regions=("chest", "face"),
+        uncertainty=InertiaUncertainty(mass_fraction=0.3, num_random_samples=3),
+        grasp_quality=(0.2, 0.9, 0.5),
+        safety_weight=0.25,
+        effort=True,
+        effort_criterion="rms_fraction",
+    )
+    message = report_msg(report, request, "base_link", Time(), 0.0)
+    assert list(message.order) == list(report.order) == list(report.quality.order)
+    assert list(message.safety_order) == list(report.safety_order)
+    assert list(message.paper_order) == list(report.ranking.order)
+    assert list(message.ranked_grasps.poses) == [request.poses[i] for i in report.order]
+    assert list(message.pareto_set) == list(report.quality.pareto_set)
+    assert message.metric_point == "worst_point" and message.safety_weight == 0.25
+    assert message.effort_criterion == "rms_fraction"
+    uncertainty = report.uncertainty
+    assert uncertainty is not None
+    assert message.ranking_flips == uncertainty.ranking_flips
+    assert message.order_stability == uncertainty.order_stability
+    assert list(message.worst_case_order) == list(uncertainty.worst_case_order)
+    assert message.uncertainty_message == uncertainty.message
+    for k, got in enumerate(message.evaluations):
+        assert got.grasp_quality == (0.2, 0.9, 0.5)[k]
+        assert got.pareto_optimal == (k in report.quality.pareto_set)
+        if not got.feasible:
+            assert got.iso_ts_15066 == [] and len(got.peak_abs_torque) == 0
+            assert math.isnan(got.combined_score) and math.isnan(got.effort_score)
+            assert got.probability_safest == 0.0
+            continue
+        exposed, effort, spread = report.exposed[k], report.effort[k], uncertainty.grasps[k]
+        assert got.safety_score == report.scores[k] == np.mean(exposed.worst_effective_mass_kg)
+        np.testing.assert_array_equal(
+            got.worst_point_effective_mass_kg, exposed.worst_effective_mass_kg
+        )
+        np.testing.assert_array_equal(
+            got.leading_point_effective_mass_kg, exposed.leading_effective_mass_kg
+        )
+        assert got.combined_score == report.quality.combined[k]
+        assert (got.worst_case_score, got.percentile_score, got.probability_safest) == (
+            spread.worst_case_score,
+            spread.percentile_score,
+            spread.probability_safest,
+        )
+        np.testing.assert_array_equal(got.peak_abs_torque, effort.peak_abs_torque)
+        np.testing.assert_array_equal(got.rms_torque, effort.rms_torque)
+        assert got.effort_score == effort.score("rms_fraction")
+        iso = report.iso[k]
+        assert [r.region for r in got.iso_ts_15066] == ["chest", "face"]
+        assert got.iso_admissible == iso.admissible_where_permitted
+        assert got.iso_limiting_region == iso.limiting_region == "chest"
+        assert got.iso_min_duration_s == iso.min_duration_s
+        chest, face = got.iso_ts_15066
+        want = iso.region("chest")
+        assert chest.transient_contact_permitted and chest.max_transient_force_n == 280.0
+        assert chest.worst_force_ratio == want.worst_force_ratio
+        assert chest.peak_contact_force_n == want.peak_contact_force_n
+        assert chest.min_max_permissible_speed_m_s == np.min(want.max_permissible_speed_m_s)
+        assert chest.min_duration_s == want.min_duration_s and chest.admissible == want.admissible
+        # face: no transient contact permitted; the core's inf ratio and null limit are NaN
+        assert not face.transient_contact_permitted and not face.admissible
+        assert math.isnan(face.worst_force_ratio) and math.isnan(face.max_transient_force_n)
+        assert face.min_max_permissible_speed_m_s == 0.0 and math.isinf(face.min_duration_s)
+
+
+def test_markers_follow_the_given_order_and_flag_iso(arm6: RobotModel) -> None:
+    ranking, grasps, trajectory = _ranking(arm6)
+    order = tuple(reversed(ranking.order))
+    scores = [1.5, 2.5, float("nan")]
+    markers = markers_msg(
+        ranking,
+        grasps,
+        trajectory,
+        "base_link",
+        Time(),
+        order=order,
+        scores=scores,
+        not_admissible={order[0]},
+    ).markers
+    labels = {m.id: m for m in markers if m.type == Marker.TEXT_VIEW_FACING}
+    arrows = {m.id: m for m in markers if m.type == Marker.ARROW}
+    first = order[0]
+    assert labels[first].text == (
+        f"#1 {grasps[first].name}: {scores[first]:.3f} kg, ISO/TS 15066: not admissible"
+    )
+    assert (arrows[first].color.r, arrows[first].color.g) == (0.0, 1.0)
+    assert labels[order[1]].text == f"#2 {grasps[order[1]].name}: {scores[order[1]]:.3f} kg"
+    left_out = markers_msg(ranking, grasps, trajectory, "b", Time(), order=order[:1]).markers
+    text = {m.id: m.text for m in left_out if m.type == Marker.TEXT_VIEW_FACING}
+    assert text[order[1]].endswith("not ranked") and text[2] == "unreachable: infeasible"

@@ -7,6 +7,7 @@ random ROS_DOMAIN_ID and localhost-only discovery, so parallel runs do not cross
 
 from __future__ import annotations
 
+import array
 import copy
 import math
 import random
@@ -32,16 +33,29 @@ from rclpy.context import Context
 from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from std_msgs.msg import Header, String
+from std_msgs.msg import Float64MultiArray, Header, String
 from visualization_msgs.msg import Marker, MarkerArray
 
-from grasp_safety_ros.core import GraspSafetyEvaluator, ObjectTrajectory, RobotModel, solid_box
+from grasp_safety_ros.core import (
+    Grasp,
+    GraspSafetyEvaluator,
+    ObjectTrajectory,
+    RobotModel,
+    solid_box,
+)
+from grasp_safety_ros.core.analysis import AnalysisOptions, analyse
+from grasp_safety_ros.core.exposed_points import box_corners_in_object
+from grasp_safety_ros.core.iso15066 import assess_grasp
+from grasp_safety_ros.core.multi_objective import rank_with_quality
+from grasp_safety_ros.core.uncertainty import InertiaUncertainty
 from grasp_safety_ros.paths import config_file
 from grasp_safety_ros.ros.conversions import inertia_msg_from_object, pose_msg_from_transform
 from grasp_safety_ros.ros.node import EXECUTOR_THREADS, GraspSafetyNode
 from grasp_safety_ros.scenario import load_scenario
 
 BOOK = load_scenario(config_file("book_baxter.yaml"))
+BOOK_GRASPS = [Grasp(g.transform_tip_to_object, f"grasp_{i}") for i, g in enumerate(BOOK.grasps)]
+"""The book's grasps named as the node names candidates."""
 BOOK_YAML = yaml.safe_load(config_file("book_baxter.yaml").read_text())
 DT_S = 0.1
 MAX_GRASPS = 40
@@ -59,6 +73,7 @@ NODE_PARAMETERS = {
         float(BOOK.object_inertia.inertia_about_com_kgm2[i, j])
         for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
     ],
+    "object.box_size_m": [0.15, 0.22, 0.015],  # the book: exposed points for metric_point
     "trajectory.dt_s": DT_S,
     "max_grasps": MAX_GRASPS,
     "max_total_samples": 100_000,
@@ -179,17 +194,40 @@ def book_request(with_inertia: bool = True) -> RankGrasps.Request:
     return request
 
 
-@pytest.fixture(scope="module")
-def core_ranking() -> Any:
-    robot = RobotModel.from_urdf("example-robot-data:baxter", "base", "right_gripper")
-    trajectory = ObjectTrajectory(
+def book_trajectory(duration_s: float = 2.0) -> ObjectTrajectory:
+    return ObjectTrajectory(
         BOOK.trajectory.transform_object_to_base_start,
         BOOK.trajectory.transform_object_to_base_goal,
-        2.0,
+        duration_s,
         DT_S,
     )
-    return GraspSafetyEvaluator(robot).rank(
-        BOOK.grasps, BOOK.object_inertia, trajectory, BOOK.robot.seed, "mean"
+
+
+@pytest.fixture(scope="module")
+def core_evaluator() -> GraspSafetyEvaluator:
+    robot = RobotModel.from_urdf("example-robot-data:baxter", "base", "right_gripper")
+    return GraspSafetyEvaluator(robot)
+
+
+@pytest.fixture(scope="module")
+def core_ranking(core_evaluator: GraspSafetyEvaluator) -> Any:
+    return core_evaluator.rank(
+        BOOK_GRASPS, BOOK.object_inertia, book_trajectory(), BOOK.robot.seed, "mean"
+    )
+
+
+def core_report(
+    evaluator: GraspSafetyEvaluator, ranking: Any, duration_s: float = 2.0, **options: Any
+) -> Any:
+    """The core's SafetyReport of the book scenario with the node's box points."""
+    points = box_corners_in_object(NODE_PARAMETERS["object.box_size_m"])
+    return analyse(
+        evaluator,
+        BOOK_GRASPS[: len(ranking.evaluations)],
+        BOOK.object_inertia,
+        book_trajectory(duration_s),
+        AnalysisOptions(points_in_object_m=points, **options),
+        ranking=ranking,
     )
 
 
@@ -236,10 +274,29 @@ def test_default_object_is_used_when_mass_is_zero(ros: NodeUnderTest, core_ranki
     assert_matches_core(response.ranking, core_ranking)
 
 
+def same_messages(first: Any, second: Any) -> bool:
+    """Field-by-field equality of messages (or sequences of them) where NaN equals NaN.
+
+    Message ``==`` says NaN != NaN, and serialised bytes differ in their padding.
+    """
+    if hasattr(first, "get_fields_and_field_types"):
+        return type(first) is type(second) and all(
+            same_messages(getattr(first, f), getattr(second, f))
+            for f in first.get_fields_and_field_types()
+        )
+    if isinstance(first, float) and isinstance(second, float):
+        return first == second or (math.isnan(first) and math.isnan(second))
+    if isinstance(first, (list, tuple, array.array, np.ndarray)):
+        return len(first) == len(second) and all(
+            same_messages(a, b) for a, b in zip(first, second, strict=True)
+        )
+    return bool(first == second)
+
+
 def test_service_is_deterministic(ros: NodeUnderTest) -> None:
     first, second = ros.rank(book_request()), ros.rank(book_request())
     assert first.success and second.success
-    assert first.ranking.evaluations == second.ranking.evaluations
+    assert same_messages(first.ranking.evaluations, second.ranking.evaluations)
     assert first.ranking.order == second.ranking.order
 
 
@@ -359,6 +416,18 @@ BAD_REQUESTS: dict[str, tuple[Callable[[RankGrasps.Request], None], str]] = {
     "unknown_metric": (
         lambda r: _set(r, metric="median"),
         r"metric: must be one of mean, max, integral, got 'median'",
+    ),
+    "quality_of_wrong_length": (
+        lambda r: _set(r, grasp_quality=[0.5, 0.7]),
+        r"^grasp_quality: must have one value per grasp \(3\), got 2$",
+    ),
+    "quality_not_finite": (
+        lambda r: _set(r, grasp_quality=[0.5, math.nan, 0.7]),
+        r"^grasp_quality: must be finite",
+    ),
+    "unknown_metric_point": (
+        lambda r: _set(r, metric_point="centre"),
+        r"^metric_point: must be one of tip, leading_point, worst_point, got 'centre'",
     ),
 }
 
@@ -637,6 +706,14 @@ def test_robot_from_robot_description_topic() -> None:
         assert response.success, response.message
         assert len(response.ranking.evaluations) == 3
         assert len(response.ranking.joint_names) == 6
+        request.metric_point = "leading_point"  # this node has no object points
+        refused = harness.rank(request)
+        assert not refused.success
+        assert refused.message.startswith(
+            "metric_point: 'leading_point' needs the object's points: set the node parameter "
+            "object.points_in_object_m"
+        ), refused.message
+        request.metric_point = ""
 
         publisher.publish(String(data=bad))  # a bad update keeps the current robot
         time.sleep(0.3)
@@ -645,3 +722,289 @@ def test_robot_from_robot_description_topic() -> None:
     finally:
         harness.client.destroy_publisher(publisher)
         harness.close()
+
+
+# --- Analyses beyond the paper (issue #6) ------------------------------------------------------
+
+
+def nan_equal(got: float, want: float) -> bool:
+    return (math.isnan(got) and math.isnan(want)) or got == pytest.approx(want, rel=1e-9, abs=1e-9)
+
+
+def test_default_analyses_leave_the_paper_fields_and_order(
+    ros: NodeUnderTest, core_ranking: Any
+) -> None:
+    response = ros.rank(book_request())
+    assert response.success, response.message
+    ranking = response.ranking
+    assert_matches_core(ranking, core_ranking)  # the old fields, order included
+    assert tuple(ranking.safety_order) == tuple(ranking.paper_order) == core_ranking.order
+    assert (ranking.metric_point, ranking.rank_by) == ("tip", "safety")
+    assert list(ranking.pareto_set) == [] and math.isnan(ranking.safety_weight)
+    assert ranking.uncertainty_message == "" and math.isnan(ranking.order_stability)
+    for evaluation in ranking.evaluations:
+        assert evaluation.safety_score == evaluation.score
+        assert math.isnan(evaluation.grasp_quality) and math.isnan(evaluation.combined_score)
+        assert math.isnan(evaluation.worst_case_score) and math.isnan(evaluation.effort_score)
+        assert not evaluation.redundancy_applied and len(evaluation.peak_abs_torque) == 0
+        # the box gives the exposed points; they do not change the tip score
+        count = len(evaluation.effective_mass_kg)
+        assert len(evaluation.leading_point_effective_mass_kg) == count
+        assert len(evaluation.worst_point_effective_mass_kg) == count
+
+
+def test_iso_fields_equal_the_core_assessment(ros: NodeUnderTest, core_ranking: Any) -> None:
+    response = ros.rank(book_request())
+    assert response.success, response.message
+    for got, evaluation in zip(
+        response.ranking.evaluations, core_ranking.evaluations, strict=True
+    ):
+        want = assess_grasp(evaluation)  # tip, every region
+        assert got.iso_admissible == want.admissible_where_permitted
+        assert got.iso_limiting_region == want.limiting_region
+        assert got.iso_min_duration_s == pytest.approx(want.min_duration_s, rel=1e-9)
+        assert [r.region for r in got.iso_ts_15066] == [r.region.name for r in want.regions]
+        for region, expected in zip(got.iso_ts_15066, want.regions, strict=True):
+            permitted = expected.transient_contact_permitted
+            assert region.transient_contact_permitted == permitted
+            assert region.admissible == expected.admissible
+            limit = expected.region.max_transient_force_n
+            assert nan_equal(region.max_transient_force_n, math.nan if limit is None else limit)
+            ratio = expected.worst_force_ratio if permitted else math.nan
+            assert nan_equal(region.worst_force_ratio, ratio)
+            assert nan_equal(region.peak_contact_force_n, expected.peak_contact_force_n)
+            speed = float(np.min(expected.max_permissible_speed_m_s))
+            assert nan_equal(region.min_max_permissible_speed_m_s, speed)
+            assert region.min_duration_s == pytest.approx(expected.min_duration_s, rel=1e-9)
+
+
+def test_too_fast_motion_is_not_iso_admissible_and_labelled(ros: NodeUnderTest) -> None:
+    markers: list[MarkerArray] = []
+    subscription = ros.client.create_subscription(
+        MarkerArray, "/grasp_safety/markers", markers.append, LATCHED
+    )
+    try:
+        request = book_request()
+        # a book ten times heavier, in 1 s: contact forces above the ISO/TS 15066 limits
+        request.object_inertia = inertia_msg_from_object(solid_box(3.4, [0.15, 0.22, 0.015]))
+        request.object_trajectory = book_path(duration_s=1.0)
+        response = ros.rank(request)
+        assert response.success, response.message
+        stamp = response.ranking.header.stamp
+        assert ros.spin_until(lambda: any(a.markers[0].header.stamp == stamp for a in markers))
+        array = next(a for a in markers if a.markers[0].header.stamp == stamp)
+        labels = [m.text for m in array.markers if m.type == Marker.TEXT_VIEW_FACING]
+        for evaluation in response.ranking.evaluations:
+            assert evaluation.feasible, evaluation.reason
+            assert not evaluation.iso_admissible
+            assert evaluation.iso_min_duration_s > 1.0
+        assert len(labels) == 3
+        assert all(text.endswith(", ISO/TS 15066: not admissible") for text in labels)
+    finally:
+        ros.client.destroy_subscription(subscription)
+
+
+def test_grasp_quality_gives_the_core_combination_and_pareto_set(
+    ros: NodeUnderTest, core_ranking: Any
+) -> None:
+    quality = [0.1, 1.0, 0.0]  # grasp 1 (least safe) has the best quality
+    request = book_request()
+    request.grasp_quality = quality
+    response = ros.rank(request)
+    assert response.success, response.message
+    ranking = response.ranking
+    scores = [e.score for e in core_ranking.evaluations]
+    expected = rank_with_quality(scores, quality, 0.5)
+    assert tuple(ranking.order) == expected.order
+    assert tuple(ranking.pareto_set) == expected.pareto_set == (0, 1)
+    assert tuple(ranking.order) != core_ranking.order  # quality changed the order
+    assert tuple(ranking.safety_order) == tuple(ranking.paper_order) == core_ranking.order
+    assert ranking.safety_weight == 0.5
+    request_poses = book_request().grasps.poses
+    assert list(ranking.ranked_grasps.poses) == [request_poses[i] for i in expected.order]
+    for k, evaluation in enumerate(ranking.evaluations):
+        assert evaluation.grasp_quality == quality[k]
+        assert evaluation.combined_score == pytest.approx(expected.combined[k], rel=1e-9)
+        assert evaluation.pareto_optimal == (k in expected.pareto_set)
+
+
+def test_leading_point_metric_scores_the_leading_point(
+    ros: NodeUnderTest, core_evaluator: GraspSafetyEvaluator, core_ranking: Any
+) -> None:
+    request = book_request()
+    request.metric_point = "leading_point"
+    response = ros.rank(request)
+    assert response.success, response.message
+    ranking = response.ranking
+    want = core_report(core_evaluator, core_ranking, metric_point="leading_point")
+    assert ranking.metric_point == "leading_point"
+    assert tuple(ranking.order) == tuple(ranking.safety_order) == want.order
+    assert tuple(ranking.paper_order) == core_ranking.order
+    for k, evaluation in enumerate(ranking.evaluations):
+        masses = evaluation.leading_point_effective_mass_kg
+        assert evaluation.safety_score == pytest.approx(np.mean(masses), rel=1e-12)
+        assert evaluation.safety_score == pytest.approx(want.scores[k], rel=1e-9)
+        np.testing.assert_allclose(masses, want.exposed[k].leading_effective_mass_kg, rtol=1e-9)
+        np.testing.assert_allclose(
+            evaluation.worst_point_effective_mass_kg,
+            want.exposed[k].worst_effective_mass_kg,
+            rtol=1e-9,
+        )
+        assert evaluation.iso_min_duration_s == pytest.approx(want.iso[k].min_duration_s, 1e-9)
+    scores = [ranking.evaluations[i].safety_score for i in ranking.order]
+    assert scores == sorted(scores)
+
+
+def test_analyses_switched_on_by_parameters(
+    ros: NodeUnderTest, core_evaluator: GraspSafetyEvaluator, core_ranking: Any
+) -> None:
+    results = ros.set_parameters(
+        uncertainty__mass_fraction=0.3,
+        uncertainty__samples=4,
+        effort__enabled=True,
+        iso_ts_15066__regions=["chest", "face"],
+        rank_by="effort",
+    )
+    assert all(r.successful for r in results), results
+    try:
+        response = ros.rank(book_request())
+    finally:
+        results = ros.set_parameters(
+            uncertainty__mass_fraction=0.0,
+            uncertainty__samples=64,
+            effort__enabled=False,
+            iso_ts_15066__regions=[],  # all regions
+            rank_by="safety",
+        )
+        assert all(r.successful for r in results), results
+    assert response.success, response.message
+    ranking = response.ranking
+    want = core_report(
+        core_evaluator,
+        core_ranking,
+        uncertainty=InertiaUncertainty(mass_fraction=0.3, num_random_samples=4),
+        effort=True,
+        iso_regions=("chest", "face"),
+        rank_by="effort",
+    )
+    assert ranking.rank_by == "effort" and ranking.effort_criterion == "peak_fraction"
+    assert tuple(ranking.order) == want.order
+    assert tuple(ranking.safety_order) == core_ranking.order
+    uncertainty = want.uncertainty
+    assert ranking.uncertainty_message == uncertainty.message
+    assert ranking.ranking_flips == uncertainty.ranking_flips
+    assert ranking.order_stability == pytest.approx(uncertainty.order_stability)
+    assert tuple(ranking.worst_case_order) == uncertainty.worst_case_order
+    for k, evaluation in enumerate(ranking.evaluations):
+        spread, effort = uncertainty.grasps[k], want.effort[k]
+        assert evaluation.worst_case_score == pytest.approx(spread.worst_case_score, rel=1e-9)
+        assert evaluation.percentile_score == pytest.approx(spread.percentile_score, rel=1e-9)
+        assert evaluation.probability_safest == spread.probability_safest
+        np.testing.assert_allclose(evaluation.peak_abs_torque, effort.peak_abs_torque, 1e-9)
+        np.testing.assert_allclose(evaluation.rms_torque, effort.rms_torque, 1e-9)
+        assert evaluation.effort_score == pytest.approx(effort.score("peak_fraction"), 1e-9)
+        assert [r.region for r in evaluation.iso_ts_15066] == ["chest", "face"]
+    efforts = [ranking.evaluations[i].effort_score for i in ranking.order]
+    assert efforts == sorted(efforts)
+
+
+def test_redundancy_resolution(
+    ros: NodeUnderTest, core_evaluator: GraspSafetyEvaluator, core_ranking: Any
+) -> None:
+    (result,) = ros.set_parameters(redundancy__enabled=True)
+    assert result.successful, result.reason
+    try:
+        request = book_request()
+        request.grasps.poses = request.grasps.poses[:1]  # ~0.4 s per grasp
+        response = ros.rank(request)
+    finally:
+        (result,) = ros.set_parameters(redundancy__enabled=False)
+        assert result.successful, result.reason
+    assert response.success, response.message
+    (evaluation,) = response.ranking.evaluations
+    first = GraspSafetyEvaluator(core_evaluator.robot).rank(
+        BOOK_GRASPS[:1], BOOK.object_inertia, book_trajectory(), BOOK.robot.seed, "mean"
+    )
+    (resolution,) = core_report(core_evaluator, first, redundancy=True).redundancy
+    assert evaluation.redundancy_applied and resolution.applied  # Baxter's arm: 7 joints
+    assert evaluation.score_without_redundancy == pytest.approx(evaluation.score, rel=1e-12)
+    assert evaluation.safety_score == pytest.approx(resolution.score, rel=1e-9)
+    assert evaluation.safety_score < evaluation.score
+    np.testing.assert_allclose(
+        evaluation.effective_mass_with_redundancy_kg, resolution.effective_mass_kg, rtol=1e-9
+    )
+
+
+def test_quality_topic_pairs_with_candidate_sets(ros: NodeUnderTest) -> None:
+    received: list[GraspRanking] = []
+    diagnostics: list[DiagnosticArray] = []
+    subs = [
+        ros.client.create_subscription(
+            GraspRanking, "/grasp_safety/ranking", received.append, LATCHED
+        ),
+        ros.client.create_subscription(DiagnosticArray, "/diagnostics", diagnostics.append, 10),
+    ]
+    quality_pub = ros.client.create_publisher(
+        Float64MultiArray, "/grasp_safety/candidate_grasp_quality", 10
+    )
+    grasps_pub = ros.client.create_publisher(PoseArray, "/grasp_safety/candidate_grasps", 10)
+    path_pub = ros.client.create_publisher(Path, "/grasp_safety/object_trajectory", 10)
+    publishers = (quality_pub, grasps_pub, path_pub)
+    request = book_request()
+    two = PoseArray(header=request.grasps.header, poses=request.grasps.poses[:2])
+    three = request.grasps
+
+    def next_ranking() -> GraspRanking:
+        """The first ranking computed after now (not the latched one of an earlier test)."""
+        now = ros.node.get_clock().now().nanoseconds
+
+        def new() -> list[GraspRanking]:
+            stamps = [(r.header.stamp.sec * 10**9 + r.header.stamp.nanosec, r) for r in received]
+            return [r for t, r in stamps if t > now]
+
+        assert ros.spin_until(lambda: bool(new()))
+        time.sleep(0.1)  # a second ranking would have come by now
+        ros.client_executor.spin_once(timeout_sec=0.05)
+        assert len(new()) == 1
+        return new()[0]
+
+    try:
+        assert ros.spin_until(lambda: min(p.get_subscription_count() for p in publishers) > 0)
+        path_pub.publish(request.object_trajectory)
+        # 1. quality first, then its set: ranked with the quality
+        quality_pub.publish(Float64MultiArray(data=[0.0, 1.0]))
+        time.sleep(0.2)  # one publisher per topic: let the quality arrive first
+        grasps_pub.publish(two)
+        ranking = next_ranking()
+        assert [e.grasp_quality for e in ranking.evaluations] == [0.0, 1.0]
+        assert len(ranking.pareto_set) > 0
+        # 2. a new set alone: the used quality is not reused
+        grasps_pub.publish(two)
+        ranking = next_ranking()
+        assert all(math.isnan(e.grasp_quality) for e in ranking.evaluations)
+        # 3. the quality after its set: the set is ranked again, with it
+        quality_pub.publish(Float64MultiArray(data=[0.5, 0.25]))
+        ranking = next_ranking()
+        assert [e.grasp_quality for e in ranking.evaluations] == [0.5, 0.25]
+        # 4. a waiting quality of another length is discarded by the next set, with a warning
+        quality_pub.publish(Float64MultiArray(data=[1.0, 2.0, 3.0, 4.0]))
+        time.sleep(0.2)
+        grasps_pub.publish(three)
+        ranking = next_ranking()
+        assert len(ranking.evaluations) == 3
+        assert all(math.isnan(e.grasp_quality) for e in ranking.evaluations)
+
+        def warned() -> bool:
+            return any(
+                "candidate_grasp_quality.data: has 4 values but the new candidate set has 3"
+                in s.message
+                for array in diagnostics
+                for s in array.status
+            )
+
+        assert ros.spin_until(warned)
+    finally:
+        for subscription in subs:
+            ros.client.destroy_subscription(subscription)
+        for publisher in publishers:
+            ros.client.destroy_publisher(publisher)

@@ -12,6 +12,10 @@ import yaml
 from conftest import ARM6_AXES, serial_arm_urdf
 
 from grasp_safety_ros.core import FrameNotFoundError, InvalidInputError, solid_box
+from grasp_safety_ros.core.exposed_points import (
+    box_corners_in_object,
+    cylinder_rim_points_in_object,
+)
 from grasp_safety_ros.paths import config_file
 from grasp_safety_ros.ros.parameters import (
     PARAMETERS,
@@ -126,6 +130,39 @@ BAD: list[tuple[dict[str, Any], str]] = [
     ({"service_busy_timeout_s": -1.0}, r"^service_busy_timeout_s: must be in \(0, inf\]"),
     ({"diagnostics_period_s": "1"}, r"^diagnostics_period_s: must be a number"),
     ({"robot_description_timeout_s": -1.0}, r"^robot_description_timeout_s: must be in \[0,"),
+    # analyses beyond the paper
+    ({"metric_point": "centre"}, r"^metric_point: must be one of tip, leading_point, worst_po"),
+    ({"metric_point": "leading_point"}, r"^metric_point: 'leading_point' needs the object's po"),
+    ({"object.points_in_object_m": [0.0] * 4}, r"^object\.points_in_object_m: must hold x y z"),
+    ({"object.points_in_object_m": [0.0, "a", 1.0]}, r"^object\.points_in_object_m: must be a"),
+    ({"object.box_size_m": [0.1, 0.2]}, r"^object\.box_size_m: must be empty or 3 edge lengths"),
+    ({"object.box_size_m": [0.1, 0.0, 0.2]}, r"^object\.box_size_m: must be empty or 3 edge"),
+    ({"object.cylinder_radius_m": 0.05}, r"^object\.cylinder_length_m: must be > 0 too"),
+    ({"object.cylinder_length_m": -0.1}, r"^object\.cylinder_length_m: must be in \[0, inf\]"),
+    (
+        {
+            "object.box_size_m": [0.1] * 3,
+            "object.cylinder_radius_m": 0.1,
+            "object.cylinder_length_m": 0.1,
+        },
+        r"^object\.box_size_m: give a box or a cylinder",
+    ),
+    ({"iso_ts_15066.regions": ["chest", "knee"]}, r"^iso_ts_15066\.regions: unknown body reg"),
+    ({"iso_ts_15066.regions": ["chest", "chest"]}, r"^iso_ts_15066\.regions: regions repeat"),
+    ({"iso_ts_15066.regions": "chest"}, r"^iso_ts_15066\.regions: must be a list of region"),
+    ({"iso_ts_15066.regions": [1.0]}, r"^iso_ts_15066\.regions: must be a list of region"),
+    ({"uncertainty.mass_fraction": 1.0}, r"^uncertainty\.mass_fraction: must be in \[0, 1\)"),
+    ({"uncertainty.inertia_fraction": -0.1}, r"^uncertainty\.inertia_fraction: must be in"),
+    ({"uncertainty.com_offset_m": float("inf")}, r"^uncertainty\.com_offset_m: must be finite"),
+    ({"uncertainty.samples": -1}, r"^uncertainty\.samples: must be in \[0, "),
+    ({"uncertainty.samples": 4.0}, r"^uncertainty\.samples: must be an integer"),
+    ({"uncertainty.percentile": 101.0}, r"^uncertainty\.percentile: must be in \[0, 100\]"),
+    ({"uncertainty.seed": "x"}, r"^uncertainty\.seed: must be an integer"),
+    ({"safety_weight": 1.5}, r"^safety_weight: must be in \[0, 1\], got 1\.5"),
+    ({"redundancy.enabled": 1}, r"^redundancy\.enabled: must be true or false"),
+    ({"effort.enabled": "yes"}, r"^effort\.enabled: must be true or false"),
+    ({"effort.criterion": "max"}, r"^effort\.criterion: must be one of peak_fraction, rms_fr"),
+    ({"rank_by": "quality"}, r"^rank_by: must be one of safety, effort, got 'quality'"),
 ]
 
 
@@ -133,6 +170,62 @@ BAD: list[tuple[dict[str, Any], str]] = [
 def test_bad_parameter_is_refused_naming_it(change: dict[str, Any], pattern: str) -> None:
     with pytest.raises(InvalidInputError, match=pattern):
         settings_from_parameters({**MINIMAL, **change})
+
+
+def test_default_analyses_are_the_paper() -> None:
+    analysis = settings_from_parameters(MINIMAL).analysis
+    assert analysis.metric_point == "tip" and analysis.points_in_object_m is None
+    assert analysis.iso_regions is None  # all regions
+    assert analysis.uncertainty is None and analysis.grasp_quality is None
+    assert not analysis.redundancy and not analysis.effort and analysis.rank_by == "safety"
+    assert analysis.safety_weight == 0.5 and analysis.effort_criterion == "peak_fraction"
+
+
+def test_analysis_parameters() -> None:
+    values = {
+        **MINIMAL,
+        "metric_point": "worst_point",
+        "object.com_in_object_m": [0.0, 0.0, 0.01],
+        "object.box_size_m": [0.1, 0.2, 0.3],
+        "iso_ts_15066.regions": ["face", "chest"],
+        "uncertainty.com_offset_m": 0.01,
+        "uncertainty.samples": 5,
+        "uncertainty.percentile": 90,
+        "uncertainty.seed": 3,
+        "safety_weight": 1,
+        "redundancy.enabled": True,
+        "rank_by": "effort",
+        "effort.criterion": "rms_fraction",
+    }
+    analysis = settings_from_parameters(values).analysis
+    assert analysis.metric_point == "worst_point"
+    points = analysis.points_in_object_m
+    np.testing.assert_array_equal(points, box_corners_in_object([0.1, 0.2, 0.3], [0, 0, 0.01]))
+    assert analysis.iso_regions == ("face", "chest")
+    uncertainty = analysis.uncertainty
+    assert uncertainty is not None
+    assert (uncertainty.mass_fraction, uncertainty.com_offset_m) == (0.0, 0.01)
+    assert (uncertainty.num_random_samples, uncertainty.percentile, uncertainty.seed) == (5, 90, 3)
+    assert analysis.safety_weight == 1.0 and analysis.redundancy
+    assert analysis.effort and analysis.rank_by == "effort"  # rank_by effort turns effort on
+    assert analysis.effort_criterion == "rms_fraction"
+
+
+def test_object_points_precedence() -> None:
+    cylinder = {"object.cylinder_radius_m": 0.04, "object.cylinder_length_m": 0.2}
+    analysis = settings_from_parameters({**MINIMAL, **cylinder}).analysis
+    np.testing.assert_array_equal(
+        analysis.points_in_object_m, cylinder_rim_points_in_object(0.04, 0.2)
+    )
+    given = {**cylinder, "object.points_in_object_m": [0.1, 0.0, 0.0, 0.0, 0.2, 0.0]}
+    analysis = settings_from_parameters({**MINIMAL, **given}).analysis
+    np.testing.assert_array_equal(analysis.points_in_object_m, [[0.1, 0, 0], [0, 0.2, 0]])
+    # empty lists from a params file arrive NOT_SET (None) or as empty arrays
+    empty = {"object.points_in_object_m": None, "iso_ts_15066.regions": None}
+    analysis = settings_from_parameters({**MINIMAL, **empty, "object.box_size_m": []}).analysis
+    assert analysis.points_in_object_m is None and analysis.iso_regions is None
+    raw = {"iso_ts_15066.regions": array.array("q"), "object.box_size_m": array.array("d")}
+    assert settings_from_parameters({**MINIMAL, **raw}).analysis.iso_regions is None
 
 
 def test_single_parameter_check_ignores_foreign_names() -> None:

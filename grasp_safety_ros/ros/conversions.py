@@ -9,20 +9,22 @@ quaternion_msg_from_rotation. Each function raises InvalidInputError naming the 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 
 import numpy as np
 import pinocchio as pin
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Inertia, Point, Pose, PoseArray, Quaternion, Vector3
+from grasp_safety_msgs.msg import BodyRegionAssessment, GraspRanking
 from grasp_safety_msgs.msg import GraspEvaluation as GraspEvaluationMsg
-from grasp_safety_msgs.msg import GraspRanking
 from nav_msgs.msg import Path
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
+from ..core.analysis import SafetyReport
 from ..core.exceptions import InvalidInputError
 from ..core.inertia import ObjectInertia
+from ..core.iso15066 import PowerForceLimitAssessment, RegionAssessment
 from ..core.ranking import Grasp, GraspEvaluation, Ranking
 from ..core.robot import RobotModel
 from ..core.trajectory import ObjectTrajectory
@@ -38,6 +40,8 @@ SCORE_UNITS = {"mean": "kg", "max": "kg", "integral": "kg*s"}
 ARROW_LENGTH_M = 0.08
 """Length of the grasp arrows in RViz; they end at the grasp point along the tip z axis."""
 INFEASIBLE_RGBA = (0.5, 0.5, 0.5, 0.6)
+"""Grasps outside the final order (infeasible, or without an effort score) are grey."""
+NAN = float("nan")
 LABEL_OFFSET_M = np.array([0.0, 0.0, 0.03])
 """Labels float this far above the grasp point (base axes)."""
 
@@ -248,7 +252,11 @@ def seed_from_joint_state(
 
 
 def evaluation_msg(evaluation: GraspEvaluation) -> GraspEvaluationMsg:
-    """grasp_safety_msgs/GraspEvaluation of a core evaluation (NaN scores when infeasible)."""
+    """grasp_safety_msgs/GraspEvaluation of a core evaluation (NaN scores when infeasible).
+
+    The analysis fields say "not computed" (NaN, empty, false), except ``safety_score``: the
+    tip score, as with the default analysis options; report_msg fills them in.
+    """
     return GraspEvaluationMsg(
         index=int(evaluation.index),
         name=evaluation.name,
@@ -264,6 +272,15 @@ def evaluation_msg(evaluation: GraspEvaluation) -> GraspEvaluationMsg:
             for x, y, z in np.asarray(evaluation.directions_in_base, dtype=float).tolist()
         ],
         direction_is_worst_case=np.asarray(evaluation.direction_is_worst_case, bool).tolist(),
+        safety_score=float(evaluation.score),
+        iso_min_duration_s=NAN,
+        worst_case_score=NAN,
+        percentile_score=NAN,
+        probability_safest=NAN,
+        grasp_quality=NAN,
+        combined_score=NAN,
+        score_without_redundancy=NAN,
+        effort_score=NAN,
     )
 
 
@@ -289,16 +306,124 @@ def ranking_msg(
     stamp: Time,
     compute_time_s: float,
 ) -> GraspRanking:
-    """grasp_safety_msgs/GraspRanking of a core ranking of the grasps in ``grasps``."""
+    """grasp_safety_msgs/GraspRanking of a core ranking of the grasps in ``grasps``.
+
+    The paper's ranking only: the analysis fields are those of the default options with
+    nothing beyond the tip computed (see evaluation_msg); report_msg gives the full result.
+    """
+    order = [int(i) for i in ranking.order]
     return GraspRanking(
         header=Header(stamp=stamp, frame_id=base_frame),
         metric=ranking.metric,
-        order=[int(i) for i in ranking.order],
+        order=order,
         ranked_grasps=ranked_pose_array(grasps, ranking.order),
         evaluations=[evaluation_msg(e) for e in ranking.evaluations],
         joint_names=list(ranking.joint_names),
         compute_time_s=float(compute_time_s),
+        metric_point="tip",
+        rank_by="safety",
+        safety_order=order,
+        paper_order=order,
+        safety_weight=NAN,
+        effort_criterion="",
+        order_stability=NAN,
     )
+
+
+def region_assessment_msg(assessment: RegionAssessment) -> BodyRegionAssessment:
+    """grasp_safety_msgs/BodyRegionAssessment of one region's ISO/TS 15066 assessment.
+
+    Where transient contact is not permitted, the core's ratio (inf while the point moves)
+    becomes NaN, as does the null limit F_tr; ``min_duration_s`` keeps the core's inf.
+    """
+    permitted = assessment.transient_contact_permitted
+    limit = assessment.region.max_transient_force_n
+    speeds = assessment.max_permissible_speed_m_s
+    return BodyRegionAssessment(
+        region=assessment.region.name,
+        transient_contact_permitted=bool(permitted),
+        worst_force_ratio=float(assessment.worst_force_ratio) if permitted else NAN,
+        peak_contact_force_n=float(assessment.peak_contact_force_n),
+        max_transient_force_n=float(limit) if limit is not None else NAN,
+        min_max_permissible_speed_m_s=float(np.min(speeds)) if len(speeds) else NAN,
+        admissible=bool(assessment.admissible),
+        min_duration_s=float(assessment.min_duration_s),
+    )
+
+
+def _set_iso(message: GraspEvaluationMsg, assessment: PowerForceLimitAssessment) -> None:
+    message.iso_ts_15066 = [region_assessment_msg(r) for r in assessment.regions]
+    message.iso_admissible = bool(assessment.feasible and assessment.admissible_where_permitted)
+    message.iso_min_duration_s = float(assessment.min_duration_s)
+    message.iso_limiting_region = assessment.limiting_region
+
+
+def report_msg(
+    report: SafetyReport,
+    grasps: PoseArray,
+    base_frame: str,
+    stamp: Time,
+    compute_time_s: float,
+) -> GraspRanking:
+    """grasp_safety_msgs/GraspRanking of a core SafetyReport (the content of the CLI's JSON).
+
+    ``order`` and ``ranked_grasps`` follow the report's final order; the paper's fields
+    (``score``, per-sample tip effective mass, ...) are those of ranking_msg.
+    """
+    options = report.options
+    quality_given = options.grasp_quality is not None
+    message = ranking_msg(report.ranking, grasps, base_frame, stamp, compute_time_s)
+    message.order = [int(i) for i in report.order]
+    message.ranked_grasps = ranked_pose_array(grasps, report.order)
+    message.metric_point = options.metric_point
+    message.rank_by = options.rank_by
+    message.safety_order = [int(i) for i in report.safety_order]
+    message.safety_weight = float(options.safety_weight) if quality_given else NAN
+    message.pareto_set = [int(i) for i in report.quality.pareto_set] if quality_given else []
+    message.effort_criterion = options.effort_criterion if report.effort else ""
+    if report.uncertainty is not None:
+        message.ranking_flips = bool(report.uncertainty.ranking_flips)
+        message.order_stability = float(report.uncertainty.order_stability)
+        message.worst_case_order = [int(i) for i in report.uncertainty.worst_case_order]
+        message.uncertainty_message = report.uncertainty.message
+    iso = {a.index: a for a in report.iso}
+    pareto = set(message.pareto_set)
+    for k, evaluation in enumerate(message.evaluations):
+        evaluation.safety_score = float(report.scores[k])
+        if k in iso:
+            _set_iso(evaluation, iso[k])
+        if report.exposed and report.exposed[k].feasible:
+            exposed = report.exposed[k]
+            evaluation.leading_point_effective_mass_kg = _floats(exposed.leading_effective_mass_kg)
+            evaluation.worst_point_effective_mass_kg = _floats(exposed.worst_effective_mass_kg)
+        if report.uncertainty is not None:
+            spread = report.uncertainty.grasps[k]
+            evaluation.worst_case_score = float(spread.worst_case_score)
+            evaluation.percentile_score = float(spread.percentile_score)
+            evaluation.probability_safest = float(spread.probability_safest)
+        if quality_given:
+            evaluation.grasp_quality = float(report.quality.quality[k])
+            evaluation.combined_score = float(report.quality.combined[k])
+            evaluation.pareto_optimal = k in pareto
+        if report.redundancy:
+            resolution = report.redundancy[k]
+            evaluation.redundancy_applied = bool(resolution.applied)
+            evaluation.score_without_redundancy = float(resolution.original_score)
+            if resolution.applied:
+                evaluation.effective_mass_with_redundancy_kg = _floats(
+                    resolution.effective_mass_kg
+                )
+        if report.effort:
+            effort = report.effort[k]
+            evaluation.effort_score = float(effort.score(options.effort_criterion))
+            if effort.feasible:
+                evaluation.peak_abs_torque = _floats(effort.peak_abs_torque)
+                evaluation.rms_torque = _floats(effort.rms_torque)
+    return message
+
+
+def _floats(values: np.ndarray) -> list[float]:
+    return np.asarray(values, dtype=float).tolist()
 
 
 def rank_color(rank: int, count: int) -> tuple[float, float, float, float]:
@@ -313,18 +438,25 @@ def markers_msg(
     trajectory: ObjectTrajectory,
     base_frame: str,
     stamp: Time,
+    *,
+    order: Sequence[int] | None = None,
+    scores: Sequence[float] | np.ndarray | None = None,
+    not_admissible: Collection[int] = (),
 ) -> MarkerArray:
     """RViz markers of a ranking: per grasp an arrow and a label, in the base frame.
 
     The first marker deletes the previous ranking's markers. Each grasp is drawn with the
     object at its start pose: an ARROW of ARROW_LENGTH_M along the tip z axis ending at the
     tip (namespace ``grasps``) and a TEXT_VIEW_FACING label with rank and score (namespace
-    ``labels``); ids are the candidate indices. Feasible grasps go from green (safest) to red
-    (least safe), infeasible ones are grey.
+    ``labels``); ids are the candidate indices. Grasps in ``order`` (default: the ranking's)
+    go from green (first) to red (last), the others are grey. The label shows ``scores``
+    (default: each evaluation's score) and, for the indices in ``not_admissible``, that
+    ISO/TS 15066 does not admit the motion.
     """
     header = Header(stamp=stamp, frame_id=base_frame)
     markers = [Marker(header=header, action=Marker.DELETEALL)]
-    rank_of = {index: rank for rank, index in enumerate(ranking.order)}
+    order = ranking.order if order is None else order
+    rank_of = {index: rank for rank, index in enumerate(order)}
     unit = SCORE_UNITS.get(ranking.metric, "")
     start = trajectory.transform_object_to_base_start
     for evaluation, grasp in zip(ranking.evaluations, grasps, strict=True):
@@ -332,12 +464,18 @@ def markers_msg(
         tip = tip_in_base.translation
         tail = tip - ARROW_LENGTH_M * tip_in_base.rotation[:, 2]
         index = evaluation.index
+        score = evaluation.score if scores is None else scores[index]
         if index in rank_of:
-            rgba = rank_color(rank_of[index], len(ranking.order))
-            text = f"#{rank_of[index] + 1} {evaluation.name}: {evaluation.score:.3f} {unit}"
+            rgba = rank_color(rank_of[index], len(order))
+            text = f"#{rank_of[index] + 1} {evaluation.name}: {score:.3f} {unit}"
+        elif evaluation.feasible:
+            rgba = INFEASIBLE_RGBA
+            text = f"{evaluation.name}: {score:.3f} {unit}, not ranked"
         else:
             rgba = INFEASIBLE_RGBA
             text = f"{evaluation.name}: infeasible"
+        if index in not_admissible:
+            text += ", ISO/TS 15066: not admissible"
         color = ColorRGBA(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3])
         identity = Pose(orientation=Quaternion(w=1.0))
         markers.append(

@@ -1,7 +1,9 @@
 """The ``grasp_safety`` node: ranks candidate grasps with the core, over a service and topics.
 
 A thin adapter: messages are converted in conversions.py, parameters validated in
-parameters.py, the work is GraspSafetyEvaluator.rank. See docs/ros.md for the interface.
+parameters.py, the work is GraspSafetyEvaluator.rank followed by core.analysis.analyse (metric
+point, ISO/TS 15066, inertia uncertainty, grasp quality, redundancy, effort). See docs/ros.md
+for the interface.
 
 Threads: a MultiThreadedExecutor with EXECUTOR_THREADS threads. The service sits in its own
 reentrant callback group, the input topics in a mutually exclusive one, everything else
@@ -9,7 +11,8 @@ reentrant callback group, the input topics in a mutually exclusive one, everythi
 One ranking runs at a time (the compute lock: the core's solvers keep scratch data); a request
 that cannot get the lock within ``service_busy_timeout_s`` is answered busy, and a ranking
 longer than ``max_compute_time_s`` is abandoned, so a slow request never blocks the next one
-for ever. The GIL still makes a long ranking share the CPU with the other callbacks.
+for ever (checked between grasps of the ranking; the analyses after it run to the end). The GIL
+still makes a long ranking share the CPU with the other callbacks.
 """
 
 from __future__ import annotations
@@ -19,9 +22,10 @@ import threading
 import time
 import traceback
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
+import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Inertia, InertiaStamped, PoseArray
@@ -41,19 +45,22 @@ from rclpy.qos import (
     qos_profile_sensor_data,
 )
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Header, String
+from std_msgs.msg import Float64MultiArray, Header, String
 from visualization_msgs.msg import MarkerArray
 
+from ..core.analysis import AnalysisOptions, analyse
 from ..core.exceptions import GraspSafetyError, InvalidInputError
+from ..core.exposed_points import check_metric_point
 from ..core.inertia import ObjectInertia
 from ..core.ranking import check_metric
+from ..core.validation import finite_array
 from .conversions import (
     check_frame_id,
     check_grasp_array,
     grasps_from_pose_array,
     markers_msg,
     object_inertia_from_msg,
-    ranking_msg,
+    report_msg,
     seed_from_joint_state,
     trajectory_from_path,
 )
@@ -150,6 +157,8 @@ class GraspSafetyNode(Node):
         self._joint_state: tuple[Sequence[str], Sequence[float]] | None = None
         self._candidates: PoseArray | None = None
         self._candidates_pending = False
+        self._candidates_quality: tuple[float, ...] | None = None  # paired with _candidates
+        self._pending_quality: tuple[float, ...] | None = None  # waits for the next set
         self._trajectory: Path | None = None
         self._inertia_override: ObjectInertia | None = None
         self._status = _Status()
@@ -191,6 +200,13 @@ class GraspSafetyNode(Node):
             PoseArray,
             "~/candidate_grasps",
             self._on_candidates,
+            INPUT,
+            callback_group=self._topic_group,
+        )
+        self.create_subscription(
+            Float64MultiArray,
+            "~/candidate_grasp_quality",
+            self._on_quality,
             INPUT,
             callback_group=self._topic_group,
         )
@@ -357,6 +373,9 @@ class GraspSafetyNode(Node):
                 request.metric,
                 source="rank_grasps",
                 grasps_field="grasps",
+                quality=_quality(request.grasp_quality, "grasp_quality"),
+                metric_point=request.metric_point,
+                quality_field="grasp_quality",
             )
             response.success = True
         except GraspSafetyError as error:
@@ -386,7 +405,49 @@ class GraspSafetyNode(Node):
             self._report_error("candidate_grasps", error)
             return
         with self._state_lock:
+            quality, self._pending_quality = self._pending_quality, None
+            if quality is not None and len(quality) != len(msg.poses):
+                discarded, quality = len(quality), None
+            else:
+                discarded = None
             self._candidates, self._candidates_pending = msg, True
+            self._candidates_quality = quality
+        if discarded is not None:
+            self._report_error(
+                "candidate_grasp_quality",
+                InvalidInputError(
+                    "candidate_grasp_quality.data",
+                    f"has {discarded} values but the new candidate set has {len(msg.poses)} "
+                    "grasps; discarded",
+                ),
+            )
+        self._rank_topics()
+
+    def _on_quality(self, msg: Float64MultiArray) -> None:
+        """Pair a quality vector with the current candidate set or hold it for the next one.
+
+        The current set takes it if it has the same length and no quality yet (it is then
+        ranked again, with the quality); otherwise it waits for the next candidate set, which
+        takes it if the lengths match. An empty vector clears a waiting one.
+        """
+        try:
+            quality = _quality(msg.data, "candidate_grasp_quality.data")
+        except GraspSafetyError as error:
+            self._report_error("candidate_grasp_quality", error)
+            return
+        with self._state_lock:
+            current = self._candidates
+            if (
+                quality is not None
+                and current is not None
+                and self._candidates_quality is None
+                and len(current.poses) == len(quality)
+            ):
+                self._candidates_quality, self._candidates_pending = quality, True
+                self._pending_quality = None
+            else:
+                self._pending_quality = quality
+                return
         self._rank_topics()
 
     def _on_trajectory(self, msg: Path) -> None:
@@ -427,11 +488,21 @@ class GraspSafetyNode(Node):
         """Rank the candidate set if it is new (not ranked yet) and a trajectory is known."""
         with self._state_lock:
             grasps, path = self._candidates, self._trajectory
+            quality = self._candidates_quality
             if grasps is None or path is None or not self._candidates_pending:
                 return
             self._candidates_pending = False
         try:
-            self._rank(grasps, path, None, "", source="topics", grasps_field="candidate_grasps")
+            self._rank(
+                grasps,
+                path,
+                None,
+                "",
+                source="topics",
+                grasps_field="candidate_grasps",
+                quality=quality,
+                quality_field="candidate_grasp_quality",
+            )
         except NotReadyError as error:
             with self._state_lock:
                 self._candidates_pending = True  # retried with the next trajectory
@@ -455,8 +526,16 @@ class GraspSafetyNode(Node):
         metric: str,
         source: str,
         grasps_field: str,
+        quality: tuple[float, ...] | None = None,
+        metric_point: str = "",
+        quality_field: str = "grasp_quality",
     ) -> GraspRanking:
-        """Convert, rank, publish; return the GraspRanking. Raises GraspSafetyError."""
+        """Convert, rank, analyse, publish; return the GraspRanking. Raises GraspSafetyError.
+
+        Args:
+            quality: One grasp quality per grasp (higher is better), or None.
+            metric_point: The request's metric point; empty: the parameter's.
+        """
         state = self._snapshot()
         settings, bundle = state.settings, state.bundle
         if bundle is None:
@@ -497,6 +576,9 @@ class GraspSafetyNode(Node):
                 "object.inertia_about_com_kgm2)",
             )
         metric = check_metric(metric or settings.metric, "metric")
+        options = _analysis_options(
+            settings.analysis, len(grasps), quality, metric_point, quality_field
+        )
         seed = bundle.seed
         if seed is None and settings.use_joint_states_seed and state.joint_state is not None:
             seed = seed_from_joint_state(*state.joint_state, bundle.robot)
@@ -516,18 +598,32 @@ class GraspSafetyNode(Node):
                 metric=metric,
                 progress=_deadline_check(started + settings.max_compute_time_s, settings),
             )
+            report = analyse(
+                bundle.evaluator, grasps, object_inertia, trajectory, options, ranking=ranking
+            )
             compute_time_s = time.perf_counter() - started
         finally:
             self._compute_lock.release()
 
         stamp = self.get_clock().now().to_msg()
-        result = ranking_msg(ranking, grasps_msg, settings.base_frame, stamp, compute_time_s)
+        result = report_msg(report, grasps_msg, settings.base_frame, stamp, compute_time_s)
         self._ranking_pub.publish(result)
         self._ranked_pub.publish(result.ranked_grasps)
         self._markers_pub.publish(
-            markers_msg(ranking, grasps, trajectory, settings.base_frame, stamp)
+            markers_msg(
+                ranking,
+                grasps,
+                trajectory,
+                settings.base_frame,
+                stamp,
+                order=report.order,
+                scores=report.scores,
+                not_admissible={
+                    a.index for a in report.iso if a.feasible and not a.admissible_where_permitted
+                },
+            )
         )
-        feasible = len(ranking.order)
+        feasible = sum(1 for e in ranking.evaluations if e.feasible)
         with self._state_lock:
             status = self._status
             status.rankings += 1
@@ -538,7 +634,7 @@ class GraspSafetyNode(Node):
             status.last_was_error = False
         self.get_logger().info(
             f"{source}: ranked {len(grasps)} grasps ({feasible} feasible) in "
-            f"{compute_time_s:.3f} s; order {list(ranking.order)}"
+            f"{compute_time_s:.3f} s; order {list(report.order)}"
         )
         self._publish_diagnostics()
         return result
@@ -602,6 +698,35 @@ class GraspSafetyNode(Node):
 def _robot_key(settings: NodeSettings) -> tuple[Any, ...]:
     """The settings a robot model depends on."""
     return (settings.robot_source, settings.base_frame, settings.tip_frame, settings.ik_seed)
+
+
+def _quality(values: Sequence[float], field: str) -> tuple[float, ...] | None:
+    """Grasp qualities of a message array (finite); None when empty (pure safety ranking)."""
+    if len(values) == 0:
+        return None
+    return tuple(float(v) for v in finite_array(np.asarray(values, dtype=float), field))
+
+
+def _analysis_options(
+    defaults: AnalysisOptions,
+    num_grasps: int,
+    quality: tuple[float, ...] | None,
+    metric_point: str,
+    quality_field: str,
+) -> AnalysisOptions:
+    """The parameters' analysis options with a request's quality and metric point."""
+    if quality is not None and len(quality) != num_grasps:
+        raise InvalidInputError(
+            quality_field, f"must have one value per grasp ({num_grasps}), got {len(quality)}"
+        )
+    metric_point = check_metric_point(metric_point or defaults.metric_point, "metric_point")
+    if metric_point != "tip" and defaults.points_in_object_m is None:
+        raise InvalidInputError(
+            "metric_point",
+            f"{metric_point!r} needs the object's points: set the node parameter "
+            "object.points_in_object_m, object.box_size_m or object.cylinder_*",
+        )
+    return replace(defaults, metric_point=metric_point, grasp_quality=quality)
 
 
 def _deadline_check(deadline: float, settings: NodeSettings) -> Callable[[int, int], None]:

@@ -7,6 +7,7 @@ refuse a bad value with that reason, and the checks are unit-testable without RO
 from __future__ import annotations
 
 import array
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -14,10 +15,19 @@ from typing import Any
 
 import numpy as np
 
+from ..core.analysis import RANK_BY, AnalysisOptions
+from ..core.effort import EFFORT_CRITERIA
 from ..core.exceptions import FrameNotFoundError, GraspSafetyError, InvalidInputError
+from ..core.exposed_points import (
+    METRIC_POINTS,
+    box_corners_in_object,
+    cylinder_rim_points_in_object,
+)
 from ..core.inertia import ObjectInertia
+from ..core.iso15066 import BODY_REGIONS
 from ..core.ranking import METRICS, EvaluationConfig, GraspSafetyEvaluator
 from ..core.robot import RobotModel
+from ..core.uncertainty import InertiaUncertainty
 from ..core.validation import finite_array, finite_float
 
 
@@ -81,6 +91,54 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
         10.0, "how long a request waits for a ranking in progress before answering busy [s]"
     ),
     "diagnostics_period_s": ParameterSpec(1.0, "period of /diagnostics status messages [s]"),
+    # --- Analyses beyond the paper (core.analysis.AnalysisOptions) ---
+    "metric_point": ParameterSpec(
+        "tip",
+        f"default point whose effective mass the safety score uses: {' | '.join(METRIC_POINTS)}"
+        " (the last two need object points)",
+    ),
+    "object.points_in_object_m": ParameterSpec(
+        [],
+        "exposed object points, object frame, flat x y z x y z ... [m]; empty: from "
+        "object.box_size_m or object.cylinder_*, else none",
+    ),
+    "object.box_size_m": ParameterSpec(
+        [], "box edges along the object axes [m] (points: its 8 corners about the CoM); []: none"
+    ),
+    "object.cylinder_radius_m": ParameterSpec(
+        0.0, "cylinder radius [m], axis = object z (points: 8 per rim about the CoM); 0: none"
+    ),
+    "object.cylinder_length_m": ParameterSpec(0.0, "cylinder length [m]; 0: no cylinder"),
+    "iso_ts_15066.regions": ParameterSpec(
+        [], "ISO/TS 15066 body regions to assess; empty: all of them"
+    ),
+    "uncertainty.mass_fraction": ParameterSpec(
+        0.0, "relative object mass error bound, in [0, 1); all three bounds 0: no analysis"
+    ),
+    "uncertainty.com_offset_m": ParameterSpec(0.0, "object CoM error bound per object axis [m]"),
+    "uncertainty.inertia_fraction": ParameterSpec(
+        0.0, "relative error bound of the principal moments of inertia, in [0, 1)"
+    ),
+    "uncertainty.samples": ParameterSpec(
+        64, "random inertias drawn in the error box (besides the nominal one and the corners)"
+    ),
+    "uncertainty.percentile": ParameterSpec(
+        95.0, "percentile of the score reported per grasp, in [0, 100]"
+    ),
+    "uncertainty.seed": ParameterSpec(0, "seed of the random inertias (results are repeatable)"),
+    "safety_weight": ParameterSpec(
+        0.5, "w in [0, 1] of w*safety + (1 - w)*quality when a grasp quality is given"
+    ),
+    "redundancy.enabled": ParameterSpec(
+        False, "lower the tip effective mass in the null space (chains with > 6 joints)"
+    ),
+    "effort.enabled": ParameterSpec(False, "compute joint torques along the trajectory"),
+    "effort.criterion": ParameterSpec(
+        "peak_fraction", f"effort score: {' | '.join(EFFORT_CRITERIA)} of the URDF effort limits"
+    ),
+    "rank_by": ParameterSpec(
+        "safety", f"final order: {' | '.join(RANK_BY)} (effort turns effort.enabled on)"
+    ),
 }
 """Every parameter of the node, by name."""
 
@@ -88,9 +146,23 @@ ROBOT_PARAMETERS = ("robot_description", "urdf", "base_frame", "tip_frame")
 """Parameters whose change rebuilds the robot model."""
 
 _STRINGS = ("robot_description", "urdf", "base_frame", "tip_frame", "object_frame", "metric")
+_STRINGS += ("metric_point", "effort.criterion", "rank_by")
+_CHOICES: Mapping[str, Sequence[str]] = {
+    "metric": METRICS,
+    "metric_point": METRIC_POINTS,
+    "effort.criterion": EFFORT_CRITERIA,
+    "rank_by": RANK_BY,
+}
+_FLAGS = ("use_joint_states_seed", "redundancy.enabled", "effort.enabled")
 _POSITIVE = ("trajectory.dt_s", "trajectory.duration_s", "max_mass_kg", "max_compute_time_s")
 _POSITIVE += ("service_busy_timeout_s", "diagnostics_period_s")
+_FRACTIONS = ("uncertainty.mass_fraction", "uncertainty.inertia_fraction")
+_RANGES: Mapping[str, tuple[float, float]] = {
+    "uncertainty.percentile": (0.0, 100.0),
+    "safety_weight": (0.0, 1.0),
+}
 _MAX_COUNT = 1_000_000_000
+_MAX_POINTS = 10_000
 
 
 @dataclass(frozen=True)
@@ -99,6 +171,9 @@ class NodeSettings:
 
     Attributes:
         object_inertia: The default object, or None when ``object.mass_kg`` is 0.
+        analysis: Options of core.analysis.analyse from the analysis parameters (metric_point,
+            object points, iso_ts_15066.*, uncertainty.*, safety_weight, redundancy.*,
+            effort.*, rank_by); a request may change metric_point and add grasp quality.
         ik_seed: The seed parameter, or None when empty (length checked against the robot
             in build_robot).
     """
@@ -122,6 +197,7 @@ class NodeSettings:
     max_compute_time_s: float
     service_busy_timeout_s: float
     diagnostics_period_s: float
+    analysis: AnalysisOptions = dataclasses.field(default_factory=AnalysisOptions)
 
     @property
     def robot_source(self) -> str:
@@ -175,29 +251,154 @@ def check_parameter(name: str, value: Any) -> Any:
             raise InvalidInputError(
                 name, "must be URDF XML; give a file path or example-robot-data:<name> in urdf"
             )
-        if name == "metric" and text not in METRICS:
-            raise InvalidInputError(name, f"must be one of {', '.join(METRICS)}, got {text!r}")
+        if name in _CHOICES and text not in _CHOICES[name]:
+            raise InvalidInputError(
+                name, f"must be one of {', '.join(_CHOICES[name])}, got {text!r}"
+            )
         if name == "object_frame" and not text:
             raise InvalidInputError(name, "must be a non-empty frame name")
         return text
-    if name == "use_joint_states_seed":
+    if name in _FLAGS:
         if not isinstance(value, bool):
             raise InvalidInputError(name, f"must be true or false, got {_show(value)}")
         return value
     if name in ("max_grasps", "max_samples", "max_total_samples"):
         return _integer(name, value, 1, _MAX_COUNT)
+    if name in ("uncertainty.samples", "uncertainty.seed"):
+        return _integer(name, value, 0, _MAX_COUNT)
     if name == "ik_seed":
         return _numbers(name, value, None)
     if name == "object.com_in_object_m":
         return _numbers(name, value, 3)
     if name == "object.inertia_about_com_kgm2":
         return _numbers(name, value, 6)
+    if name == "object.points_in_object_m":
+        return _points(name, value)
+    if name == "object.box_size_m":
+        size = _numbers(name, value, None)
+        if size and (len(size) != 3 or min(size) <= 0.0):
+            raise InvalidInputError(
+                name, f"must be empty or 3 edge lengths > 0 [m], got {_show(list(size))}"
+            )
+        return size
+    if name == "iso_ts_15066.regions":
+        return _regions(name, value)
     if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
         raise InvalidInputError(name, f"must be a number, got {_show(value)}")
     if name in _POSITIVE:
         return finite_float(value, name, minimum=0.0, strict_minimum=True)
-    # object.mass_kg (0 = none) and robot_description_timeout_s (0 = for ever)
+    if name in _FRACTIONS:
+        fraction = finite_float(value, name, minimum=0.0)
+        if fraction >= 1.0:
+            raise InvalidInputError(name, f"must be in [0, 1), got {fraction:g}")
+        return fraction
+    if name in _RANGES:
+        return finite_float(value, name, *_RANGES[name])
+    # object.mass_kg (0 = none), robot_description_timeout_s (0 = for ever),
+    # object.cylinder_* (0 = none), uncertainty.com_offset_m (0 = exact)
     return finite_float(value, name, minimum=0.0)
+
+
+def _points(name: str, value: Any) -> tuple[float, ...]:
+    numbers = _numbers(name, value, None)
+    if len(numbers) % 3:
+        raise InvalidInputError(
+            name, f"must hold x y z per point (a multiple of 3 numbers), got {len(numbers)}"
+        )
+    if len(numbers) > 3 * _MAX_POINTS:
+        raise InvalidInputError(
+            name, f"must hold at most {_MAX_POINTS} points, got {len(numbers) // 3}"
+        )
+    return numbers
+
+
+def _regions(name: str, value: Any) -> tuple[str, ...]:
+    if value is None:  # an empty list in a params file arrives as NOT_SET
+        value = []
+    if isinstance(value, (str, bytes)) or not isinstance(value, (list, tuple, array.array)):
+        raise InvalidInputError(name, f"must be a list of region names, got {_show(value)}")
+    names = list(value)
+    if not names:  # [] may arrive as an empty byte or integer array
+        return ()
+    for region in names:
+        if not isinstance(region, str):
+            raise InvalidInputError(name, f"must be a list of region names, got {_show(names)}")
+        if region not in BODY_REGIONS:
+            raise InvalidInputError(
+                name, f"unknown body region {region!r}; regions: {', '.join(BODY_REGIONS)}"
+            )
+    if len(set(names)) != len(names):
+        raise InvalidInputError(name, f"regions repeat: {_show(names)}")
+    return tuple(names)
+
+
+def points_from_parameters(values: Mapping[str, Any]) -> np.ndarray | None:
+    """Exposed object points (K, 3) [m] from checked parameter values, or None.
+
+    ``object.points_in_object_m`` when set; else the corners of ``object.box_size_m``; else the
+    rims of the ``object.cylinder_*`` cylinder; both shapes centred on ``object.com_in_object_m``
+    as the CLI's scenario files do.
+    """
+    points = values["object.points_in_object_m"]
+    box = values["object.box_size_m"]
+    radius, length = values["object.cylinder_radius_m"], values["object.cylinder_length_m"]
+    if (radius > 0.0) != (length > 0.0):
+        which = "object.cylinder_length_m" if radius > 0.0 else "object.cylinder_radius_m"
+        raise InvalidInputError(which, "must be > 0 too: a cylinder needs a radius and a length")
+    if box and radius > 0.0:
+        raise InvalidInputError(
+            "object.box_size_m",
+            "give a box or a cylinder (object.cylinder_radius_m, object.cylinder_length_m), "
+            "not both",
+        )
+    com = np.array(values["object.com_in_object_m"])
+    if points:
+        return np.array(points).reshape(-1, 3)
+    if box:
+        return np.array(box_corners_in_object(box, com))
+    if radius > 0.0:
+        return np.array(cylinder_rim_points_in_object(radius, length, com))
+    return None
+
+
+def analysis_from_parameters(values: Mapping[str, Any]) -> AnalysisOptions:
+    """The AnalysisOptions of checked parameter values (no grasp quality).
+
+    Raises:
+        InvalidInputError: naming the parameter (e.g. metric_point without object points).
+    """
+    points = points_from_parameters(values)
+    metric_point = values["metric_point"]
+    if metric_point != "tip" and points is None:
+        raise InvalidInputError(
+            "metric_point",
+            f"{metric_point!r} needs the object's points: set object.points_in_object_m, "
+            "object.box_size_m or object.cylinder_radius_m and object.cylinder_length_m",
+        )
+    bounds = [values[f"uncertainty.{n}"] for n in ("mass_fraction", "com_offset_m")]
+    bounds.append(values["uncertainty.inertia_fraction"])
+    uncertainty = None
+    if any(bound > 0.0 for bound in bounds):
+        uncertainty = InertiaUncertainty(
+            mass_fraction=values["uncertainty.mass_fraction"],
+            com_offset_m=values["uncertainty.com_offset_m"],
+            inertia_fraction=values["uncertainty.inertia_fraction"],
+            num_random_samples=values["uncertainty.samples"],
+            seed=values["uncertainty.seed"],
+            percentile=values["uncertainty.percentile"],
+        )
+    regions = values["iso_ts_15066.regions"]
+    return AnalysisOptions(
+        metric_point=metric_point,
+        points_in_object_m=points,
+        iso_regions=regions or None,
+        uncertainty=uncertainty,
+        safety_weight=values["safety_weight"],
+        redundancy=values["redundancy.enabled"],
+        effort=values["effort.enabled"],
+        rank_by=values["rank_by"],
+        effort_criterion=values["effort.criterion"],
+    )
 
 
 def inertia_tensor_from_components(components: Sequence[float], field: str) -> np.ndarray:
@@ -267,6 +468,7 @@ def settings_from_parameters(values: Mapping[str, Any]) -> NodeSettings:
         max_compute_time_s=v["max_compute_time_s"],
         service_busy_timeout_s=v["service_busy_timeout_s"],
         diagnostics_period_s=v["diagnostics_period_s"],
+        analysis=analysis_from_parameters(v),
     )
 
 
