@@ -109,3 +109,44 @@ def test_partial_quality_is_refused(tmp_path: Path) -> None:
     del data["grasps"][1]["quality"]
     with pytest.raises(InvalidInputError, match="grasps: give a quality for every grasp"):
         parse_scenario(data, tmp_path)
+
+
+def test_progress_counts_every_unit_and_can_abandon(tmp_path: Path) -> None:
+    from grasp_safety_ros.core import EvaluationConfig, GraspSafetyEvaluator
+    from grasp_safety_ros.core.analysis import analyse
+
+    scenario = parse_scenario(coarse(EXTENDED, redundancy=False), tmp_path)
+    evaluator = GraspSafetyEvaluator(scenario.robot.load(), EvaluationConfig())
+    ranking = evaluator.rank(
+        scenario.grasps, scenario.object_inertia, scenario.trajectory, scenario.robot.seed
+    )
+    calls: list[tuple[int, int]] = []
+    analyse(
+        evaluator,
+        scenario.grasps,
+        scenario.object_inertia,
+        scenario.trajectory,
+        scenario.options,
+        ranking=ranking,
+        progress=lambda d, t: calls.append((d, t)),
+    )
+    # exposed points and effort per grasp, plus one uncertainty analysis
+    assert calls == [(k, 7) for k in range(1, 8)]
+
+    class AbandonError(Exception):
+        pass
+
+    def abandon(done: int, total: int) -> None:
+        if done == 2:
+            raise AbandonError
+
+    with pytest.raises(AbandonError):
+        analyse(
+            evaluator,
+            scenario.grasps,
+            scenario.object_inertia,
+            scenario.trajectory,
+            scenario.options,
+            ranking=ranking,
+            progress=abandon,
+        )

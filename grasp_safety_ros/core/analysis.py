@@ -8,7 +8,7 @@ the ROS node both serialise a SafetyReport; neither computes anything itself.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -130,8 +130,14 @@ def analyse(
     seed_positions: Sequence[float] | np.ndarray | None = None,
     metric: str | None = None,
     ranking: Ranking | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> SafetyReport:
-    """Rank the grasps (unless ``ranking`` is given) and run the analyses ``options`` ask for."""
+    """Rank the grasps (unless ``ranking`` is given) and run the analyses ``options`` ask for.
+
+    Args:
+        progress: Called as ``progress(done, total)`` after each unit of work (one grasp of
+            one analysis); it may raise to abandon the analysis.
+    """
     options = options or AnalysisOptions()
     if options.grasp_quality is not None and len(options.grasp_quality) != len(grasps):
         raise InvalidInputError(
@@ -143,22 +149,36 @@ def analyse(
     robot = evaluator.robot
     evaluations = ranking.evaluations
     metric = ranking.metric
+    per_grasp = (
+        (options.points_in_object_m is not None) + options.redundancy + options.effort
+    ) * len(grasps) + (options.uncertainty is not None)
+    done = 0
+
+    def step() -> None:
+        nonlocal done
+        done += 1
+        if progress is not None:
+            progress(done, per_grasp)
 
     exposed: tuple[ExposedPointsEvaluation, ...] = ()
     if options.points_in_object_m is not None:
-        exposed = tuple(
-            evaluate_exposed_points(
-                robot, e, object_inertia, g, trajectory, options.points_in_object_m
+        exposed_list = []
+        for e, g in zip(evaluations, grasps, strict=True):
+            exposed_list.append(
+                evaluate_exposed_points(
+                    robot, e, object_inertia, g, trajectory, options.points_in_object_m
+                )
             )
-            for e, g in zip(evaluations, grasps, strict=True)
-        )
+            step()
+        exposed = tuple(exposed_list)
     redundancy: tuple[RedundancyResolution, ...] = ()
     if options.redundancy:
         config = RedundancyConfig(metric=metric, max_joint_step=evaluator.config.ik.max_joint_step)
-        redundancy = tuple(
-            resolve_redundancy(robot, e, object_inertia, g, trajectory, config)
-            for e, g in zip(evaluations, grasps, strict=True)
-        )
+        resolutions = []
+        for e, g in zip(evaluations, grasps, strict=True):
+            resolutions.append(resolve_redundancy(robot, e, object_inertia, g, trajectory, config))
+            step()
+        redundancy = tuple(resolutions)
 
     scores = np.full(len(evaluations), np.nan)
     iso: list[PowerForceLimitAssessment] = []
@@ -197,19 +217,17 @@ def analyse(
         uncertainty = analyse_inertia_uncertainty(
             robot, evaluations, grasps, object_inertia, options.uncertainty, metric
         )
+        step()
     effort: tuple[EffortEvaluation, ...] = ()
     if options.effort:
-        effort = tuple(
-            evaluate_effort(
-                robot,
-                e,
-                object_inertia,
-                g,
-                trajectory,
-                redundancy[k].joint_positions if redundancy and redundancy[k].applied else None,
+        efforts = []
+        for k, (e, g) in enumerate(zip(evaluations, grasps, strict=True)):
+            resolved = (
+                redundancy[k].joint_positions if redundancy and redundancy[k].applied else None
             )
-            for k, (e, g) in enumerate(zip(evaluations, grasps, strict=True))
-        )
+            efforts.append(evaluate_effort(robot, e, object_inertia, g, trajectory, resolved))
+            step()
+        effort = tuple(efforts)
     if options.rank_by == "effort":
         order = order_by_effort(effort, options.effort_criterion)
     elif options.grasp_quality is not None:

@@ -590,16 +590,23 @@ class GraspSafetyNode(Node):
             )
         try:
             started = time.perf_counter()
+            deadline_check = _deadline_check(started + settings.max_compute_time_s, settings)
             ranking = bundle.evaluator.rank(
                 grasps,
                 object_inertia,
                 trajectory,
                 seed_positions=seed,
                 metric=metric,
-                progress=_deadline_check(started + settings.max_compute_time_s, settings),
+                progress=deadline_check,
             )
             report = analyse(
-                bundle.evaluator, grasps, object_inertia, trajectory, options, ranking=ranking
+                bundle.evaluator,
+                grasps,
+                object_inertia,
+                trajectory,
+                options,
+                ranking=ranking,
+                progress=deadline_check,
             )
             compute_time_s = time.perf_counter() - started
         finally:
@@ -730,12 +737,12 @@ def _analysis_options(
 
 
 def _deadline_check(deadline: float, settings: NodeSettings) -> Callable[[int, int], None]:
-    """A progress callback for rank() that abandons the ranking after the deadline."""
+    """A progress callback for rank() and analyse() that abandons the work after the deadline."""
 
     def check(done: int, total: int) -> None:
         if done < total and time.perf_counter() > deadline:
             raise ComputeTimeExceededError(
-                f"ranking abandoned after {done} of {total} grasps: longer than "
+                f"ranking abandoned after {done} of {total} steps: longer than "
                 f"max_compute_time_s={settings.max_compute_time_s:g} s; send fewer grasps or "
                 "raise trajectory.dt_s"
             )
