@@ -4,6 +4,10 @@ The object is rigidly attached to the tip body, so the joint-space inertia M_aug
 The translational block of the inverse operational-space inertia (the mobility) at the tip is
 then Λ_tot⁻¹ = J M_aug⁻¹ Jᵀ, which equals (Λ_robot + Λ_obj)⁻¹ exactly (Woodbury), with no
 inverse of Λ_robot. The effective mass along a unit direction u is 1 / (uᵀ Λ_tot⁻¹ u).
+
+``translational_mobilities_in_base`` evaluates a whole trajectory at once, with Pinocchio
+(``computeMinverse``) or with the compiled kernel of ``parallel.py`` (composite-rigid-body
+mass matrix and a Cholesky factor); both give the same matrices to rounding.
 """
 
 from __future__ import annotations
@@ -11,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
+from .ik import ChainArrays
 from .inertia import ObjectInertia
 from .robot import RobotModel
 
@@ -31,6 +36,104 @@ def augmented_model(
     inertia_in_joint = transform_object_to_joint.act(object_inertia.spatial_inertia_in_object())
     model.inertias[tip.parentJoint] = model.inertias[tip.parentJoint] + inertia_in_joint
     return model
+
+
+def robot_inertia_arrays(robot: RobotModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The chain's body inertias as arrays: mass [kg] (n,), centre of mass in the joint frame
+    [m] (n, 3), rotational inertia about it, joint axes [kg m^2] (n, 3, 3)."""
+    inertias = [robot.model.inertias[j] for j in range(1, robot.model.njoints)]
+    masses = np.array([inertia.mass for inertia in inertias])
+    levers = np.array([inertia.lever for inertia in inertias]).reshape(-1, 3)
+    rotational = np.array([inertia.inertia for inertia in inertias]).reshape(-1, 3, 3)
+    return masses, levers, rotational
+
+
+def augmented_inertia_arrays(
+    robot: RobotModel,
+    object_inertia: ObjectInertia,
+    transform_tip_to_object: pin.SE3,
+    robot_arrays: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Body inertias of ``augmented_model`` as arrays (as ``robot_inertia_arrays``), without
+    copying the model; ``robot_arrays`` (``robot_inertia_arrays(robot)``) saves recomputing."""
+    model = robot.model
+    tip = model.frames[robot.tip_frame_id]
+    transform_object_to_joint = tip.placement * pin.SE3(transform_tip_to_object).inverse()
+    inertia_in_joint = transform_object_to_joint.act(object_inertia.spatial_inertia_in_object())
+    masses, levers, rotational = (
+        tuple(np.array(a) for a in robot_arrays)
+        if robot_arrays is not None
+        else robot_inertia_arrays(robot)
+    )
+    body = model.inertias[tip.parentJoint] + inertia_in_joint
+    k = tip.parentJoint - 1
+    masses[k], levers[k], rotational[k] = body.mass, body.lever, body.inertia
+    return masses, levers, rotational
+
+
+def translational_mobilities_in_base(
+    robot: RobotModel,
+    object_inertia: ObjectInertia,
+    transform_tip_to_object: pin.SE3,
+    q_all: np.ndarray,
+    chain: ChainArrays | None = None,
+) -> np.ndarray:
+    """``translational_mobility_in_base`` of the augmented model for every row of ``q_all``.
+
+    Args:
+        robot: The chain model.
+        object_inertia: Object inertia in the object frame.
+        transform_tip_to_object: The grasp.
+        q_all: Configurations (N, nq).
+        chain: ``ik.chain_arrays(robot)`` to use the compiled kernel (numba); None: Pinocchio.
+
+    Returns:
+        (N, 3, 3) mobilities [1/kg], base axes.
+    """
+    q_all = np.ascontiguousarray(q_all, dtype=float)
+    out = np.empty((len(q_all), 3, 3))
+    if chain is not None:
+        from . import parallel
+
+        masses, levers, rotational = augmented_inertia_arrays(
+            robot, object_inertia, transform_tip_to_object
+        )
+        parallel.translational_mobilities(
+            chain.placement_rotations,
+            chain.placement_translations,
+            chain.axes,
+            chain.prismatic,
+            chain.tip_rotation,
+            chain.tip_translation,
+            chain.base_rotation,
+            masses,
+            levers,
+            rotational,
+            q_all,
+            out,
+        )
+        return out
+    model = augmented_model(robot, object_inertia, transform_tip_to_object)
+    data = model.createData()
+    upper = np.triu(np.ones((model.nv, model.nv), dtype=bool))
+    rotation_base_to_world = robot.transform_base_to_world.rotation
+    frame_id = robot.tip_frame_id
+    for i, q in enumerate(q_all):
+        pin.computeMinverse(model, data, q)
+        minv = np.where(upper, data.Minv, data.Minv.T)  # computeMinverse fills the upper part
+        pin.computeJointJacobians(model, data, q)
+        jacobian_world = pin.getFrameJacobian(
+            model, data, frame_id, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+        ).reshape(6, model.nv)
+        jacobian_base = rotation_base_to_world.T @ jacobian_world[:3]
+        out[i] = jacobian_base @ minv @ jacobian_base.T
+    return out
+
+
+def effective_masses_along(mobilities: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """``effective_mass_along`` for (N, 3, 3) mobilities and (N, 3) directions [kg]."""
+    units = directions / np.sqrt(np.einsum("ni,ni->n", directions, directions))[:, None]
+    return 1.0 / np.einsum("ni,nij,nj->n", units, mobilities, units)
 
 
 def translational_mobility_in_base(

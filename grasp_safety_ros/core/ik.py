@@ -1,15 +1,45 @@
-"""Inverse kinematics of the tip frame along a trajectory (damped Gauss-Newton on SE(3))."""
+"""Inverse kinematics of the tip frame along a trajectory (damped Gauss-Newton on SE(3)).
+
+Two implementations of the same algorithm (same warm start, steps, tolerances and checks):
+
+- ``python``: a loop over Pinocchio's Python bindings; works for every chain.
+- ``compiled``: the whole trajectory in one numba kernel (``pip install numba``), for chains of
+  revolute and prismatic joints. Its per-sample results equal the Python loop's to rounding
+  (the test suite checks 1e-9); it releases the GIL, so grasps can run on threads.
+
+``backend="auto"`` picks ``compiled`` when numba is importable and the chain is supported.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import importlib.util
+import math
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
+from typing import Any, NamedTuple
 
 import numpy as np
 import pinocchio as pin
 
 from .exceptions import InvalidInputError
 from .robot import RobotModel
+
+
+def _numba_installed() -> bool:
+    try:
+        return importlib.util.find_spec("numba") is not None
+    except (ImportError, ValueError):
+        return False
+
+
+NUMBA_AVAILABLE = _numba_installed()
+"""Whether the optional accelerator numba is installed (imported only when first used)."""
+
+BACKENDS = ("auto", "compiled", "python")
+"""IK / effective-mass implementations: see the module docstring."""
+
+_EPS = float(np.finfo(float).eps)
+_PREC3 = _EPS ** (1.0 / 4.0)  # Pinocchio's TaylorSeriesExpansion<double>::precision<3>()
 
 
 @dataclass(frozen=True)
@@ -75,12 +105,155 @@ class IKTrajectoryResult:
         return not self.reason
 
 
+class ChainArrays(NamedTuple):
+    """A serial chain of 1-DOF joints as flat arrays, for the compiled kernels.
+
+    Joint k (chain order) moves in the frame ``placement_k`` of joint k-1 (of the world for
+    k = 0): rotation about, or translation along, the unit ``axis_k`` (joint frame).
+    """
+
+    placement_rotations: np.ndarray  # (n, 3, 3)
+    placement_translations: np.ndarray  # (n, 3) [m]
+    axes: np.ndarray  # (n, 3), unit
+    prismatic: np.ndarray  # (n,) 1.0 for prismatic joints, 0.0 for revolute ones
+    tip_rotation: np.ndarray  # (3, 3): tip frame in the last joint's frame
+    tip_translation: np.ndarray  # (3,) [m]
+    base_rotation: np.ndarray  # (3, 3): base frame in the world frame
+    lower_q: np.ndarray  # (n,)
+    upper_q: np.ndarray  # (n,)
+
+
+def chain_arrays(robot: RobotModel) -> ChainArrays | None:
+    """The chain of ``robot`` as arrays, or None when the compiled kernels cannot handle it.
+
+    Supported: a serial chain of revolute and prismatic joints (Pinocchio's RX/RY/RZ,
+    PX/PY/PZ and their unaligned variants; not continuous joints), the tip frame on the last.
+    """
+    model = robot.model
+    n = model.nv
+    if model.nq != n or model.njoints != n + 1:
+        return None
+    if any(model.parents[k] != k - 1 for k in range(1, n + 1)):
+        return None
+    if model.frames[robot.tip_frame_id].parentJoint != n:
+        return None
+    data = model.createData()
+    pin.computeJointJacobians(model, data, pin.neutral(model))
+    axes = np.empty((n, 3))
+    prismatic = np.zeros(n)
+    for k in range(n):
+        subspace = np.asarray(pin.getJointJacobian(model, data, k + 1, pin.LOCAL)).reshape(6, n)
+        column = subspace[:, k]
+        linear, angular = column[:3], column[3:]
+        if np.linalg.norm(angular) > 1e-12:
+            if np.linalg.norm(linear) > 1e-12 or abs(np.linalg.norm(angular) - 1.0) > 1e-12:
+                return None
+            axes[k] = angular
+        else:
+            if abs(np.linalg.norm(linear) - 1.0) > 1e-12:
+                return None
+            axes[k], prismatic[k] = linear, 1.0
+    placements = [model.jointPlacements[k] for k in range(1, n + 1)]
+    tip = model.frames[robot.tip_frame_id].placement
+    lower = np.array(model.lowerPositionLimit, dtype=float)
+    upper = np.array(model.upperPositionLimit, dtype=float)
+    arrays = ChainArrays(
+        placement_rotations=np.array([p.rotation for p in placements]),
+        placement_translations=np.array([p.translation for p in placements]),
+        axes=axes,
+        prismatic=prismatic,
+        tip_rotation=np.array(tip.rotation),
+        tip_translation=np.array(tip.translation),
+        base_rotation=np.array(robot.transform_base_to_world.rotation),
+        lower_q=lower,
+        upper_q=upper,
+    )
+    for array in arrays:
+        array.setflags(write=False)
+    return arrays
+
+
+def compiled_available() -> bool:
+    """True when numba is importable (the compiled backend can be used)."""
+    return NUMBA_AVAILABLE
+
+
+def check_backend(backend: str, field_name: str = "backend") -> str:
+    """Return ``backend`` if it is one of BACKENDS, else raise InvalidInputError."""
+    if backend not in BACKENDS:
+        raise InvalidInputError(
+            field_name, f"must be one of {', '.join(BACKENDS)}, got {backend!r}"
+        )
+    if backend == "compiled" and not NUMBA_AVAILABLE:
+        raise InvalidInputError(
+            field_name, "'compiled' needs numba (pip install numba); use 'auto' or 'python'"
+        )
+    return backend
+
+
+def exp3_batch(rotation_vectors: np.ndarray) -> np.ndarray:
+    """Pinocchio's exp3 (same formula and Taylor branch) for an (N, 3) array of vectors."""
+    v = np.asarray(rotation_vectors, dtype=float)
+    t2 = np.einsum("ij,ij->i", v, v) + _EPS * _EPS
+    t = np.sqrt(t2)
+    ct, st = np.cos(t), np.sin(t)
+    large = t > _PREC3
+    with np.errstate(divide="ignore", invalid="ignore"):
+        alpha_vxvx = np.where(large, (1.0 - ct) / t2, 0.5 - t2 / 24.0)
+        alpha_vx = np.where(large, st / t, 1.0 - t2 / 6.0)
+    ct = np.where(large, ct, 1.0 - t2 / 2.0)
+    result = alpha_vxvx[:, None, None] * v[:, :, None] * v[:, None, :]
+    result[:, 0, 1] -= alpha_vx * v[:, 2]
+    result[:, 1, 0] += alpha_vx * v[:, 2]
+    result[:, 0, 2] += alpha_vx * v[:, 1]
+    result[:, 2, 0] -= alpha_vx * v[:, 1]
+    result[:, 1, 2] -= alpha_vx * v[:, 0]
+    result[:, 2, 1] += alpha_vx * v[:, 0]
+    for k in range(3):
+        result[:, k, k] += ct
+    return result
+
+
+def tip_path_arrays(
+    trajectory: Any, transform_tip_to_object: pin.SE3, s_values: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """ObjectTrajectory.tip_path as arrays, vectorised over the samples.
+
+    Args:
+        trajectory: An ObjectTrajectory.
+        transform_tip_to_object: The grasp.
+        s_values: Path parameters in [0, 1].
+
+    Returns:
+        Tip rotations (N, 3, 3) and positions (N, 3) [m] in the base frame, and the path
+        tangents d p_tip / ds (N, 3) [m], base axes; equal to ``tip_path`` up to rounding.
+    """
+    s = np.asarray(s_values, dtype=float)
+    grasp = pin.SE3(transform_tip_to_object)
+    start = trajectory.transform_object_to_base_start
+    goal = trajectory.transform_object_to_base_goal
+    log = np.asarray(trajectory.rotation_log_in_object, dtype=float)
+    object_rotations = np.matmul(start.rotation, exp3_batch(s[:, None] * log))
+    start_p, goal_p = start.translation, goal.translation
+    object_translations = (1.0 - s)[:, None] * start_p + s[:, None] * goal_p
+    rotations = np.matmul(object_rotations, grasp.rotation)
+    translations = np.einsum("nij,j->ni", object_rotations, grasp.translation) + (
+        object_translations
+    )
+    lever_in_object = np.cross(log, grasp.translation)
+    tangents = (goal_p - start_p) + np.einsum("nij,j->ni", object_rotations, lever_in_object)
+    return rotations, translations, tangents
+
+
 class IKSolver:
     """Tip-pose IK for a RobotModel, warm-started along trajectories."""
 
-    def __init__(self, robot: RobotModel, config: IKConfig | None = None) -> None:
+    def __init__(
+        self, robot: RobotModel, config: IKConfig | None = None, backend: str = "auto"
+    ) -> None:
         self.robot = robot
         self.config = config or IKConfig()
+        self.backend = check_backend(backend, "ik.backend")
         self.data = robot.model.createData()
         model = robot.model
         lower = np.array(model.lowerPositionLimit, dtype=float)
@@ -90,64 +263,105 @@ class IKSolver:
                 lower[joint.idx_q : joint.idx_q + joint.nq] = -np.inf
                 upper[joint.idx_q : joint.idx_q + joint.nq] = np.inf
         self._lower_q, self._upper_q = lower, upper
+        self.chain = chain_arrays(robot) if backend != "python" else None
+        if backend == "compiled" and self.chain is None:
+            raise InvalidInputError(
+                "ik.backend",
+                "'compiled' supports serial chains of revolute and prismatic joints only; "
+                f"joints here: {', '.join(j.shortname() for j in model.joints[1:])}",
+            )
+        self.compiled = NUMBA_AVAILABLE and self.chain is not None
+        self._dgesv: Any = None if self.compiled else _lapack_dgesv()
+        self._identity6 = np.eye(6)
+        self._identity_n = np.eye(model.nv)
 
-    def solve(self, transform_tip_to_base: pin.SE3, q_init: np.ndarray) -> tuple[np.ndarray, bool, int]:
+    # ----------------------------------------------------------------------------- one pose
+    def solve(
+        self, transform_tip_to_base: pin.SE3, q_init: np.ndarray
+    ) -> tuple[np.ndarray, bool, int]:
         """Solve one tip pose from ``q_init``.
 
         Returns:
             The configuration, whether it converged to the tolerances, and the iterations.
         """
+        target_in_world = self.robot.transform_base_to_world * transform_tip_to_base
+        if self.compiled:
+            assert self.chain is not None
+            config = self.config
+            q, converged, iterations = _kernels().solve_pose(
+                *self.chain,
+                np.array(target_in_world.rotation),
+                np.array(target_in_world.translation),
+                np.asarray(q_init, dtype=float),
+                config.position_tolerance_m,
+                config.orientation_tolerance_rad,
+                config.max_iterations,
+                config.max_iteration_step,
+            )
+            return q, bool(converged), int(iterations)
+        return self._solve_python(target_in_world, q_init)
+
+    def _solve_python(
+        self, target_in_world: pin.SE3, q_init: np.ndarray
+    ) -> tuple[np.ndarray, bool, int]:
         model, data, config = self.robot.model, self.data, self.config
         frame_id = self.robot.tip_frame_id
-        target_in_world = self.robot.transform_base_to_world * transform_tip_to_base
-        q = np.clip(np.array(q_init, dtype=float), self._lower_q, self._upper_q)
+        lower, upper = self._lower_q, self._upper_q
+        q = np.minimum(np.maximum(np.array(q_init, dtype=float), lower), upper)
         n = model.nv
+        position_tolerance = config.position_tolerance_m
+        orientation_tolerance = config.orientation_tolerance_rad
         for iteration in range(config.max_iterations + 1):
-            pin.forwardKinematics(model, data, q)
+            pin.computeJointJacobians(model, data, q)  # forward kinematics + joint Jacobians
             current = pin.updateFramePlacement(model, data, frame_id)
             error_transform = current.actInv(target_in_world)
             error = pin.log6(error_transform).vector
+            translation = error_transform.translation
             if (
-                np.linalg.norm(error_transform.translation) <= config.position_tolerance_m
-                and np.linalg.norm(error[3:]) <= config.orientation_tolerance_rad
+                math.sqrt(translation.dot(translation)) <= position_tolerance
+                and math.sqrt(error[3:].dot(error[3:])) <= orientation_tolerance
             ):
                 return q, True, iteration
             if iteration == config.max_iterations:
                 break
-            frame_jacobian = pin.computeFrameJacobian(
-                model, data, q, frame_id, pin.ReferenceFrame.LOCAL
+            frame_jacobian = pin.getFrameJacobian(
+                model, data, frame_id, pin.ReferenceFrame.LOCAL
             ).reshape(6, n)  # eigenpy returns a 6x1 matrix as a vector
             jacobian = pin.Jlog6(error_transform.inverse()) @ frame_jacobian
-            damping = 1e-12 + 1e-3 * float(error @ error)
+            damping = 1e-12 + 1e-3 * float(error.dot(error))
             if n >= 6:
-                step = jacobian.T @ np.linalg.solve(
-                    jacobian @ jacobian.T + damping * np.eye(6), error
+                step = (
+                    jacobian.T
+                    @ self._dgesv(jacobian @ jacobian.T + damping * self._identity6, error)[2]
                 )
             else:
-                step = np.linalg.solve(jacobian.T @ jacobian + damping * np.eye(n), jacobian.T @ error)
+                step = self._dgesv(
+                    jacobian.T @ jacobian + damping * self._identity_n, jacobian.T @ error
+                )[2]
             largest = float(np.abs(step).max())
             if largest > config.max_iteration_step:
                 step *= config.max_iteration_step / largest
-            q = np.clip(pin.integrate(model, q, step), self._lower_q, self._upper_q)
+            q = pin.integrate(model, q, step)
+            np.maximum(q, lower, out=q)
+            np.minimum(q, upper, out=q)
         return q, False, config.max_iterations
 
-    def solve_first(self, transform_tip_to_base: pin.SE3, seed_q: np.ndarray) -> tuple[np.ndarray, bool, int]:
+    def solve_first(
+        self, transform_tip_to_base: pin.SE3, seed_q: np.ndarray
+    ) -> tuple[np.ndarray, bool, int]:
         """Solve from the seed, then from deterministic random restarts within the limits."""
         q, converged, iterations = self.solve(transform_tip_to_base, seed_q)
         if converged:
             return q, True, iterations
-        rng = np.random.default_rng(self.config.random_seed)
-        lower = np.where(np.isfinite(self.robot.lower_limits), self.robot.lower_limits, -np.pi)
-        upper = np.where(np.isfinite(self.robot.upper_limits), self.robot.upper_limits, np.pi)
         total = iterations
-        for _ in range(self.config.random_restarts):
-            start = self.robot.q_from_positions(rng.uniform(lower, upper))
+        for start in self.restarts():
             q, converged, iterations = self.solve(transform_tip_to_base, start)
             total += iterations
             if converged:
                 return q, True, total
         return q, False, total
 
+    # ----------------------------------------------------------------------------- trajectory
     def solve_trajectory(
         self,
         transforms_tip_to_base: Sequence[pin.SE3],
@@ -161,55 +375,173 @@ class IKSolver:
         positions jump by more than ``max_joint_step`` or exceed the velocity limits between
         consecutive samples.
         """
-        model, robot, config = self.robot.model, self.robot, self.config
-        count = len(transforms_tip_to_base)
-        q_all = np.empty((count, model.nq))
-        iterations = np.zeros(count, dtype=int)
-        velocity_limits = robot.velocity_limits
-        check_velocity = config.check_velocity_limits & np.isfinite(velocity_limits) & (
-            velocity_limits > 0
+        rotations = np.array([pose.rotation for pose in transforms_tip_to_base]).reshape(-1, 3, 3)
+        translations = np.array([pose.translation for pose in transforms_tip_to_base])
+        return self.solve_trajectory_arrays(
+            rotations, translations.reshape(-1, 3), times_s, s_values, seed_q
         )
-        for i, target in enumerate(transforms_tip_to_base):
-            if i == 0:
-                q, converged, iterations[i] = self.solve_first(target, seed_q)
-            else:
-                guess = q_all[i - 1]
-                if i >= 2 and s_values[i - 1] > s_values[i - 2]:
-                    ratio = (s_values[i] - s_values[i - 1]) / (s_values[i - 1] - s_values[i - 2])
-                    velocity = pin.difference(model, q_all[i - 2], q_all[i - 1])
-                    guess = pin.integrate(model, q_all[i - 1], ratio * velocity)
-                q, converged, iterations[i] = self.solve(target, guess)
+
+    def solve_trajectory_arrays(
+        self,
+        rotations_tip_to_base: np.ndarray,
+        translations_tip_in_base: np.ndarray,
+        times_s: np.ndarray,
+        s_values: np.ndarray,
+        seed_q: np.ndarray,
+    ) -> IKTrajectoryResult:
+        """``solve_trajectory`` with the tip poses as (N, 3, 3) rotations and (N, 3) [m]."""
+        base = self.robot.transform_base_to_world
+        rotations_world = np.matmul(base.rotation, rotations_tip_to_base)
+        translations_world = (
+            np.einsum("ij,nj->ni", base.rotation, translations_tip_in_base) + base.translation
+        )
+        count = len(rotations_world)
+        if count == 0:
+            return IKTrajectoryResult(np.empty((0, self.robot.model.nq)), np.zeros(0, int), "")
+        first = pin.SE3(np.array(rotations_tip_to_base[0]), np.array(translations_tip_in_base[0]))
+        q0, converged, iterations0 = self.solve_first(first, seed_q)
+        if not converged:
+            reason = self.first_sample_reason(q0, times_s)
+            return IKTrajectoryResult(
+                np.empty((0, self.robot.model.nq)), np.zeros(0, dtype=int), reason
+            )
+        velocity_limits = self.robot.velocity_limits
+        check_velocity = (
+            self.config.check_velocity_limits
+            & np.isfinite(velocity_limits)
+            & (velocity_limits > 0)
+        )
+        if self.compiled:
+            status, index, joint, value, q_all, iterations, q_fail = self._trajectory_compiled(
+                rotations_world, translations_world, times_s, s_values, q0, check_velocity
+            )
+        else:
+            status, index, joint, value, q_all, iterations, q_fail = self._trajectory_python(
+                rotations_world, translations_world, times_s, s_values, q0, check_velocity
+            )
+        iterations[0] = iterations0
+        if status == _OK:
+            return IKTrajectoryResult(q_all, iterations, "")
+        reason = self.failure_reason(status, index, joint, value, q_fail, times_s)
+        return IKTrajectoryResult(q_all[:index], iterations[:index], reason)
+
+    def failure_reason(
+        self,
+        status: int,
+        index: int,
+        joint: int,
+        value: float,
+        q_fail: np.ndarray,
+        times_s: np.ndarray,
+    ) -> str:
+        """Why a trajectory fails, from a trajectory solve's status (not OK) and details."""
+        i, k = index, joint
+        names, config = self.robot.joint_names, self.config
+        if status == _NOT_CONVERGED:
+            return f"IK did not converge at sample {i} (t={times_s[i]:.3f} s)" + self._limit_note(
+                q_fail
+            )
+        if status == _JUMP:
+            return (
+                f"joint '{names[k]}' jumps by {value:.3f} between t="
+                f"{times_s[i - 1]:.3f} s and t={times_s[i]:.3f} s (max_joint_step="
+                f"{config.max_joint_step:g})"
+            )
+        return (
+            f"joint '{names[k]}' needs speed {value:.3f} > limit "
+            f"{self.robot.velocity_limits[k]:g} at t={times_s[i]:.3f} s"
+        )
+
+    def first_sample_reason(self, q_fail: np.ndarray, times_s: np.ndarray) -> str:
+        """Why sample 0 fails (no convergence from the seed or any restart)."""
+        return (
+            f"IK did not converge at sample 0 (t={times_s[0]:.3f} s)"
+            + self._limit_note(q_fail)
+            + " from the seed or any restart"
+        )
+
+    def restarts(self) -> Iterator[np.ndarray]:
+        """The deterministic random restart configurations tried by ``solve_first``."""
+        rng = np.random.default_rng(self.config.random_seed)
+        lower = np.where(np.isfinite(self.robot.lower_limits), self.robot.lower_limits, -np.pi)
+        upper = np.where(np.isfinite(self.robot.upper_limits), self.robot.upper_limits, np.pi)
+        for _ in range(self.config.random_restarts):
+            yield self.robot.q_from_positions(rng.uniform(lower, upper))
+
+    def _trajectory_compiled(
+        self,
+        rotations_world: np.ndarray,
+        translations_world: np.ndarray,
+        times_s: np.ndarray,
+        s_values: np.ndarray,
+        q0: np.ndarray,
+        check_velocity: np.ndarray,
+    ) -> tuple[int, int, int, float, np.ndarray, np.ndarray, np.ndarray]:
+        assert self.chain is not None
+        config = self.config
+        count = len(rotations_world)
+        q_all = np.empty((count, self.robot.model.nq))
+        iterations = np.zeros(count, dtype=np.int64)
+        q_fail = np.empty(self.robot.model.nq)
+        status, index, joint, value = _kernels().solve_trajectory(
+            *self.chain,
+            np.ascontiguousarray(rotations_world),
+            np.ascontiguousarray(translations_world),
+            np.ascontiguousarray(times_s, dtype=float),
+            np.ascontiguousarray(s_values, dtype=float),
+            np.asarray(q0, dtype=float),
+            config.position_tolerance_m,
+            config.orientation_tolerance_rad,
+            config.max_iterations,
+            config.max_iteration_step,
+            config.max_joint_step,
+            np.ascontiguousarray(check_velocity),
+            np.asarray(self.robot.velocity_limits, dtype=float),
+            q_all,
+            iterations,
+            q_fail,
+        )
+        return int(status), int(index), int(joint), float(value), q_all, iterations, q_fail
+
+    def _trajectory_python(
+        self,
+        rotations_world: np.ndarray,
+        translations_world: np.ndarray,
+        times_s: np.ndarray,
+        s_values: np.ndarray,
+        q0: np.ndarray,
+        check_velocity: np.ndarray,
+    ) -> tuple[int, int, int, float, np.ndarray, np.ndarray, np.ndarray]:
+        model, config = self.robot.model, self.config
+        count = len(rotations_world)
+        q_all = np.empty((count, model.nq))
+        iterations = np.zeros(count, dtype=np.int64)
+        q_all[0] = q0
+        velocity_limits = self.robot.velocity_limits
+        any_velocity_check = bool(check_velocity.any())
+        for i in range(1, count):
+            target = pin.SE3(rotations_world[i], translations_world[i])
+            guess = q_all[i - 1]
+            if i >= 2 and s_values[i - 1] > s_values[i - 2]:
+                ratio = (s_values[i] - s_values[i - 1]) / (s_values[i - 1] - s_values[i - 2])
+                velocity = pin.difference(model, q_all[i - 2], q_all[i - 1])
+                guess = pin.integrate(model, q_all[i - 1], ratio * velocity)
+            q, converged, iterations[i] = self._solve_python(target, guess)
             if not converged:
-                reason = (
-                    f"IK did not converge at sample {i} (t={times_s[i]:.3f} s)"
-                    + self._limit_note(q)
-                    + (" from the seed or any restart" if i == 0 else "")
-                )
-                return IKTrajectoryResult(q_all[:i], iterations[:i], reason)
+                return _NOT_CONVERGED, i, 0, 0.0, q_all, iterations, q
             q_all[i] = q
-            if i == 0:
-                continue
             delta = np.abs(pin.difference(model, q_all[i - 1], q))
             k = int(np.argmax(delta))
             if delta[k] > config.max_joint_step:
-                reason = (
-                    f"joint '{robot.joint_names[k]}' jumps by {delta[k]:.3f} between t="
-                    f"{times_s[i - 1]:.3f} s and t={times_s[i]:.3f} s (max_joint_step="
-                    f"{config.max_joint_step:g})"
-                )
-                return IKTrajectoryResult(q_all[:i], iterations[:i], reason)
+                return _JUMP, i, k, float(delta[k]), q_all, iterations, q
             elapsed = times_s[i] - times_s[i - 1]
-            if check_velocity.any() and elapsed > 0:
+            if any_velocity_check and elapsed > 0:
                 speed = delta / elapsed
                 over = check_velocity & (speed > velocity_limits * (1 + 1e-9))
                 if over.any():
                     k = int(np.flatnonzero(over)[0])
-                    reason = (
-                        f"joint '{robot.joint_names[k]}' needs speed {speed[k]:.3f} > limit "
-                        f"{velocity_limits[k]:g} at t={times_s[i]:.3f} s"
-                    )
-                    return IKTrajectoryResult(q_all[:i], iterations[:i], reason)
-        return IKTrajectoryResult(q_all, iterations, "")
+                    return _TOO_FAST, i, k, float(speed[k]), q_all, iterations, q
+        return _OK, count, 0, 0.0, q_all, iterations, q_all[-1]
 
     def _limit_note(self, q: np.ndarray) -> str:
         positions = self.robot.positions_from_q(q)
@@ -220,3 +552,21 @@ class IKSolver:
             return " (target out of reach or singular)"
         names = ", ".join(self.robot.joint_names[k] for k in np.flatnonzero(at_limit))
         return f" (joint limits reached: {names})"
+
+
+_OK, _NOT_CONVERGED, _JUMP, _TOO_FAST = 0, 1, 2, 3
+"""Status codes of a trajectory solve."""
+
+
+def _lapack_dgesv() -> Any:
+    """LAPACK's dgesv (what np.linalg.solve calls, without its Python overhead)."""
+    from scipy.linalg.lapack import dgesv
+
+    return dgesv
+
+
+def _kernels() -> Any:
+    """The compiled kernels (numba compiles them, or loads them from its cache, on first use)."""
+    from . import parallel
+
+    return parallel

@@ -2,20 +2,19 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
 
 from .effective_mass import (
-    augmented_model,
-    effective_mass_along,
-    translational_mobility_in_base,
+    effective_masses_along,
+    translational_mobilities_in_base,
     worst_direction,
 )
 from .exceptions import InvalidInputError
-from .ik import IKConfig, IKSolver
+from .ik import IKConfig, IKSolver, check_backend, tip_path_arrays
 from .inertia import ObjectInertia
 from .robot import RobotModel
 from .trajectory import ObjectTrajectory
@@ -47,13 +46,29 @@ class EvaluationConfig:
     Attributes:
         metric: Aggregate used as the score: ``mean`` (default), ``max`` or ``integral``.
         ik: IK settings.
+        backend: ``auto`` (compiled kernels when numba is installed and the chain is
+            supported, else Pinocchio from Python), ``compiled`` or ``python``; all give the
+            same results to rounding.
+        workers: Parallel workers for large requests in ``rank``; 0: one per available core,
+            1: always serial. Results do not depend on it.
+        parallel_min_samples: ``rank`` uses the workers when grasps x samples is at least this.
     """
 
     metric: str = "mean"
     ik: IKConfig = field(default_factory=IKConfig)
+    backend: str = "auto"
+    workers: int = 0
+    parallel_min_samples: int = 4000
 
     def __post_init__(self) -> None:
         check_metric(self.metric)
+        check_backend(self.backend, "backend")
+        for name, value in (
+            ("workers", self.workers),
+            ("parallel_min_samples", self.parallel_min_samples),
+        ):
+            if not isinstance(value, int) or isinstance(value, bool) or value < 0:
+                raise InvalidInputError(name, f"must be an integer >= 0, got {value!r}")
 
 
 def check_metric(metric: str, field_name: str = "metric") -> str:
@@ -148,7 +163,7 @@ class GraspSafetyEvaluator:
     def __init__(self, robot: RobotModel, config: EvaluationConfig | None = None) -> None:
         self.robot = robot
         self.config = config or EvaluationConfig()
-        self.ik = IKSolver(robot, self.config.ik)
+        self.ik = IKSolver(robot, self.config.ik, self.config.backend)
 
     def seed_q(self, seed_positions: Sequence[float] | np.ndarray | None) -> np.ndarray:
         """Pinocchio configuration of an IK seed given in chain joint order (or the default)."""
@@ -171,26 +186,74 @@ class GraspSafetyEvaluator:
         metric = check_metric(metric or self.config.metric)
         times = trajectory.times_s()
         s_values, s_rate, _ = trajectory.path_parameter(times)
-        poses, tangents = trajectory.tip_path(grasp.transform_tip_to_object, s_values)
-        ik = self.ik.solve_trajectory(poses, times, s_values, self.seed_q(seed_positions))
-        if not ik.feasible:
-            return _infeasible(index, grasp.name, ik.reason, self.robot.num_joints)
-        model = augmented_model(self.robot, object_inertia, grasp.transform_tip_to_object)
-        data = model.createData()
-        count = len(times)
-        masses = np.empty(count)
-        directions = np.empty((count, 3))
-        worst = np.zeros(count, dtype=bool)
-        tangent_norms = np.linalg.norm(tangents, axis=1)
-        for i in range(count):
-            mobility = translational_mobility_in_base(self.robot, model, data, ik.q[i])
-            if tangent_norms[i] < STATIONARY_TANGENT_M:
-                directions[i], masses[i] = worst_direction(mobility)
-                worst[i] = True
-            else:
-                directions[i] = tangents[i] / tangent_norms[i]
-                masses[i] = effective_mass_along(mobility, directions[i])
-        positions = np.array([self.robot.positions_from_q(q) for q in ik.q])
+        return self._evaluate_sampled(
+            index,
+            grasp,
+            object_inertia,
+            trajectory,
+            metric,
+            times,
+            s_values,
+            s_rate,
+            self.seed_q(seed_positions),
+        )
+
+    def _evaluate_sampled(
+        self,
+        index: int,
+        grasp: Grasp,
+        object_inertia: ObjectInertia,
+        trajectory: ObjectTrajectory,
+        metric: str,
+        times: np.ndarray,
+        s_values: np.ndarray,
+        s_rate: np.ndarray,
+        seed_q: np.ndarray,
+    ) -> GraspEvaluation:
+        """``evaluate`` with the sample times, path parameters and IK seed already computed."""
+        robot = self.robot
+        if self.ik.compiled:  # tip path, IK and effective mass in one compiled call
+            from . import parallel
+
+            fused = parallel.evaluate_grasp_compiled(
+                self.ik,
+                object_inertia,
+                trajectory,
+                grasp.transform_tip_to_object,
+                times,
+                s_values,
+                seed_q,
+            )
+            if fused.reason:
+                return _infeasible(index, grasp.name, fused.reason, robot.num_joints)
+            q_all, iterations, mobilities = fused.q, fused.iterations, fused.mobilities
+            masses, directions, worst = fused.effective_masses, fused.directions, fused.worst
+            tangent_norms = fused.tangent_norms
+        else:
+            rotations, translations, tangents = tip_path_arrays(
+                trajectory, grasp.transform_tip_to_object, s_values
+            )
+            ik = self.ik.solve_trajectory_arrays(rotations, translations, times, s_values, seed_q)
+            if not ik.feasible:
+                return _infeasible(index, grasp.name, ik.reason, robot.num_joints)
+            q_all, iterations = ik.q, ik.iterations
+            mobilities = translational_mobilities_in_base(
+                robot, object_inertia, grasp.transform_tip_to_object, q_all
+            )
+            count = len(times)
+            masses = np.empty(count)
+            directions = np.empty((count, 3))
+            tangent_norms = np.linalg.norm(tangents, axis=1)
+            worst = tangent_norms < STATIONARY_TANGENT_M
+            moving = ~worst
+            directions[moving] = tangents[moving] / tangent_norms[moving, None]
+            masses[moving] = effective_masses_along(mobilities[moving], directions[moving])
+        for i in np.flatnonzero(worst):
+            directions[i], masses[i] = worst_direction(mobilities[i])
+        if robot.model.nq == robot.model.nv:  # no continuous joint: positions are q
+            positions = np.array(q_all)
+        else:
+            positions = np.array([robot.positions_from_q(q) for q in q_all])
         return GraspEvaluation(
             index=index,
             name=grasp.name,
@@ -203,7 +266,7 @@ class GraspSafetyEvaluator:
             effective_mass_kg=masses,
             direction_is_worst_case=worst,
             tip_speed_m_s=tangent_norms * s_rate,
-            ik_iterations=ik.iterations,
+            ik_iterations=iterations,
         )
 
     def rank(
@@ -221,14 +284,26 @@ class GraspSafetyEvaluator:
             progress: Called as ``progress(done, total)`` after each grasp.
         """
         metric = check_metric(metric or self.config.metric)
-        self.seed_q(seed_positions)  # validate once, before any work
+        seed_q = self.seed_q(seed_positions)  # validate once, before any work
+        grasps = list(grasps)
+        from . import parallel  # imports numba when installed: only when first needed
+
+        times = trajectory.times_s()
+        s_values, s_rate, _ = trajectory.path_parameter(times)
+        executor = parallel.executor_for(self, len(grasps) * len(times))
+        jobs = [
+            (index, grasp, object_inertia, trajectory, metric, times, s_values, s_rate, seed_q)
+            for index, grasp in enumerate(grasps)
+        ]
+        if executor is None:
+            results: Iterable[GraspEvaluation] = (self._evaluate_sampled(*job) for job in jobs)
+        else:
+            results = parallel.evaluate_jobs(self, executor, jobs)
         evaluations = []
-        for index, grasp in enumerate(grasps):
-            evaluations.append(
-                self.evaluate(grasp, object_inertia, trajectory, index, seed_positions, metric)
-            )
+        for evaluation in results:
+            evaluations.append(evaluation)
             if progress is not None:
-                progress(index + 1, len(grasps))
+                progress(len(evaluations), len(grasps))
         return Ranking(
             joint_names=self.robot.joint_names,
             metric=metric,

@@ -1,0 +1,391 @@
+"""Fast paths give the same results as the plain ones: compiled kernels vs Pinocchio from
+Python, vectorised tip path vs ObjectTrajectory.tip_path, pools vs serial, and both vs the
+implementation before the optimisation (bench/reference.py). Equality only, never timing."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from conftest import ARM6_AXES, ARM7_AXES, BAXTER_SEED, random_positions, serial_arm_urdf
+
+from grasp_safety_ros.core import (
+    EvaluationConfig,
+    Grasp,
+    GraspSafetyEvaluator,
+    IKConfig,
+    InvalidInputError,
+    ObjectTrajectory,
+    RobotModel,
+    solid_box,
+)
+from grasp_safety_ros.core.effective_mass import (
+    augmented_model,
+    translational_mobilities_in_base,
+    translational_mobility_in_base,
+)
+from grasp_safety_ros.core.ik import (
+    IKSolver,
+    chain_arrays,
+    compiled_available,
+    exp3_batch,
+    tip_path_arrays,
+)
+from grasp_safety_ros.core.ranking import Ranking
+from grasp_safety_ros.core.validation import pose_from_position_quat
+
+needs_numba = pytest.mark.skipif(not compiled_available(), reason="numba is not installed")
+RTOL = 1e-9
+BOX = solid_box(0.8, [0.08, 0.12, 0.2], [0.0, 0.01, -0.02])
+
+
+def reach_trajectory(
+    robot: RobotModel, positions: np.ndarray, dt: float = 0.02
+) -> ObjectTrajectory:
+    """A short quintic trajectory of the tip pose at ``positions`` (object frame = tip frame)."""
+    start = robot.transform_tip_to_base(positions)
+    goal = pin.SE3(
+        start.rotation @ pin.exp3(np.array([0.1, -0.05, 0.15])),
+        start.translation + np.array([0.03, -0.04, 0.05]),
+    )
+    return ObjectTrajectory(start, goal, 1.0, dt)
+
+
+def grasps_near_identity(count: int, seed: int = 3) -> list[Grasp]:
+    rng = np.random.default_rng(seed)
+    return [
+        Grasp(pin.SE3(pin.exp3(rng.uniform(-0.2, 0.2, 3)), rng.uniform(-0.03, 0.03, 3)), f"g{k}")
+        for k in range(count)
+    ]
+
+
+def assert_same_ranking(a: Ranking, b: Ranking, rtol: float = RTOL) -> None:
+    assert a.order == b.order
+    for x, y in zip(a.evaluations, b.evaluations, strict=True):
+        assert x.feasible == y.feasible
+        assert bool(x.reason) == bool(y.reason)
+        if not x.feasible:
+            continue
+        np.testing.assert_array_equal(x.ik_iterations, y.ik_iterations)
+        np.testing.assert_array_equal(x.direction_is_worst_case, y.direction_is_worst_case)
+        np.testing.assert_allclose(x.effective_mass_kg, y.effective_mass_kg, rtol=rtol)
+        np.testing.assert_allclose(x.joint_positions, y.joint_positions, rtol=0, atol=1e-8)
+        np.testing.assert_allclose(x.directions_in_base, y.directions_in_base, atol=1e-12)
+        np.testing.assert_allclose(x.tip_speed_m_s, y.tip_speed_m_s, rtol=1e-12, atol=1e-15)
+        assert x.score == pytest.approx(y.score, rel=rtol)
+
+
+def assert_identical_ranking(a: Ranking, b: Ranking) -> None:
+    """Bit-for-bit: same code, other workers."""
+    assert a.order == b.order
+    for x, y in zip(a.evaluations, b.evaluations, strict=True):
+        assert (x.index, x.name, x.feasible, x.reason) == (y.index, y.name, y.feasible, y.reason)
+        for field in (
+            "times_s",
+            "joint_positions",
+            "directions_in_base",
+            "effective_mass_kg",
+            "direction_is_worst_case",
+            "tip_speed_m_s",
+            "ik_iterations",
+        ):
+            np.testing.assert_array_equal(getattr(x, field), getattr(y, field))
+        assert x.score == y.score or (np.isnan(x.score) and np.isnan(y.score))
+
+
+def mixed_arm_urdf() -> str:
+    """A 6-DOF arm whose third and fifth joints are prismatic."""
+    lines = serial_arm_urdf(ARM6_AXES, seed=4).splitlines()
+    for k, line in enumerate(lines):
+        if line.startswith(('<joint name="j3"', '<joint name="j5"')):
+            lines[k] = line.replace('type="revolute"', 'type="prismatic"').replace(
+                'lower="-3.0" upper="3.0"', 'lower="-0.5" upper="0.5"'
+            )
+    return "\n".join(lines)
+
+
+ROBOTS = {
+    "arm6": lambda: RobotModel.from_urdf(serial_arm_urdf(ARM6_AXES), "base_link", "tool"),
+    "arm7": lambda: RobotModel.from_urdf(serial_arm_urdf(ARM7_AXES, seed=1), "base_link", "tool"),
+    "arm4": lambda: RobotModel.from_urdf(
+        serial_arm_urdf(("z", "y", "y", "x"), seed=2), "base_link", "tool"
+    ),
+    "mixed": lambda: RobotModel.from_urdf(mixed_arm_urdf(), "base_link", "tool"),
+}
+
+
+# --- building blocks ------------------------------------------------------------------------
+
+
+def test_exp3_batch_equals_pinocchio() -> None:
+    rng = np.random.default_rng(0)
+    vectors = np.vstack([rng.normal(size=(20, 3)), 1e-7 * rng.normal(size=(5, 3)), np.zeros(3)])
+    for vector, rotation in zip(vectors, exp3_batch(vectors), strict=True):
+        np.testing.assert_allclose(rotation, pin.exp3(vector), rtol=0, atol=1e-15)
+
+
+def test_tip_path_arrays_equal_tip_path() -> None:
+    trajectory = ObjectTrajectory(
+        pose_from_position_quat([1.0, 0.0, 0.03], [0.5, 0.5, 0.5, 0.5], "start"),
+        pose_from_position_quat([1.1, -0.38, 0.16], [0.0, 0.0, 0.2, 0.98], "goal"),
+        2.0,
+        0.05,
+    )
+    s_values, _, _ = trajectory.path_parameter(trajectory.times_s())
+    for grasp in grasps_near_identity(4):
+        poses, tangents = trajectory.tip_path(grasp.transform_tip_to_object, s_values)
+        rotations, translations, tangents_v = tip_path_arrays(
+            trajectory, grasp.transform_tip_to_object, s_values
+        )
+        np.testing.assert_allclose(rotations, [p.rotation for p in poses], atol=1e-15)
+        np.testing.assert_allclose(translations, [p.translation for p in poses], atol=1e-15)
+        np.testing.assert_allclose(tangents_v, tangents, atol=1e-15)
+
+
+def test_chain_arrays_reject_continuous_joints() -> None:
+    urdf = serial_arm_urdf(ARM6_AXES).replace(
+        '<joint name="j2" type="revolute">', '<joint name="j2" type="continuous">'
+    )
+    robot = RobotModel.from_urdf(urdf, "base_link", "tool")
+    assert chain_arrays(robot) is None
+    assert not IKSolver(robot).compiled  # auto falls back to the Python path
+    if compiled_available():
+        with pytest.raises(InvalidInputError, match="revolute and prismatic joints only"):
+            IKSolver(robot, backend="compiled")
+
+
+def test_configuration_is_validated() -> None:
+    with pytest.raises(InvalidInputError, match="backend: must be one of auto, compiled"):
+        EvaluationConfig(backend="gpu")
+    with pytest.raises(InvalidInputError, match="workers: must be an integer >= 0"):
+        EvaluationConfig(workers=-1)
+    with pytest.raises(InvalidInputError, match="parallel_min_samples: must be an integer"):
+        EvaluationConfig(parallel_min_samples=1.5)  # type: ignore[arg-type]
+
+
+@needs_numba
+@pytest.mark.parametrize("name", sorted(ROBOTS))
+def test_compiled_mobilities_equal_pinocchio(name: str) -> None:
+    robot = ROBOTS[name]()
+    chain = chain_arrays(robot)
+    assert chain is not None
+    rng = np.random.default_rng(5)
+    q_all = np.array([robot.q_from_positions(random_positions(robot, rng)) for _ in range(10)])
+    for grasp in grasps_near_identity(3):
+        pose = grasp.transform_tip_to_object
+        compiled = translational_mobilities_in_base(robot, BOX, pose, q_all, chain)
+        batched = translational_mobilities_in_base(robot, BOX, pose, q_all)
+        model = augmented_model(robot, BOX, pose)
+        single = [
+            translational_mobility_in_base(robot, model, model.createData(), q) for q in q_all
+        ]
+        np.testing.assert_allclose(compiled, single, rtol=1e-10, atol=1e-14)
+        np.testing.assert_array_equal(batched, single)
+
+
+@needs_numba
+@pytest.mark.parametrize("name", sorted(ROBOTS))
+def test_compiled_ik_equals_python_ik(name: str) -> None:
+    robot = ROBOTS[name]()
+    python, compiled = IKSolver(robot, backend="python"), IKSolver(robot, backend="compiled")
+    rng = np.random.default_rng(6)
+    for _ in range(10):
+        goal = random_positions(robot, rng)
+        target = robot.transform_tip_to_base(goal)
+        start = robot.q_from_positions(
+            np.clip(
+                goal + rng.uniform(-0.4, 0.4, robot.num_joints),
+                robot.lower_limits,
+                robot.upper_limits,
+            )
+        )
+        q_py, ok_py, it_py = python.solve(target, start)
+        q_c, ok_c, it_c = compiled.solve(target, start)
+        assert (ok_py, it_py) == (ok_c, it_c)
+        np.testing.assert_allclose(q_c, q_py, rtol=0, atol=1e-9)
+
+
+@needs_numba
+def test_solve_trajectory_is_the_same_in_both_backends(arm7: RobotModel) -> None:
+    rng = np.random.default_rng(13)
+    seed = random_positions(arm7, rng)
+    trajectory = reach_trajectory(arm7, seed)
+    times = trajectory.times_s()
+    s_values, _, _ = trajectory.path_parameter(times)
+    poses, _ = trajectory.tip_path(pin.SE3.Identity(), s_values)
+    seed_q = arm7.q_from_positions(seed)
+    for config in (IKConfig(), IKConfig(max_joint_step=1e-3)):
+        a = IKSolver(arm7, config, "python").solve_trajectory(poses, times, s_values, seed_q)
+        b = IKSolver(arm7, config, "compiled").solve_trajectory(poses, times, s_values, seed_q)
+        assert a.reason == b.reason
+        np.testing.assert_array_equal(a.iterations, b.iterations)
+        np.testing.assert_allclose(b.q, a.q, rtol=0, atol=1e-9)
+    assert "jumps by" in a.reason
+
+
+# --- whole rankings -------------------------------------------------------------------------
+
+
+def evaluators(robot: RobotModel, **config: object) -> tuple[GraspSafetyEvaluator, ...]:
+    base = EvaluationConfig(workers=1, **config)  # type: ignore[arg-type]
+    return (
+        GraspSafetyEvaluator(robot, replace(base, backend="python")),
+        GraspSafetyEvaluator(robot, replace(base, backend="compiled")),
+    )
+
+
+@needs_numba
+@pytest.mark.parametrize("name", ["arm6", "arm7", "mixed"])  # arm4 cannot follow 6-D paths
+def test_compiled_ranking_equals_python_ranking(name: str) -> None:
+    robot = ROBOTS[name]()
+    rng = np.random.default_rng(7)
+    seed = random_positions(robot, rng)
+    trajectory = reach_trajectory(robot, seed)
+    grasps = grasps_near_identity(6)
+    python, compiled = evaluators(robot)
+    expected = python.rank(grasps, BOX, trajectory, seed_positions=seed)
+    assert len(expected.order) >= 3  # mostly feasible: the comparison has substance
+    assert_same_ranking(compiled.rank(grasps, BOX, trajectory, seed_positions=seed), expected)
+
+
+@needs_numba
+def test_failures_are_the_same_in_both_backends(arm6: RobotModel) -> None:
+    rng = np.random.default_rng(8)
+    seed = random_positions(arm6, rng)
+    trajectory = reach_trajectory(arm6, seed)
+    grasps = [
+        Grasp(pin.SE3(np.eye(3), np.array([0.0, 0.0, 5.0])), "unreachable"),
+        Grasp(pin.SE3.Identity(), "fine"),
+    ]
+    for config in ({}, {"ik": IKConfig(max_joint_step=1e-3)}):
+        python, compiled = evaluators(arm6, **config)
+        a = python.rank(grasps, BOX, trajectory, seed_positions=seed)
+        b = compiled.rank(grasps, BOX, trajectory, seed_positions=seed)
+        assert [e.reason for e in a.evaluations] == [e.reason for e in b.evaluations]
+    assert "from the seed or any restart" in a.evaluations[0].reason
+    assert "jumps by" in a.evaluations[1].reason
+    fast = ObjectTrajectory(
+        trajectory.transform_object_to_base_start,
+        trajectory.transform_object_to_base_goal,
+        0.02,
+        0.001,
+    )
+    python, compiled = evaluators(arm6)
+    a = python.rank(grasps[1:], BOX, fast, seed_positions=seed)
+    b = compiled.rank(grasps[1:], BOX, fast, seed_positions=seed)
+    assert "needs speed" in a.evaluations[0].reason
+    assert a.evaluations[0].reason == b.evaluations[0].reason
+
+
+@needs_numba
+def test_restarts_of_the_first_sample_are_the_same(arm7: RobotModel) -> None:
+    rng = np.random.default_rng(9)
+    goal = random_positions(arm7, rng)
+    trajectory = reach_trajectory(arm7, goal)
+    far_seed = np.clip(-goal, arm7.lower_limits, arm7.upper_limits)
+    python, compiled = evaluators(arm7, ik=IKConfig(max_iterations=15))
+    grasps = grasps_near_identity(3)
+    a = python.rank(grasps, BOX, trajectory, seed_positions=far_seed)
+    b = compiled.rank(grasps, BOX, trajectory, seed_positions=far_seed)
+    assert any(e.feasible and e.ik_iterations[0] > 15 for e in a.evaluations)  # restarted
+    assert_same_ranking(b, a)
+
+
+@needs_numba
+def test_worst_case_direction_when_the_tip_does_not_move(arm6: RobotModel) -> None:
+    rng = np.random.default_rng(10)
+    seed = random_positions(arm6, rng)
+    pose = arm6.transform_tip_to_base(seed)
+    still = ObjectTrajectory(pose, pose, 0.2, 0.05)
+    python, compiled = evaluators(arm6)
+    a = python.rank([Grasp(pin.SE3.Identity())], BOX, still, seed_positions=seed)
+    b = compiled.rank([Grasp(pin.SE3.Identity())], BOX, still, seed_positions=seed)
+    assert a.evaluations[0].direction_is_worst_case.all()
+    assert_same_ranking(b, a)
+
+
+def test_both_backends_equal_the_implementation_before_optimisation(
+    baxter: RobotModel,
+) -> None:
+    path = Path(__file__).resolve().parents[1] / "bench" / "reference.py"
+    if not path.is_file():
+        pytest.skip("bench/reference.py not present")
+    spec = importlib.util.spec_from_file_location("bench_reference", path)
+    assert spec is not None and spec.loader is not None
+    reference = importlib.util.module_from_spec(spec)
+    sys.modules["bench_reference"] = reference
+    spec.loader.exec_module(reference)
+    trajectory = ObjectTrajectory(
+        pose_from_position_quat([1.0, 0.0, 0.03], [0.5, 0.5, 0.5, 0.5], "start"),
+        pose_from_position_quat([1.1, -0.38, 0.16], [0.5, 0.5, 0.5, 0.5], "goal"),
+        2.0,
+        0.04,
+    )
+    book = solid_box(0.34, [0.15, 0.22, 0.015])
+    grasps = [
+        Grasp(pose_from_position_quat([-0.075, y, 0.0], [0, 0, 0, 1], "g")) for y in (-0.1, 0, 0.1)
+    ]
+    ik = reference.ReferenceIK(baxter)
+    seed_q = baxter.q_from_positions(BAXTER_SEED)
+    expected = [
+        reference.reference_evaluate(
+            baxter, ik, g.transform_tip_to_object, book, trajectory, seed_q
+        )
+        for g in grasps
+    ]
+    backends = ["python"] + (["compiled"] if compiled_available() else [])
+    for backend in backends:
+        evaluator = GraspSafetyEvaluator(baxter, EvaluationConfig(backend=backend, workers=1))
+        ranking = evaluator.rank(grasps, book, trajectory, seed_positions=BAXTER_SEED)
+        for evaluation, (feasible, masses, iterations) in zip(
+            ranking.evaluations, expected, strict=True
+        ):
+            assert evaluation.feasible and feasible
+            np.testing.assert_allclose(evaluation.effective_mass_kg, masses, rtol=RTOL)
+            np.testing.assert_array_equal(evaluation.ik_iterations, iterations)
+
+
+# --- pools ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("backend", ["compiled", "python"])
+def test_parallel_ranking_is_identical_to_serial(backend: str, arm7: RobotModel) -> None:
+    if backend == "compiled" and not compiled_available():
+        pytest.skip("numba is not installed")
+    rng = np.random.default_rng(11)
+    seed = random_positions(arm7, rng)
+    trajectory = reach_trajectory(arm7, seed, dt=0.05)
+    grasps = [*grasps_near_identity(8), Grasp(pin.SE3(np.eye(3), np.array([0, 0, 5.0])), "far")]
+    serial = GraspSafetyEvaluator(arm7, EvaluationConfig(backend=backend, workers=1))
+    pooled = GraspSafetyEvaluator(
+        arm7, EvaluationConfig(backend=backend, workers=2, parallel_min_samples=1)
+    )
+    expected = serial.rank(grasps, BOX, trajectory, seed_positions=seed)
+    progress: list[tuple[int, int]] = []
+    got = pooled.rank(
+        grasps, BOX, trajectory, seed_positions=seed, progress=lambda *a: progress.append(a)
+    )
+    assert getattr(pooled, "_grasp_pool", None) is not None  # the pool was used
+    assert progress == [(k, len(grasps)) for k in range(1, len(grasps) + 1)]
+    assert_identical_ranking(got, expected)
+    assert_identical_ranking(pooled.rank(grasps, BOX, trajectory, seed_positions=seed), expected)
+
+
+def test_warm_up_runs_with_and_without_an_evaluator(arm6: RobotModel) -> None:
+    from grasp_safety_ros.core.parallel import warm_up
+
+    assert warm_up() >= 0.0
+    assert warm_up(GraspSafetyEvaluator(arm6)) >= 0.0
+    assert warm_up(GraspSafetyEvaluator(arm6, EvaluationConfig(backend="python"))) == 0.0
+
+
+def test_small_requests_stay_serial(arm6: RobotModel) -> None:
+    evaluator = GraspSafetyEvaluator(arm6, EvaluationConfig(workers=2, parallel_min_samples=10**6))
+    seed = random_positions(arm6, np.random.default_rng(12))
+    evaluator.rank(grasps_near_identity(2), BOX, reach_trajectory(arm6, seed), seed_positions=seed)
+    assert getattr(evaluator, "_grasp_pool", None) is None
