@@ -49,7 +49,7 @@ def test_params_file_declares_exactly_the_node_parameters() -> None:
 
 
 def test_every_parameter_is_documented() -> None:
-    docs = (Path(__file__).resolve().parents[1] / "docs" / "ros.md").read_text()
+    docs = (Path(__file__).resolve().parents[1] / "README.md").read_text()
     for name in PARAMETERS:
         assert f"| `{name}` |" in docs, name
 

@@ -25,6 +25,7 @@ from ..core.exposed_points import (
 )
 from ..core.inertia import ObjectInertia
 from ..core.iso15066 import BODY_REGIONS
+from ..core.parallel import warm_up
 from ..core.ranking import METRICS, EvaluationConfig, GraspSafetyEvaluator
 from ..core.robot import RobotModel
 from ..core.uncertainty import InertiaUncertainty
@@ -532,4 +533,5 @@ def build_robot(settings: NodeSettings, topic_description: str | None) -> RobotB
     except GraspSafetyError as error:
         raise _renamed(error, origin) from None
     evaluator = GraspSafetyEvaluator(robot, EvaluationConfig(metric=settings.metric))
+    warm_up(evaluator)  # compile or load the kernels now, not on the first request
     return RobotBundle(robot=robot, evaluator=evaluator, seed=seed, origin=origin)
