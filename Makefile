@@ -35,7 +35,7 @@ bench: $(IFACE_STAMP)
 	$(PY) bench/run.py --json bench/results.json
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check grasp_safety_ros test bench
+	$(VENV)/bin/ruff check grasp_safety_ros test bench examples
 
 clean:
 	rm -rf $(VENV) build install log

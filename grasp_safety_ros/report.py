@@ -221,16 +221,16 @@ def _iso_lines(report: SafetyReport) -> list[str]:
         "",
         "ISO/TS 15066 transient contact, worst F/F_max over the trajectory "
         "(n/p: transient contact not permitted; > 1: too fast)",
-        f"{'region':<16} " + " ".join(f"{a.name[:12]:>12}" for a in shown),
+        f"{'region':<16} " + " ".join(f"{a.name[:15]:>15}" for a in shown),
     ]
     for j, region in enumerate(shown[0].regions):
-        cells = " ".join(f"{_ratio(a.regions[j].worst_force_ratio):>12}" for a in shown)
+        cells = " ".join(f"{_ratio(a.regions[j].worst_force_ratio):>15}" for a in shown)
         lines.append(f"{region.region.name[:16]:<16} {cells}")
     lines.append(
-        f"{'admissible':<16} "
-        + " ".join(f"{'yes' if a.admissible_where_permitted else 'no':>12}" for a in shown)
+        f"{'ok where allowed':<16} "
+        + " ".join(f"{'yes' if a.admissible_where_permitted else 'no':>15}" for a in shown)
     )
-    lines.append(f"{'T_min [s]':<16} " + " ".join(f"{a.min_duration_s:>12.3f}" for a in shown))
+    lines.append(f"{'T_min [s]':<16} " + " ".join(f"{a.min_duration_s:>15.3f}" for a in shown))
     if len(by_index) > len(shown):
         lines.append(f"({len(by_index) - len(shown)} more feasible grasps in the JSON output)")
     return lines
