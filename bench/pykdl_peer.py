@@ -5,10 +5,11 @@ xml.etree: joints base -> tip, origins rpy/xyz, axes, link inertials). Kinematic
 joint-space inertia come from KDL (ChainFkSolverPos_recursive, ChainJntToJacSolver,
 ChainDynParam.JntToMass). The IK is the same damped Gauss-Newton loop as the core's (error
 log6 of current^-1 * target in the tip frame, Jlog6, same damping, step limit, tolerances
-1e-6 m / 1e-6 rad, secant warm start, deterministic restarts, jump and speed checks), with
-its SE(3) log written in numpy. The effective mass is computed as the paper would have:
-Lambda = (J M^-1 J^T)^-1 (numpy inverses), Lambda_tot = Lambda + Lambda_obj (Khatib's
-augmented object, T^T Lambda_com T), then [Lambda_tot^-1]_3x3 and 1 / (u^T A u).
+1e-6 m / 1e-6 rad, the same first-order warm start q_{i-1} + J^+ log6(T_{i-1}^-1 T_i),
+deterministic restarts, jump and speed checks), with its SE(3) log written in numpy. The
+effective mass is computed as the paper would have: Lambda = (J M^-1 J^T)^-1 (numpy
+inverses), Lambda_tot = Lambda + Lambda_obj (Khatib's augmented object, T^T Lambda_com T),
+then [Lambda_tot^-1]_3x3 and 1 / (u^T A u).
 
 Nothing here uses Pinocchio: only the URDF file location comes from the core.
 """
@@ -359,6 +360,8 @@ class PyKDLPipeline:
         self._frame = kdl.Frame()
         self._jacobian = kdl.Jacobian(self.n)
         self._mass = kdl.JntSpaceInertiaMatrix(self.n)
+        self.last_tip_rotation = np.eye(3)
+        """Tip rotation (base axes) at the configuration ``solve`` last returned."""
 
     # --- KDL calls, converted to numpy
     def _set_q(self, q: np.ndarray) -> None:
@@ -389,10 +392,11 @@ class PyKDLPipeline:
     def solve(
         self, target_r: np.ndarray, target_p: np.ndarray, q_init: np.ndarray
     ) -> tuple[np.ndarray, bool, int]:
-        config, n = self.config, self.n
+        config = self.config
         q = np.clip(np.array(q_init, dtype=float), self.chain.lower, self.chain.upper)
         for iteration in range(config.max_iterations + 1):
             rotation, position = self.forward(q)
+            self.last_tip_rotation = rotation
             error_r = rotation.T @ target_r
             error_p = rotation.T @ (target_p - position)
             error = log6(error_r, error_p)
@@ -406,20 +410,41 @@ class PyKDLPipeline:
             jacobian_base = self.jacobian(q)
             local = np.vstack([rotation.T @ jacobian_base[:3], rotation.T @ jacobian_base[3:]])
             jacobian = jlog6(error_r.T, -error_r.T @ error_p) @ local
-            damping = 1e-12 + 1e-3 * float(error @ error)
-            if n >= 6:
-                step = jacobian.T @ np.linalg.solve(
-                    jacobian @ jacobian.T + damping * np.eye(6), error
-                )
-            else:
-                step = np.linalg.solve(
-                    jacobian.T @ jacobian + damping * np.eye(n), jacobian.T @ error
-                )
-            largest = float(np.abs(step).max())
-            if largest > config.max_iteration_step:
-                step *= config.max_iteration_step / largest
-            q = np.clip(q + step, self.chain.lower, self.chain.upper)
+            q = np.clip(q + self._damped_step(jacobian, error), self.chain.lower, self.chain.upper)
         return q, False, config.max_iterations
+
+    def _damped_step(self, jacobian: np.ndarray, error: np.ndarray) -> np.ndarray:
+        """Damped minimum-norm solution of jacobian @ step = error, step-limited (the core's)."""
+        n = self.n
+        damping = 1e-12 + 1e-3 * float(error @ error)
+        if n >= 6:
+            step = jacobian.T @ np.linalg.solve(jacobian @ jacobian.T + damping * np.eye(6), error)
+        else:
+            step = np.linalg.solve(jacobian.T @ jacobian + damping * np.eye(n), jacobian.T @ error)
+        largest = float(np.abs(step).max())
+        if largest > self.config.max_iteration_step:
+            step *= self.config.max_iteration_step / largest
+        return step
+
+    def predict(
+        self,
+        q_previous: np.ndarray,
+        tip_rotation: np.ndarray,
+        rotation_previous: np.ndarray,
+        position_previous: np.ndarray,
+        rotation: np.ndarray,
+        position: np.ndarray,
+    ) -> np.ndarray:
+        """Warm start of the next sample (the core's predictor): q_previous + J^+ xi, xi the
+        tip twist from the previous target to the next (tip axes), J the tip-frame Jacobian
+        at q_previous, where the tip rotation is ``tip_rotation`` (base axes; as the core,
+        this reuses the solve's last forward kinematics)."""
+        jacobian_base = self.jacobian(q_previous)
+        local = np.vstack([tip_rotation.T @ jacobian_base[:3], tip_rotation.T @ jacobian_base[3:]])
+        twist = log6(
+            rotation_previous.T @ rotation, rotation_previous.T @ (position - position_previous)
+        )
+        return q_previous + self._damped_step(local, twist)
 
     def solve_first(
         self, target_r: np.ndarray, target_p: np.ndarray, seed: np.ndarray
@@ -490,10 +515,14 @@ class PyKDLPipeline:
             if i == 0:
                 q, converged, iterations[i] = self.solve_first(rotations[0], positions[0], seed)
             else:
-                guess = q_all[i - 1]
-                if i >= 2 and s_values[i - 1] > s_values[i - 2]:
-                    ratio = (s_values[i] - s_values[i - 1]) / (s_values[i - 1] - s_values[i - 2])
-                    guess = q_all[i - 1] + ratio * (q_all[i - 1] - q_all[i - 2])
+                guess = self.predict(
+                    q_all[i - 1],
+                    self.last_tip_rotation,
+                    rotations[i - 1],
+                    positions[i - 1],
+                    rotations[i],
+                    positions[i],
+                )
                 q, converged, iterations[i] = self.solve(rotations[i], positions[i], guess)
             if not converged:
                 return f"IK did not converge at sample {i}", np.empty(0), q_all[:i], iterations

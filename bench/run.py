@@ -10,8 +10,12 @@ Measured in one process, interleaved, repeated (median and spread):
   from given joint positions / feasible samples); total wall time; IK iterations per sample;
 - ours, parallel (both cores, the evaluator's pool), and the Python/Pinocchio fallback backend;
 - the peer: the same pipeline on PyKDL (bench/pykdl_peer.py), and the ratio;
-- identity: per-sample effective masses vs the pre-issue implementation (bench/reference.py)
-  and vs the peer (max relative difference);
+- identity: per-sample effective masses, feasibility and IK iterations of the compiled vs the
+  Python backend, effective masses vs the peer (same algorithm on PyKDL) and vs the pre-issue
+  effective-mass code (bench/reference.py) on our joint paths (max relative differences);
+- the pre-issue implementation (bench/reference.py, secant IK warm start): its time, its
+  feasible grasps, and the self-motion of its joint paths vs ours (the null-space share of
+  each joint step, |(I - J^+ J) dq| / |dq|);
 - the physical floor (4k flops per evaluation + 2k per IK iteration) and our distance to it;
 - where the time goes (cProfile of one ranking, ours and the peer's);
 - service latency: 10 grasps x 101 samples through the running node (in-process, rclpy),
@@ -25,6 +29,7 @@ from __future__ import annotations
 import argparse
 import cProfile
 import io
+import itertools
 import json
 import math
 import os
@@ -43,7 +48,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np
 from pykdl_peer import PyKDLPipeline, build_chain, load_pykdl
-from reference import ReferenceIK, reference_evaluate
+from reference import ReferenceIK, reference_effective_masses
 from workload import ARMS, ArmWorkload, box_object, grasps_around_box
 
 from grasp_safety_ros.core import GraspSafetyEvaluator
@@ -94,6 +99,25 @@ def rel_diff(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.max(np.abs(a / b - 1.0))) if len(a) else 0.0
 
 
+def self_motion_fractions(robot: Any, q_path: np.ndarray) -> np.ndarray:
+    """|(I - J^+ J) dq| / |dq| of each joint step dq of q_path, J the tip Jacobian at its
+    start: the share of the step that moves the arm along its self-motion manifold."""
+    import pinocchio as pin
+
+    model, data = robot.model, robot.model.createData()
+    jacobians = np.array(
+        [
+            pin.computeFrameJacobian(model, data, q, robot.tip_frame_id, pin.LOCAL)
+            for q in q_path[:-1]
+        ]
+    )
+    steps = np.array([pin.difference(model, a, b) for a, b in itertools.pairwise(q_path)])
+    row_space = np.einsum("nij,nj->ni", np.linalg.pinv(jacobians) @ jacobians, steps)
+    norms = np.linalg.norm(steps, axis=1)
+    moving = norms > 0
+    return np.linalg.norm(steps - row_space, axis=1)[moving] / norms[moving]
+
+
 # ----------------------------------------------------------------------------- one arm
 def bench_arm(arm: ArmWorkload, args: argparse.Namespace, kdl: Any) -> dict[str, Any]:
     robot = arm.robot()
@@ -130,27 +154,61 @@ def bench_arm(arm: ArmWorkload, args: argparse.Namespace, kdl: Any) -> dict[str,
         np.concatenate([e.ik_iterations[1:] for e in feasible]).mean()
     )
 
-    # Identity with the pre-issue implementation (every grasp).
-    print(f"[{arm.name}] identity check vs the pre-issue implementation", file=sys.stderr)
+    # The pre-issue implementation (every grasp): the body of reference_evaluate, timed.
+    print(f"[{arm.name}] the pre-issue implementation (secant warm start)", file=sys.stderr)
     reference_ik = ReferenceIK(robot)
     seed_q = robot.q_from_positions(seed)
-    worst, same_feasibility, same_iterations = 0.0, True, True
+    times_s = trajectory.times_s()
+    s_values, _, _ = trajectory.path_parameter(times_s)
+    reference_paths: list[np.ndarray | None] = []
     start = time.perf_counter()
-    for grasp, evaluation in zip(grasps, ranking.evaluations, strict=True):
-        ok, masses, ref_iterations = reference_evaluate(
-            robot, reference_ik, grasp.transform_tip_to_object, obj, trajectory, seed_q
-        )
-        same_feasibility &= ok == evaluation.feasible
-        if ok and evaluation.feasible:
-            worst = max(worst, rel_diff(evaluation.effective_mass_kg, masses))
-            same_iterations &= bool(np.array_equal(ref_iterations, evaluation.ik_iterations))
+    for grasp in grasps:
+        poses, tangents = trajectory.tip_path(grasp.transform_tip_to_object, s_values)
+        q_path, _, reason = reference_ik.solve_trajectory(poses, times_s, s_values, seed_q)
+        if not reason:
+            reference_effective_masses(robot, grasp.transform_tip_to_object, obj, q_path, tangents)
+        reference_paths.append(None if reason else q_path)
     reference_s = time.perf_counter() - start
+    # Its effective-mass code on our joint paths (the identity that still holds), and how its
+    # joint paths differ from ours (self-motion).
+    worst, path_diff = 0.0, 0.0
+    ours_self_motion, reference_self_motion = [], []
+    for grasp, evaluation, q_reference in zip(
+        grasps, ranking.evaluations, reference_paths, strict=True
+    ):
+        if q_reference is not None and len(q_reference) > 1:
+            reference_self_motion.append(float(self_motion_fractions(robot, q_reference).max()))
+        if not evaluation.feasible:
+            continue
+        q_ours = np.array([robot.q_from_positions(p) for p in evaluation.joint_positions])
+        _, tangents = trajectory.tip_path(grasp.transform_tip_to_object, s_values)
+        masses = reference_effective_masses(
+            robot, grasp.transform_tip_to_object, obj, q_ours, tangents
+        )
+        worst = max(worst, rel_diff(evaluation.effective_mass_kg, masses))
+        if len(q_ours) > 1:
+            ours_self_motion.append(float(self_motion_fractions(robot, q_ours).max()))
+        if q_reference is not None:
+            path_diff = max(path_diff, float(np.abs(q_reference - q_ours).max()))
+    names_ours = {g.name for g, e in zip(grasps, ranking.evaluations, strict=True) if e.feasible}
+    names_reference = {
+        g.name for g, q in zip(grasps, reference_paths, strict=True) if q is not None
+    }
     out["reference"] = {
-        "max_rel_diff": worst,
-        "same_feasibility": same_feasibility,
-        "same_ik_iterations": same_iterations,
+        "ik_warm_start": "secant (extrapolates the previous joint step)",
         "wall_s": reference_s,
         "us_per_sample_with_ik": reference_s / total * 1e6,
+        "feasible_grasps": len(names_reference),
+        "feasible_only_with_ours": sorted(names_ours - names_reference),
+        "feasible_only_with_reference": sorted(names_reference - names_ours),
+        "effective_mass_max_rel_diff_on_our_paths": worst,
+        "max_joint_path_diff_rad": path_diff,
+    }
+    out["self_motion_fraction"] = {
+        "ours_max": max(ours_self_motion, default=0.0),
+        "ours_median_of_grasp_max": float(np.median(ours_self_motion)),
+        "reference_max": max(reference_self_motion, default=0.0),
+        "reference_median_of_grasp_max": float(np.median(reference_self_motion)),
     }
 
     # Peer.
@@ -245,13 +303,21 @@ def bench_arm(arm: ArmWorkload, args: argparse.Namespace, kdl: Any) -> dict[str,
     out["us_per_sample_with_ik_parallel"] = summary([t / total * 1e6 for t in timings["parallel"]])
     out["parallel_speedup"] = with_ik["median"] / out["us_per_sample_with_ik_parallel"]["median"]
     out["python_backend_us_per_sample_with_ik"] = fallback_s / total * 1e6
+    pairs = list(zip(fallback_ranking.evaluations, ranking.evaluations, strict=True))
     out["python_backend_max_rel_diff"] = max(
         (
             rel_diff(a.effective_mass_kg, b.effective_mass_kg)
-            for a, b in zip(fallback_ranking.evaluations, ranking.evaluations, strict=True)
+            for a, b in pairs
             if a.feasible and b.feasible
         ),
         default=0.0,
+    )
+    out["python_backend_same_feasibility"] = all(a.feasible == b.feasible for a, b in pairs)
+    # The last iterate of a sample that does not converge (100 iterations) is chaotic: the
+    # joints it leaves at a limit, named in the reason, may differ by rounding.
+    out["python_backend_reasons_differ"] = [b.name for a, b in pairs if a.reason != b.reason]
+    out["python_backend_same_ik_iterations"] = all(
+        np.array_equal(a.ik_iterations, b.ik_iterations) for a, b in pairs
     )
     floor = (
         FLOPS_PER_EVALUATION + FLOPS_PER_IK_ITERATION * out["ik_iterations_per_sample"]
@@ -480,7 +546,26 @@ def main(argv: Sequence[str] | None = None) -> int:
         "max_rel_diff_vs_pykdl": max(
             (a["pykdl"]["max_rel_diff"] for a in arms.values() if "pykdl" in a), default=None
         ),
-        "max_rel_diff_vs_reference": max(a["reference"]["max_rel_diff"] for a in arms.values()),
+        "max_rel_diff_compiled_vs_python": max(
+            a["python_backend_max_rel_diff"] for a in arms.values()
+        ),
+        "compiled_vs_python_same_feasibility_and_iterations": all(
+            a["python_backend_same_feasibility"] and a["python_backend_same_ik_iterations"]
+            for a in arms.values()
+        ),
+        "max_rel_diff_vs_reference_effective_mass": max(
+            a["reference"]["effective_mass_max_rel_diff_on_our_paths"] for a in arms.values()
+        ),
+        "feasible_grasps": {name: a["feasible_grasps"] for name, a in arms.items()},
+        "feasible_grasps_reference_secant": {
+            name: a["reference"]["feasible_grasps"] for name, a in arms.items()
+        },
+        "self_motion_fraction_max": max(
+            a["self_motion_fraction"]["ours_max"] for a in arms.values()
+        ),
+        "self_motion_fraction_max_reference_secant": max(
+            a["self_motion_fraction"]["reference_max"] for a in arms.values()
+        ),
         "floor_us_per_sample": worst("floor_us_per_sample", min),
         "distance_to_floor": worst("distance_to_floor"),
         "service_latency_ms_median": service.get("median_ms"),
@@ -537,10 +622,20 @@ def print_table(results: dict[str, Any]) -> None:
             f"us/sample, wall {fmt(arm['wall_s_parallel']['median'], '.3f')} s "
             f"(x{fmt(arm['parallel_speedup'])})"
         )
+        same = arm["python_backend_same_feasibility"] and arm["python_backend_same_ik_iterations"]
         print(
-            f"  python backend: {fmt(arm['python_backend_us_per_sample_with_ik'])} us/sample; "
-            f"pre-issue code: {fmt(arm['reference']['us_per_sample_with_ik'])} us/sample, "
-            f"max rel diff {fmt(arm['reference']['max_rel_diff'], '.1e')}"
+            f"  python backend: {fmt(arm['python_backend_us_per_sample_with_ik'])} us/sample, "
+            f"max rel diff {fmt(arm['python_backend_max_rel_diff'], '.1e')}, "
+            f"{'same' if same else 'DIFFERENT'} feasibility and IK iterations"
+        )
+        ref, motion = arm["reference"], arm["self_motion_fraction"]
+        print(
+            f"  pre-issue code (secant warm start): {fmt(ref['us_per_sample_with_ik'])} "
+            f"us/sample, {ref['feasible_grasps']} feasible; its effective masses on our paths: "
+            f"max rel diff {fmt(ref['effective_mass_max_rel_diff_on_our_paths'], '.1e')}; "
+            f"self-motion share of joint steps: ours max {fmt(motion['ours_max'], '.1e')}, "
+            f"secant max {fmt(motion['reference_max'], '.2f')} "
+            f"(median {fmt(motion['reference_median_of_grasp_max'], '.2f')})"
         )
         if "pykdl" in arm:
             p = arm["pykdl"]

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -15,6 +17,7 @@ from grasp_safety_ros.core import (
     RobotModel,
     solid_box,
 )
+from grasp_safety_ros.core.ik import compiled_available
 from grasp_safety_ros.core.validation import pose_from_position_quat
 
 
@@ -94,3 +97,95 @@ def test_joint_jump_is_infeasible(arm6: RobotModel) -> None:
         poses, np.array([0.0, 0.1]), np.array([0.0, 1.0]), arm6.q_from_positions(positions)
     )
     assert not result.feasible and "jumps by" in result.reason
+
+
+# --- warm start along a trajectory: no drift along the self-motion manifold ----------------
+
+ARM7_START = np.array([-1.43, -1.209, 1.885, -2.449, 0.601, 1.371, -1.873])
+"""A configuration of conftest's arm7 with every joint far from its limits along the path."""
+
+
+def arm7_reach(
+    robot: RobotModel, duration_s: float
+) -> tuple[list[pin.SE3], np.ndarray, np.ndarray]:
+    """Tip poses, times [s] and path parameters of a 101-sample quintic reach from ARM7_START
+    (turn by 0.54 rad, move by 0.21 m); the same path for every duration."""
+    start = robot.transform_tip_to_base(ARM7_START)
+    goal = pin.SE3(
+        start.rotation @ pin.exp3(np.array([0.3, -0.2, 0.4])),
+        start.translation + np.array([0.15, -0.1, 0.1]),
+    )
+    trajectory = ObjectTrajectory(start, goal, duration_s, duration_s / 100)
+    times = trajectory.times_s()
+    s_values, _, _ = trajectory.path_parameter(times)
+    poses, _ = trajectory.tip_path(pin.SE3.Identity(), s_values)
+    return poses, times, s_values
+
+
+def self_motion_fractions(robot: RobotModel, q_path: np.ndarray) -> np.ndarray:
+    """|(I - J^+ J) dq| / |dq| of each joint step dq, J the tip Jacobian at its start."""
+    data = robot.model.createData()
+    fractions = []
+    for q, q_next in itertools.pairwise(q_path):
+        jacobian = pin.computeFrameJacobian(
+            robot.model, data, q, robot.tip_frame_id, pin.ReferenceFrame.LOCAL
+        )
+        step = pin.difference(robot.model, q, q_next)
+        null_part = step - np.linalg.pinv(jacobian) @ (jacobian @ step)
+        fractions.append(np.linalg.norm(null_part) / np.linalg.norm(step))
+    return np.array(fractions)
+
+
+def secant_path(
+    solver: IKSolver, poses: list[pin.SE3], s_values: np.ndarray, q0: np.ndarray
+) -> np.ndarray:
+    """The warm start used before (extrapolating the previous joint step), for contrast."""
+    q_path = [q0]
+    for i in range(1, len(poses)):
+        guess = q_path[-1]
+        if i >= 2:
+            ratio = (s_values[i] - s_values[i - 1]) / (s_values[i - 1] - s_values[i - 2])
+            guess = q_path[-1] + ratio * (q_path[-1] - q_path[-2])
+        q, converged, _ = solver.solve(poses[i], guess)
+        assert converged
+        q_path.append(q)
+    return np.array(q_path)
+
+
+BACKENDS = ["python"] + (["compiled"] if compiled_available() else [])
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_trajectory_has_no_self_motion(backend: str, arm7: RobotModel) -> None:
+    """Every joint step of a 7-DOF path is (up to the Jacobian's change over one step) in the
+    row space of J: the path is the minimum-norm one. Extrapolating the previous joint step
+    (the former warm start) carries null-space motion on and amplifies it while the path
+    accelerates: up to ~90 % of the step on this path."""
+    poses, times, s_values = arm7_reach(arm7, 1.0)
+    solver = IKSolver(arm7, backend=backend)
+    q0 = arm7.q_from_positions(ARM7_START)
+    result = solver.solve_trajectory(poses, times, s_values, q0)
+    assert result.feasible, result.reason
+    assert np.all(np.abs(result.q) < 2.9)  # no joint limit (3 rad) constrains the path
+    assert self_motion_fractions(arm7, result.q).max() < 1e-3
+    assert self_motion_fractions(arm7, secant_path(solver, poses, s_values, q0)).max() > 0.5
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_self_motion_does_not_make_a_path_too_fast(backend: str, arm7: RobotModel) -> None:
+    """The same path in 0.2 s: the minimum-norm joint path stays under the 10 rad/s limits and
+    reproduces every tip pose; the secant's self-motion would have needed more than 10 rad/s
+    (the grasp was rejected as too fast)."""
+    poses, times, s_values = arm7_reach(arm7, 0.2)
+    solver = IKSolver(arm7, backend=backend)
+    q0 = arm7.q_from_positions(ARM7_START)
+    result = solver.solve_trajectory(poses, times, s_values, q0)
+    assert result.feasible, result.reason
+    speeds = np.abs(np.diff(result.q, axis=0)) / np.diff(times)[:, None]
+    assert speeds.max() < 0.95 * arm7.velocity_limits.min()
+    for q, target in zip(result.q, poses, strict=True):
+        position_error, angle_error = pose_error(arm7, arm7.positions_from_q(q), target)
+        assert position_error <= 1e-6 and angle_error <= 1e-6
+    secant = secant_path(solver, poses, s_values, q0)
+    secant_speeds = np.abs(np.diff(secant, axis=0)) / np.diff(times)[:, None]
+    assert np.any(secant_speeds > arm7.velocity_limits)

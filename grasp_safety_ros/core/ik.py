@@ -1,5 +1,13 @@
 """Inverse kinematics of the tip frame along a trajectory (damped Gauss-Newton on SE(3)).
 
+Along a trajectory each sample is warm-started by a first-order predictor from the previous
+solution, q_guess = q_{i-1} (+) J^+(q_{i-1}) xi_i: xi_i = log6(T_{i-1}^-1 T_i) is the tip twist
+between consecutive targets (tip frame) and J^+ the damped minimum-norm pseudo-inverse of the
+tip-frame (LOCAL) Jacobian at q_{i-1} (the same damping and step limit as the Gauss-Newton
+correction). Neither the predictor nor the correction steps have a null-space component, so on
+redundant arms the path follows the minimum-norm solution and does not drift along the
+self-motion manifold (as extrapolating the previous joint step would).
+
 Two implementations of the same algorithm (same warm start, steps, tolerances and checks):
 
 - ``python``: a loop over Pinocchio's Python bindings; works for every chain.
@@ -328,23 +336,46 @@ class IKSolver:
                 model, data, frame_id, pin.ReferenceFrame.LOCAL
             ).reshape(6, n)  # eigenpy returns a 6x1 matrix as a vector
             jacobian = pin.Jlog6(error_transform.inverse()) @ frame_jacobian
-            damping = 1e-12 + 1e-3 * float(error.dot(error))
-            if n >= 6:
-                step = (
-                    jacobian.T
-                    @ self._dgesv(jacobian @ jacobian.T + damping * self._identity6, error)[2]
-                )
-            else:
-                step = self._dgesv(
-                    jacobian.T @ jacobian + damping * self._identity_n, jacobian.T @ error
-                )[2]
-            largest = float(np.abs(step).max())
-            if largest > config.max_iteration_step:
-                step *= config.max_iteration_step / largest
-            q = pin.integrate(model, q, step)
+            q = pin.integrate(model, q, self._damped_step(jacobian, error))
             np.maximum(q, lower, out=q)
             np.minimum(q, upper, out=q)
         return q, False, config.max_iterations
+
+    def _damped_step(self, jacobian: np.ndarray, error: np.ndarray) -> np.ndarray:
+        """Damped minimum-norm solution of jacobian @ step = error (6 x n), step-limited.
+
+        Damping 1e-12 + 1e-3 |error|^2; n >= 6: step = J^T (J J^T + damping I)^-1 error (no
+        null-space component), else (J^T J + damping I)^-1 J^T error. A step whose largest
+        entry exceeds ``max_iteration_step`` is scaled down to it (same direction). Solved by
+        LAPACK's LU here, by LDL^T in the compiled kernel (equal to rounding).
+        """
+        damping = 1e-12 + 1e-3 * float(error.dot(error))
+        if jacobian.shape[1] >= 6:
+            step = (
+                jacobian.T
+                @ self._dgesv(jacobian @ jacobian.T + damping * self._identity6, error)[2]
+            )
+        else:
+            step = self._dgesv(
+                jacobian.T @ jacobian + damping * self._identity_n, jacobian.T @ error
+            )[2]
+        largest = float(np.abs(step).max())
+        if largest > self.config.max_iteration_step:
+            step *= self.config.max_iteration_step / largest
+        return step
+
+    def _predict(self, q_previous: np.ndarray, motion_tip: pin.SE3) -> np.ndarray:
+        """The warm start q_previous (+) J^+ log6(motion_tip) of the next sample.
+
+        ``self.data`` must hold the joint Jacobians at q_previous (computeJointJacobians, as
+        left by the solve that returned it); motion_tip: previous target^-1 * next target.
+        """
+        model = self.robot.model
+        frame_jacobian = pin.getFrameJacobian(
+            model, self.data, self.robot.tip_frame_id, pin.ReferenceFrame.LOCAL
+        ).reshape(6, model.nv)
+        twist_in_tip = pin.log6(motion_tip).vector
+        return pin.integrate(model, q_previous, self._damped_step(frame_jacobian, twist_in_tip))
 
     def solve_first(
         self, transform_tip_to_base: pin.SE3, seed_q: np.ndarray
@@ -369,11 +400,19 @@ class IKSolver:
         s_values: np.ndarray,
         seed_q: np.ndarray,
     ) -> IKTrajectoryResult:
-        """Solve every sample, each warm-started by extrapolating the two previous solutions.
+        """Solve every sample, each warm-started by the first-order predictor from the previous
+        solution (module docstring): the joint path has no self-motion.
 
         The result is infeasible (with a reason) when a sample does not converge, or joint
         positions jump by more than ``max_joint_step`` or exceed the velocity limits between
         consecutive samples.
+
+        Args:
+            transforms_tip_to_base: Tip pose of each sample.
+            times_s: Sample times [s] (for the velocity check).
+            s_values: Path parameters of the samples (unused by the predictor, which needs
+                only the poses; kept so callers need not change).
+            seed_q: Seed of sample 0 (then deterministic random restarts).
         """
         rotations = np.array([pose.rotation for pose in transforms_tip_to_base]).reshape(-1, 3, 3)
         translations = np.array([pose.translation for pose in transforms_tip_to_base])
@@ -413,11 +452,11 @@ class IKSolver:
         )
         if self.compiled:
             status, index, joint, value, q_all, iterations, q_fail = self._trajectory_compiled(
-                rotations_world, translations_world, times_s, s_values, q0, check_velocity
+                rotations_world, translations_world, times_s, q0, check_velocity
             )
         else:
             status, index, joint, value, q_all, iterations, q_fail = self._trajectory_python(
-                rotations_world, translations_world, times_s, s_values, q0, check_velocity
+                rotations_world, translations_world, times_s, q0, check_velocity
             )
         iterations[0] = iterations0
         if status == _OK:
@@ -473,7 +512,6 @@ class IKSolver:
         rotations_world: np.ndarray,
         translations_world: np.ndarray,
         times_s: np.ndarray,
-        s_values: np.ndarray,
         q0: np.ndarray,
         check_velocity: np.ndarray,
     ) -> tuple[int, int, int, float, np.ndarray, np.ndarray, np.ndarray]:
@@ -488,7 +526,6 @@ class IKSolver:
             np.ascontiguousarray(rotations_world),
             np.ascontiguousarray(translations_world),
             np.ascontiguousarray(times_s, dtype=float),
-            np.ascontiguousarray(s_values, dtype=float),
             np.asarray(q0, dtype=float),
             config.position_tolerance_m,
             config.orientation_tolerance_rad,
@@ -508,7 +545,6 @@ class IKSolver:
         rotations_world: np.ndarray,
         translations_world: np.ndarray,
         times_s: np.ndarray,
-        s_values: np.ndarray,
         q0: np.ndarray,
         check_velocity: np.ndarray,
     ) -> tuple[int, int, int, float, np.ndarray, np.ndarray, np.ndarray]:
@@ -519,13 +555,12 @@ class IKSolver:
         q_all[0] = q0
         velocity_limits = self.robot.velocity_limits
         any_velocity_check = bool(check_velocity.any())
+        pin.computeJointJacobians(model, self.data, q0)  # _predict's Jacobian at q_all[0]
+        previous = pin.SE3(rotations_world[0], translations_world[0])
         for i in range(1, count):
             target = pin.SE3(rotations_world[i], translations_world[i])
-            guess = q_all[i - 1]
-            if i >= 2 and s_values[i - 1] > s_values[i - 2]:
-                ratio = (s_values[i] - s_values[i - 1]) / (s_values[i - 1] - s_values[i - 2])
-                velocity = pin.difference(model, q_all[i - 2], q_all[i - 1])
-                guess = pin.integrate(model, q_all[i - 1], ratio * velocity)
+            guess = self._predict(q_all[i - 1], previous.actInv(target))
+            previous = target
             q, converged, iterations[i] = self._solve_python(target, guess)
             if not converged:
                 return _NOT_CONVERGED, i, 0, 0.0, q_all, iterations, q

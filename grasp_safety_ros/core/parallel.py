@@ -362,6 +362,187 @@ def _lu_solve(a, b, m):
 
 # ----------------------------------------------------------------------------- IK
 @_jit
+def _relative_pose(rotation_a, translation_a, rotation_b, translation_b, out_r, out_p):
+    """(rotation_a, translation_a)^-1 * (rotation_b, translation_b) into (out_r, out_p)."""
+    d0 = translation_b[0] - translation_a[0]
+    d1 = translation_b[1] - translation_a[1]
+    d2 = translation_b[2] - translation_a[2]
+    for i in range(3):
+        f0, f1, f2 = rotation_a[0, i], rotation_a[1, i], rotation_a[2, i]
+        out_p[i] = f0 * d0 + f1 * d1 + f2 * d2
+        for j in range(3):
+            out_r[i, j] = f0 * rotation_b[0, j] + f1 * rotation_b[1, j] + f2 * rotation_b[2, j]
+
+
+@_jit
+def _damped_step(jacobian, error, max_iteration_step, system, rhs, step):
+    """IKSolver._damped_step, compiled: the step-limited damped minimum-norm solution of
+    jacobian (6 x n) @ step = error, into step (system, rhs: scratch).
+
+    n >= 6: (J J^T + damping I) y = error, symmetric positive definite, is solved by LDL^T,
+    step = J^T y. Rounding could make a pivot non-positive only where the damping (>= 1e-12)
+    is below eps |J|^2, i.e. at a singularity of an arm with lever arms of tens of metres:
+    then LU with partial pivoting, as before.
+    """
+    n = step.shape[0]
+    e0, e1, e2, e3, e4, e5 = error[0], error[1], error[2], error[3], error[4], error[5]
+    damping = 1e-12 + 1e-3 * (e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3 + e4 * e4 + e5 * e5)
+    if n < 6:
+        for a in range(n):
+            for b in range(n):
+                total = 0.0
+                for i in range(6):
+                    total += jacobian[i, a] * jacobian[i, b]
+                system[a, b] = total
+            system[a, a] += damping
+            total = 0.0
+            for i in range(6):
+                total += jacobian[i, a] * error[i]
+            rhs[a] = total
+        _lu_solve(system, rhs, n)
+        for k in range(n):
+            step[k] = rhs[k]
+    else:
+        # J J^T: lower triangle in 21 independent sums (no latency chain through memory).
+        a00 = a10 = a11 = a20 = a21 = a22 = a30 = a31 = a32 = a33 = 0.0
+        a40 = a41 = a42 = a43 = a44 = a50 = a51 = a52 = a53 = a54 = a55 = 0.0
+        for k in range(n):
+            j0, j1, j2 = jacobian[0, k], jacobian[1, k], jacobian[2, k]
+            j3, j4, j5 = jacobian[3, k], jacobian[4, k], jacobian[5, k]
+            a00 += j0 * j0
+            a10 += j1 * j0
+            a11 += j1 * j1
+            a20 += j2 * j0
+            a21 += j2 * j1
+            a22 += j2 * j2
+            a30 += j3 * j0
+            a31 += j3 * j1
+            a32 += j3 * j2
+            a33 += j3 * j3
+            a40 += j4 * j0
+            a41 += j4 * j1
+            a42 += j4 * j2
+            a43 += j4 * j3
+            a44 += j4 * j4
+            a50 += j5 * j0
+            a51 += j5 * j1
+            a52 += j5 * j2
+            a53 += j5 * j3
+            a54 += j5 * j4
+            a55 += j5 * j5
+        a00 += damping
+        a11 += damping
+        a22 += damping
+        a33 += damping
+        a44 += damping
+        a55 += damping
+        s = system
+        s[0, 0] = a00
+        s[1, 0], s[1, 1] = a10, a11
+        s[2, 0], s[2, 1], s[2, 2] = a20, a21, a22
+        s[3, 0], s[3, 1], s[3, 2], s[3, 3] = a30, a31, a32, a33
+        s[4, 0], s[4, 1], s[4, 2], s[4, 3], s[4, 4] = a40, a41, a42, a43, a44
+        s[5, 0], s[5, 1], s[5, 2], s[5, 3], s[5, 4], s[5, 5] = a50, a51, a52, a53, a54, a55
+        # LDL^T in place: L below the diagonal, 1/D on it, L D above it.
+        definite = True
+        for j in range(6):
+            total = s[j, j]
+            for k in range(j):
+                total -= s[j, k] * s[k, j]
+            if not total > 0.0:
+                definite = False
+                break
+            inverse = 1.0 / total
+            s[j, j] = inverse
+            for i in range(j + 1, 6):
+                total = s[i, j]
+                for k in range(j):
+                    total -= s[i, k] * s[k, j]
+                s[j, i] = total
+                s[i, j] = total * inverse
+        if definite:
+            for i in range(6):
+                total = error[i]
+                for k in range(i):
+                    total -= s[i, k] * rhs[k]
+                rhs[i] = total
+            for i in range(6):
+                rhs[i] *= s[i, i]
+            for i in range(5, -1, -1):
+                total = rhs[i]
+                for k in range(i + 1, 6):
+                    total -= s[k, i] * rhs[k]
+                rhs[i] = total
+        else:  # pragma: no cover - see the docstring
+            s[0, 0], s[0, 1], s[0, 2], s[0, 3], s[0, 4], s[0, 5] = a00, a10, a20, a30, a40, a50
+            s[1, 0], s[1, 1], s[1, 2], s[1, 3], s[1, 4], s[1, 5] = a10, a11, a21, a31, a41, a51
+            s[2, 0], s[2, 1], s[2, 2], s[2, 3], s[2, 4], s[2, 5] = a20, a21, a22, a32, a42, a52
+            s[3, 0], s[3, 1], s[3, 2], s[3, 3], s[3, 4], s[3, 5] = a30, a31, a32, a33, a43, a53
+            s[4, 0], s[4, 1], s[4, 2], s[4, 3], s[4, 4], s[4, 5] = a40, a41, a42, a43, a44, a54
+            s[5, 0], s[5, 1], s[5, 2], s[5, 3], s[5, 4], s[5, 5] = a50, a51, a52, a53, a54, a55
+            for i in range(6):
+                rhs[i] = error[i]
+            _lu_solve(s, rhs, 6)
+        r0, r1, r2, r3, r4, r5 = rhs[0], rhs[1], rhs[2], rhs[3], rhs[4], rhs[5]
+        for k in range(n):
+            step[k] = (
+                jacobian[0, k] * r0
+                + jacobian[1, k] * r1
+                + jacobian[2, k] * r2
+                + jacobian[3, k] * r3
+                + jacobian[4, k] * r4
+                + jacobian[5, k] * r5
+            )
+    largest = 0.0
+    for k in range(n):
+        if abs(step[k]) > largest:
+            largest = abs(step[k])
+    if largest > max_iteration_step:
+        scale = max_iteration_step / largest
+        for k in range(n):
+            step[k] *= scale
+
+
+@_jit
+def _predict(
+    axes,
+    prismatic,
+    joint_rotations,
+    joint_translations,
+    fr,
+    ft,
+    rotation_previous,
+    translation_previous,
+    rotation_next,
+    translation_next,
+    max_iteration_step,
+    q_previous,
+    guess,
+    er,
+    et,
+    error,
+    jac,
+    system,
+    rhs,
+    step,
+):
+    """IKSolver._predict, compiled: guess = q_previous + J^+ log6(T_{i-1}^-1 T_i).
+
+    joint_*, fr, ft: the joint and tip poses at q_previous (as the solve that returned it
+    leaves them), so the tip-frame Jacobian there costs no forward kinematics; er, et, error,
+    jac, system, rhs, step: scratch.
+    """
+    _local_jacobian(axes, prismatic, joint_rotations, joint_translations, fr, ft, jac)
+    _relative_pose(
+        rotation_previous, translation_previous, rotation_next, translation_next, er, et
+    )
+    _log6(er, et, error)
+    _damped_step(jac, error, max_iteration_step, system, rhs, step)
+    for k in range(step.shape[0]):
+        guess[k] = q_previous[k] + step[k]
+
+
+@_jit
 def _workspace(n):
     """Buffers of one IK / effective-mass evaluation for an n-joint chain."""
     m = 6 if n >= 6 else n
@@ -434,19 +615,7 @@ def _solve_pose_into(
             fr,
             ft,
         )
-        # Error transform current^-1 * target.
-        d0 = target_translation[0] - ft[0]
-        d1 = target_translation[1] - ft[1]
-        d2 = target_translation[2] - ft[2]
-        for i in range(3):
-            f0, f1, f2 = fr[0, i], fr[1, i], fr[2, i]
-            et[i] = f0 * d0 + f1 * d1 + f2 * d2
-            for j in range(3):
-                er[i, j] = (
-                    f0 * target_rotation[0, j]
-                    + f1 * target_rotation[1, j]
-                    + f2 * target_rotation[2, j]
-                )
+        _relative_pose(fr, ft, target_rotation, target_translation, er, et)  # current^-1 target
         _log6(er, et, error)
         position_error = math.sqrt(et[0] * et[0] + et[1] * et[1] + et[2] * et[2])
         angle_error = math.sqrt(error[3] * error[3] + error[4] * error[4] + error[5] * error[5])
@@ -460,54 +629,23 @@ def _solve_pose_into(
             for j in range(3):
                 ir[i, j] = er[j, i]
         _jlog6(ir, it, jlog)
-        for i in range(6):
-            for k in range(n):
-                total = 0.0
-                for j in range(6):
-                    total += jlog[i, j] * jac[j, k]
-                jk[i, k] = total
-        squared = 0.0
-        for i in range(6):
-            squared += error[i] * error[i]
-        damping = 1e-12 + 1e-3 * squared
-        if n >= 6:
-            for i in range(6):
-                for j in range(6):
-                    total = 0.0
-                    for k in range(n):
-                        total += jk[i, k] * jk[j, k]
-                    system[i, j] = total
-                system[i, i] += damping
-                rhs[i] = error[i]
-            _lu_solve(system, rhs, 6)
-            for k in range(n):
-                total = 0.0
-                for i in range(6):
-                    total += jk[i, k] * rhs[i]
-                step[k] = total
-        else:
-            for a in range(n):
-                for b in range(n):
-                    total = 0.0
-                    for i in range(6):
-                        total += jk[i, a] * jk[i, b]
-                    system[a, b] = total
-                system[a, a] += damping
-                total = 0.0
-                for i in range(6):
-                    total += jk[i, a] * error[i]
-                rhs[a] = total
-            _lu_solve(system, rhs, n)
-            for k in range(n):
-                step[k] = rhs[k]
-        largest = 0.0
+        # jk = Jlog6 jac; Jlog6 = [[A, B], [0, A]]: columns independent, no zero products.
+        a00, a01, a02 = jlog[0, 0], jlog[0, 1], jlog[0, 2]
+        a10, a11, a12 = jlog[1, 0], jlog[1, 1], jlog[1, 2]
+        a20, a21, a22 = jlog[2, 0], jlog[2, 1], jlog[2, 2]
+        b00, b01, b02 = jlog[0, 3], jlog[0, 4], jlog[0, 5]
+        b10, b11, b12 = jlog[1, 3], jlog[1, 4], jlog[1, 5]
+        b20, b21, b22 = jlog[2, 3], jlog[2, 4], jlog[2, 5]
         for k in range(n):
-            if abs(step[k]) > largest:
-                largest = abs(step[k])
-        if largest > max_iteration_step:
-            scale = max_iteration_step / largest
-            for k in range(n):
-                step[k] *= scale
+            v0, v1, v2 = jac[0, k], jac[1, k], jac[2, k]
+            w0, w1, w2 = jac[3, k], jac[4, k], jac[5, k]
+            jk[0, k] = a00 * v0 + a01 * v1 + a02 * v2 + b00 * w0 + b01 * w1 + b02 * w2
+            jk[1, k] = a10 * v0 + a11 * v1 + a12 * v2 + b10 * w0 + b11 * w1 + b12 * w2
+            jk[2, k] = a20 * v0 + a21 * v1 + a22 * v2 + b20 * w0 + b21 * w1 + b22 * w2
+            jk[3, k] = a00 * w0 + a01 * w1 + a02 * w2
+            jk[4, k] = a10 * w0 + a11 * w1 + a12 * w2
+            jk[5, k] = a20 * w0 + a21 * w1 + a22 * w2
+        _damped_step(jk, error, max_iteration_step, system, rhs, step)
         for k in range(n):
             q[k] = min(max(q[k] + step[k], lower_q[k]), upper_q[k])
     return False, max_iterations
@@ -570,7 +708,6 @@ def _trajectory_step(
     target_rotations,
     target_translations,
     times,
-    s_values,
     i,
     position_tolerance,
     orientation_tolerance,
@@ -587,15 +724,34 @@ def _trajectory_step(
     q,
     ws,
 ):
-    """Sample i >= 1 of IKSolver._trajectory_python: (status, joint, value); status 0 is OK."""
+    """Sample i >= 1 of IKSolver._trajectory_python: (status, joint, value); status 0 is OK.
+
+    ws must hold the joint and tip poses at q_all[i - 1] (for the predictor); on return it
+    holds those at q.
+    """
     n = q.shape[0]
-    if i >= 2 and s_values[i - 1] > s_values[i - 2]:
-        ratio = (s_values[i] - s_values[i - 1]) / (s_values[i - 1] - s_values[i - 2])
-        for k in range(n):
-            guess[k] = q_all[i - 1, k] + ratio * (q_all[i - 1, k] - q_all[i - 2, k])
-    else:
-        for k in range(n):
-            guess[k] = q_all[i - 1, k]
+    _predict(
+        axes,
+        prismatic,
+        ws[0],
+        ws[1],
+        ws[2],
+        ws[3],
+        target_rotations[i - 1],
+        target_translations[i - 1],
+        target_rotations[i],
+        target_translations[i],
+        max_iteration_step,
+        q_all[i - 1],
+        guess,
+        ws[4],
+        ws[5],
+        ws[8],
+        ws[9],
+        ws[12],
+        ws[13],
+        ws[14],
+    )
     converged, iterations[i] = _solve_pose_into(
         placement_rotations,
         placement_translations,
@@ -652,7 +808,6 @@ def solve_trajectory(
     target_rotations,
     target_translations,
     times,
-    s_values,
     q0,
     position_tolerance,
     orientation_tolerance,
@@ -679,6 +834,19 @@ def solve_trajectory(
         q_all[0, k] = q0[k]
         if check_velocity[k]:
             any_velocity_check = True
+    _forward_kinematics(  # the predictor of sample 1 needs the poses at q0
+        placement_rotations,
+        placement_translations,
+        axes,
+        prismatic,
+        tip_rotation,
+        tip_translation,
+        q_all[0],
+        ws[0],
+        ws[1],
+        ws[2],
+        ws[3],
+    )
     for i in range(1, count):
         status, joint, value = _trajectory_step(
             placement_rotations,
@@ -692,7 +860,6 @@ def solve_trajectory(
             target_rotations,
             target_translations,
             times,
-            s_values,
             i,
             position_tolerance,
             orientation_tolerance,
@@ -1039,7 +1206,6 @@ def evaluate_grasp(
                 target_rotations,
                 target_translations,
                 times,
-                s_values,
                 i,
                 position_tolerance,
                 orientation_tolerance,
