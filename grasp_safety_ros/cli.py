@@ -139,6 +139,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except GraspSafetyError as error:
         print(f"grasp-safety: error: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except BrokenPipeError:  # output piped into a reader that stopped early (head, less)
+        sys.stderr.close()
+        return 0
 
 
 if __name__ == "__main__":
