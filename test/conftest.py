@@ -8,7 +8,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from grasp_safety_ros.core import RobotModel
+from grasp_safety_ros.core import ObjectTrajectory, RobotModel
+from grasp_safety_ros.core.validation import pose_from_position_quat
 
 
 def _inertial(mass: float, inertia: Sequence[float], com: Sequence[float]) -> str:
@@ -91,6 +92,19 @@ def baxter() -> RobotModel:
 
 
 BAXTER_SEED = (0.0, -0.55, 0.0, 0.75, 0.0, 1.26, 0.0)
+
+
+def book_trajectory(
+    dt_s: float = 0.05,
+    duration_s: float = 2.0,
+    goal_rotation_log: Sequence[float] = (0.0, 0.0, 0.0),
+) -> ObjectTrajectory:
+    """The paper's book motion, (1, 0, 0.03) -> (1.1, -0.38, 0.16) m, quat_xyzw (0.5, 0.5,
+    0.5, 0.5); the goal orientation optionally turned by exp(goal_rotation_log) (object axes)."""
+    start = pose_from_position_quat([1.0, 0.0, 0.03], [0.5, 0.5, 0.5, 0.5], "start")
+    goal = pose_from_position_quat([1.1, -0.38, 0.16], [0.5, 0.5, 0.5, 0.5], "goal")
+    goal.rotation = goal.rotation @ pin.exp3(np.array(goal_rotation_log, dtype=float))
+    return ObjectTrajectory(start, goal, duration_s, dt_s)
 
 
 def random_positions(robot: RobotModel, rng: np.random.Generator) -> np.ndarray:

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import BAXTER_SEED
+from conftest import BAXTER_SEED, book_trajectory
 
 from grasp_safety_ros.core import (
     Grasp,
@@ -32,12 +32,8 @@ from grasp_safety_ros.core.validation import pose_from_position_quat
 BOOK = solid_box(0.34, [0.15, 0.22, 0.015])
 GRASP = Grasp(pose_from_position_quat([-0.075, 0.1, 0.0], [0, 0, 0, 1], "grasp"), "spine")
 START = pose_from_position_quat([1.0, 0.0, 0.03], [0.5, 0.5, 0.5, 0.5], "start")
-
-
-def moving_trajectory(dt: float = 0.05) -> ObjectTrajectory:
-    goal = pose_from_position_quat([1.1, -0.38, 0.16], [0.5, 0.5, 0.5, 0.5], "goal")
-    goal.rotation = goal.rotation @ pin.exp3(np.array([0.2, -0.3, 0.25]))
-    return ObjectTrajectory(START, goal, 2.0, dt)
+TURNING = (0.2, -0.3, 0.25)
+"""The goal orientation turned about a generic axis, so that the object also rotates."""
 
 
 def evaluate(robot: RobotModel, trajectory: ObjectTrajectory, obj: ObjectInertia = BOOK):
@@ -62,7 +58,7 @@ def test_static_object_needs_exactly_the_gravity_torque(baxter: RobotModel) -> N
 
 
 def test_rest_at_both_ends_of_a_quintic_is_static(baxter: RobotModel) -> None:
-    trajectory = moving_trajectory()
+    trajectory = book_trajectory(goal_rotation_log=TURNING)
     evaluation = evaluate(baxter, trajectory)
     effort = evaluate_effort(baxter, evaluation, BOOK, GRASP, trajectory)
     model = augmented_model(baxter, BOOK, GRASP.transform_tip_to_object)
@@ -152,7 +148,7 @@ def test_pendulum_closed_form() -> None:
 
 
 def test_twist_matches_finite_differences_of_the_tip_path() -> None:
-    trajectory = moving_trajectory(dt=0.001)
+    trajectory = book_trajectory(0.001, goal_rotation_log=TURNING)
     times = trajectory.times_s()
     s, _, _ = trajectory.path_parameter(times)
     poses, _ = trajectory.tip_path(GRASP.transform_tip_to_object, s)
@@ -169,7 +165,7 @@ def test_twist_matches_finite_differences_of_the_tip_path() -> None:
 
 def test_joint_motion_is_consistent_with_the_samples_and_the_tip(baxter: RobotModel) -> None:
     """J q̇ is the tip twist exactly; q̇ and q̈ agree with differences of the IK samples."""
-    trajectory = moving_trajectory(dt=0.01)
+    trajectory = book_trajectory(0.01, goal_rotation_log=TURNING)
     evaluation = evaluate(baxter, trajectory)
     effort = evaluate_effort(baxter, evaluation, BOOK, GRASP, trajectory)
     times = evaluation.times_s
@@ -202,7 +198,7 @@ def test_joint_motion_is_consistent_with_the_samples_and_the_tip(baxter: RobotMo
 
 
 def test_order_by_effort_and_infeasible(baxter: RobotModel) -> None:
-    trajectory = moving_trajectory()
+    trajectory = book_trajectory(goal_rotation_log=TURNING)
     light = evaluate_effort(baxter, evaluate(baxter, trajectory), BOOK, GRASP, trajectory)
     heavy_object = BOOK.scaled(10.0)
     heavy = evaluate_effort(
@@ -223,7 +219,7 @@ def test_order_by_effort_and_infeasible(baxter: RobotModel) -> None:
 
 
 def test_wrong_joint_positions_are_refused(baxter: RobotModel) -> None:
-    trajectory = moving_trajectory()
+    trajectory = book_trajectory(goal_rotation_log=TURNING)
     evaluation = evaluate(baxter, trajectory)
     with pytest.raises(InvalidInputError, match="joint_positions"):
         evaluate_effort(baxter, evaluation, BOOK, GRASP, trajectory, np.zeros((3, 7)))

@@ -5,7 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import ARM6_AXES, BAXTER_SEED, random_positions, random_rotation, serial_arm_urdf
+from conftest import (
+    ARM6_AXES,
+    BAXTER_SEED,
+    book_trajectory,
+    random_positions,
+    random_rotation,
+    serial_arm_urdf,
+)
 
 from grasp_safety_ros.core import (
     Grasp,
@@ -36,16 +43,6 @@ SPINE_GRASPS = [
     Grasp(pose_from_position_quat([-0.075, y, 0.0], [0, 0, 0, 1], "grasp"), f"spine_{y:+.1f}")
     for y in (-0.1, 0.0, 0.1)
 ]
-
-
-def book_trajectory(
-    rotation_log: tuple[float, float, float] = (0.0, 0.0, 0.0),
-) -> ObjectTrajectory:
-    """The paper's book motion; the goal orientation turned by exp(rotation_log) (object axes)."""
-    start = pose_from_position_quat([1.0, 0.0, 0.03], [0.5, 0.5, 0.5, 0.5], "start")
-    goal = pose_from_position_quat([1.1, -0.38, 0.16], [0.5, 0.5, 0.5, 0.5], "goal")
-    goal.rotation = goal.rotation @ pin.exp3(np.array(rotation_log))
-    return ObjectTrajectory(start, goal, 2.0, 0.05)
 
 
 TURNING = (0.2, -0.3, 0.25)
@@ -97,7 +94,7 @@ def evaluate_book(baxter: RobotModel, trajectory: ObjectTrajectory) -> list:
 
 
 def test_point_at_the_tip_origin_gives_the_tip_values(baxter: RobotModel) -> None:
-    trajectory = book_trajectory(TURNING)
+    trajectory = book_trajectory(goal_rotation_log=TURNING)
     evaluations = evaluate_book(baxter, trajectory)
     for evaluation, grasp in zip(evaluations, SPINE_GRASPS, strict=True):
         assert evaluation.feasible, evaluation.reason
@@ -185,7 +182,7 @@ def test_leading_and_worst_points_under_pure_translation(baxter: RobotModel) -> 
 
 
 def test_metric_point_scores_and_order(baxter: RobotModel) -> None:
-    trajectory = book_trajectory(TURNING)
+    trajectory = book_trajectory(goal_rotation_log=TURNING)
     evaluations = evaluate_book(baxter, trajectory)
     corners = box_corners_in_object(BOOK_SIZE)
     exposed = [

@@ -7,7 +7,7 @@ import itertools
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import BAXTER_SEED, random_positions
+from conftest import BAXTER_SEED, book_trajectory, random_positions
 
 from grasp_safety_ros.core import (
     Grasp,
@@ -43,15 +43,6 @@ def test_solve_reaches_random_reachable_poses(arm: str, request: pytest.FixtureR
         assert converged
         position_error, angle_error = pose_error(robot, robot.positions_from_q(q), target)
         assert position_error <= 1e-6 and angle_error <= 1e-6
-
-
-def book_trajectory(dt: float = 0.05) -> ObjectTrajectory:
-    return ObjectTrajectory(
-        pose_from_position_quat([1.0, 0.0, 0.03], [0.5, 0.5, 0.5, 0.5], "start"),
-        pose_from_position_quat([1.1, -0.38, 0.16], [0.5, 0.5, 0.5, 0.5], "goal"),
-        2.0,
-        dt,
-    )
 
 
 def test_every_sample_reproduces_the_tip_pose(baxter: RobotModel) -> None:

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from conftest import BAXTER_SEED
+from conftest import BAXTER_SEED, book_trajectory
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -20,7 +20,6 @@ from grasp_safety_ros.core import (
     GraspSafetyEvaluator,
     IKConfig,
     InvalidInputError,
-    ObjectTrajectory,
     RobotModel,
     iso15066,
     solid_box,
@@ -42,15 +41,6 @@ SHARED_TABLE = (
     / ("iso_ts_15066_body_regions.yaml")
 )
 HEAD_REGIONS = ("skull_forehead", "face", "neck")
-
-
-def book_trajectory(duration_s: float, dt_s: float) -> ObjectTrajectory:
-    return ObjectTrajectory(
-        pose_from_position_quat([1.0, 0.0, 0.03], [0.5, 0.5, 0.5, 0.5], "start"),
-        pose_from_position_quat([1.1, -0.38, 0.16], [0.5, 0.5, 0.5, 0.5], "goal"),
-        duration_s,
-        dt_s,
-    )
 
 
 BOOK = solid_box(0.34, [0.15, 0.22, 0.015])
@@ -168,7 +158,7 @@ def test_minimum_duration_makes_the_retimed_trajectory_exactly_admissible(
     evaluator = GraspSafetyEvaluator(baxter, FAST)
     duration, dt = 0.5, 0.0125
     fast = evaluator.evaluate(
-        SPINE, BOOK, book_trajectory(duration, dt), seed_positions=BAXTER_SEED
+        SPINE, BOOK, book_trajectory(dt, duration), seed_positions=BAXTER_SEED
     )
     assert fast.feasible, fast.reason
     assessment = assess_grasp(fast)
@@ -176,7 +166,7 @@ def test_minimum_duration_makes_the_retimed_trajectory_exactly_admissible(
     t_min = assessment.min_duration_s
     assert t_min > duration
     retimed = evaluator.evaluate(
-        SPINE, BOOK, book_trajectory(t_min, dt * t_min / duration), seed_positions=BAXTER_SEED
+        SPINE, BOOK, book_trajectory(dt * t_min / duration, t_min), seed_positions=BAXTER_SEED
     )
     np.testing.assert_allclose(retimed.times_s, fast.times_s * t_min / duration, rtol=1e-12)
     again = assess_grasp(retimed)
@@ -190,7 +180,7 @@ def test_minimum_duration_makes_the_retimed_trajectory_exactly_admissible(
             )
             assert after.min_duration_s == pytest.approx(before.min_duration_s, rel=1e-6)
     slower = evaluator.evaluate(
-        SPINE, BOOK, book_trajectory(1.001 * t_min, dt), seed_positions=BAXTER_SEED
+        SPINE, BOOK, book_trajectory(dt, 1.001 * t_min), seed_positions=BAXTER_SEED
     )
     assert assess_grasp(slower).admissible_where_permitted
     assert not assess_grasp(slower).admissible  # head regions: never with a moving tip
@@ -198,7 +188,7 @@ def test_minimum_duration_makes_the_retimed_trajectory_exactly_admissible(
 
 def test_assess_grasp_uses_tip_speed_and_effective_mass(baxter: RobotModel) -> None:
     evaluation = GraspSafetyEvaluator(baxter).evaluate(
-        SPINE, BOOK, book_trajectory(2.0, 0.05), seed_positions=BAXTER_SEED
+        SPINE, BOOK, book_trajectory(0.05, 2.0), seed_positions=BAXTER_SEED
     )
     assessment = assess_grasp(evaluation, ["pelvis"])
     assert assessment.duration_s == 2.0 and assessment.index == evaluation.index
@@ -216,7 +206,7 @@ def test_assess_grasp_uses_tip_speed_and_effective_mass(baxter: RobotModel) -> N
 def test_infeasible_grasp_is_not_assessed(baxter: RobotModel) -> None:
     far = Grasp(pose_from_position_quat([0.0, 0.0, 3.0], [0, 0, 0, 1], "grasp"), "far")
     evaluation = GraspSafetyEvaluator(baxter).evaluate(
-        far, BOOK, book_trajectory(2.0, 0.1), seed_positions=BAXTER_SEED
+        far, BOOK, book_trajectory(0.1, 2.0), seed_positions=BAXTER_SEED
     )
     assessment = assess_grasp(evaluation)
     assert not assessment.feasible and not assessment.admissible and assessment.regions == ()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import BAXTER_SEED
+from conftest import BAXTER_SEED, book_trajectory
 
 from grasp_safety_ros.core import (
     Grasp,
@@ -73,16 +73,6 @@ def recomputed_effective_mass(
             worst_direction(mobility)[1] if worst else effective_mass_along(mobility, direction)
         )
     return np.array(masses)
-
-
-def book_trajectory(dt_s: float) -> ObjectTrajectory:
-    """The paper's book motion: (1, 0, 0.03) -> (1.1, -0.38, 0.16) m in 2 s."""
-    return ObjectTrajectory(
-        pose_from_position_quat([1.0, 0.0, 0.03], [0.5, 0.5, 0.5, 0.5], "start"),
-        pose_from_position_quat([1.1, -0.38, 0.16], [0.5, 0.5, 0.5, 0.5], "goal"),
-        2.0,
-        dt_s,
-    )
 
 
 def book_grasp(y_m: float) -> Grasp:

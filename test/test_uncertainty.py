@@ -6,14 +6,13 @@ import math
 
 import numpy as np
 import pytest
-from conftest import BAXTER_SEED
+from conftest import BAXTER_SEED, book_trajectory
 
 from grasp_safety_ros.core import (
     Grasp,
     GraspSafetyEvaluator,
     InvalidInputError,
     ObjectInertia,
-    ObjectTrajectory,
     RobotModel,
     solid_box,
 )
@@ -31,12 +30,7 @@ GRASPS = [
     Grasp(pose_from_position_quat([-0.075, y, 0.0], [0, 0, 0, 1], "grasp"), f"spine_{y:+.1f}")
     for y in (-0.1, 0.0, 0.1)
 ] + [Grasp(pose_from_position_quat([0.0, 0.0, 3.0], [0, 0, 0, 1], "grasp"), "far")]
-TRAJECTORY = ObjectTrajectory(
-    pose_from_position_quat([1.0, 0.0, 0.03], [0.5, 0.5, 0.5, 0.5], "start"),
-    pose_from_position_quat([1.1, -0.38, 0.16], [0.5, 0.5, 0.5, 0.5], "goal"),
-    2.0,
-    0.05,
-)
+TRAJECTORY = book_trajectory()
 
 
 @pytest.fixture(scope="module")
