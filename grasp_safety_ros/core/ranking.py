@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
@@ -18,6 +19,9 @@ from .ik import IKConfig, IKSolver, check_backend, tip_path_arrays
 from .inertia import ObjectInertia
 from .robot import RobotModel
 from .trajectory import ObjectTrajectory
+
+if TYPE_CHECKING:
+    from .posture import PostureSelection
 
 METRICS = ("mean", "max", "integral")
 """Aggregates of the per-sample effective mass: mean [kg], max [kg], integral [kg s]."""
@@ -133,12 +137,15 @@ class Ranking:
         metric: The aggregate used.
         order: Indices of the feasible grasps, safest first (ties keep input order).
         evaluations: One per candidate, in candidate order.
+        postures: How each candidate's posture was chosen (core.posture), in candidate
+            order; empty when posture selection was not run.
     """
 
     joint_names: tuple[str, ...]
     metric: str
     order: tuple[int, ...]
     evaluations: tuple[GraspEvaluation, ...]
+    postures: tuple[PostureSelection, ...] = ()
 
 
 def aggregate(effective_mass_kg: np.ndarray, times_s: np.ndarray, metric: str) -> float:
