@@ -1045,7 +1045,8 @@ def test_single_ik_posture_fields_and_joint_trajectory(
         assert (got.postures_tried, got.postures_feasible) == (1, 1)
         np.testing.assert_allclose(got.start_positions, want.joint_positions[0], atol=1e-12)
         assert_joint_trajectory(got, ranking.joint_names, want.times_s, want.joint_positions)
-        assert got.joint_trajectory.header.frame_id == "base"
+        header = got.joint_trajectory.header
+        assert header.frame_id == "base" and (header.stamp.sec, header.stamp.nanosec) == (0, 0)
 
 
 def test_posture_selection_by_parameter_equals_the_core(

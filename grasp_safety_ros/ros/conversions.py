@@ -301,7 +301,8 @@ def joint_trajectory_msg(
 ) -> JointTrajectory:
     """trajectory_msgs/JointTrajectory of sampled joint positions [rad or m] at times [s]:
     velocities and accelerations from core.executable (C2 spline, at rest at both ends);
-    no points when there are no samples."""
+    no points when there are no samples. Give ``header`` a zero stamp: in a JointTrajectory
+    the stamp is when execution starts, and 0 means on receipt."""
     message = JointTrajectory(header=header, joint_names=list(joint_names))
     if len(times_s) == 0:
         return message
@@ -386,7 +387,7 @@ def ranking_msg(
             ranking.joint_names,
             evaluation.times_s,
             evaluation.joint_positions,
-            Header(stamp=stamp, frame_id=base_frame),
+            Header(frame_id=base_frame),
         )
     return message
 
@@ -478,7 +479,7 @@ def report_msg(
                     report.ranking.joint_names,
                     resolution.times_s,
                     resolution.joint_positions,
-                    Header(stamp=stamp, frame_id=base_frame),
+                    Header(frame_id=base_frame),
                 )
         if report.effort:
             effort = report.effort[k]
