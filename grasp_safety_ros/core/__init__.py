@@ -1,4 +1,10 @@
-"""ROS-free core of grasp_safety_ros (numpy + pinocchio only)."""
+"""ROS-free core of grasp_safety_ros (numpy + pinocchio; numba optional).
+
+Rooms, imported one way: ``exceptions`` and ``input_checks`` <- ``model`` (robot, object
+inertia, trajectory) <- ``method`` (the paper: IK, effective mass, ranking; the bridge to the
+compiled ``kernels`` and the worker pool) <- ``analyses`` (beyond the paper). The public names
+of the paper's method are re-exported here.
+"""
 
 from .exceptions import FrameNotFoundError, GraspSafetyError, InvalidInputError, RobotModelError
 from .method.ik import IKConfig, IKSolver
