@@ -1,4 +1,4 @@
-"""Benchmark section: cost and gain of posture selection (core.posture) per grasp.
+"""Benchmark section: cost and gain of posture selection (core.method.posture) per grasp.
 
 For each arm workload (bench/workload.py: Panda and Baxter's right arm, a box, grasps around
 it, 2 s at dt 0.01 s) and for the paper's book on Baxter (config/book_baxter.yaml), the
@@ -22,10 +22,10 @@ from typing import Any
 import numpy as np
 from workload import ARMS, box_object, grasps_around_box
 
+from grasp_safety_ros.cli.scenario import load_scenario
 from grasp_safety_ros.core import EvaluationConfig, GraspSafetyEvaluator
-from grasp_safety_ros.core.posture import PostureConfig, select_postures
+from grasp_safety_ros.core.method.posture import PostureConfig, select_postures
 from grasp_safety_ros.paths import config_file
-from grasp_safety_ros.scenario import load_scenario
 
 RESTARTS = (0, 2, 4, 8, 16, 32, 64)
 

@@ -1,4 +1,4 @@
-"""Posture selection (core.posture) and the executable joint trajectory (core.executable)."""
+"""Posture selection (core.method.posture) and joint velocities (core.method.executable)."""
 
 from __future__ import annotations
 
@@ -16,10 +16,10 @@ from grasp_safety_ros.core import (
     RobotModel,
     solid_box,
 )
-from grasp_safety_ros.core.analysis import AnalysisOptions, analyse
-from grasp_safety_ros.core.executable import joint_velocities_accelerations
-from grasp_safety_ros.core.posture import PostureConfig, select_postures
-from grasp_safety_ros.core.validation import pose_from_position_quat
+from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions, analyse
+from grasp_safety_ros.core.input_checks import pose_from_position_quat
+from grasp_safety_ros.core.method.executable import joint_velocities_accelerations
+from grasp_safety_ros.core.method.posture import PostureConfig, select_postures
 
 BOOK = solid_box(0.34, (0.15, 0.22, 0.015))
 

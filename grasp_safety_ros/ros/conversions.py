@@ -22,21 +22,21 @@ from std_msgs.msg import ColorRGBA, Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import Marker, MarkerArray
 
-from ..core.analysis import SafetyReport
+from ..core.analyses.iso15066 import PowerForceLimitAssessment, RegionAssessment
+from ..core.analyses.safety_report import SafetyReport
 from ..core.exceptions import InvalidInputError
-from ..core.executable import joint_velocities_accelerations
-from ..core.inertia import ObjectInertia
-from ..core.iso15066 import PowerForceLimitAssessment, RegionAssessment
-from ..core.posture import PostureSelection, single_posture
-from ..core.ranking import Grasp, GraspEvaluation, Ranking
-from ..core.robot import RobotModel
-from ..core.trajectory import ObjectTrajectory
-from ..core.validation import (
+from ..core.input_checks import (
     finite_array,
     finite_float,
     quat_xyzw_from_rotation,
     rotation_from_quat_xyzw,
 )
+from ..core.method.executable import joint_velocities_accelerations
+from ..core.method.posture import PostureSelection, single_posture
+from ..core.method.ranking import Grasp, GraspEvaluation, Ranking
+from ..core.model.inertia import ObjectInertia
+from ..core.model.robot import RobotModel
+from ..core.model.trajectory import ObjectTrajectory
 from .parameters import inertia_tensor_from_components
 
 SCORE_UNITS = {"mean": "kg", "max": "kg", "integral": "kg*s"}
@@ -300,7 +300,7 @@ def joint_trajectory_msg(
     joint_names: Sequence[str], times_s: np.ndarray, joint_positions: np.ndarray, header: Header
 ) -> JointTrajectory:
     """trajectory_msgs/JointTrajectory of sampled joint positions [rad or m] at times [s]:
-    velocities and accelerations from core.executable (C2 spline, at rest at both ends);
+    velocities and accelerations from core.method.executable (C2 spline, at rest at both ends);
     no points when there are no samples. Give ``header`` a zero stamp: in a JointTrajectory
     the stamp is when execution starts, and 0 means on receipt."""
     message = JointTrajectory(header=header, joint_names=list(joint_names))

@@ -16,18 +16,18 @@ import numpy as np
 import pinocchio as pin
 from scipy.stats import spearmanr
 
-from ..core.effective_mass import effective_mass_along, translational_mobility_in_base
-from ..core.inertia import (
+from ..core.input_checks import pose_from_position_quat
+from ..core.method.effective_mass import effective_mass_along, translational_mobility_in_base
+from ..core.method.posture import DEFAULT_RESTARTS, PostureConfig, select_posture
+from ..core.method.ranking import Grasp, GraspEvaluation, GraspSafetyEvaluator
+from ..core.model.inertia import (
     ObjectInertia,
     TensorObjectGeometry,
     solid_box,
     tensor_object_configurations,
 )
-from ..core.posture import DEFAULT_RESTARTS, PostureConfig, select_posture
-from ..core.ranking import Grasp, GraspEvaluation, GraspSafetyEvaluator
-from ..core.robot import RobotModel
-from ..core.trajectory import ObjectTrajectory
-from ..core.validation import pose_from_position_quat
+from ..core.model.robot import RobotModel
+from ..core.model.trajectory import ObjectTrajectory
 from .scene import ContactConfig, ObjectShape, SensorConfig
 from .simulation import (
     CollisionResult,
@@ -366,7 +366,7 @@ def posture_comparison(
     log: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
     """Pillar impacts of the single-IK posture (``runs``) against the selected posture
-    (core.posture, ``restarts``) for the same grasps, same object path and same pillar.
+    (core.method.posture, ``restarts``) for the same grasps, same object path and same pillar.
 
     Returns:
         The posture_selection part of results.json: per grasp the mean effective mass, the

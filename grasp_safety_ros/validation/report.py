@@ -364,7 +364,7 @@ def _signed_percent(change: float | None, digits: int = 1) -> str:
 
 
 def _posture_section(results: dict[str, Any]) -> str:
-    """Single-IK posture against the selected posture (core.posture) for the same grasps."""
+    """Single-IK posture against the selected posture (core.method.posture) for the same grasps."""
     postures = results.get("posture_selection")
     if not postures:
         return ""
@@ -391,7 +391,7 @@ def _posture_section(results: dict[str, Any]) -> str:
 ## Posture selection: single IK against the selected posture
 
 Book, same grasps, same object path and pillar as above; the single-IK rows are the book's
-runs above, the selected posture is core.posture's with {postures["restarts"]} IK restarts
+runs above, the selected posture is core.method.posture's with {postures["restarts"]} IK restarts
 (the lowest mean tip effective mass among the feasible start postures found, each followed
 along the path). The controller tracks the selected posture's joint trajectory from its own
 start configuration. "√ prediction" is the change of the peak force a spring sensor predicts

@@ -14,9 +14,9 @@ solutions, and the effective mass depends on which one the arm is in. The paper 
    in 0 iterations, to that posture), and scored;
 4. the feasible one with the lowest score is kept (ties: the earliest, so the single IK).
 
-The null-space refinement (core.redundancy, when enabled) then starts from the kept posture.
-A grasp is infeasible only when no start posture gives a feasible trajectory. ``restarts=0``
-returns the ranking unchanged.
+The null-space refinement (core.analyses.redundancy, when enabled) then starts from the kept
+posture. A grasp is infeasible only when no start posture gives a feasible trajectory.
+``restarts=0`` returns the ranking unchanged.
 """
 
 from __future__ import annotations
@@ -28,10 +28,10 @@ import numpy as np
 import pinocchio as pin
 from scipy.stats import qmc
 
-from .exceptions import InvalidInputError
-from .inertia import ObjectInertia
+from ..exceptions import InvalidInputError
+from ..model.inertia import ObjectInertia
+from ..model.trajectory import ObjectTrajectory
 from .ranking import Grasp, GraspEvaluation, GraspSafetyEvaluator, Ranking, order_by_score
-from .trajectory import ObjectTrajectory
 
 MAX_RESTARTS = 1000
 """Largest number of posture restarts accepted per grasp."""

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from .exceptions import InvalidInputError
+from ..exceptions import InvalidInputError
 
 
 def joint_velocities_accelerations(

@@ -7,11 +7,11 @@ from typing import Any
 
 import numpy as np
 
-from .core.analysis import SafetyReport
-from .core.executable import joint_velocities_accelerations
-from .core.iso15066 import PowerForceLimitAssessment
-from .core.posture import PostureSelection
-from .core.ranking import GraspEvaluation, Ranking
+from ..core.analyses.iso15066 import PowerForceLimitAssessment
+from ..core.analyses.safety_report import SafetyReport
+from ..core.method.executable import joint_velocities_accelerations
+from ..core.method.posture import PostureSelection
+from ..core.method.ranking import GraspEvaluation, Ranking
 
 SCORE_UNITS = {"mean": "kg", "max": "kg", "integral": "kg*s"}
 
@@ -32,9 +32,7 @@ def numbers(values: np.ndarray) -> list[Any]:
 
 def evaluation_to_dict(evaluation: GraspEvaluation) -> dict[str, Any]:
     """One grasp of the paper's ranking (samples carry q and qd in joint_names order)."""
-    velocities, _ = joint_velocities_accelerations(
-        evaluation.times_s, evaluation.joint_positions
-    )
+    velocities, _ = joint_velocities_accelerations(evaluation.times_s, evaluation.joint_positions)
     samples = [
         {
             "t_s": float(evaluation.times_s[i]),
@@ -61,7 +59,7 @@ def evaluation_to_dict(evaluation: GraspEvaluation) -> dict[str, Any]:
 
 
 def posture_to_dict(posture: PostureSelection) -> dict[str, Any]:
-    """How one grasp's posture was chosen (core.posture); scores in the ranking's unit."""
+    """How one grasp's posture was chosen (core.method.posture); scores in the ranking's unit."""
     return {
         "restarts": posture.restarts,
         "score_single_ik": number(posture.score_single_ik),
