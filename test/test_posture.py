@@ -284,3 +284,32 @@ def test_seven_dof_inline_arm_selection_finds_lower_score() -> None:
     p = selected.postures[0]
     assert p.postures_feasible >= 2 and p.score_range[1] > p.score_range[0]
     assert p.score <= p.score_single_ik
+
+
+def test_scenario_posture_section_and_cli_json() -> None:
+    import yaml
+
+    from grasp_safety_ros.cli.main import rank_scenario
+    from grasp_safety_ros.cli.report import report_to_dict
+    from grasp_safety_ros.cli.scenario import parse_scenario
+    from grasp_safety_ros.paths import config_file
+
+    path = config_file("book_baxter.yaml")
+    data = yaml.safe_load(path.read_text())
+    assert parse_scenario(data, path.parent).posture == PostureConfig(restarts=8)
+    for bad, field in (({"restarts": -1}, "restarts"), ({"restarts": "8"}, "restarts")):
+        with pytest.raises(InvalidInputError, match=rf"posture\.{field}: must be an integer"):
+            parse_scenario({**data, "posture": bad}, path.parent)
+    with pytest.raises(InvalidInputError, match=r"posture\.tries: unknown field"):
+        parse_scenario({**data, "posture": {"tries": 3}}, path.parent)
+    scenario = parse_scenario({**data, "posture": {"restarts": 0}}, path.parent)
+    paper = GraspSafetyEvaluator(scenario.robot.load(path.parent)).rank(
+        scenario.grasps, scenario.object_inertia, scenario.trajectory, scenario.robot.seed
+    )
+    result = report_to_dict(rank_scenario(scenario))
+    assert result["paper_ranking"] == list(paper.order)
+    for grasp, e in zip(result["grasps"], paper.evaluations, strict=True):
+        assert grasp["score"] == e.score and grasp["posture"]["restarts"] == 0
+        assert [s["q"] for s in grasp["samples"]] == e.joint_positions.tolist()
+        qd, _ = joint_velocities_accelerations(e.times_s, e.joint_positions)
+        assert [s["qd"] for s in grasp["samples"]] == qd.tolist()
