@@ -476,7 +476,12 @@ def test_slow_request_does_not_block_the_next_for_ever(ros: NodeUnderTest) -> No
         slow.grasps.poses = [copy.deepcopy(slow.grasps.poses[i % 3]) for i in range(1000)]
         slow.object_trajectory = book_path(duration_s=2000.0)
         slow_future = ros.rank_client.call_async(slow)
-        time.sleep(0.3)  # the slow ranking holds the compute lock by now
+        # wait until the slow ranking holds the compute lock (not a fixed sleep: on a loaded
+        # machine converting 1000 grasps alone can take longer than a fraction of a second)
+        deadline = time.monotonic() + 30.0
+        while not ros.node._compute_lock.locked() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert ros.node._compute_lock.locked()
         started = time.monotonic()
         busy = ros.rank(book_request())
         assert not busy.success

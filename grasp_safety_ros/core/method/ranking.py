@@ -301,7 +301,9 @@ class GraspSafetyEvaluator:
         if executor is None:
             results: Iterable[GraspEvaluation] = (self._evaluate_sampled(*job) for job in jobs)
         else:
-            results = evaluate_jobs(self, executor, jobs, GraspSafetyEvaluator._evaluate_sampled)
+            results = evaluate_jobs(
+                self, executor, jobs, GraspSafetyEvaluator._evaluate_sampled, len(times)
+            )
         evaluations = []
         for evaluation in results:
             evaluations.append(evaluation)
