@@ -1,8 +1,9 @@
 """The node over real rclpy: service, topics, bad inputs, parameters, robot from a topic.
 
 The node runs in-process in a MultiThreadedExecutor thread with its own rclpy Context; the
-test client is a second node in the same context with its own executor. Each context uses a
-random ROS_DOMAIN_ID and localhost-only discovery, so parallel runs do not cross-talk.
+test client is a second node in the same context with its own executor. Each context claims
+its own ROS_DOMAIN_ID (ros_domains) and uses localhost-only discovery, so parallel runs do not
+cross-talk.
 """
 
 from __future__ import annotations
@@ -10,7 +11,6 @@ from __future__ import annotations
 import array
 import copy
 import math
-import random
 import re
 import threading
 import time
@@ -34,6 +34,7 @@ from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64MultiArray, Header, String
+from ros_domains import claim_ros_domain
 from visualization_msgs.msg import Marker, MarkerArray
 
 from grasp_safety_ros.core import (
@@ -84,10 +85,16 @@ NODE_PARAMETERS = {
 
 
 def start_context() -> Context:
-    """A fresh rclpy context on a random domain, discovery limited to this host."""
-    domain_id = random.SystemRandom().randint(0, 101)
+    """A fresh rclpy context on a domain claimed for it (ros_domains; released when the
+    context shuts down), discovery limited to this host."""
+    claim = claim_ros_domain()
     context = Context()
-    rclpy.init(context=context, domain_id=domain_id)
+    try:
+        rclpy.init(context=context, domain_id=claim.domain_id)
+    except BaseException:
+        claim.release()
+        raise
+    context.on_shutdown(claim.release)
     return context
 
 

@@ -137,14 +137,27 @@ def chain_arrays(robot: RobotModel) -> ChainArrays | None:
     Supported: a serial chain of revolute and prismatic joints (Pinocchio's RX/RY/RZ,
     PX/PY/PZ and their unaligned variants; not continuous joints), the tip frame on the last.
     """
+    arrays = _chain_arrays_or_reason(robot)
+    return arrays if isinstance(arrays, ChainArrays) else None
+
+
+_NOT_COMPILED = "not supported by the compiled kernels"
+
+
+def _chain_arrays_or_reason(robot: RobotModel) -> ChainArrays | str:
+    """The chain as arrays, or the reason the compiled kernels cannot handle it."""
     model = robot.model
     n = model.nv
-    if model.nq != n or model.njoints != n + 1:
-        return None
-    if any(model.parents[k] != k - 1 for k in range(1, n + 1)):
-        return None
+    for k in range(1, model.njoints):
+        joint = model.joints[k]
+        if joint.nq != joint.nv:
+            return f"continuous joint {model.names[k]} {_NOT_COMPILED}"
+        if joint.nv != 1:
+            return f"{joint.shortname()} joint {model.names[k]} ({joint.nv} DOF) {_NOT_COMPILED}"
+    if model.njoints != n + 1 or any(model.parents[k] != k - 1 for k in range(1, n + 1)):
+        return f"branched chain {_NOT_COMPILED}"
     if model.frames[robot.tip_frame_id].parentJoint != n:
-        return None
+        return f"tip frame not on the last joint: {_NOT_COMPILED}"
     data = model.createData()
     pin.computeJointJacobians(model, data, pin.neutral(model))
     axes = np.empty((n, 3))
@@ -155,11 +168,11 @@ def chain_arrays(robot: RobotModel) -> ChainArrays | None:
         linear, angular = column[:3], column[3:]
         if np.linalg.norm(angular) > 1e-12:
             if np.linalg.norm(linear) > 1e-12 or abs(np.linalg.norm(angular) - 1.0) > 1e-12:
-                return None
+                return f"joint {model.names[k + 1]} (screw motion) {_NOT_COMPILED}"
             axes[k] = angular
         else:
             if abs(np.linalg.norm(linear) - 1.0) > 1e-12:
-                return None
+                return f"joint {model.names[k + 1]} (non-unit axis) {_NOT_COMPILED}"
             axes[k], prismatic[k] = linear, 1.0
     placements = [model.jointPlacements[k] for k in range(1, n + 1)]
     tip = model.frames[robot.tip_frame_id].placement
@@ -271,7 +284,8 @@ class IKSolver:
                 lower[joint.idx_q : joint.idx_q + joint.nq] = -np.inf
                 upper[joint.idx_q : joint.idx_q + joint.nq] = np.inf
         self._lower_q, self._upper_q = lower, upper
-        self.chain = chain_arrays(robot) if backend != "python" else None
+        chain = _chain_arrays_or_reason(robot) if backend != "python" else "requested"
+        self.chain = chain if isinstance(chain, ChainArrays) else None
         if backend == "compiled" and self.chain is None:
             raise InvalidInputError(
                 "ik.backend",
@@ -279,6 +293,13 @@ class IKSolver:
                 f"joints here: {', '.join(j.shortname() for j in model.joints[1:])}",
             )
         self.compiled = NUMBA_AVAILABLE and self.chain is not None
+        if self.compiled or backend == "python":
+            self.backend_used = "compiled" if self.compiled else "python"
+        elif not NUMBA_AVAILABLE:
+            self.backend_used = "python (numba not installed)"
+        else:
+            self.backend_used = f"python ({chain})"
+        """What runs: ``compiled`` or ``python``, with the reason when ``auto`` fell back."""
         self._dgesv: Any = None if self.compiled else _lapack_dgesv()
         self._identity6 = np.eye(6)
         self._identity_n = np.eye(model.nv)

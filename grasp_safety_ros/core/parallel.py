@@ -20,7 +20,7 @@ import multiprocessing
 import os
 import threading
 import weakref
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Generator, Iterator, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, ThreadPoolExecutor
 from dataclasses import replace
 from typing import TYPE_CHECKING, Any, NamedTuple
@@ -1493,20 +1493,40 @@ Job = tuple[Any, ...]
 
 def evaluate_jobs(
     evaluator: GraspSafetyEvaluator, executor: Executor, jobs: Sequence[Job]
-) -> Iterator[GraspEvaluation]:
+) -> Generator[GraspEvaluation, None, None]:
     """``evaluator.evaluate`` of each job on the pool, yielded in job order.
 
     Jobs go out in contiguous chunks (about four per worker), which keeps the pool's
-    per-task overhead small and the load balanced.
+    per-task overhead small and the load balanced. Closing the returned generator early (an
+    abandoned ranking) cancels the chunks not started yet and, on threads, stops the running
+    ones after their current job.
     """
     workers = max(1, getattr(executor, "_max_workers", 2))
     size = max(1, math.ceil(len(jobs) / (4 * workers)))
     chunks = [jobs[k : k + size] for k in range(0, len(jobs), size)]
+    stop = threading.Event()
     if isinstance(executor, ThreadPoolExecutor):
-        results = executor.map(lambda chunk: [_evaluate(evaluator, job) for job in chunk], chunks)
+
+        def run(chunk: Sequence[Job]) -> list[GraspEvaluation]:
+            return [_evaluate(evaluator, job) for job in chunk if not stop.is_set()]
+
+        results = executor.map(run, chunks)
     else:
         results = executor.map(_evaluate_chunk_in_worker, chunks)
-    return (evaluation for chunk in results for evaluation in chunk)
+    return _flatten_until_closed(results, stop)
+
+
+def _flatten_until_closed(
+    results: Iterator[list[GraspEvaluation]], stop: threading.Event
+) -> Generator[GraspEvaluation, None, None]:
+    try:
+        for chunk in results:
+            yield from chunk
+    finally:
+        stop.set()
+        close = getattr(results, "close", None)
+        if close is not None:
+            close()  # Executor.map's iterator cancels the pending chunks
 
 
 def _evaluate(evaluator: GraspSafetyEvaluator, job: Job) -> GraspEvaluation:
