@@ -21,7 +21,7 @@ from typing import Any
 import pytest
 from builtin_interfaces.msg import Time
 from conftest import ARM6_AXES, serial_arm_urdf
-from geometry_msgs.msg import Inertia, InertiaStamped, PoseArray, PoseStamped
+from geometry_msgs.msg import Inertia, InertiaStamped, PoseArray
 from grasp_safety_msgs.msg import GraspRanking
 from grasp_safety_msgs.srv import RankGrasps
 from hypothesis import HealthCheck, given, settings
@@ -39,8 +39,8 @@ from test_ros_node import (
     same_messages,
 )
 
-from grasp_safety_ros.core.ik import compiled_available
 from grasp_safety_ros.core.exceptions import InvalidInputError
+from grasp_safety_ros.core.ik import compiled_available
 from grasp_safety_ros.core.validation import QUATERNION_NORM_TOLERANCE
 from grasp_safety_ros.ros.conversions import MAX_ABS_POSITION_M, transform_from_pose_msg
 
