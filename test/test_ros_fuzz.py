@@ -30,11 +30,12 @@ from hypothesis.errors import InvalidArgument
 from nav_msgs.msg import Path
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, Header, String
-from test_ros_node import (
+from test_ros_node import (  # noqa: F401  (_localhost_only: autouse fixture)
     LATCHED,
     MAX_GRASPS,
     NODE_PARAMETERS,
     NodeUnderTest,
+    _localhost_only,
     book_request,
     same_messages,
 )

@@ -1496,37 +1496,31 @@ def evaluate_jobs(
 ) -> Generator[GraspEvaluation, None, None]:
     """``evaluator.evaluate`` of each job on the pool, yielded in job order.
 
-    Jobs go out in contiguous chunks (about four per worker), which keeps the pool's
-    per-task overhead small and the load balanced. Closing the returned generator early (an
-    abandoned ranking) cancels the chunks not started yet and, on threads, stops the running
-    ones after their current job.
+    On processes, jobs go out in contiguous chunks (about four per worker), which keeps the
+    pool's per-task overhead small and the load balanced; on threads one job is one task (the
+    overhead is small), so the caller sees each result, and can stop, as soon as it is ready.
+    Closing the returned generator early (an abandoned ranking) cancels the tasks not started
+    yet; a running thread task finishes its one job.
     """
+    if isinstance(executor, ThreadPoolExecutor):
+        return _close_early(executor.map(lambda job: [_evaluate(evaluator, job)], jobs))
     workers = max(1, getattr(executor, "_max_workers", 2))
     size = max(1, math.ceil(len(jobs) / (4 * workers)))
     chunks = [jobs[k : k + size] for k in range(0, len(jobs), size)]
-    stop = threading.Event()
-    if isinstance(executor, ThreadPoolExecutor):
-
-        def run(chunk: Sequence[Job]) -> list[GraspEvaluation]:
-            return [_evaluate(evaluator, job) for job in chunk if not stop.is_set()]
-
-        results = executor.map(run, chunks)
-    else:
-        results = executor.map(_evaluate_chunk_in_worker, chunks)
-    return _flatten_until_closed(results, stop)
+    return _close_early(executor.map(_evaluate_chunk_in_worker, chunks))
 
 
-def _flatten_until_closed(
-    results: Iterator[list[GraspEvaluation]], stop: threading.Event
+def _close_early(
+    results: Iterator[list[GraspEvaluation]],
 ) -> Generator[GraspEvaluation, None, None]:
+    """The evaluations of Executor.map's chunks; closing it closes the map (cancels the rest)."""
     try:
         for chunk in results:
             yield from chunk
     finally:
-        stop.set()
         close = getattr(results, "close", None)
         if close is not None:
-            close()  # Executor.map's iterator cancels the pending chunks
+            close()
 
 
 def _evaluate(evaluator: GraspSafetyEvaluator, job: Job) -> GraspEvaluation:
