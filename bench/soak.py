@@ -1,10 +1,11 @@
 """Soak and load benchmark of the grasp_safety node (not part of ``make test``).
 
-Starts the node as its own process (the bundled params file: Baxter, the book, dt_s 0.02 s)
-and sends mixed requests through real rclpy service clients: good ones (the book, 3 grasps x
-101 samples) and malformed ones (NaN positions, zero quaternions, empty grasps, one-pose
-Paths, unknown frames, negative mass, indefinite inertia, bogus metric strings, quality of the
-wrong length). A warm-up phase is followed by phases with 1, 4 and 16 concurrent clients.
+Starts the node as its own process (the bundled params file: Baxter, the book; trajectory.dt_s
+0.1 s unless --dt-s) and sends mixed requests through real rclpy service clients: good ones
+(the book, 3 grasps x 21 samples, all analyses of the params file) and malformed ones (NaN
+positions, zero quaternions, empty grasps, one-pose Paths, unknown frames, negative mass,
+indefinite inertia, bogus metric strings, quality of the wrong length). A warm-up phase is
+followed by phases with 1, 4 and 16 concurrent clients.
 
 Prints, per phase and in total: requests sent / answered (ranked) / refused with a reason
 naming the expected field / refused otherwise / busy answers / lost (sent, never answered),
@@ -240,7 +241,7 @@ def run_phase(
     return tally
 
 
-def start_node(domain_id: int, log_dir: Path) -> subprocess.Popen[str]:
+def start_node(domain_id: int, log_dir: Path, dt_s: float) -> subprocess.Popen[str]:
     """The node process; its output goes to log_dir/node.log (a pipe could fill up)."""
     log_dir.mkdir(parents=True, exist_ok=True)
     env = {
@@ -255,6 +256,7 @@ def start_node(domain_id: int, log_dir: Path) -> subprocess.Popen[str]:
             [
                 *(sys.executable, "-m", "grasp_safety_ros.ros.node", "--ros-args"),
                 *("--params-file", PARAMS, "-p", "use_joint_states_seed:=false"),
+                *("-p", f"trajectory.dt_s:={float(dt_s)!r}"),
                 *("--log-level", "warn"),
             ],
             env=env,
@@ -271,13 +273,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument("--warm-up", type=int, default=None, help="default: requests / 10")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--dt-s", type=float, default=0.1, help="node parameter trajectory.dt_s")
     args = parser.parse_args(argv)
     warm_up = args.warm_up if args.warm_up is not None else max(20, args.requests // 10)
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     started = time.perf_counter()
     with claim_ros_domain() as claim:
         log_dir = Path(tempfile.mkdtemp(prefix="grasp_safety_soak_"))
-        node = start_node(claim.domain_id, log_dir)
+        node = start_node(claim.domain_id, log_dir, args.dt_s)
         context = Context()
         rclpy.init(context=context, domain_id=claim.domain_id)
         clients: Clients | None = None

@@ -104,6 +104,7 @@ class Mutation:
     label: str
     stage: int  # applied in stage order: counts (0) before values (1)
     apply: Callable[[Parts], tuple[str, str]]
+    key: str  # what it changes: one mutation per key, so none undoes another
 
     def __repr__(self) -> str:
         return self.label
@@ -154,7 +155,7 @@ def pose_value(draw: st.DrawFn) -> Mutation:
             return field, REFUSE
         return field, ACCEPT
 
-    return Mutation(f"{where}[{index}].{part}.{component}={value!r}", 1, apply)
+    return Mutation(f"{where}[{index}].{part}.{component}={value!r}", 1, apply, f"pose {where}")
 
 
 @st.composite
@@ -187,7 +188,7 @@ def quaternion_scale(draw: st.DrawFn) -> Mutation:
             setattr(quaternion, c, getattr(quaternion, c) * scale)
         return field, _quaternion_expectation(quaternion)
 
-    return Mutation(f"{where}[{index}].orientation*{scale!r}", 1, apply)
+    return Mutation(f"{where}[{index}].orientation*{scale!r}", 1, apply, f"pose {where}")
 
 
 @st.composite
@@ -199,7 +200,7 @@ def grasp_count(draw: st.DrawFn) -> Mutation:
         parts.grasps.poses = [copy.deepcopy(book[i % len(book)]) for i in range(count)]
         return "grasps.poses", REFUSE if count == 0 or count > MAX_GRASPS else ACCEPT
 
-    return Mutation(f"{count} grasps", 0, apply)
+    return Mutation(f"{count} grasps", 0, apply, "grasp count")
 
 
 @st.composite
@@ -217,13 +218,14 @@ def path_count(draw: st.DrawFn) -> Mutation:
         parts.path.poses = poses
         return "object_trajectory", REFUSE if count < 2 else EITHER
 
-    return Mutation(f"path of {count} poses", 0, apply)
+    return Mutation(f"path of {count} poses", 0, apply, "path count")
 
 
 @st.composite
 def stamps(draw: st.DrawFn) -> Mutation:
     """Random stamps on the trajectory poses (out of order: refused)."""
-    sec = draw(st.lists(st.integers(-(2**31), 2**31 - 1), min_size=2, max_size=2))
+    seconds = st.one_of(st.integers(-3, 12), st.integers(-(2**31), 2**31 - 1))
+    sec = draw(st.lists(seconds, min_size=2, max_size=2))
     nanosec = draw(st.lists(st.integers(0, 2**32 - 1), min_size=2, max_size=2))
 
     def apply(parts: Parts) -> tuple[str, str]:
@@ -235,7 +237,7 @@ def stamps(draw: st.DrawFn) -> Mutation:
             return "object_trajectory.poses", REFUSE
         return "object_trajectory", EITHER
 
-    return Mutation(f"stamps {sec} {nanosec}", 1, apply)
+    return Mutation(f"stamps {sec} {nanosec}", 1, apply, "stamps")
 
 
 @st.composite
@@ -261,7 +263,7 @@ def frames(draw: st.DrawFn) -> Mutation:
         parts.path.poses[k].header.frame_id = frame
         return f"object_trajectory.poses[{k}].header", REFUSE
 
-    return Mutation(f"{where} frame {frame!r}", 1, apply)
+    return Mutation(f"{where} frame {frame!r}", 1, apply, f"frame {where}")
 
 
 @st.composite
@@ -299,7 +301,7 @@ def inertia(draw: st.DrawFn) -> Mutation:
         i.ixz = value
         return "object_inertia", REFUSE if not math.isfinite(value) or abs(value) > 1.0 else EITHER
 
-    return Mutation(f"inertia {kind} {value!r}", 1, apply)
+    return Mutation(f"inertia {kind} {value!r}", 1, apply, "inertia")
 
 
 @st.composite
@@ -319,7 +321,7 @@ def quality(draw: st.DrawFn) -> Mutation:
             return "grasp_quality", REFUSE
         return "grasp_quality", EITHER  # e.g. identical qualities
 
-    return Mutation(f"quality {values!r}", 1, apply)
+    return Mutation(f"quality {values!r}", 1, apply, "quality")
 
 
 @st.composite
@@ -333,7 +335,7 @@ def strings(draw: st.DrawFn) -> Mutation:
         setattr(parts, which, value)
         return which, ACCEPT if value in valid or value == "" else REFUSE
 
-    return Mutation(f"{which}={value!r}", 1, apply)
+    return Mutation(f"{which}={value!r}", 1, apply, which)
 
 
 MUTATIONS = st.one_of(
@@ -357,6 +359,12 @@ def mutated(mutations: list[Mutation]) -> tuple[Parts, list[tuple[str, str]]]:
 
 def names_a_field(message: str, fields: list[str]) -> bool:
     return any(message.startswith(field) for field in fields)
+
+
+def resource_refusal(message: str) -> bool:
+    """Refused for time, not for the input: longer than max_compute_time_s (a long but valid
+    trajectory on a loaded machine), or busy."""
+    return message.startswith(("ranking abandoned after", "busy:"))
 
 
 def test_absurd_positions_are_refused_before_the_ik() -> None:
@@ -395,7 +403,7 @@ def assert_exact(got: RankGrasps.Response, reference: GraspRanking) -> None:
 
 
 @FUZZ
-@given(mutations=st.lists(MUTATIONS, min_size=1, max_size=3))
+@given(mutations=st.lists(MUTATIONS, min_size=1, max_size=3, unique_by=lambda m: m.key))
 def test_malformed_requests_are_refused_naming_the_field(
     node: NodeUnderTest, reference: GraspRanking, mutations: list[Mutation]
 ) -> None:
@@ -409,9 +417,13 @@ def test_malformed_requests_are_refused_naming_the_field(
         assert names_a_field(response.message, fields), (response.message, fields)
         assert response.ranking.evaluations == []
     elif EITHER in kinds:
-        assert response.success or names_a_field(response.message, fields), response.message
+        assert (
+            response.success
+            or names_a_field(response.message, fields)
+            or resource_refusal(response.message)
+        ), response.message
     else:
-        assert response.success, response.message
+        assert response.success or resource_refusal(response.message), response.message
     assert_exact(node.rank(book_request()), reference)
 
 
@@ -473,7 +485,7 @@ def topic_field(field: str) -> str:
 
 
 @FUZZ
-@given(mutations=st.lists(TOPIC_MUTATIONS, min_size=1, max_size=2))
+@given(mutations=st.lists(TOPIC_MUTATIONS, min_size=1, max_size=2, unique_by=lambda m: m.key))
 def test_malformed_topic_messages_are_refused_on_diagnostics(
     node: NodeUnderTest,
     reference: GraspRanking,

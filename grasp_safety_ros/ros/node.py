@@ -394,14 +394,18 @@ class GraspSafetyNode(Node):
                     f"must be URDF XML; got {len(msg.data)} characters not starting with '<'",
                 )
             bundle = build_robot(settings, msg.data)
-        except GraspSafetyError as error:
+        except Exception as error:  # GraspSafetyError, or a bug on a strange description
+            reason = str(error)
+            if not isinstance(error, GraspSafetyError):
+                self.get_logger().error(f"/robot_description:\n{traceback.format_exc()}")
+                reason = _internal_error(error)
             if self._waiting_for_robot:
                 # wait_for_robot raises it, main() logs it once
-                self._startup_failure = f"robot from /robot_description: {error}"
+                self._startup_failure = f"robot from /robot_description: {reason}"
             else:
                 with self._state_lock:
-                    self._status.robot_description_error = str(error)
-                self._report_error("/robot_description", error)  # the working model stays
+                    self._status.robot_description_error = reason
+                self._report_error("/robot_description", reason)  # the working model stays
             return
         with self._state_lock:
             if _robot_key(self._settings) != _robot_key(settings):
