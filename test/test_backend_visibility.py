@@ -13,11 +13,12 @@ import pytest
 import yaml
 from conftest import ARM6_AXES, book_trajectory, serial_arm_urdf
 
-from grasp_safety_ros.cli import main
-from grasp_safety_ros.core import Grasp, GraspSafetyEvaluator, RobotModel, parallel, solid_box
-from grasp_safety_ros.core import ik as ik_module
-from grasp_safety_ros.core.ik import IKSolver, compiled_available
-from grasp_safety_ros.core.ranking import EvaluationConfig
+from grasp_safety_ros.cli.main import main
+from grasp_safety_ros.core import Grasp, GraspSafetyEvaluator, RobotModel, solid_box
+from grasp_safety_ros.core.method import ik as ik_module
+from grasp_safety_ros.core.method import ranking as ranking_module
+from grasp_safety_ros.core.method.ik import IKSolver, compiled_available
+from grasp_safety_ros.core.method.ranking import EvaluationConfig
 from grasp_safety_ros.paths import config_file
 
 BOX = solid_box(0.5, [0.1, 0.1, 0.1])
@@ -39,7 +40,7 @@ def rank_counting_paths(
 ) -> tuple[str, dict[str, int]]:
     """Rank two grasps; return the reported backend and how often each path really ran."""
     calls = {"compiled": 0, "python": 0}
-    compiled, python = parallel.evaluate_grasp_compiled, IKSolver.solve_trajectory_arrays
+    compiled, python = ranking_module.evaluate_grasp_compiled, IKSolver.solve_trajectory_arrays
 
     def count_compiled(*args: Any, **kwargs: Any) -> Any:
         calls["compiled"] += 1
@@ -49,7 +50,7 @@ def rank_counting_paths(
         calls["python"] += 1
         return python(self, *args, **kwargs)
 
-    monkeypatch.setattr(parallel, "evaluate_grasp_compiled", count_compiled)
+    monkeypatch.setattr(ranking_module, "evaluate_grasp_compiled", count_compiled)
     monkeypatch.setattr(IKSolver, "solve_trajectory_arrays", count_python)
     grasps = [Grasp(pin.SE3(np.eye(3), np.array([0.0, 0.0, z])), f"g{z}") for z in (0.0, 0.02)]
     trajectory = book_trajectory(dt_s=0.25)

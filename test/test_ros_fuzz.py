@@ -41,8 +41,8 @@ from test_ros_node import (  # noqa: F401  (_localhost_only: autouse fixture)
 )
 
 from grasp_safety_ros.core.exceptions import InvalidInputError
-from grasp_safety_ros.core.ik import compiled_available
-from grasp_safety_ros.core.validation import QUATERNION_NORM_TOLERANCE
+from grasp_safety_ros.core.input_checks import QUATERNION_NORM_TOLERANCE
+from grasp_safety_ros.core.method.ik import compiled_available
 from grasp_safety_ros.ros.conversions import MAX_ABS_POSITION_M, transform_from_pose_msg
 
 try:
