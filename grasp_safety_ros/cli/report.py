@@ -71,11 +71,13 @@ def posture_to_dict(posture: PostureSelection) -> dict[str, Any]:
 
 
 def ranking_to_dict(ranking: Ranking) -> dict[str, Any]:
-    """The paper's ranking: joint names, metric, ranking (indices) and per-grasp results."""
+    """The paper's ranking: joint names, metric, ranking (indices), per-grasp results and the
+    backend that ran (``compiled`` or ``python``, with the reason of a fallback)."""
     grasps = [evaluation_to_dict(e) for e in ranking.evaluations]
     for grasp, posture in zip(grasps, ranking.postures, strict=False):
         grasp["posture"] = posture_to_dict(posture)
     return {
+        "backend": ranking.backend,
         "joint_names": list(ranking.joint_names),
         "metric": ranking.metric,
         "score_unit": SCORE_UNITS[ranking.metric],

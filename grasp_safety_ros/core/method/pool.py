@@ -14,12 +14,10 @@ import multiprocessing
 import os
 import threading
 import weakref
-from collections import deque
-from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor
+from collections.abc import Callable, Generator, Iterator, Sequence
+from concurrent.futures import Executor, ProcessPoolExecutor, ThreadPoolExecutor
 from dataclasses import replace
 from functools import partial
-from itertools import islice
 from typing import Any, TypeVar
 
 Job = tuple[Any, ...]
@@ -69,55 +67,40 @@ def executor_for(evaluator: Any, total_samples: int) -> Executor | None:
     return pool
 
 
-CHUNK_SAMPLES = 100_000
-"""Largest number of samples (jobs x samples_per_job) in one chunk of ``evaluate_jobs``."""
-
-
 def evaluate_jobs(
     evaluator: Any,
     executor: Executor,
     jobs: Sequence[Job],
     evaluate: Callable[..., Result],
-    samples_per_job: int = 1,
-) -> Iterator[Result]:
+) -> Generator[Result, None, None]:
     """``evaluate(evaluator, *job)`` of each job on the pool, yielded in job order.
 
     ``evaluate`` must be picklable for a process pool (a module-level function or a method
     of a module-level class, e.g. ``GraspSafetyEvaluator._evaluate_sampled``); the workers
-    call it on their own copy of the evaluator. Jobs go out in contiguous chunks (about four
-    per worker, at most CHUNK_SAMPLES samples each), which keeps the pool's per-task overhead
-    small and the load balanced. Chunks are submitted as results are consumed (at most two
-    per worker in flight), so a consumer that stops early (a deadline) leaves little work
-    behind on the pool.
+    call it on their own copy of the evaluator. On processes, jobs go out in contiguous chunks
+    (about four per worker), which keeps the pool's per-task overhead small and the load
+    balanced; on threads one job is one task (the overhead is small), so the caller sees each
+    result, and can stop, as soon as it is ready. Closing the returned generator early (an
+    abandoned ranking) cancels the tasks not started yet; a running thread task finishes its
+    one job.
     """
+    if isinstance(executor, ThreadPoolExecutor):
+        return _close_early(executor.map(lambda job: [evaluate(evaluator, *job)], jobs))
     workers = max(1, getattr(executor, "_max_workers", 2))
     size = max(1, math.ceil(len(jobs) / (4 * workers)))
-    size = max(1, min(size, CHUNK_SAMPLES // max(1, samples_per_job)))
-    chunks = iter([jobs[k : k + size] for k in range(0, len(jobs), size)])
-    if isinstance(executor, ThreadPoolExecutor):
-
-        def run(chunk: Sequence[Job]) -> list[Result]:
-            return [evaluate(evaluator, *job) for job in chunk]
-    else:
-        run = partial(_evaluate_chunk_in_worker, evaluate)
-    return _in_order(executor, run, chunks, 2 * workers)
+    chunks = [jobs[k : k + size] for k in range(0, len(jobs), size)]
+    return _close_early(executor.map(partial(_evaluate_chunk_in_worker, evaluate), chunks))
 
 
-def _in_order(
-    executor: Executor,
-    run: Callable[[Sequence[Job]], list[Result]],
-    chunks: Iterator[Sequence[Job]],
-    in_flight: int,
-) -> Iterator[Result]:
-    pending: deque[Future[list[Result]]] = deque(
-        executor.submit(run, chunk) for chunk in islice(chunks, in_flight)
-    )
-    while pending:
-        results = pending.popleft().result()
-        following = next(chunks, None)
-        if following is not None:
-            pending.append(executor.submit(run, following))
-        yield from results
+def _close_early(results: Iterator[list[Result]]) -> Generator[Result, None, None]:
+    """The results of Executor.map's chunks; closing it closes the map (cancels the rest)."""
+    try:
+        for chunk in results:
+            yield from chunk
+    finally:
+        close = getattr(results, "close", None)
+        if close is not None:
+            close()
 
 
 _WORKER_EVALUATOR: Any = None
