@@ -32,9 +32,9 @@ from geometry_msgs.msg import Inertia, InertiaStamped, PoseArray
 from grasp_safety_msgs.msg import GraspRanking
 from grasp_safety_msgs.srv import RankGrasps
 from nav_msgs.msg import Path
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
-from rclpy.exceptions import InvalidParameterValueException
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import Executor, ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -64,6 +64,7 @@ from .conversions import (
     seed_from_joint_state,
     trajectory_from_path,
 )
+from .declaration import declare_node_parameters, typed_parameters
 from .parameters import (
     PARAMETERS,
     ROBOT_PARAMETERS,
@@ -163,19 +164,14 @@ class GraspSafetyNode(Node):
         self._inertia_override: ObjectInertia | None = None
         self._status = _Status()
 
+        self.add_pre_set_parameters_callback(typed_parameters)
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        declarations = [
-            (
-                name,
-                spec.default,
-                ParameterDescriptor(description=spec.description, dynamic_typing=True),
-            )
-            for name, spec in PARAMETERS.items()
-        ]
         try:
-            self.declare_parameters("", declarations)
-        except InvalidParameterValueException:
-            raise StartupError(self._startup_rejection or "invalid parameter") from None
+            declare_node_parameters(self)
+        except GraspSafetyError as error:
+            raise StartupError(str(error)) from None
+        except (InvalidParameterValueException, InvalidParameterTypeException) as error:
+            raise StartupError(self._startup_rejection or str(error)) from None
         self._values = {name: self.get_parameter(name).value for name in PARAMETERS}
         try:
             self._settings = settings_from_parameters(self._values)
