@@ -7,6 +7,7 @@ Needs the ``ros2`` command in the venv (``make setup`` installs it when
 prefix (``make setup``). One node, started with ``ros2 run``, serves the whole module on its
 own random ROS_DOMAIN_ID with discovery limited to this host; every process runs in its own
 process group, which is killed if it outlives its time limit, and no ``ros2`` daemon is used.
+The dump test starts a second node from the dump, on another domain.
 """
 
 from __future__ import annotations
@@ -49,13 +50,15 @@ pytestmark = pytest.mark.skipif(
 )
 
 
-def ros_env(log_dir: Path) -> dict[str, str]:
-    """The environment of .venv/setup.bash on a random domain, logs in ``log_dir``."""
+def ros_env(log_dir: Path, avoid_domain: str = "") -> dict[str, str]:
+    """The environment of .venv/setup.bash on a random domain (not ``avoid_domain``), logs in
+    ``log_dir``."""
+    domains = [str(d) for d in range(102) if str(d) != avoid_domain]
     return {
         **os.environ,
         "PATH": f"{BIN}{os.pathsep}{os.environ.get('PATH', '')}",
         "AMENT_PREFIX_PATH": str(PREFIX),
-        "ROS_DOMAIN_ID": str(random.SystemRandom().randint(0, 101)),
+        "ROS_DOMAIN_ID": random.SystemRandom().choice(domains),
         "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
         "ROS_LOG_DIR": str(log_dir),
         "RCUTILS_COLORIZED_OUTPUT": "0",
@@ -370,7 +373,8 @@ def test_param_dump_restarts_the_node_unchanged(
     assert flat["object.points_in_object_m"] == [] and flat["iso_ts_15066.regions"] == []
     params_file = tmp_path / "dump.yaml"
     params_file.write_text(dump)
-    restarted = RunningNode(ros_env(tmp_path), str(params_file), tmp_path / "restarted.log")
+    env = ros_env(tmp_path, avoid_domain=node.env["ROS_DOMAIN_ID"])  # both nodes: /grasp_safety
+    restarted = RunningNode(env, str(params_file), tmp_path / "restarted.log")
     try:
         assert "ignoring unknown parameter" not in restarted.output()
         call = ("service", "call", f"{NODE}/rank_grasps", "grasp_safety_msgs/srv/RankGrasps")
