@@ -5,16 +5,16 @@
 Needs the ``ros2`` command in the venv (``make setup`` installs it when
 ``../shared/tools/ros2cli/install`` exists) and the package registered in the venv's ament
 prefix (``make setup``). One node, started with ``ros2 run``, serves the whole module on its
-own random ROS_DOMAIN_ID with discovery limited to this host; every process runs in its own
-process group, which is killed if it outlives its time limit, and no ``ros2`` daemon is used.
-The dump test starts a second node from the dump, on another domain.
+own ROS_DOMAIN_ID (claimed with test/ros_domains.py) with discovery limited to this host;
+every process runs in its own process group, which is killed if it outlives its time limit,
+and no ``ros2`` daemon is used. The dump test starts a second node from the dump, on another
+domain.
 """
 
 from __future__ import annotations
 
 import json
 import os
-import random
 import re
 import signal
 import subprocess
@@ -26,6 +26,7 @@ from typing import Any
 
 import pytest
 import yaml
+from ros_domains import claim_ros_domain
 
 from grasp_safety_ros.paths import config_file
 from grasp_safety_ros.ros.parameters import PARAMETERS
@@ -50,15 +51,13 @@ pytestmark = pytest.mark.skipif(
 )
 
 
-def ros_env(log_dir: Path, avoid_domain: str = "") -> dict[str, str]:
-    """The environment of .venv/setup.bash on a random domain (not ``avoid_domain``), logs in
-    ``log_dir``."""
-    domains = [str(d) for d in range(102) if str(d) != avoid_domain]
+def ros_env(log_dir: Path, domain_id: int) -> dict[str, str]:
+    """The environment of .venv/setup.bash on ``domain_id``, logs in ``log_dir``."""
     return {
         **os.environ,
         "PATH": f"{BIN}{os.pathsep}{os.environ.get('PATH', '')}",
         "AMENT_PREFIX_PATH": str(PREFIX),
-        "ROS_DOMAIN_ID": random.SystemRandom().choice(domains),
+        "ROS_DOMAIN_ID": str(domain_id),
         "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
         "ROS_LOG_DIR": str(log_dir),
         "RCUTILS_COLORIZED_OUTPUT": "0",
@@ -151,9 +150,10 @@ class RunningNode:
 @pytest.fixture(scope="module")
 def node(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RunningNode]:
     log_dir = tmp_path_factory.mktemp("ros2_cli")
-    running = RunningNode(ros_env(log_dir), PARAMS, log_dir / "node.log")
-    yield running
-    running.close()
+    with claim_ros_domain() as claim:
+        running = RunningNode(ros_env(log_dir, claim.domain_id), PARAMS, log_dir / "node.log")
+        yield running
+        running.close()
     assert running.process.returncode == 0, running.output()
     assert "Traceback" not in running.output(), running.output()
 
@@ -373,18 +373,19 @@ def test_param_dump_restarts_the_node_unchanged(
     assert flat["object.points_in_object_m"] == [] and flat["iso_ts_15066.regions"] == []
     params_file = tmp_path / "dump.yaml"
     params_file.write_text(dump)
-    env = ros_env(tmp_path, avoid_domain=node.env["ROS_DOMAIN_ID"])  # both nodes: /grasp_safety
-    restarted = RunningNode(env, str(params_file), tmp_path / "restarted.log")
-    try:
-        assert "ignoring unknown parameter" not in restarted.output()
-        call = ("service", "call", f"{NODE}/rank_grasps", "grasp_safety_msgs/srv/RankGrasps")
-        dumped, answered = ros2_all(
-            restarted.env,
-            ("param", "dump", *WAIT, NODE),
-            (*call, book_request_yaml(integers=False)),
-        )
-    finally:
-        restarted.close()
+    with claim_ros_domain() as claim:  # another domain than the module's node
+        env = ros_env(tmp_path, claim.domain_id)
+        restarted = RunningNode(env, str(params_file), tmp_path / "restarted.log")
+        try:
+            assert "ignoring unknown parameter" not in restarted.output()
+            call = ("service", "call", f"{NODE}/rank_grasps", "grasp_safety_msgs/srv/RankGrasps")
+            dumped, answered = ros2_all(
+                restarted.env,
+                ("param", "dump", *WAIT, NODE),
+                (*call, book_request_yaml(integers=False)),
+            )
+        finally:
+            restarted.close()
     assert restarted.process.returncode == 0, restarted.output()
     assert dumped.stdout == dump
     assert response_field(answered.stdout, "order") == cli_ranking["ranking"]
@@ -404,7 +405,7 @@ def flatten(tree: dict[str, Any], prefix: str = "") -> dict[str, Any]:
 
 
 def test_interface_show_every_interface(tmp_path: Path) -> None:
-    env = ros_env(tmp_path)
+    env = ros_env(tmp_path, 0)  # the interface verbs read the ament index only: no graph
     sources = {
         f"grasp_safety_msgs/{path.parent.name}/{path.stem}": path
         for path in (ROOT / "msg_defs").glob("*/*")

@@ -5,7 +5,6 @@ a bad override refused at start-up naming the parameter. In-process node, own rc
 
 from __future__ import annotations
 
-import random
 from collections.abc import Iterator
 from typing import Any
 
@@ -15,6 +14,7 @@ from conftest import ARM6_AXES, serial_arm_urdf
 from rcl_interfaces.msg import ParameterType
 from rclpy.context import Context
 from rclpy.parameter import Parameter
+from ros_domains import claim_ros_domain
 
 from grasp_safety_ros.ros.declaration import declared_type, descriptor, typed
 from grasp_safety_ros.ros.node import GraspSafetyNode, StartupError
@@ -80,10 +80,10 @@ def test_typed_converts_only_without_loss(
 
 @pytest.fixture()
 def context() -> Iterator[Context]:
-    with pytest.MonkeyPatch.context() as patch:
+    with pytest.MonkeyPatch.context() as patch, claim_ros_domain() as claim:
         patch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
         context = Context()
-        rclpy.init(context=context, domain_id=random.SystemRandom().randint(0, 101))
+        rclpy.init(context=context, domain_id=claim.domain_id)
         yield context
         rclpy.shutdown(context=context)
 
