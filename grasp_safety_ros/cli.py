@@ -137,7 +137,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return int(args.handler(args))
     except GraspSafetyError as error:
-        print(f"grasp-safety: error: {error}", file=sys.stderr)
+        one_line = " ".join(line.strip() for line in str(error).splitlines())
+        print(f"grasp-safety: error: {one_line}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except BrokenPipeError:  # output piped into a reader that stopped early (head, less)
         sys.stderr.close()

@@ -20,6 +20,80 @@ from .core.trajectory import ObjectTrajectory
 from .core.uncertainty import InertiaUncertainty
 from .core.validation import finite_array, finite_float, pose_from_position_quat
 
+MAX_SCENARIO_BYTES = 4_000_000
+"""Largest scenario file read [bytes]."""
+
+MAX_NESTING_DEPTH = 64
+"""Deepest nesting of lists and mappings in a scenario file."""
+
+MAX_EXPANDED_NODES = 1_000_000
+"""Most YAML nodes a scenario may expand to, aliases (``*name``) counted at full size."""
+
+MAX_GRASPS = 10_000
+"""Most grasps in a scenario."""
+
+MAX_GRASP_SAMPLES = 10_000_000
+"""Most grasps x trajectory samples (IK solves) in a scenario."""
+
+MAX_POINTS = 1_000
+"""Most exposed points (``object.points_m``)."""
+
+MAX_UNCERTAINTY_SAMPLES = 10_000
+"""Most random inertia samples (``uncertainty.samples``)."""
+
+
+_SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml when available
+
+
+def _check_yaml_structure(text: str) -> None:
+    """Refuse YAML nested deeper than MAX_NESTING_DEPTH or expanding to more than
+    MAX_EXPANDED_NODES nodes (aliases ``*name`` counted at the full size of their anchor, so a
+    "billion laughs" file is refused however short); one pass over the parser's events."""
+    child_sizes: list[int] = [0]
+    anchor_stack: list[str | None] = []
+    anchor_sizes: dict[str, int] = {}
+    for event in yaml.parse(text, Loader=_SAFE_LOADER):
+        if isinstance(event, yaml.CollectionStartEvent):
+            if len(anchor_stack) >= MAX_NESTING_DEPTH:
+                raise InvalidInputError(
+                    "scenario",
+                    f"nesting deeper than {MAX_NESTING_DEPTH} levels at line "
+                    f"{event.start_mark.line + 1}",
+                )
+            anchor_stack.append(event.anchor)
+            child_sizes.append(0)
+            continue
+        if isinstance(event, yaml.CollectionEndEvent):
+            size, anchor = 1 + child_sizes.pop(), anchor_stack.pop()
+        elif isinstance(event, yaml.AliasEvent):
+            size, anchor = anchor_sizes.get(event.anchor, 1), None
+        elif isinstance(event, yaml.ScalarEvent):
+            size, anchor = 1, event.anchor
+        else:  # stream and document start and end
+            continue
+        if anchor is not None:
+            anchor_sizes[anchor] = size
+        child_sizes[-1] += size
+        if child_sizes[-1] > MAX_EXPANDED_NODES:
+            raise InvalidInputError(
+                "scenario",
+                f"expands to more than {MAX_EXPANDED_NODES} YAML nodes (aliases counted at "
+                f"full size), near line {event.start_mark.line + 1}",
+            )
+
+
+def load_yaml(text: str, where: str) -> Any:
+    """Parse YAML text, bounded by _check_yaml_structure; errors as one-line
+    InvalidInputError('scenario')."""
+    try:
+        _check_yaml_structure(text)
+        return yaml.load(text, Loader=_SAFE_LOADER)  # a safe loader
+    except (yaml.YAMLError, ValueError, OverflowError) as error:
+        if isinstance(error, InvalidInputError):
+            raise
+        reason = " ".join(str(error).split())
+        raise InvalidInputError("scenario", f"{where} is not valid YAML: {reason}") from None
+
 
 @dataclass(frozen=True)
 class RobotSpec:
@@ -82,9 +156,9 @@ def _string(value: Any, field: str) -> str:
 
 
 def _check_keys(section: Mapping[str, Any], allowed: set[str], prefix: str) -> None:
-    unknown = sorted(set(section) - allowed)
+    unknown = sorted(str(key) for key in set(section) - allowed)
     if unknown:
-        where = f"{prefix}.{unknown[0]}" if prefix else str(unknown[0])
+        where = f"{prefix}.{unknown[0]}" if prefix else unknown[0]
         raise InvalidInputError(where, f"unknown field; allowed: {', '.join(sorted(allowed))}")
 
 
@@ -123,6 +197,11 @@ def parse_object(section: Any) -> tuple[ObjectInertia, np.ndarray | None]:
     obj = _mapping(section, "object")
     inertia = _parse_inertia(obj)
     if "points_m" in obj:
+        if isinstance(obj["points_m"], list) and len(obj["points_m"]) > MAX_POINTS:
+            raise InvalidInputError(
+                "object.points_m",
+                f"has {len(obj['points_m'])} points; at most {MAX_POINTS} are allowed",
+            )
         points = finite_array(obj["points_m"], "object.points_m")
         if points.ndim != 2 or points.shape[1] != 3 or len(points) == 0:
             raise InvalidInputError(
@@ -204,6 +283,10 @@ def parse_grasps(section: Any) -> tuple[tuple[Grasp, ...], tuple[float, ...] | N
     """
     if not isinstance(section, list) or not section:
         raise InvalidInputError("grasps", "must be a non-empty list of poses")
+    if len(section) > MAX_GRASPS:
+        raise InvalidInputError(
+            "grasps", f"has {len(section)} grasps; at most {MAX_GRASPS} are allowed"
+        )
     grasps = []
     qualities = []
     for i, item in enumerate(section):
@@ -260,6 +343,12 @@ def parse_options(
             "seed",
         }
         _check_keys(section, allowed, "uncertainty")
+        samples = section.get("samples")
+        if isinstance(samples, int) and samples > MAX_UNCERTAINTY_SAMPLES:
+            raise InvalidInputError(
+                "uncertainty.samples",
+                f"must be at most {MAX_UNCERTAINTY_SAMPLES}, got {samples}",
+            )
         renamed = {("num_random_samples" if k == "samples" else k): v for k, v in section.items()}
         uncertainty = InertiaUncertainty(**renamed)
     effort = _mapping(root.get("effort", {}), "effort")
@@ -297,10 +386,18 @@ def parse_scenario(data: Any, base_dir: Path) -> Scenario:
         raise InvalidInputError("metric", f"must be one of {', '.join(METRICS)}, got {metric!r}")
     object_inertia, points = parse_object(_required(root, "object", ""))
     grasps, quality = parse_grasps(_required(root, "grasps", ""))
+    trajectory = parse_trajectory(_required(root, "trajectory", ""))
+    if len(grasps) * trajectory.num_samples > MAX_GRASP_SAMPLES:
+        raise InvalidInputError(
+            "grasps",
+            f"{len(grasps)} grasps x {trajectory.num_samples} trajectory samples = "
+            f"{len(grasps) * trajectory.num_samples} IK solves; at most {MAX_GRASP_SAMPLES} "
+            "(fewer grasps or a larger trajectory.dt_s)",
+        )
     return Scenario(
         robot=parse_robot(_required(root, "robot", "")),
         object_inertia=object_inertia,
-        trajectory=parse_trajectory(_required(root, "trajectory", "")),
+        trajectory=trajectory,
         grasps=grasps,
         metric=check_metric(metric),
         base_dir=base_dir,
@@ -309,14 +406,23 @@ def parse_scenario(data: Any, base_dir: Path) -> Scenario:
 
 
 def load_scenario(path: str | Path) -> Scenario:
-    """Read and validate a scenario YAML file."""
+    """Read and validate a scenario YAML file (at most MAX_SCENARIO_BYTES, UTF-8)."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        with path.open("rb") as stream:
+            raw = stream.read(MAX_SCENARIO_BYTES + 1)
     except OSError as error:
-        raise InvalidInputError("scenario", f"cannot read '{path}': {error.strerror}") from None
+        reason = error.strerror or str(error)
+        raise InvalidInputError("scenario", f"cannot read '{path}': {reason}") from None
+    if len(raw) > MAX_SCENARIO_BYTES:
+        raise InvalidInputError(
+            "scenario", f"'{path}' is larger than {MAX_SCENARIO_BYTES} bytes, the limit"
+        )
     try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as error:
-        raise InvalidInputError("scenario", f"'{path}' is not valid YAML: {error}") from None
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as error:
+        raise InvalidInputError(
+            "scenario", f"'{path}' is not UTF-8 text (byte {error.start}: {error.reason})"
+        ) from None
+    data = load_yaml(text, f"'{path}'")
     return parse_scenario(data, path.resolve().parent)
