@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
 import importlib.metadata
 import os
+import sys
+import tempfile
+import threading
 import xml.etree.ElementTree as ElementTree
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -92,7 +96,7 @@ def resolve_urdf(source: str, relative_to: Path | None = None) -> tuple[str, boo
     except (OSError, ValueError):  # a name too long, or with a NUL byte
         is_file = False
     if not is_file:
-        shown = text if len(text) <= 80 else f"{text[:77]}..."
+        shown = str(path) if len(str(path)) <= 200 else f"{str(path)[:197]}..."
         raise InvalidInputError(
             "robot.urdf",
             f"no URDF file at {shown!r}; give a file path, URDF XML or "
@@ -106,15 +110,65 @@ def resolve_urdf(source: str, relative_to: Path | None = None) -> tuple[str, boo
     return str(path), False
 
 
+_NATIVE_STDERR_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def _native_stderr_captured(captured: list[str]) -> Iterator[None]:
+    """Capture what native code (urdfdom's console_bridge) writes to file descriptor 2; the
+    text is appended to ``captured`` on exit."""
+    with _NATIVE_STDERR_LOCK, tempfile.TemporaryFile() as sink:
+        sys.stderr.flush()
+        saved = os.dup(2)
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            sink.seek(0)
+            captured.append(sink.read().decode("utf-8", errors="replace"))
+
+
+def _urdf_parser_errors(output: str) -> tuple[list[str], str]:
+    """Split urdfdom's output into its error messages and the other lines (kept as text)."""
+    errors, other = [], []
+    lines = output.splitlines()
+    for k, line in enumerate(lines):
+        if line.startswith("Error:"):
+            errors.append(" ".join(line[len("Error:") :].split()))
+        elif not (
+            line.startswith("         at line ")
+            and k
+            and lines[k - 1].startswith(("Error:", "Warning:"))
+        ):
+            other.append(line)
+    return errors, "".join(f"{line}\n" for line in other)
+
+
 def load_urdf_model(source: str, relative_to: Path | None = None) -> pin.Model:
-    """Build the full Pinocchio model (fixed base) of a URDF given as in resolve_urdf."""
+    """Build the full Pinocchio model (fixed base) of a URDF given as in resolve_urdf.
+
+    A description the URDF parser reports errors for is refused even when Pinocchio builds a
+    model from it (a malformed ``<inertial>`` would otherwise become a massless link).
+    """
     text, is_xml = resolve_urdf(source, relative_to)
+    where = "URDF XML" if is_xml else f"'{text}'"
+    captured: list[str] = []
     try:
-        return pin.buildModelFromXML(text) if is_xml else pin.buildModelFromUrdf(text)
+        with _native_stderr_captured(captured):
+            model = pin.buildModelFromXML(text) if is_xml else pin.buildModelFromUrdf(text)
     except (RuntimeError, ValueError) as error:
-        where = "URDF XML" if is_xml else f"'{text}'"
-        message = str(error).strip().splitlines()[0] if str(error).strip() else "parse error"
-        raise InvalidInputError("robot.urdf", f"cannot read {where}: {message}") from None
+        parser_errors, other = _urdf_parser_errors("".join(captured))
+        sys.stderr.write(other)
+        message = " ".join(str(error).split()) or "parse error"
+        details = f" ({'; '.join(parser_errors)})" if parser_errors else ""
+        raise InvalidInputError("robot.urdf", f"cannot read {where}: {message}{details}") from None
+    parser_errors, other = _urdf_parser_errors("".join(captured))
+    sys.stderr.write(other)
+    if parser_errors:
+        raise InvalidInputError("robot.urdf", f"cannot read {where}: {'; '.join(parser_errors)}")
+    return model
 
 
 @dataclass(frozen=True)
