@@ -189,7 +189,7 @@ def load_urdf_mimic_joints(source: str, relative_to: Path | None = None) -> dict
         where = "URDF XML" if is_xml else f"'{text}'"
         raise InvalidInputError("robot.urdf", f"cannot read {where}: {error}") from None
     mimic_joints = {}
-    for joint in root.iter("joint"):
+    for joint in root.findall("joint"):
         mimic = joint.find("mimic")
         if mimic is None:
             continue
