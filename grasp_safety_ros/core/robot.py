@@ -138,9 +138,7 @@ def _urdf_parser_errors(output: str) -> tuple[list[str], str]:
         if line.startswith("Error:"):
             errors.append(" ".join(line[len("Error:") :].split()))
         elif not (
-            line.startswith("         at line ")
-            and k
-            and lines[k - 1].startswith(("Error:", "Warning:"))
+            line.startswith("         at line ") and k and lines[k - 1].startswith("Error:")
         ):
             other.append(line)
     return errors, "".join(f"{line}\n" for line in other)
