@@ -44,7 +44,7 @@ SMALL = {  # the book scenario cut down to 2 grasps x 3 samples, so a valid run 
 }
 SECTIONS = {"robot", "object", "trajectory", "grasps", "metric", "scenario"} | OPTIONAL_SECTIONS
 ERROR_LINE = re.compile(r"grasp-safety: error: ([A-Za-z_0-9][\w.\[\]]*): \S")
-FUZZ = settings(max_examples=300, suppress_health_check=[HealthCheck.too_slow])
+FUZZ = settings(max_examples=25, suppress_health_check=[HealthCheck.too_slow])
 
 
 def run_cli(content: str | bytes, *extra: str) -> tuple[int, str]:
