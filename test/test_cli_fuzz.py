@@ -320,3 +320,15 @@ def test_console_shows_one_line_and_no_traceback(
     assert completed.returncode == 2
     assert completed.stderr.startswith(expected), completed.stderr
     assert len(completed.stderr.splitlines()) == 1, completed.stderr
+
+
+def test_unwritable_outputs_name_the_option(tmp_path: Path) -> None:
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    for option, target, message in (
+        ("--json", blocker / "out.json", "--json: cannot write"),
+        ("--plot", tmp_path / "out.unknown_format", "--plot: cannot write"),
+    ):
+        code, err = run_cli(dump(SMALL), option, str(target))
+        assert code == 2 and len(err.splitlines()) == 1, err
+        assert err.startswith(f"grasp-safety: error: {message} '{target}'"), err
