@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,6 +41,13 @@ MAX_POINTS = 1_000
 
 MAX_UNCERTAINTY_SAMPLES = 10_000
 """Most random inertia samples (``uncertainty.samples``)."""
+
+MAX_OBJECT_MASS_KG = 10_000.0
+"""Heaviest object [kg]."""
+
+MAX_OBJECT_SIZE_M = 100.0
+"""Largest object dimension, CoM offset and radius of gyration [m] (far beyond any gripper;
+much larger objects make the augmented mass matrix numerically singular)."""
 
 
 _SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml when available
@@ -156,7 +164,9 @@ def _string(value: Any, field: str) -> str:
 
 
 def _check_keys(section: Mapping[str, Any], allowed: set[str], prefix: str) -> None:
-    unknown = sorted(str(key) for key in set(section) - allowed)
+    unknown = sorted(
+        k if isinstance(k, str) else json.dumps(k, default=str) for k in set(section) - allowed
+    )
     if unknown:
         where = f"{prefix}.{unknown[0]}" if prefix else unknown[0]
         raise InvalidInputError(where, f"unknown field; allowed: {', '.join(sorted(allowed))}")
@@ -223,9 +233,14 @@ def _parse_inertia(obj: Mapping[str, Any]) -> ObjectInertia:
     shapes = {"inertia_about_com_kgm2", "box_size_m", "cylinder", "sphere"}
     _check_keys(obj, {"mass_kg", "com_in_object_m", "points_m"} | shapes, "object")
     mass = finite_float(
-        _required(obj, "mass_kg", "object"), "object.mass_kg", minimum=0.0, strict_minimum=True
+        _required(obj, "mass_kg", "object"),
+        "object.mass_kg",
+        minimum=0.0,
+        maximum=MAX_OBJECT_MASS_KG,
+        strict_minimum=True,
     )
     com = finite_array(obj.get("com_in_object_m", [0.0, 0.0, 0.0]), "object.com_in_object_m", (3,))
+    _check_size(com, "object.com_in_object_m")
     given = sorted(shapes & set(obj))
     if len(given) != 1:
         raise InvalidInputError(
@@ -237,21 +252,42 @@ def _parse_inertia(obj: Mapping[str, Any]) -> ObjectInertia:
         tensor = finite_array(
             obj["inertia_about_com_kgm2"], "object.inertia_about_com_kgm2", (3, 3)
         )
-        return ObjectInertia(mass, com, tensor)
+        inertia = ObjectInertia(mass, com, tensor)
+        gyration_m = float(
+            np.sqrt(np.max(np.linalg.eigvalsh(inertia.inertia_about_com_kgm2)) / mass)
+        )
+        if gyration_m > MAX_OBJECT_SIZE_M:
+            raise InvalidInputError(
+                "object.inertia_about_com_kgm2",
+                f"radius of gyration sqrt(I_max / mass_kg) = {gyration_m:g} m; at most "
+                f"{MAX_OBJECT_SIZE_M:g} m",
+            )
+        return inertia
     if "box_size_m" in obj:
+        _check_size(obj["box_size_m"], "object.box_size_m")
         return solid_box(mass, obj["box_size_m"], com)
     if "cylinder" in obj:
         cylinder = _mapping(obj["cylinder"], "object.cylinder")
         _check_keys(cylinder, {"radius_m", "length_m"}, "object.cylinder")
-        return solid_cylinder(
-            mass,
-            _required(cylinder, "radius_m", "object.cylinder"),
-            _required(cylinder, "length_m", "object.cylinder"),
-            com,
-        )
+        radius = _required(cylinder, "radius_m", "object.cylinder")
+        length = _required(cylinder, "length_m", "object.cylinder")
+        _check_size(radius, "object.cylinder.radius_m")
+        _check_size(length, "object.cylinder.length_m")
+        return solid_cylinder(mass, radius, length, com)
     sphere = _mapping(obj["sphere"], "object.sphere")
     _check_keys(sphere, {"radius_m"}, "object.sphere")
-    return solid_sphere(mass, _required(sphere, "radius_m", "object.sphere"), com)
+    radius = _required(sphere, "radius_m", "object.sphere")
+    _check_size(radius, "object.sphere.radius_m")
+    return solid_sphere(mass, radius, com)
+
+
+def _check_size(value: Any, field: str) -> None:
+    """Refuse a length or vector [m] longer than MAX_OBJECT_SIZE_M; other checks (type, sign,
+    shape) are the inertia constructors'."""
+    array = finite_array(value, field)
+    size = float(np.max(np.abs(array), initial=0.0))
+    if size > MAX_OBJECT_SIZE_M:
+        raise InvalidInputError(field, f"must be at most {MAX_OBJECT_SIZE_M:g} m, got {size:g} m")
 
 
 def _pose(section: Any, field: str):
@@ -362,18 +398,24 @@ def parse_options(
             "metric_point",
             f"{metric_point!r} needs object.points_m or a box or cylinder object",
         )
-    return AnalysisOptions(
-        metric_point=metric_point,
-        points_in_object_m=points,
-        iso_regions=None if regions is None else tuple(regions),
-        uncertainty=uncertainty,
-        grasp_quality=quality,
-        safety_weight=finite_float(root.get("safety_weight", 0.5), "safety_weight", 0.0, 1.0),
-        redundancy=_flag(root.get("redundancy", False), "redundancy"),
-        effort=_flag(effort.get("enabled", True), "effort.enabled"),
-        rank_by=rank_by,
-        effort_criterion=effort.get("criterion", "peak_fraction"),
-    )
+    try:
+        return AnalysisOptions(
+            metric_point=metric_point,
+            points_in_object_m=points,
+            iso_regions=None if regions is None else tuple(regions),
+            uncertainty=uncertainty,
+            grasp_quality=quality,
+            safety_weight=finite_float(root.get("safety_weight", 0.5), "safety_weight", 0.0, 1.0),
+            redundancy=_flag(root.get("redundancy", False), "redundancy"),
+            effort=_flag(effort.get("enabled", True), "effort.enabled"),
+            rank_by=rank_by,
+            effort_criterion=effort.get("criterion", "peak_fraction"),
+        )
+    except InvalidInputError as error:  # the core says iso15066.<field>; the file iso_ts_15066
+        if not error.field.startswith("iso15066."):
+            raise
+        field = "iso_ts_15066." + error.field[len("iso15066.") :]
+        raise InvalidInputError(field, error.reason) from None
 
 
 def parse_scenario(data: Any, base_dir: Path) -> Scenario:

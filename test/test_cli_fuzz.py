@@ -43,7 +43,8 @@ SMALL = {  # the book scenario cut down to 2 grasps x 3 samples, so a valid run 
     "grasps": BOOK["grasps"][:2],
 }
 SECTIONS = {"robot", "object", "trajectory", "grasps", "metric", "scenario"} | OPTIONAL_SECTIONS
-ERROR_LINE = re.compile(r"grasp-safety: error: ([A-Za-z_0-9][\w.\[\]]*): \S")
+ERROR_LINE = re.compile(r"grasp-safety: error: ([A-Za-z_0-9-][\w.\[\]-]*): \S")
+UNKNOWN_FIELD = re.compile(r"grasp-safety: error: (.+?): unknown field; allowed: ")
 FUZZ = settings(max_examples=25, suppress_health_check=[HealthCheck.too_slow])
 
 
@@ -65,6 +66,9 @@ def assert_one_line_error(code: int, err: str, fields: set[str] = SECTIONS) -> s
     """Exit 2 and one stderr line naming a field whose first part is in ``fields``; the field."""
     assert code == 2, err
     assert err.endswith("\n") and len(err.splitlines()) == 1, err
+    unknown = UNKNOWN_FIELD.match(err)
+    if unknown is not None:  # names the unexpected key itself, whatever its text
+        return unknown.group(1)
     match = ERROR_LINE.match(err)
     assert match is not None, err
     field = match.group(1)
@@ -332,3 +336,29 @@ def test_unwritable_outputs_name_the_option(tmp_path: Path) -> None:
         code, err = run_cli(dump(SMALL), option, str(target))
         assert code == 2 and len(err.splitlines()) == 1, err
         assert err.startswith(f"grasp-safety: error: {message} '{target}'"), err
+
+
+@pytest.mark.parametrize(
+    ("obj", "message"),
+    [
+        (
+            {"mass_kg": 0.34, "box_size_m": [7e7, 0.22, 0.015]},
+            "object.box_size_m: must be at most",
+        ),
+        ({"mass_kg": 0.34, "sphere": {"radius_m": 1e200}}, "object.sphere.radius_m: must be at"),
+        ({"mass_kg": 1e300, "sphere": {"radius_m": 0.1}}, "object.mass_kg: must be in (0, 10000]"),
+        (
+            {"mass_kg": 0.34, "inertia_about_com_kgm2": [[1e6, 0, 0], [0, 1e6, 0], [0, 0, 1e6]]},
+            "object.inertia_about_com_kgm2: radius of gyration",
+        ),
+    ],
+)
+def test_absurd_objects_are_refused_before_the_numbers_break(obj: Any, message: str) -> None:
+    code, err = run_cli(dump({**SMALL, "object": obj}))
+    assert_one_line_error(code, err)
+    assert err.startswith(f"grasp-safety: error: {message}"), err
+
+
+def test_core_field_names_are_the_file_s() -> None:
+    code, err = run_cli(dump({**SMALL, "iso_ts_15066": {"regions": ["elbow"]}}))
+    assert assert_one_line_error(code, err) == "iso_ts_15066.regions"

@@ -246,3 +246,25 @@ def test_one_massless_link_is_fine() -> None:
     end = urdf.index("</link>", start)
     massless = urdf[:start] + '<link name="link4">' + urdf[end:]
     assert RobotModel.from_urdf(massless, "base_link", "tool").num_joints == 7
+
+
+def test_xml_entity_bomb_is_refused() -> None:
+    entities = '<!ENTITY l0 "lol">' + "".join(
+        f'<!ENTITY l{i} "{f"&l{i - 1};" * 10}">' for i in range(1, 10)
+    )
+    urdf = serial_arm_urdf(ARM6_AXES).replace(
+        '<robot name="arm">',
+        f'<!DOCTYPE robot [{entities}]><robot name="arm">'
+        '<material name="m&l9;"><color rgba="1 0 0 1"/></material>',
+    )
+    with pytest.raises(InvalidInputError) as error:
+        RobotModel.from_urdf(urdf, "base_link", "tool")
+    assert one_line(error).startswith("robot.urdf: cannot read URDF XML: limit on input")
+
+
+def test_locked_joint_outside_its_limits_is_refused() -> None:
+    with pytest.raises(InvalidInputError) as error:
+        RobotModel.from_urdf(fingers_urdf(False), "base_link", "tool", {"fa": 1e300})
+    assert one_line(error) == (
+        "robot.locked_joints.fa: 1e+300 is outside the joint's limits [-1, 1]"
+    )

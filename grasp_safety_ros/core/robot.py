@@ -374,6 +374,13 @@ class RobotModel:
                 raise InvalidInputError(
                     "robot.locked_joints", f"joint '{name}' has nq={joint.nq}; only nq=1 joints"
                 )
+            lower = full_model.lowerPositionLimit[joint.idx_q]
+            upper = full_model.upperPositionLimit[joint.idx_q]
+            if not lower - 1e-9 <= float(value) <= upper + 1e-9:
+                raise InvalidInputError(
+                    f"robot.locked_joints.{name}",
+                    f"{float(value):g} is outside the joint's limits [{lower:g}, {upper:g}]",
+                )
             reference[joint.idx_q] = float(value)
         _apply_mimic_joints(
             full_model, chain, mimic_joints or {}, reference, locked_positions, tip_frame
