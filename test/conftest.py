@@ -11,7 +11,7 @@ import pytest
 from hypothesis import settings
 
 from grasp_safety_ros.core import ObjectTrajectory, RobotModel
-from grasp_safety_ros.core.validation import pose_from_position_quat
+from grasp_safety_ros.core.input_checks import pose_from_position_quat
 
 # Property tests: no deadline on this shared machine; in CI (env CI set) the examples are
 # derived from each test's name (derandomize), so a run is reproducible.

@@ -23,9 +23,8 @@ from conftest import ARM6_AXES, serial_arm_urdf
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from grasp_safety_ros.cli import main
-from grasp_safety_ros.paths import config_file
-from grasp_safety_ros.scenario import (
+from grasp_safety_ros.cli.main import main
+from grasp_safety_ros.cli.scenario import (
     MAX_EXPANDED_NODES,
     MAX_GRASP_SAMPLES,
     MAX_GRASPS,
@@ -35,6 +34,7 @@ from grasp_safety_ros.scenario import (
     MAX_UNCERTAINTY_SAMPLES,
     OPTIONAL_SECTIONS,
 )
+from grasp_safety_ros.paths import config_file
 
 BOOK = yaml.safe_load(config_file("book_baxter.yaml").read_text())
 SMALL = {  # the book scenario cut down to 2 grasps x 3 samples, so a valid run is quick
@@ -315,7 +315,7 @@ def test_console_shows_one_line_and_no_traceback(
     scenario = tmp_path / "bad.yaml"
     scenario.write_text(content)
     completed = subprocess.run(
-        [sys.executable, "-m", "grasp_safety_ros.cli", "rank", str(scenario)],
+        [sys.executable, "-m", "grasp_safety_ros.cli.main", "rank", str(scenario)],
         capture_output=True,
         text=True,
         check=False,

@@ -24,13 +24,14 @@ import importlib.util
 import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
-from .exceptions import InvalidInputError
-from .robot import RobotModel
+from ..exceptions import InvalidInputError
+from ..model.robot import RobotModel
+from .compiled import chain_arrays
 
 
 def _numba_installed() -> bool:
@@ -111,74 +112,6 @@ class IKTrajectoryResult:
     def feasible(self) -> bool:
         """True when every sample was solved within tolerance and limits."""
         return not self.reason
-
-
-class ChainArrays(NamedTuple):
-    """A serial chain of 1-DOF joints as flat arrays, for the compiled kernels.
-
-    Joint k (chain order) moves in the frame ``placement_k`` of joint k-1 (of the world for
-    k = 0): rotation about, or translation along, the unit ``axis_k`` (joint frame).
-    """
-
-    placement_rotations: np.ndarray  # (n, 3, 3)
-    placement_translations: np.ndarray  # (n, 3) [m]
-    axes: np.ndarray  # (n, 3), unit
-    prismatic: np.ndarray  # (n,) 1.0 for prismatic joints, 0.0 for revolute ones
-    tip_rotation: np.ndarray  # (3, 3): tip frame in the last joint's frame
-    tip_translation: np.ndarray  # (3,) [m]
-    base_rotation: np.ndarray  # (3, 3): base frame in the world frame
-    lower_q: np.ndarray  # (n,)
-    upper_q: np.ndarray  # (n,)
-
-
-def chain_arrays(robot: RobotModel) -> ChainArrays | None:
-    """The chain of ``robot`` as arrays, or None when the compiled kernels cannot handle it.
-
-    Supported: a serial chain of revolute and prismatic joints (Pinocchio's RX/RY/RZ,
-    PX/PY/PZ and their unaligned variants; not continuous joints), the tip frame on the last.
-    """
-    model = robot.model
-    n = model.nv
-    if model.nq != n or model.njoints != n + 1:
-        return None
-    if any(model.parents[k] != k - 1 for k in range(1, n + 1)):
-        return None
-    if model.frames[robot.tip_frame_id].parentJoint != n:
-        return None
-    data = model.createData()
-    pin.computeJointJacobians(model, data, pin.neutral(model))
-    axes = np.empty((n, 3))
-    prismatic = np.zeros(n)
-    for k in range(n):
-        subspace = np.asarray(pin.getJointJacobian(model, data, k + 1, pin.LOCAL)).reshape(6, n)
-        column = subspace[:, k]
-        linear, angular = column[:3], column[3:]
-        if np.linalg.norm(angular) > 1e-12:
-            if np.linalg.norm(linear) > 1e-12 or abs(np.linalg.norm(angular) - 1.0) > 1e-12:
-                return None
-            axes[k] = angular
-        else:
-            if abs(np.linalg.norm(linear) - 1.0) > 1e-12:
-                return None
-            axes[k], prismatic[k] = linear, 1.0
-    placements = [model.jointPlacements[k] for k in range(1, n + 1)]
-    tip = model.frames[robot.tip_frame_id].placement
-    lower = np.array(model.lowerPositionLimit, dtype=float)
-    upper = np.array(model.upperPositionLimit, dtype=float)
-    arrays = ChainArrays(
-        placement_rotations=np.array([p.rotation for p in placements]),
-        placement_translations=np.array([p.translation for p in placements]),
-        axes=axes,
-        prismatic=prismatic,
-        tip_rotation=np.array(tip.rotation),
-        tip_translation=np.array(tip.translation),
-        base_rotation=np.array(robot.transform_base_to_world.rotation),
-        lower_q=lower,
-        upper_q=upper,
-    )
-    for array in arrays:
-        array.setflags(write=False)
-    return arrays
 
 
 def compiled_available() -> bool:
@@ -601,7 +534,7 @@ def _lapack_dgesv() -> Any:
 
 
 def _kernels() -> Any:
-    """The compiled kernels (numba compiles them, or loads them from its cache, on first use)."""
-    from . import parallel
+    """The IK kernels (numba compiles them, or loads them from its cache, on first use)."""
+    from ..kernels import ik
 
-    return parallel
+    return ik

@@ -8,8 +8,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
-from .exceptions import InvalidInputError
-from .validation import finite_float
+from ..exceptions import InvalidInputError
+from ..input_checks import finite_float
 
 MAX_SAMPLES = 1_000_000
 """Upper bound on the number of samples of one trajectory."""

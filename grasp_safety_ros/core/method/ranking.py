@@ -8,22 +8,22 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from ..exceptions import InvalidInputError
+from ..model.inertia import ObjectInertia
+from ..model.robot import RobotModel
+from ..model.trajectory import ObjectTrajectory
+from .compiled import evaluate_grasp_compiled
 from .effective_mass import (
+    STATIONARY_TANGENT_M,
     effective_masses_along,
     translational_mobilities_in_base,
     worst_direction,
 )
-from .exceptions import InvalidInputError
 from .ik import IKConfig, IKSolver, check_backend, tip_path_arrays
-from .inertia import ObjectInertia
-from .robot import RobotModel
-from .trajectory import ObjectTrajectory
+from .pool import evaluate_jobs, executor_for
 
 METRICS = ("mean", "max", "integral")
 """Aggregates of the per-sample effective mass: mean [kg], max [kg], integral [kg s]."""
-
-STATIONARY_TANGENT_M = 1e-9
-"""Below this |d p_tip / ds| [m] the tip does not translate and the worst direction is used."""
 
 
 @dataclass(frozen=True)
@@ -213,9 +213,7 @@ class GraspSafetyEvaluator:
         """``evaluate`` with the sample times, path parameters and IK seed already computed."""
         robot = self.robot
         if self.ik.compiled:  # tip path, IK and effective mass in one compiled call
-            from . import parallel
-
-            fused = parallel.evaluate_grasp_compiled(
+            fused = evaluate_grasp_compiled(
                 self.ik,
                 object_inertia,
                 trajectory,
@@ -286,11 +284,9 @@ class GraspSafetyEvaluator:
         metric = check_metric(metric or self.config.metric)
         seed_q = self.seed_q(seed_positions)  # validate once, before any work
         grasps = list(grasps)
-        from . import parallel  # imports numba when installed: only when first needed
-
         times = trajectory.times_s()
         s_values, s_rate, _ = trajectory.path_parameter(times)
-        executor = parallel.executor_for(self, len(grasps) * len(times))
+        executor = executor_for(self, len(grasps) * len(times))
         jobs = [
             (index, grasp, object_inertia, trajectory, metric, times, s_values, s_rate, seed_q)
             for index, grasp in enumerate(grasps)
@@ -298,7 +294,7 @@ class GraspSafetyEvaluator:
         if executor is None:
             results: Iterable[GraspEvaluation] = (self._evaluate_sampled(*job) for job in jobs)
         else:
-            results = parallel.evaluate_jobs(self, executor, jobs)
+            results = evaluate_jobs(self, executor, jobs, GraspSafetyEvaluator._evaluate_sampled)
         evaluations = []
         for evaluation in results:
             evaluations.append(evaluation)
