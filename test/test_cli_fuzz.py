@@ -135,6 +135,7 @@ def _edited(edits: list[tuple[tuple[Any, ...], str, Any, str]]) -> tuple[Any, se
     return data, new_keys
 
 
+@pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")  # norms of 1e308
 @FUZZ
 @given(st.lists(EDIT, min_size=1, max_size=3))
 def test_edited_scenarios_run_or_name_the_field(edits: list[Any]) -> None:
