@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,6 +21,87 @@ from ..core.method.ranking import METRICS, Grasp, check_metric
 from ..core.model.inertia import ObjectInertia, solid_box, solid_cylinder, solid_sphere
 from ..core.model.robot import RobotModel
 from ..core.model.trajectory import ObjectTrajectory
+
+MAX_SCENARIO_BYTES = 4_000_000
+"""Largest scenario file read [bytes]."""
+
+MAX_NESTING_DEPTH = 64
+"""Deepest nesting of lists and mappings in a scenario file."""
+
+MAX_EXPANDED_NODES = 1_000_000
+"""Most YAML nodes a scenario may expand to, aliases (``*name``) counted at full size."""
+
+MAX_GRASPS = 10_000
+"""Most grasps in a scenario."""
+
+MAX_GRASP_SAMPLES = 10_000_000
+"""Most grasps x trajectory samples (IK solves) in a scenario."""
+
+MAX_POINTS = 1_000
+"""Most exposed points (``object.points_m``)."""
+
+MAX_UNCERTAINTY_SAMPLES = 10_000
+"""Most random inertia samples (``uncertainty.samples``)."""
+
+MAX_OBJECT_MASS_KG = 10_000.0
+"""Heaviest object [kg]."""
+
+MAX_OBJECT_SIZE_M = 100.0
+"""Largest object dimension, CoM offset and radius of gyration [m] (far beyond any gripper;
+much larger objects make the augmented mass matrix numerically singular)."""
+
+
+_SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml when available
+
+
+def _check_yaml_structure(text: str) -> None:
+    """Refuse YAML nested deeper than MAX_NESTING_DEPTH or expanding to more than
+    MAX_EXPANDED_NODES nodes (aliases ``*name`` counted at the full size of their anchor, so a
+    "billion laughs" file is refused however short); one pass over the parser's events."""
+    child_sizes: list[int] = [0]
+    anchor_stack: list[str | None] = []
+    anchor_sizes: dict[str, int] = {}
+    for event in yaml.parse(text, Loader=_SAFE_LOADER):
+        if isinstance(event, yaml.CollectionStartEvent):
+            if len(anchor_stack) >= MAX_NESTING_DEPTH:
+                raise InvalidInputError(
+                    "scenario",
+                    f"nesting deeper than {MAX_NESTING_DEPTH} levels at line "
+                    f"{event.start_mark.line + 1}",
+                )
+            anchor_stack.append(event.anchor)
+            child_sizes.append(0)
+            continue
+        if isinstance(event, yaml.CollectionEndEvent):
+            size, anchor = 1 + child_sizes.pop(), anchor_stack.pop()
+        elif isinstance(event, yaml.AliasEvent):
+            size, anchor = anchor_sizes.get(event.anchor, 1), None
+        elif isinstance(event, yaml.ScalarEvent):
+            size, anchor = 1, event.anchor
+        else:  # stream and document start and end
+            continue
+        if anchor is not None:
+            anchor_sizes[anchor] = size
+        child_sizes[-1] += size
+        if child_sizes[-1] > MAX_EXPANDED_NODES:
+            raise InvalidInputError(
+                "scenario",
+                f"expands to more than {MAX_EXPANDED_NODES} YAML nodes (aliases counted at "
+                f"full size), near line {event.start_mark.line + 1}",
+            )
+
+
+def load_yaml(text: str, where: str) -> Any:
+    """Parse YAML text, bounded by _check_yaml_structure; errors as one-line
+    InvalidInputError('scenario')."""
+    try:
+        _check_yaml_structure(text)
+        return yaml.load(text, Loader=_SAFE_LOADER)  # a safe loader
+    except (yaml.YAMLError, ValueError, OverflowError) as error:
+        if isinstance(error, InvalidInputError):
+            raise
+        reason = " ".join(str(error).split())
+        raise InvalidInputError("scenario", f"{where} is not valid YAML: {reason}") from None
 
 
 @dataclass(frozen=True)
@@ -85,9 +167,11 @@ def _string(value: Any, field: str) -> str:
 
 
 def _check_keys(section: Mapping[str, Any], allowed: set[str], prefix: str) -> None:
-    unknown = sorted(set(section) - allowed)
+    unknown = sorted(
+        k if isinstance(k, str) else json.dumps(k, default=str) for k in set(section) - allowed
+    )
     if unknown:
-        where = f"{prefix}.{unknown[0]}" if prefix else str(unknown[0])
+        where = f"{prefix}.{unknown[0]}" if prefix else unknown[0]
         raise InvalidInputError(where, f"unknown field; allowed: {', '.join(sorted(allowed))}")
 
 
@@ -126,6 +210,11 @@ def parse_object(section: Any) -> tuple[ObjectInertia, np.ndarray | None]:
     obj = _mapping(section, "object")
     inertia = _parse_inertia(obj)
     if "points_m" in obj:
+        if isinstance(obj["points_m"], list) and len(obj["points_m"]) > MAX_POINTS:
+            raise InvalidInputError(
+                "object.points_m",
+                f"has {len(obj['points_m'])} points; at most {MAX_POINTS} are allowed",
+            )
         points = finite_array(obj["points_m"], "object.points_m")
         if points.ndim != 2 or points.shape[1] != 3 or len(points) == 0:
             raise InvalidInputError(
@@ -147,9 +236,14 @@ def _parse_inertia(obj: Mapping[str, Any]) -> ObjectInertia:
     shapes = {"inertia_about_com_kgm2", "box_size_m", "cylinder", "sphere"}
     _check_keys(obj, {"mass_kg", "com_in_object_m", "points_m"} | shapes, "object")
     mass = finite_float(
-        _required(obj, "mass_kg", "object"), "object.mass_kg", minimum=0.0, strict_minimum=True
+        _required(obj, "mass_kg", "object"),
+        "object.mass_kg",
+        minimum=0.0,
+        maximum=MAX_OBJECT_MASS_KG,
+        strict_minimum=True,
     )
     com = finite_array(obj.get("com_in_object_m", [0.0, 0.0, 0.0]), "object.com_in_object_m", (3,))
+    _check_size(com, "object.com_in_object_m")
     given = sorted(shapes & set(obj))
     if len(given) != 1:
         raise InvalidInputError(
@@ -161,21 +255,42 @@ def _parse_inertia(obj: Mapping[str, Any]) -> ObjectInertia:
         tensor = finite_array(
             obj["inertia_about_com_kgm2"], "object.inertia_about_com_kgm2", (3, 3)
         )
-        return ObjectInertia(mass, com, tensor)
+        inertia = ObjectInertia(mass, com, tensor)
+        gyration_m = float(
+            np.sqrt(np.max(np.linalg.eigvalsh(inertia.inertia_about_com_kgm2)) / mass)
+        )
+        if gyration_m > MAX_OBJECT_SIZE_M:
+            raise InvalidInputError(
+                "object.inertia_about_com_kgm2",
+                f"radius of gyration sqrt(I_max / mass_kg) = {gyration_m:g} m; at most "
+                f"{MAX_OBJECT_SIZE_M:g} m",
+            )
+        return inertia
     if "box_size_m" in obj:
+        _check_size(obj["box_size_m"], "object.box_size_m")
         return solid_box(mass, obj["box_size_m"], com)
     if "cylinder" in obj:
         cylinder = _mapping(obj["cylinder"], "object.cylinder")
         _check_keys(cylinder, {"radius_m", "length_m"}, "object.cylinder")
-        return solid_cylinder(
-            mass,
-            _required(cylinder, "radius_m", "object.cylinder"),
-            _required(cylinder, "length_m", "object.cylinder"),
-            com,
-        )
+        radius = _required(cylinder, "radius_m", "object.cylinder")
+        length = _required(cylinder, "length_m", "object.cylinder")
+        _check_size(radius, "object.cylinder.radius_m")
+        _check_size(length, "object.cylinder.length_m")
+        return solid_cylinder(mass, radius, length, com)
     sphere = _mapping(obj["sphere"], "object.sphere")
     _check_keys(sphere, {"radius_m"}, "object.sphere")
-    return solid_sphere(mass, _required(sphere, "radius_m", "object.sphere"), com)
+    radius = _required(sphere, "radius_m", "object.sphere")
+    _check_size(radius, "object.sphere.radius_m")
+    return solid_sphere(mass, radius, com)
+
+
+def _check_size(value: Any, field: str) -> None:
+    """Refuse a length or vector [m] longer than MAX_OBJECT_SIZE_M; other checks (type, sign,
+    shape) are the inertia constructors'."""
+    array = finite_array(value, field)
+    size = float(np.max(np.abs(array), initial=0.0))
+    if size > MAX_OBJECT_SIZE_M:
+        raise InvalidInputError(field, f"must be at most {MAX_OBJECT_SIZE_M:g} m, got {size:g} m")
 
 
 def _pose(section: Any, field: str):
@@ -207,6 +322,10 @@ def parse_grasps(section: Any) -> tuple[tuple[Grasp, ...], tuple[float, ...] | N
     """
     if not isinstance(section, list) or not section:
         raise InvalidInputError("grasps", "must be a non-empty list of poses")
+    if len(section) > MAX_GRASPS:
+        raise InvalidInputError(
+            "grasps", f"has {len(section)} grasps; at most {MAX_GRASPS} are allowed"
+        )
     grasps = []
     qualities = []
     for i, item in enumerate(section):
@@ -273,6 +392,12 @@ def parse_options(
             "seed",
         }
         _check_keys(section, allowed, "uncertainty")
+        samples = section.get("samples")
+        if isinstance(samples, int) and samples > MAX_UNCERTAINTY_SAMPLES:
+            raise InvalidInputError(
+                "uncertainty.samples",
+                f"must be at most {MAX_UNCERTAINTY_SAMPLES}, got {samples}",
+            )
         renamed = {("num_random_samples" if k == "samples" else k): v for k, v in section.items()}
         uncertainty = InertiaUncertainty(**renamed)
     effort = _mapping(root.get("effort", {}), "effort")
@@ -286,18 +411,24 @@ def parse_options(
             "metric_point",
             f"{metric_point!r} needs object.points_m or a box or cylinder object",
         )
-    return AnalysisOptions(
-        metric_point=metric_point,
-        points_in_object_m=points,
-        iso_regions=None if regions is None else tuple(regions),
-        uncertainty=uncertainty,
-        grasp_quality=quality,
-        safety_weight=finite_float(root.get("safety_weight", 0.5), "safety_weight", 0.0, 1.0),
-        redundancy=_flag(root.get("redundancy", False), "redundancy"),
-        effort=_flag(effort.get("enabled", True), "effort.enabled"),
-        rank_by=rank_by,
-        effort_criterion=effort.get("criterion", "peak_fraction"),
-    )
+    try:
+        return AnalysisOptions(
+            metric_point=metric_point,
+            points_in_object_m=points,
+            iso_regions=None if regions is None else tuple(regions),
+            uncertainty=uncertainty,
+            grasp_quality=quality,
+            safety_weight=finite_float(root.get("safety_weight", 0.5), "safety_weight", 0.0, 1.0),
+            redundancy=_flag(root.get("redundancy", False), "redundancy"),
+            effort=_flag(effort.get("enabled", True), "effort.enabled"),
+            rank_by=rank_by,
+            effort_criterion=effort.get("criterion", "peak_fraction"),
+        )
+    except InvalidInputError as error:  # the core says iso15066.<field>; the file iso_ts_15066
+        if not error.field.startswith("iso15066."):
+            raise
+        field = "iso_ts_15066." + error.field[len("iso15066.") :]
+        raise InvalidInputError(field, error.reason) from None
 
 
 def parse_scenario(data: Any, base_dir: Path) -> Scenario:
@@ -310,10 +441,18 @@ def parse_scenario(data: Any, base_dir: Path) -> Scenario:
         raise InvalidInputError("metric", f"must be one of {', '.join(METRICS)}, got {metric!r}")
     object_inertia, points = parse_object(_required(root, "object", ""))
     grasps, quality = parse_grasps(_required(root, "grasps", ""))
+    trajectory = parse_trajectory(_required(root, "trajectory", ""))
+    if len(grasps) * trajectory.num_samples > MAX_GRASP_SAMPLES:
+        raise InvalidInputError(
+            "grasps",
+            f"{len(grasps)} grasps x {trajectory.num_samples} trajectory samples = "
+            f"{len(grasps) * trajectory.num_samples} IK solves; at most {MAX_GRASP_SAMPLES} "
+            "(fewer grasps or a larger trajectory.dt_s)",
+        )
     return Scenario(
         robot=parse_robot(_required(root, "robot", "")),
         object_inertia=object_inertia,
-        trajectory=parse_trajectory(_required(root, "trajectory", "")),
+        trajectory=trajectory,
         grasps=grasps,
         metric=check_metric(metric),
         base_dir=base_dir,
@@ -323,14 +462,23 @@ def parse_scenario(data: Any, base_dir: Path) -> Scenario:
 
 
 def load_scenario(path: str | Path) -> Scenario:
-    """Read and validate a scenario YAML file."""
+    """Read and validate a scenario YAML file (at most MAX_SCENARIO_BYTES, UTF-8)."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        with path.open("rb") as stream:
+            raw = stream.read(MAX_SCENARIO_BYTES + 1)
     except OSError as error:
-        raise InvalidInputError("scenario", f"cannot read '{path}': {error.strerror}") from None
+        reason = error.strerror or str(error)
+        raise InvalidInputError("scenario", f"cannot read '{path}': {reason}") from None
+    if len(raw) > MAX_SCENARIO_BYTES:
+        raise InvalidInputError(
+            "scenario", f"'{path}' is larger than {MAX_SCENARIO_BYTES} bytes, the limit"
+        )
     try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as error:
-        raise InvalidInputError("scenario", f"'{path}' is not valid YAML: {error}") from None
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as error:
+        raise InvalidInputError(
+            "scenario", f"'{path}' is not UTF-8 text (byte {error.start}: {error.reason})"
+        ) from None
+    data = load_yaml(text, f"'{path}'")
     return parse_scenario(data, path.resolve().parent)
