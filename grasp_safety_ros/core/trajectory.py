@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import NamedTuple, Protocol
 
 import numpy as np
 import pinocchio as pin
@@ -13,6 +14,44 @@ from .validation import finite_float
 
 MAX_SAMPLES = 1_000_000
 """Upper bound on the number of samples of one trajectory."""
+
+
+class TipMotion(NamedTuple):
+    """The tip path a grasp induces, sampled (the common interface of object trajectories).
+
+    Every trajectory type (``ObjectTrajectory``, ``WaypointTrajectory``,
+    ``JointSpaceTrajectory``) offers ``times_s()``, ``duration_s``, ``path_parameter(times)``,
+    ``object_poses(times)``, ``tip_motion(grasp, times)``, ``tip_twists(grasp, times)`` and
+    ``supports_compiled``; the evaluator and the analyses use only these.
+    """
+
+    rotations: np.ndarray  # (N, 3, 3) tip frame in the base frame
+    positions: np.ndarray  # (N, 3) [m] tip origin in the base frame
+    tangents: np.ndarray  # (N, 3) [m] direction of tip motion, base axes (see each type)
+    speeds: np.ndarray  # (N,) [m/s] tip speed
+
+
+class Trajectory(Protocol):
+    """What the evaluator and the analyses need of an object trajectory (see TipMotion)."""
+
+    supports_compiled: bool
+
+    @property
+    def duration_s(self) -> float: ...
+
+    def times_s(self) -> np.ndarray: ...
+
+    def path_parameter(
+        self, times_s: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+
+    def object_poses(self, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def tip_motion(self, transform_tip_to_object: pin.SE3, times_s: np.ndarray) -> TipMotion: ...
+
+    def tip_twists(
+        self, transform_tip_to_object: pin.SE3, times_s: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]: ...
 
 
 def quintic_time_scaling(tau: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -44,6 +83,9 @@ class ObjectTrajectory:
     duration_s: float
     dt_s: float
     rotation_log_in_object: np.ndarray = field(init=False, repr=False)
+
+    supports_compiled = True
+    """The compiled fused kernel computes this trajectory's tip path itself."""
 
     def __post_init__(self) -> None:
         duration = finite_float(
@@ -118,3 +160,45 @@ class ObjectTrajectory:
             poses.append(object_pose * grasp)
             tangents[i] = linear + object_pose.rotation @ lever_in_object
         return poses, tangents
+
+    def object_poses(self, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Object rotations (N, 3, 3) and positions (N, 3) [m] in the base frame at the times."""
+        motion = self.tip_motion(pin.SE3.Identity(), times_s)
+        return motion.rotations, motion.positions
+
+    def tip_motion(self, transform_tip_to_object: pin.SE3, times_s: np.ndarray) -> TipMotion:
+        """Tip poses, path tangents d p_tip/ds [m] and speeds |d p_tip/ds|·ds/dt [m/s].
+
+        Equal to ``ik.tip_path_arrays`` at s(t) (the Python evaluation path's tip path).
+        """
+        from .ik import tip_path_arrays
+
+        s_values, s_rate, _ = self.path_parameter(times_s)
+        rotations, positions, tangents = tip_path_arrays(self, transform_tip_to_object, s_values)
+        return TipMotion(rotations, positions, tangents, np.linalg.norm(tangents, axis=1) * s_rate)
+
+    def tip_twists(
+        self, transform_tip_to_object: pin.SE3, times_s: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Tip twist (N, 6) [m/s, rad/s] and its time derivative (N, 6), base axes.
+
+        Linear part: velocity / classical acceleration of the tip origin; angular part: angular
+        velocity / acceleration of the object (= of the tip).
+        """
+        grasp = pin.SE3(transform_tip_to_object)
+        times = np.asarray(times_s, dtype=float)
+        s_values, s_rate, s_accel = self.path_parameter(times)
+        _, tangents = self.tip_path(grasp, s_values)
+        omega = self.rotation_log_in_object  # object angular velocity per unit s, object axes
+        curvature_in_object = np.cross(omega, np.cross(omega, grasp.translation))
+        twist = np.empty((len(times), 6))
+        twist_rate = np.empty((len(times), 6))
+        for i, s in enumerate(s_values):
+            rotation = self.transform_object_to_base(float(s)).rotation
+            angular = rotation @ omega
+            second = rotation @ curvature_in_object  # d² p_tip / ds²
+            twist[i, :3] = tangents[i] * s_rate[i]
+            twist[i, 3:] = angular * s_rate[i]
+            twist_rate[i, :3] = second * s_rate[i] ** 2 + tangents[i] * s_accel[i]
+            twist_rate[i, 3:] = angular * s_accel[i]
+        return twist, twist_rate
