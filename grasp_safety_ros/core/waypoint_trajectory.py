@@ -241,11 +241,13 @@ class WaypointTrajectory:
             )
             third = self._position_spline(times[rest], 3) + np.cross(third_angular, lever[rest])
             tangents[rest] = third * self.duration_s**3 * _REST_SCALE
+        speeds = np.linalg.norm(velocity, axis=1)
+        speeds[rest] = 0.0  # exactly at rest (the spline's derivative there is rounding)
         return TipMotion(
             rotations=np.matmul(rotations, grasp.rotation),
             positions=positions + lever,
             tangents=tangents,
-            speeds=np.linalg.norm(velocity, axis=1),
+            speeds=speeds,
         )
 
     def tip_twists(
