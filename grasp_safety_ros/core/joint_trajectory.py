@@ -26,9 +26,6 @@ from .robot import RobotModel
 from .trajectory import TipMotion, quintic_time_scaling
 from .validation import finite_array
 
-_STATIONARY_M = 1e-9
-"""Tip rest threshold on |derivative|·T^k [m] (the evaluator's STATIONARY_TANGENT_M)."""
-
 
 @dataclass(frozen=True)
 class PlannedJointTrajectory:
@@ -187,6 +184,8 @@ class JointSpaceTrajectory:
     def _kinematics(self, times_s: np.ndarray) -> tuple[np.ndarray, ...]:
         """Tip rotations, positions, twists, twist rates (base axes) and the rest limits
         T²·J q̈ (or T³·J q⃛ where that vanishes), 6-D, base axes."""
+        from .ranking import STATIONARY_TANGENT_M  # (ranking imports this module)
+
         robot = self.robot
         model, data = robot.model, robot.model.createData()
         base = robot.transform_base_to_world
@@ -212,7 +211,7 @@ class JointSpaceTrajectory:
             t = self.duration_s
             second = jacobian @ seconds[i] * t**2
             third = jacobian @ thirds[i] * t**3
-            limit = second if np.linalg.norm(second[:3]) >= _STATIONARY_M else third
+            limit = second if np.linalg.norm(second[:3]) >= STATIONARY_TANGENT_M else third
             rest[i] = np.concatenate([base.rotation.T @ limit[:3], base.rotation.T @ limit[3:]])
         return rotations, translations, twists, twist_rates, rest
 
@@ -231,8 +230,10 @@ class JointSpaceTrajectory:
         relative = self.transform_tip_to_object.inverse() * pin.SE3(transform_tip_to_object)
         lever = rotations @ relative.translation  # tip -> attached frame, base axes
         velocity = twists[:, :3] + np.cross(twists[:, 3:], lever)
+        from .ranking import STATIONARY_TANGENT_M
+
         tangents = velocity * self.duration_s
-        at_rest = np.linalg.norm(tangents, axis=1) < _STATIONARY_M
+        at_rest = np.linalg.norm(tangents, axis=1) < STATIONARY_TANGENT_M
         limit = rest[:, :3] + np.cross(rest[:, 3:], lever)  # J q̈ (or J q⃛) where q̇ = 0
         tangents[at_rest] = limit[at_rest]
         return TipMotion(

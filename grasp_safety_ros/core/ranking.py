@@ -235,7 +235,7 @@ class GraspSafetyEvaluator:
             mobilities = translational_mobilities_in_base(
                 robot, object_inertia, grasp.transform_tip_to_object, q_all
             )
-            masses, directions, worst, tangent_norms = _masses_along(mobilities, tip.tangents)
+            masses, directions, worst = _masses_along(mobilities, tip.tangents)
             tip_speeds = tip.speeds
         # Until the kernel takes precomputed tip paths, only the quintic (whose tip path the
         # kernel computes itself) runs compiled; every other trajectory type runs below.
@@ -255,8 +255,7 @@ class GraspSafetyEvaluator:
                 return _infeasible(index, grasp.name, fused.reason, robot.num_joints)
             q_all, iterations, mobilities = fused.q, fused.iterations, fused.mobilities
             masses, directions, worst = fused.effective_masses, fused.directions, fused.worst
-            tangent_norms = fused.tangent_norms
-            tip_speeds = tangent_norms * s_rate
+            tip_speeds = fused.tangent_norms * s_rate
         else:
             tip = trajectory.tip_motion(grasp.transform_tip_to_object, times)
             ik = self.ik.solve_trajectory_arrays(
@@ -268,7 +267,7 @@ class GraspSafetyEvaluator:
             mobilities = translational_mobilities_in_base(
                 robot, object_inertia, grasp.transform_tip_to_object, q_all
             )
-            masses, directions, worst, tangent_norms = _masses_along(mobilities, tip.tangents)
+            masses, directions, worst = _masses_along(mobilities, tip.tangents)
             tip_speeds = tip.speeds
         for i in np.flatnonzero(worst):
             directions[i], masses[i] = worst_direction(mobilities[i])
@@ -344,9 +343,9 @@ def _as_quintic(trajectory: Trajectory) -> Trajectory:
 
 def _masses_along(
     mobilities: np.ndarray, tangents: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Effective masses along the unit tangents, directions, the samples where the tip does
-    not translate (left for ``worst_direction``) and the tangent norms."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Effective masses along the unit tangents, the directions, and the samples where the tip
+    does not translate (their direction and mass are left for ``worst_direction``)."""
     count = len(tangents)
     masses = np.empty(count)
     directions = np.empty((count, 3))
@@ -355,7 +354,7 @@ def _masses_along(
     moving = ~worst
     directions[moving] = tangents[moving] / tangent_norms[moving, None]
     masses[moving] = effective_masses_along(mobilities[moving], directions[moving])
-    return masses, directions, worst, tangent_norms
+    return masses, directions, worst
 
 
 def _infeasible(index: int, name: str, reason: str, num_joints: int) -> GraspEvaluation:
