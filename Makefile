@@ -18,7 +18,7 @@ $(STAMP): requirements.txt setup.py
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q -r requirements.txt
 	$(PY) -m pip install -q --no-deps -e .
-	$(PY) -c "from grasp_safety_ros.core.parallel import warm_up; print(f'compiled kernels ready ({warm_up():.1f} s)')"
+	$(PY) -c "from grasp_safety_ros.core.method.warm_up import warm_up; print(f'compiled kernels ready ({warm_up():.1f} s)')"
 	touch $@
 
 $(IFACE_STAMP): $(STAMP) $(IFACE_SRC)

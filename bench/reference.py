@@ -19,13 +19,13 @@ import numpy as np
 import pinocchio as pin
 
 from grasp_safety_ros.core import ObjectInertia, ObjectTrajectory, RobotModel
-from grasp_safety_ros.core.effective_mass import (
+from grasp_safety_ros.core.method.effective_mass import (
     augmented_model,
     effective_mass_along,
     translational_mobility_in_base,
     worst_direction,
 )
-from grasp_safety_ros.core.ik import IKConfig
+from grasp_safety_ros.core.method.ik import IKConfig
 
 STATIONARY_TANGENT_M = 1e-9
 

@@ -52,14 +52,14 @@ from reference import ReferenceIK, reference_effective_masses
 from workload import ARMS, ArmWorkload, box_object, grasps_around_box
 
 from grasp_safety_ros.core import GraspSafetyEvaluator
-from grasp_safety_ros.core.effective_mass import (
+from grasp_safety_ros.core.method.effective_mass import (
     effective_masses_along,
     translational_mobilities_in_base,
 )
-from grasp_safety_ros.core.ik import compiled_available
-from grasp_safety_ros.core.parallel import default_workers
-from grasp_safety_ros.core.ranking import EvaluationConfig, Ranking
-from grasp_safety_ros.core.robot import resolve_urdf
+from grasp_safety_ros.core.method.ik import compiled_available
+from grasp_safety_ros.core.method.pool import default_workers
+from grasp_safety_ros.core.method.ranking import EvaluationConfig, Ranking
+from grasp_safety_ros.core.model.robot import resolve_urdf
 
 FLOPS_PER_EVALUATION = 4000.0
 FLOPS_PER_IK_ITERATION = 2000.0

@@ -8,7 +8,7 @@ import numpy as np
 import pinocchio as pin
 
 from grasp_safety_ros.core import Grasp, ObjectInertia, ObjectTrajectory, RobotModel, solid_box
-from grasp_safety_ros.core.validation import pose_from_position_quat
+from grasp_safety_ros.core.input_checks import pose_from_position_quat
 
 BOX_SIZE_M = (0.08, 0.12, 0.20)
 """Edges of the box along the object x, y, z axes [m]."""

@@ -9,7 +9,7 @@ import pinocchio as pin
 import pytest
 
 from grasp_safety_ros.core import ObjectTrajectory, RobotModel
-from grasp_safety_ros.core.validation import pose_from_position_quat
+from grasp_safety_ros.core.input_checks import pose_from_position_quat
 
 
 def _inertial(mass: float, inertia: Sequence[float], com: Sequence[float]) -> str:

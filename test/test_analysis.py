@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 import yaml
 
-from grasp_safety_ros.cli import main, rank_scenario
-from grasp_safety_ros.core.analysis import AnalysisOptions
+from grasp_safety_ros.cli.main import main, rank_scenario
+from grasp_safety_ros.cli.scenario import load_scenario, parse_scenario
+from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions
 from grasp_safety_ros.core.exceptions import InvalidInputError
 from grasp_safety_ros.paths import config_file
-from grasp_safety_ros.scenario import load_scenario, parse_scenario
 
 EXTENDED = yaml.safe_load(config_file("book_baxter_extended.yaml").read_text())
 
@@ -113,7 +113,7 @@ def test_partial_quality_is_refused(tmp_path: Path) -> None:
 
 def test_progress_counts_every_unit_and_can_abandon(tmp_path: Path) -> None:
     from grasp_safety_ros.core import EvaluationConfig, GraspSafetyEvaluator
-    from grasp_safety_ros.core.analysis import analyse
+    from grasp_safety_ros.core.analyses.safety_report import analyse
 
     scenario = parse_scenario(coarse(EXTENDED, redundancy=False), tmp_path)
     evaluator = GraspSafetyEvaluator(scenario.robot.load(), EvaluationConfig())

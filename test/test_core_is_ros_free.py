@@ -10,7 +10,7 @@ import sys
 for name in ("rclpy", "mujoco", "yaml", "matplotlib"):
     sys.modules[name] = None  # any import of these now raises ImportError
 import grasp_safety_ros.core as core
-import grasp_safety_ros.core.effective_mass, grasp_safety_ros.core.ik
+import grasp_safety_ros.core.method.effective_mass, grasp_safety_ros.core.method.ik
 loaded = [m for m, v in sys.modules.items() if v is not None]
 print(sorted(m for m in loaded if m.split(".")[0] in ("rclpy", "mujoco")))
 """

@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from grasp_safety_ros.core import ObjectInertia, RobotModel, solid_box
-from grasp_safety_ros.core.effective_mass import (
+from grasp_safety_ros.core.method.effective_mass import (
     augmented_model,
     effective_mass_along,
     translational_mobility_in_base,

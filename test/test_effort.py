@@ -20,14 +20,14 @@ from grasp_safety_ros.core import (
     RobotModel,
     solid_box,
 )
-from grasp_safety_ros.core.effective_mass import augmented_model
-from grasp_safety_ros.core.effort import (
+from grasp_safety_ros.core.analyses.effort import (
     evaluate_effort,
     order_by_effort,
     tip_twist_and_derivative,
 )
-from grasp_safety_ros.core.exposed_points import point_jacobian_in_base
-from grasp_safety_ros.core.validation import pose_from_position_quat
+from grasp_safety_ros.core.analyses.exposed_points import point_jacobian_in_base
+from grasp_safety_ros.core.input_checks import pose_from_position_quat
+from grasp_safety_ros.core.method.effective_mass import augmented_model
 
 BOOK = solid_box(0.34, [0.15, 0.22, 0.015])
 GRASP = Grasp(pose_from_position_quat([-0.075, 0.1, 0.0], [0, 0, 0, 1], "grasp"), "spine")

@@ -23,8 +23,7 @@ from grasp_safety_ros.core import (
     RobotModel,
     solid_box,
 )
-from grasp_safety_ros.core.effective_mass import augmented_model
-from grasp_safety_ros.core.exposed_points import (
+from grasp_safety_ros.core.analyses.exposed_points import (
     box_corners_in_object,
     check_points_in_object,
     cylinder_rim_points_in_object,
@@ -35,7 +34,8 @@ from grasp_safety_ros.core.exposed_points import (
     point_mobility_in_base,
     score_with_metric_point,
 )
-from grasp_safety_ros.core.validation import pose_from_position_quat
+from grasp_safety_ros.core.input_checks import pose_from_position_quat
+from grasp_safety_ros.core.method.effective_mass import augmented_model
 
 BOOK_SIZE = (0.15, 0.22, 0.015)
 BOOK = solid_box(0.34, BOOK_SIZE)

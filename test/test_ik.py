@@ -17,8 +17,8 @@ from grasp_safety_ros.core import (
     RobotModel,
     solid_box,
 )
-from grasp_safety_ros.core.ik import compiled_available
-from grasp_safety_ros.core.validation import pose_from_position_quat
+from grasp_safety_ros.core.input_checks import pose_from_position_quat
+from grasp_safety_ros.core.method.ik import compiled_available
 
 
 def pose_error(robot: RobotModel, positions: np.ndarray, target: pin.SE3) -> tuple[float, float]:

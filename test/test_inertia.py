@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from grasp_safety_ros.core import InvalidInputError, ObjectInertia, solid_box, solid_cylinder
-from grasp_safety_ros.core.inertia import (
+from grasp_safety_ros.core.model.inertia import (
     TensorObjectGeometry,
     solid_sphere,
     tensor_object_configurations,

@@ -21,10 +21,10 @@ from grasp_safety_ros.core import (
     IKConfig,
     InvalidInputError,
     RobotModel,
-    iso15066,
     solid_box,
 )
-from grasp_safety_ros.core.iso15066 import (
+from grasp_safety_ros.core.analyses import iso15066
+from grasp_safety_ros.core.analyses.iso15066 import (
     BODY_REGIONS,
     BodyRegion,
     assess_grasp,
@@ -32,7 +32,7 @@ from grasp_safety_ros.core.iso15066 import (
     max_permissible_speed_m_s,
     transient_contact_force_n,
 )
-from grasp_safety_ros.core.validation import pose_from_position_quat
+from grasp_safety_ros.core.input_checks import pose_from_position_quat
 
 SHARED_TABLE = (
     Path(__file__).resolve().parents[1].parent
@@ -247,8 +247,8 @@ def test_new_core_modules_import_without_yaml_or_ros() -> None:
         "import sys\n"
         "for name in ('rclpy', 'yaml', 'matplotlib', 'scipy'):\n"
         "    sys.modules[name] = None\n"
-        + "".join(f"import grasp_safety_ros.core.{m}\n" for m in NEW_MODULES)
-        + "from grasp_safety_ros.core.iso15066 import BODY_REGIONS\n"
+        + "".join(f"import grasp_safety_ros.core.analyses.{m}\n" for m in NEW_MODULES)
+        + "from grasp_safety_ros.core.analyses.iso15066 import BODY_REGIONS\n"
         "print(len(BODY_REGIONS))\n"
     )
     completed = subprocess.run(

@@ -9,9 +9,12 @@ import pytest
 from conftest import BAXTER_SEED, book_trajectory
 
 from grasp_safety_ros.core import Grasp, GraspSafetyEvaluator, InvalidInputError, solid_box
-from grasp_safety_ros.core.analysis import AnalysisOptions, analyse
-from grasp_safety_ros.core.exposed_points import box_corners_in_object
-from grasp_safety_ros.core.joint_trajectory import JointSpaceTrajectory, PlannedJointTrajectory
+from grasp_safety_ros.core.analyses.exposed_points import box_corners_in_object
+from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions, analyse
+from grasp_safety_ros.core.method.joint_trajectory import (
+    JointSpaceTrajectory,
+    PlannedJointTrajectory,
+)
 
 BOOK = solid_box(0.34, [0.15, 0.22, 0.015])
 GRASP = pin.SE3(np.eye(3), np.array([0.0, -0.1, 0.0]))

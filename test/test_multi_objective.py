@@ -10,13 +10,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from grasp_safety_ros.core import GraspEvaluation, InvalidInputError
-from grasp_safety_ros.core.multi_objective import (
+from grasp_safety_ros.core.analyses.multi_objective import (
     min_max_normalise,
     pareto_set,
     rank_evaluations_with_quality,
     rank_with_quality,
 )
-from grasp_safety_ros.core.ranking import order_by_score
+from grasp_safety_ros.core.method.ranking import order_by_score
 
 # Values on a grid (ties occur, and min-max normalisation cannot merge distinct values by
 # rounding); NaN marks an infeasible grasp.

@@ -27,20 +27,16 @@ from grasp_safety_ros.core import (
     RobotModel,
     solid_box,
 )
-from grasp_safety_ros.core.effective_mass import (
+from grasp_safety_ros.core.input_checks import pose_from_position_quat
+from grasp_safety_ros.core.method.compiled import chain_arrays
+from grasp_safety_ros.core.method.effective_mass import (
     augmented_model,
     translational_mobilities_in_base,
     translational_mobility_in_base,
 )
-from grasp_safety_ros.core.ik import (
-    IKSolver,
-    chain_arrays,
-    compiled_available,
-    exp3_batch,
-    tip_path_arrays,
-)
-from grasp_safety_ros.core.ranking import Ranking
-from grasp_safety_ros.core.validation import pose_from_position_quat
+from grasp_safety_ros.core.method.ik import IKSolver, compiled_available
+from grasp_safety_ros.core.method.ranking import Ranking
+from grasp_safety_ros.core.model.trajectory import exp3_batch, tip_path_arrays
 
 needs_numba = pytest.mark.skipif(not compiled_available(), reason="numba is not installed")
 RTOL = 1e-9
@@ -422,7 +418,7 @@ def test_parallel_ranking_is_identical_to_serial(backend: str, arm7: RobotModel)
 
 
 def test_warm_up_runs_with_and_without_an_evaluator(arm6: RobotModel) -> None:
-    from grasp_safety_ros.core.parallel import warm_up
+    from grasp_safety_ros.core.method.warm_up import warm_up
 
     assert warm_up() >= 0.0
     assert warm_up(GraspSafetyEvaluator(arm6)) >= 0.0

@@ -17,22 +17,22 @@ from grasp_safety_ros.core import (
     RobotModel,
     solid_box,
 )
-from grasp_safety_ros.core.effective_mass import (
-    augmented_model,
-    effective_mass_along,
-    translational_mobility_in_base,
-    worst_direction,
-)
-from grasp_safety_ros.core.effort import evaluate_effort
-from grasp_safety_ros.core.ranking import METRICS, aggregate
-from grasp_safety_ros.core.redundancy import (
+from grasp_safety_ros.core.analyses.effort import evaluate_effort
+from grasp_safety_ros.core.analyses.redundancy import (
     RedundancyConfig,
     RedundancyResolution,
     bernstein_basis,
     metric_weights,
     resolve_redundancy,
 )
-from grasp_safety_ros.core.validation import pose_from_position_quat
+from grasp_safety_ros.core.input_checks import pose_from_position_quat
+from grasp_safety_ros.core.method.effective_mass import (
+    augmented_model,
+    effective_mass_along,
+    translational_mobility_in_base,
+    worst_direction,
+)
+from grasp_safety_ros.core.method.ranking import METRICS, aggregate
 
 BOOK = solid_box(0.34, [0.15, 0.22, 0.015])
 BOX = solid_box(1.5, [0.1, 0.2, 0.3], [0.02, 0.0, 0.05])

@@ -34,11 +34,11 @@ from grasp_safety_ros.core import (
     RobotModel,
     solid_box,
 )
-from grasp_safety_ros.core.analysis import AnalysisOptions, SafetyReport, analyse
-from grasp_safety_ros.core.exposed_points import box_corners_in_object
-from grasp_safety_ros.core.ranking import GraspEvaluation, Ranking
-from grasp_safety_ros.core.uncertainty import InertiaUncertainty
-from grasp_safety_ros.core.waypoint_trajectory import WaypointTrajectory
+from grasp_safety_ros.core.analyses.exposed_points import box_corners_in_object
+from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions, SafetyReport, analyse
+from grasp_safety_ros.core.analyses.uncertainty import InertiaUncertainty
+from grasp_safety_ros.core.method.ranking import GraspEvaluation, Ranking
+from grasp_safety_ros.core.model.waypoint_trajectory import WaypointTrajectory
 from grasp_safety_ros.ros.conversions import (
     check_grasp_array,
     grasps_from_pose_array,

@@ -38,9 +38,9 @@ from trajectory_msgs.msg import (
 )
 
 from grasp_safety_ros.core import Grasp, GraspSafetyEvaluator
-from grasp_safety_ros.core.joint_trajectory import PlannedJointTrajectory
-from grasp_safety_ros.core.validation import pose_from_position_quat
-from grasp_safety_ros.core.waypoint_trajectory import WaypointTrajectory
+from grasp_safety_ros.core.input_checks import pose_from_position_quat
+from grasp_safety_ros.core.method.joint_trajectory import PlannedJointTrajectory
+from grasp_safety_ros.core.model.waypoint_trajectory import WaypointTrajectory
 from grasp_safety_ros.ros.conversions import pose_msg_from_transform, quaternion_msg_from_rotation
 
 WAYPOINT_TIMES_S = (0.0, 1.2, 2.5)

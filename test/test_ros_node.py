@@ -36,6 +36,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64MultiArray, Header, String
 from visualization_msgs.msg import Marker, MarkerArray
 
+from grasp_safety_ros.cli.scenario import load_scenario
 from grasp_safety_ros.core import (
     Grasp,
     GraspSafetyEvaluator,
@@ -43,15 +44,14 @@ from grasp_safety_ros.core import (
     RobotModel,
     solid_box,
 )
-from grasp_safety_ros.core.analysis import AnalysisOptions, analyse
-from grasp_safety_ros.core.exposed_points import box_corners_in_object
-from grasp_safety_ros.core.iso15066 import assess_grasp
-from grasp_safety_ros.core.multi_objective import rank_with_quality
-from grasp_safety_ros.core.uncertainty import InertiaUncertainty
+from grasp_safety_ros.core.analyses.exposed_points import box_corners_in_object
+from grasp_safety_ros.core.analyses.iso15066 import assess_grasp
+from grasp_safety_ros.core.analyses.multi_objective import rank_with_quality
+from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions, analyse
+from grasp_safety_ros.core.analyses.uncertainty import InertiaUncertainty
 from grasp_safety_ros.paths import config_file
 from grasp_safety_ros.ros.conversions import inertia_msg_from_object, pose_msg_from_transform
 from grasp_safety_ros.ros.node import EXECUTOR_THREADS, GraspSafetyNode
-from grasp_safety_ros.scenario import load_scenario
 
 BOOK = load_scenario(config_file("book_baxter.yaml"))
 BOOK_GRASPS = [Grasp(g.transform_tip_to_object, f"grasp_{i}") for i, g in enumerate(BOOK.grasps)]

@@ -12,7 +12,7 @@ import yaml
 from conftest import ARM6_AXES, serial_arm_urdf
 
 from grasp_safety_ros.core import FrameNotFoundError, InvalidInputError, solid_box
-from grasp_safety_ros.core.exposed_points import (
+from grasp_safety_ros.core.analyses.exposed_points import (
     box_corners_in_object,
     cylinder_rim_points_in_object,
 )

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from grasp_safety_ros.cli import main
+from grasp_safety_ros.cli.main import main
 from grasp_safety_ros.paths import config_file
 
 WAYPOINTS = yaml.safe_load(config_file("book_baxter_waypoints.yaml").read_text())

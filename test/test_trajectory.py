@@ -8,7 +8,7 @@ import pytest
 from conftest import random_rotation
 
 from grasp_safety_ros.core import InvalidInputError, ObjectTrajectory
-from grasp_safety_ros.core.trajectory import quintic_time_scaling
+from grasp_safety_ros.core.model.trajectory import quintic_time_scaling
 
 
 def make_trajectory(seed: int = 0, duration: float = 2.0, dt: float = 0.01) -> ObjectTrajectory:

@@ -16,14 +16,14 @@ from grasp_safety_ros.core import (
     RobotModel,
     solid_box,
 )
-from grasp_safety_ros.core.uncertainty import (
+from grasp_safety_ros.core.analyses.uncertainty import (
     InertiaUncertainty,
     analyse_inertia_uncertainty,
     effective_mass_for_inertias,
     perturb_inertia,
     sample_inertia_perturbations,
 )
-from grasp_safety_ros.core.validation import pose_from_position_quat
+from grasp_safety_ros.core.input_checks import pose_from_position_quat
 
 BOOK = solid_box(0.34, [0.15, 0.22, 0.015])  # a thin plate: I_z ≈ I_x + I_y
 GRASPS = [

@@ -19,14 +19,14 @@ from conftest import ARM7_AXES, BAXTER_SEED, random_positions, random_rotation, 
 mujoco = pytest.importorskip("mujoco")
 
 from grasp_safety_ros.core import GraspSafetyEvaluator, RobotModel  # noqa: E402
-from grasp_safety_ros.core.effective_mass import (  # noqa: E402
+from grasp_safety_ros.core.exceptions import InvalidInputError, RobotModelError  # noqa: E402
+from grasp_safety_ros.core.method.effective_mass import (  # noqa: E402
     augmented_model,
     effective_mass_along,
     translational_mobility_in_base,
 )
-from grasp_safety_ros.core.exceptions import InvalidInputError, RobotModelError  # noqa: E402
-from grasp_safety_ros.core.inertia import TensorObjectGeometry, solid_box  # noqa: E402
-from grasp_safety_ros.core.ranking import Grasp  # noqa: E402
+from grasp_safety_ros.core.method.ranking import Grasp  # noqa: E402
+from grasp_safety_ros.core.model.inertia import TensorObjectGeometry, solid_box  # noqa: E402
 from grasp_safety_ros.validation import format_summary, reproduce  # noqa: E402
 from grasp_safety_ros.validation.experiments import (  # noqa: E402
     ROBOT_SOURCE,

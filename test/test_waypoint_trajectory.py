@@ -17,11 +17,11 @@ from grasp_safety_ros.core import (
     InvalidInputError,
     solid_box,
 )
-from grasp_safety_ros.core.analysis import AnalysisOptions, analyse
-from grasp_safety_ros.core.exposed_points import box_corners_in_object
-from grasp_safety_ros.core.trajectory import MAX_SAMPLES
-from grasp_safety_ros.core.validation import pose_from_position_quat
-from grasp_safety_ros.core.waypoint_trajectory import WaypointTrajectory, right_jacobian_so3
+from grasp_safety_ros.core.analyses.exposed_points import box_corners_in_object
+from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions, analyse
+from grasp_safety_ros.core.input_checks import pose_from_position_quat
+from grasp_safety_ros.core.model.trajectory import MAX_SAMPLES
+from grasp_safety_ros.core.model.waypoint_trajectory import WaypointTrajectory, right_jacobian_so3
 
 BOOK = solid_box(0.34, [0.15, 0.22, 0.015])
 GRASPS = [Grasp(pin.SE3(np.eye(3), np.array([0.0, y, 0.0])), f"g{y}") for y in (-0.1, 0.0, 0.1)]

@@ -23,21 +23,21 @@ from std_msgs.msg import ColorRGBA, Header
 from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 from visualization_msgs.msg import Marker, MarkerArray
 
-from ..core.analysis import SafetyReport
+from ..core.analyses.iso15066 import PowerForceLimitAssessment, RegionAssessment
+from ..core.analyses.safety_report import SafetyReport
 from ..core.exceptions import InvalidInputError
-from ..core.inertia import ObjectInertia
-from ..core.iso15066 import PowerForceLimitAssessment, RegionAssessment
-from ..core.joint_trajectory import PlannedJointTrajectory
-from ..core.ranking import Grasp, GraspEvaluation, Ranking
-from ..core.robot import RobotModel
-from ..core.trajectory import ObjectTrajectory
-from ..core.validation import (
+from ..core.input_checks import (
     finite_array,
     finite_float,
     quat_xyzw_from_rotation,
     rotation_from_quat_xyzw,
 )
-from ..core.waypoint_trajectory import WaypointTrajectory
+from ..core.method.joint_trajectory import PlannedJointTrajectory
+from ..core.method.ranking import Grasp, GraspEvaluation, Ranking
+from ..core.model.inertia import ObjectInertia
+from ..core.model.robot import RobotModel
+from ..core.model.trajectory import ObjectTrajectory
+from ..core.model.waypoint_trajectory import WaypointTrajectory
 from .parameters import inertia_tensor_from_components
 
 SCORE_UNITS = {"mean": "kg", "max": "kg", "integral": "kg*s"}

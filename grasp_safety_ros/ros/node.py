@@ -1,9 +1,9 @@
 """The ``grasp_safety`` node: ranks candidate grasps with the core, over a service and topics.
 
 A thin adapter: messages are converted in conversions.py, parameters validated in
-parameters.py, the work is GraspSafetyEvaluator.rank followed by core.analysis.analyse (metric
-point, ISO/TS 15066, inertia uncertainty, grasp quality, redundancy, effort). See the README
-for the interface.
+parameters.py, the work is GraspSafetyEvaluator.rank followed by
+core.analyses.safety_report.analyse (metric point, ISO/TS 15066, inertia uncertainty, grasp
+quality, redundancy, effort). See the README for the interface.
 
 Threads: a MultiThreadedExecutor with EXECUTOR_THREADS threads. The service sits in its own
 reentrant callback group, the input topics in a mutually exclusive one, everything else
@@ -49,12 +49,12 @@ from std_msgs.msg import Float64MultiArray, Header, String
 from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 from visualization_msgs.msg import MarkerArray
 
-from ..core.analysis import AnalysisOptions, analyse
+from ..core.analyses.exposed_points import check_metric_point
+from ..core.analyses.safety_report import AnalysisOptions, analyse
 from ..core.exceptions import GraspSafetyError, InvalidInputError
-from ..core.exposed_points import check_metric_point
-from ..core.inertia import ObjectInertia
-from ..core.ranking import check_metric
-from ..core.validation import finite_array
+from ..core.input_checks import finite_array
+from ..core.method.ranking import check_metric
+from ..core.model.inertia import ObjectInertia
 from .conversions import (
     check_frame_id,
     check_grasp_array,

@@ -15,21 +15,21 @@ from typing import Any
 
 import numpy as np
 
-from ..core.analysis import RANK_BY, AnalysisOptions
-from ..core.effort import EFFORT_CRITERIA
-from ..core.exceptions import FrameNotFoundError, GraspSafetyError, InvalidInputError
-from ..core.exposed_points import (
+from ..core.analyses.effort import EFFORT_CRITERIA
+from ..core.analyses.exposed_points import (
     METRIC_POINTS,
     box_corners_in_object,
     cylinder_rim_points_in_object,
 )
-from ..core.inertia import ObjectInertia
-from ..core.iso15066 import BODY_REGIONS
-from ..core.parallel import warm_up
-from ..core.ranking import METRICS, EvaluationConfig, GraspSafetyEvaluator
-from ..core.robot import RobotModel
-from ..core.uncertainty import InertiaUncertainty
-from ..core.validation import finite_array, finite_float
+from ..core.analyses.iso15066 import BODY_REGIONS
+from ..core.analyses.safety_report import RANK_BY, AnalysisOptions
+from ..core.analyses.uncertainty import InertiaUncertainty
+from ..core.exceptions import FrameNotFoundError, GraspSafetyError, InvalidInputError
+from ..core.input_checks import finite_array, finite_float
+from ..core.method.ranking import METRICS, EvaluationConfig, GraspSafetyEvaluator
+from ..core.method.warm_up import warm_up
+from ..core.model.inertia import ObjectInertia
+from ..core.model.robot import RobotModel
 
 
 @dataclass(frozen=True)
@@ -92,7 +92,7 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
         10.0, "how long a request waits for a ranking in progress before answering busy [s]"
     ),
     "diagnostics_period_s": ParameterSpec(1.0, "period of /diagnostics status messages [s]"),
-    # --- Analyses beyond the paper (core.analysis.AnalysisOptions) ---
+    # --- Analyses beyond the paper (core.analyses.safety_report.AnalysisOptions) ---
     "metric_point": ParameterSpec(
         "tip",
         f"default point whose effective mass the safety score uses: {' | '.join(METRIC_POINTS)}"
@@ -172,9 +172,10 @@ class NodeSettings:
 
     Attributes:
         object_inertia: The default object, or None when ``object.mass_kg`` is 0.
-        analysis: Options of core.analysis.analyse from the analysis parameters (metric_point,
-            object points, iso_ts_15066.*, uncertainty.*, safety_weight, redundancy.*,
-            effort.*, rank_by); a request may change metric_point and add grasp quality.
+        analysis: Options of core.analyses.safety_report.analyse from the analysis parameters
+            (metric_point, object points, iso_ts_15066.*, uncertainty.*, safety_weight,
+            redundancy.*, effort.*, rank_by); a request may change metric_point and add grasp
+            quality.
         ik_seed: The seed parameter, or None when empty (length checked against the robot
             in build_robot).
     """

@@ -16,18 +16,18 @@ import numpy as np
 import pinocchio as pin
 from scipy.stats import spearmanr
 
-from ..core.effective_mass import effective_mass_along, translational_mobility_in_base
-from ..core.inertia import (
+from ..core.input_checks import pose_from_position_quat
+from ..core.method.effective_mass import effective_mass_along, translational_mobility_in_base
+from ..core.method.ranking import Grasp, GraspEvaluation, GraspSafetyEvaluator
+from ..core.model.inertia import (
     ObjectInertia,
     TensorObjectGeometry,
     solid_box,
     tensor_object_configurations,
 )
-from ..core.ranking import Grasp, GraspEvaluation, GraspSafetyEvaluator
-from ..core.robot import RobotModel
-from ..core.trajectory import ObjectTrajectory
-from ..core.validation import pose_from_position_quat
-from ..core.waypoint_trajectory import WaypointTrajectory
+from ..core.model.robot import RobotModel
+from ..core.model.trajectory import ObjectTrajectory
+from ..core.model.waypoint_trajectory import WaypointTrajectory
 from .scene import ContactConfig, ObjectShape, SensorConfig
 from .simulation import (
     CollisionResult,

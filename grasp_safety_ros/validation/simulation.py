@@ -11,9 +11,9 @@ import pinocchio as pin
 from scipy.interpolate import CubicSpline
 
 from ..core.exceptions import InvalidInputError
-from ..core.inertia import ObjectInertia
-from ..core.ranking import GraspEvaluation
-from ..core.robot import RobotModel
+from ..core.method.ranking import GraspEvaluation
+from ..core.model.inertia import ObjectInertia
+from ..core.model.robot import RobotModel
 from .scene import (
     ContactConfig,
     ObjectShape,

@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from .exceptions import FrameNotFoundError, InvalidInputError, RobotModelError
-from .validation import finite_array
+from ..exceptions import FrameNotFoundError, InvalidInputError, RobotModelError
+from ..input_checks import finite_array
 
 EXAMPLE_ROBOT_DATA_PREFIX = "example-robot-data:"
 

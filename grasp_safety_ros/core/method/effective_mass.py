@@ -6,18 +6,26 @@ then Λ_tot⁻¹ = J M_aug⁻¹ Jᵀ, which equals (Λ_robot + Λ_obj)⁻¹ exac
 inverse of Λ_robot. The effective mass along a unit direction u is 1 / (uᵀ Λ_tot⁻¹ u).
 
 ``translational_mobilities_in_base`` evaluates a whole trajectory at once, with Pinocchio
-(``computeMinverse``) or with the compiled kernel of ``parallel.py`` (composite-rigid-body
-mass matrix and a Cholesky factor); both give the same matrices to rounding.
+(``computeMinverse``) or with the compiled kernel of ``core/kernels/effective_mass.py``
+(composite-rigid-body mass matrix and a Cholesky factor); both give the same matrices to
+rounding.
 """
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import pinocchio as pin
 
-from .ik import ChainArrays
-from .inertia import ObjectInertia
-from .robot import RobotModel
+from ..model.inertia import ObjectInertia
+from ..model.robot import RobotModel
+
+if TYPE_CHECKING:
+    from .compiled import ChainArrays
+
+STATIONARY_TANGENT_M = 1e-9
+"""Below this |d p_tip / ds| [m] the tip does not translate and the worst direction is used."""
 
 
 def augmented_model(
@@ -85,7 +93,7 @@ def translational_mobilities_in_base(
         object_inertia: Object inertia in the object frame.
         transform_tip_to_object: The grasp.
         q_all: Configurations (N, nq).
-        chain: ``ik.chain_arrays(robot)`` to use the compiled kernel (numba); None: Pinocchio.
+        chain: ``compiled.chain_arrays(robot)``: the compiled kernel (numba); None: Pinocchio.
 
     Returns:
         (N, 3, 3) mobilities [1/kg], base axes.
@@ -93,12 +101,12 @@ def translational_mobilities_in_base(
     q_all = np.ascontiguousarray(q_all, dtype=float)
     out = np.empty((len(q_all), 3, 3))
     if chain is not None:
-        from . import parallel
+        from ..kernels.effective_mass import translational_mobilities
 
         masses, levers, rotational = augmented_inertia_arrays(
             robot, object_inertia, transform_tip_to_object
         )
-        parallel.translational_mobilities(
+        translational_mobilities(
             chain.placement_rotations,
             chain.placement_translations,
             chain.axes,

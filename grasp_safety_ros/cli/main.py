@@ -9,10 +9,10 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from .core.analysis import SafetyReport, analyse
-from .core.exceptions import GraspSafetyError
-from .core.ranking import METRICS, EvaluationConfig, GraspSafetyEvaluator
-from .paths import config_file
+from ..core.analyses.safety_report import SafetyReport, analyse
+from ..core.exceptions import GraspSafetyError
+from ..core.method.ranking import METRICS, EvaluationConfig, GraspSafetyEvaluator
+from ..paths import config_file
 from .report import report_text, report_to_dict
 from .scenario import Scenario, load_scenario
 
@@ -98,7 +98,7 @@ def _command_demo(args: argparse.Namespace) -> int:
 
 
 def _command_reproduce(args: argparse.Namespace) -> int:
-    from .validation import format_summary, reproduce
+    from ..validation import format_summary, reproduce
 
     results = reproduce(Path(args.out), quick=args.quick)
     print(format_summary(results))

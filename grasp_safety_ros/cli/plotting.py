@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .core.analysis import SafetyReport
+from ..core.analyses.safety_report import SafetyReport
 
 
 def _label(name: str, index: int) -> str:

@@ -21,10 +21,11 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from .exceptions import InvalidInputError
-from .robot import RobotModel
-from .trajectory import TipMotion, quintic_time_scaling
-from .validation import finite_array
+from ..exceptions import InvalidInputError
+from ..input_checks import finite_array
+from ..model.robot import RobotModel
+from ..model.trajectory import TipMotion, quintic_time_scaling
+from .effective_mass import STATIONARY_TANGENT_M
 
 
 @dataclass(frozen=True)
@@ -184,8 +185,6 @@ class JointSpaceTrajectory:
     def _kinematics(self, times_s: np.ndarray) -> tuple[np.ndarray, ...]:
         """Tip rotations, positions, twists, twist rates (base axes) and the rest limits
         T²·J q̈ (or T³·J q⃛ where that vanishes), 6-D, base axes."""
-        from .ranking import STATIONARY_TANGENT_M  # (ranking imports this module)
-
         robot = self.robot
         model, data = robot.model, robot.model.createData()
         base = robot.transform_base_to_world
@@ -230,8 +229,6 @@ class JointSpaceTrajectory:
         relative = self.transform_tip_to_object.inverse() * pin.SE3(transform_tip_to_object)
         lever = rotations @ relative.translation  # tip -> attached frame, base axes
         velocity = twists[:, :3] + np.cross(twists[:, 3:], lever)
-        from .ranking import STATIONARY_TANGENT_M
-
         tangents = velocity * self.duration_s
         at_rest = np.linalg.norm(tangents, axis=1) < STATIONARY_TANGENT_M
         limit = rest[:, :3] + np.cross(rest[:, 3:], lever)  # J q̈ (or J q⃛) where q̇ = 0

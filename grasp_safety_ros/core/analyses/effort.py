@@ -29,12 +29,12 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .effective_mass import augmented_model
-from .exceptions import InvalidInputError
-from .inertia import ObjectInertia
-from .ranking import Grasp, GraspEvaluation
-from .robot import RobotModel
-from .trajectory import Trajectory
+from ..exceptions import InvalidInputError
+from ..method.effective_mass import augmented_model
+from ..method.ranking import Grasp, GraspEvaluation
+from ..model.inertia import ObjectInertia
+from ..model.robot import RobotModel
+from ..model.trajectory import Trajectory
 
 EFFORT_CRITERIA = ("peak_fraction", "rms_fraction")
 """Effort scores: max over joints of peak |τ| / limit, or of RMS τ / limit (lower is better)."""

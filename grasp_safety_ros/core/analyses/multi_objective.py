@@ -26,9 +26,9 @@ from typing import Any
 
 import numpy as np
 
-from .exceptions import InvalidInputError
-from .ranking import GraspEvaluation
-from .validation import finite_array, finite_float
+from ..exceptions import InvalidInputError
+from ..input_checks import finite_array, finite_float
+from ..method.ranking import GraspEvaluation
 
 
 @dataclass(frozen=True)

@@ -24,13 +24,14 @@ import importlib.util
 import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
-from .exceptions import InvalidInputError
-from .robot import RobotModel
+from ..exceptions import InvalidInputError
+from ..model.robot import RobotModel
+from .compiled import chain_arrays
 
 
 def _numba_installed() -> bool:
@@ -45,9 +46,6 @@ NUMBA_AVAILABLE = _numba_installed()
 
 BACKENDS = ("auto", "compiled", "python")
 """IK / effective-mass implementations: see the module docstring."""
-
-_EPS = float(np.finfo(float).eps)
-_PREC3 = _EPS ** (1.0 / 4.0)  # Pinocchio's TaylorSeriesExpansion<double>::precision<3>()
 
 
 @dataclass(frozen=True)
@@ -113,74 +111,6 @@ class IKTrajectoryResult:
         return not self.reason
 
 
-class ChainArrays(NamedTuple):
-    """A serial chain of 1-DOF joints as flat arrays, for the compiled kernels.
-
-    Joint k (chain order) moves in the frame ``placement_k`` of joint k-1 (of the world for
-    k = 0): rotation about, or translation along, the unit ``axis_k`` (joint frame).
-    """
-
-    placement_rotations: np.ndarray  # (n, 3, 3)
-    placement_translations: np.ndarray  # (n, 3) [m]
-    axes: np.ndarray  # (n, 3), unit
-    prismatic: np.ndarray  # (n,) 1.0 for prismatic joints, 0.0 for revolute ones
-    tip_rotation: np.ndarray  # (3, 3): tip frame in the last joint's frame
-    tip_translation: np.ndarray  # (3,) [m]
-    base_rotation: np.ndarray  # (3, 3): base frame in the world frame
-    lower_q: np.ndarray  # (n,)
-    upper_q: np.ndarray  # (n,)
-
-
-def chain_arrays(robot: RobotModel) -> ChainArrays | None:
-    """The chain of ``robot`` as arrays, or None when the compiled kernels cannot handle it.
-
-    Supported: a serial chain of revolute and prismatic joints (Pinocchio's RX/RY/RZ,
-    PX/PY/PZ and their unaligned variants; not continuous joints), the tip frame on the last.
-    """
-    model = robot.model
-    n = model.nv
-    if model.nq != n or model.njoints != n + 1:
-        return None
-    if any(model.parents[k] != k - 1 for k in range(1, n + 1)):
-        return None
-    if model.frames[robot.tip_frame_id].parentJoint != n:
-        return None
-    data = model.createData()
-    pin.computeJointJacobians(model, data, pin.neutral(model))
-    axes = np.empty((n, 3))
-    prismatic = np.zeros(n)
-    for k in range(n):
-        subspace = np.asarray(pin.getJointJacobian(model, data, k + 1, pin.LOCAL)).reshape(6, n)
-        column = subspace[:, k]
-        linear, angular = column[:3], column[3:]
-        if np.linalg.norm(angular) > 1e-12:
-            if np.linalg.norm(linear) > 1e-12 or abs(np.linalg.norm(angular) - 1.0) > 1e-12:
-                return None
-            axes[k] = angular
-        else:
-            if abs(np.linalg.norm(linear) - 1.0) > 1e-12:
-                return None
-            axes[k], prismatic[k] = linear, 1.0
-    placements = [model.jointPlacements[k] for k in range(1, n + 1)]
-    tip = model.frames[robot.tip_frame_id].placement
-    lower = np.array(model.lowerPositionLimit, dtype=float)
-    upper = np.array(model.upperPositionLimit, dtype=float)
-    arrays = ChainArrays(
-        placement_rotations=np.array([p.rotation for p in placements]),
-        placement_translations=np.array([p.translation for p in placements]),
-        axes=axes,
-        prismatic=prismatic,
-        tip_rotation=np.array(tip.rotation),
-        tip_translation=np.array(tip.translation),
-        base_rotation=np.array(robot.transform_base_to_world.rotation),
-        lower_q=lower,
-        upper_q=upper,
-    )
-    for array in arrays:
-        array.setflags(write=False)
-    return arrays
-
-
 def compiled_available() -> bool:
     """True when numba is importable (the compiled backend can be used)."""
     return NUMBA_AVAILABLE
@@ -197,60 +127,6 @@ def check_backend(backend: str, field_name: str = "backend") -> str:
             field_name, "'compiled' needs numba (pip install numba); use 'auto' or 'python'"
         )
     return backend
-
-
-def exp3_batch(rotation_vectors: np.ndarray) -> np.ndarray:
-    """Pinocchio's exp3 (same formula and Taylor branch) for an (N, 3) array of vectors."""
-    v = np.asarray(rotation_vectors, dtype=float)
-    t2 = np.einsum("ij,ij->i", v, v) + _EPS * _EPS
-    t = np.sqrt(t2)
-    ct, st = np.cos(t), np.sin(t)
-    large = t > _PREC3
-    with np.errstate(divide="ignore", invalid="ignore"):
-        alpha_vxvx = np.where(large, (1.0 - ct) / t2, 0.5 - t2 / 24.0)
-        alpha_vx = np.where(large, st / t, 1.0 - t2 / 6.0)
-    ct = np.where(large, ct, 1.0 - t2 / 2.0)
-    result = alpha_vxvx[:, None, None] * v[:, :, None] * v[:, None, :]
-    result[:, 0, 1] -= alpha_vx * v[:, 2]
-    result[:, 1, 0] += alpha_vx * v[:, 2]
-    result[:, 0, 2] += alpha_vx * v[:, 1]
-    result[:, 2, 0] -= alpha_vx * v[:, 1]
-    result[:, 1, 2] -= alpha_vx * v[:, 0]
-    result[:, 2, 1] += alpha_vx * v[:, 0]
-    for k in range(3):
-        result[:, k, k] += ct
-    return result
-
-
-def tip_path_arrays(
-    trajectory: Any, transform_tip_to_object: pin.SE3, s_values: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """ObjectTrajectory.tip_path as arrays, vectorised over the samples.
-
-    Args:
-        trajectory: An ObjectTrajectory.
-        transform_tip_to_object: The grasp.
-        s_values: Path parameters in [0, 1].
-
-    Returns:
-        Tip rotations (N, 3, 3) and positions (N, 3) [m] in the base frame, and the path
-        tangents d p_tip / ds (N, 3) [m], base axes; equal to ``tip_path`` up to rounding.
-    """
-    s = np.asarray(s_values, dtype=float)
-    grasp = pin.SE3(transform_tip_to_object)
-    start = trajectory.transform_object_to_base_start
-    goal = trajectory.transform_object_to_base_goal
-    log = np.asarray(trajectory.rotation_log_in_object, dtype=float)
-    object_rotations = np.matmul(start.rotation, exp3_batch(s[:, None] * log))
-    start_p, goal_p = start.translation, goal.translation
-    object_translations = (1.0 - s)[:, None] * start_p + s[:, None] * goal_p
-    rotations = np.matmul(object_rotations, grasp.rotation)
-    translations = np.einsum("nij,j->ni", object_rotations, grasp.translation) + (
-        object_translations
-    )
-    lever_in_object = np.cross(log, grasp.translation)
-    tangents = (goal_p - start_p) + np.einsum("nij,j->ni", object_rotations, lever_in_object)
-    return rotations, translations, tangents
 
 
 class IKSolver:
@@ -601,7 +477,7 @@ def _lapack_dgesv() -> Any:
 
 
 def _kernels() -> Any:
-    """The compiled kernels (numba compiles them, or loads them from its cache, on first use)."""
-    from . import parallel
+    """The IK kernels (numba compiles them, or loads them from its cache, on first use)."""
+    from ..kernels import ik
 
-    return parallel
+    return ik

@@ -28,10 +28,15 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from .exceptions import InvalidInputError
-from .ik import exp3_batch
-from .trajectory import MAX_SAMPLES, ObjectTrajectory, TipMotion, quintic_time_scaling
-from .validation import finite_float
+from ..exceptions import InvalidInputError
+from ..input_checks import finite_float
+from .trajectory import (
+    MAX_SAMPLES,
+    ObjectTrajectory,
+    TipMotion,
+    exp3_batch,
+    quintic_time_scaling,
+)
 
 _MERGE_FRACTION = 1e-6
 """Regular samples within this fraction of dt of a waypoint time are replaced by it."""

@@ -32,11 +32,11 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from .exceptions import InvalidInputError
-from .inertia import ObjectInertia
-from .ranking import Grasp, GraspEvaluation, aggregate, check_metric
-from .robot import RobotModel
-from .validation import finite_array, finite_float
+from ..exceptions import InvalidInputError
+from ..input_checks import finite_array, finite_float
+from ..method.ranking import Grasp, GraspEvaluation, aggregate, check_metric
+from ..model.inertia import ObjectInertia
+from ..model.robot import RobotModel
 
 PERTURBATION_CHUNK = 32
 """Perturbations processed per batch (bounds memory to chunk x samples x n x n floats)."""

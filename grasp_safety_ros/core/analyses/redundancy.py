@@ -65,13 +65,13 @@ from math import comb
 import numpy as np
 import pinocchio as pin
 
-from .effective_mass import augmented_model, translational_mobility_in_base
+from ..exceptions import InvalidInputError
+from ..method.effective_mass import augmented_model, translational_mobility_in_base
+from ..method.ranking import Grasp, GraspEvaluation, aggregate, check_metric
+from ..model.inertia import ObjectInertia
+from ..model.robot import RobotModel
+from ..model.trajectory import Trajectory
 from .effort import effort_limits
-from .exceptions import InvalidInputError
-from .inertia import ObjectInertia
-from .ranking import Grasp, GraspEvaluation, aggregate, check_metric
-from .robot import RobotModel
-from .trajectory import Trajectory
 
 TASK_DIMENSION = 6
 """Tip pose coordinates the trajectory fixes (position and orientation)."""

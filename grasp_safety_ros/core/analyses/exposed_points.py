@@ -23,13 +23,13 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from .effective_mass import augmented_model
-from .exceptions import InvalidInputError
-from .inertia import ObjectInertia
-from .ranking import Grasp, GraspEvaluation, aggregate, check_metric
-from .robot import RobotModel
-from .trajectory import Trajectory
-from .validation import finite_array, finite_float
+from ..exceptions import InvalidInputError
+from ..input_checks import finite_array, finite_float
+from ..method.effective_mass import augmented_model
+from ..method.ranking import Grasp, GraspEvaluation, aggregate, check_metric
+from ..model.inertia import ObjectInertia
+from ..model.robot import RobotModel
+from ..model.trajectory import Trajectory
 
 METRIC_POINTS = ("tip", "leading_point", "worst_point")
 """Which point's effective mass a score uses: the tip, the leading point, the worst point."""

@@ -7,9 +7,9 @@ from typing import Any
 
 import numpy as np
 
-from .core.analysis import SafetyReport
-from .core.iso15066 import PowerForceLimitAssessment
-from .core.ranking import GraspEvaluation, Ranking
+from ..core.analyses.iso15066 import PowerForceLimitAssessment
+from ..core.analyses.safety_report import SafetyReport
+from ..core.method.ranking import GraspEvaluation, Ranking
 
 SCORE_UNITS = {"mean": "kg", "max": "kg", "integral": "kg*s"}
 

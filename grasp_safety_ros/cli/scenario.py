@@ -10,17 +10,17 @@ from typing import Any
 import numpy as np
 import yaml
 
-from .core.analysis import RANK_BY, AnalysisOptions
-from .core.exceptions import InvalidInputError
-from .core.exposed_points import box_corners_in_object, cylinder_rim_points_in_object
-from .core.inertia import ObjectInertia, solid_box, solid_cylinder, solid_sphere
-from .core.joint_trajectory import PlannedJointTrajectory
-from .core.ranking import METRICS, Grasp, check_metric
-from .core.robot import RobotModel
-from .core.trajectory import ObjectTrajectory
-from .core.uncertainty import InertiaUncertainty
-from .core.validation import finite_array, finite_float, pose_from_position_quat
-from .core.waypoint_trajectory import WaypointTrajectory
+from ..core.analyses.exposed_points import box_corners_in_object, cylinder_rim_points_in_object
+from ..core.analyses.safety_report import RANK_BY, AnalysisOptions
+from ..core.analyses.uncertainty import InertiaUncertainty
+from ..core.exceptions import InvalidInputError
+from ..core.input_checks import finite_array, finite_float, pose_from_position_quat
+from ..core.method.joint_trajectory import PlannedJointTrajectory
+from ..core.method.ranking import METRICS, Grasp, check_metric
+from ..core.model.inertia import ObjectInertia, solid_box, solid_cylinder, solid_sphere
+from ..core.model.robot import RobotModel
+from ..core.model.trajectory import ObjectTrajectory
+from ..core.model.waypoint_trajectory import WaypointTrajectory
 
 
 @dataclass(frozen=True)

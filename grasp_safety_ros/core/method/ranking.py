@@ -8,23 +8,23 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from ..exceptions import InvalidInputError
+from ..model.inertia import ObjectInertia
+from ..model.robot import RobotModel
+from ..model.trajectory import Trajectory
+from .compiled import evaluate_grasp_compiled
 from .effective_mass import (
+    STATIONARY_TANGENT_M,
     effective_masses_along,
     translational_mobilities_in_base,
     worst_direction,
 )
-from .exceptions import InvalidInputError
 from .ik import IKConfig, IKSolver, check_backend
-from .inertia import ObjectInertia
 from .joint_trajectory import JointSpaceTrajectory, PlannedJointTrajectory
-from .robot import RobotModel
-from .trajectory import Trajectory
+from .pool import evaluate_jobs, executor_for
 
 METRICS = ("mean", "max", "integral")
 """Aggregates of the per-sample effective mass: mean [kg], max [kg], integral [kg s]."""
-
-STATIONARY_TANGENT_M = 1e-9
-"""Below this |d p_tip / ds| [m] the tip does not translate and the worst direction is used."""
 
 
 @dataclass(frozen=True)
@@ -240,9 +240,7 @@ class GraspSafetyEvaluator:
         # Until the kernel takes precomputed tip paths, only the quintic (whose tip path the
         # kernel computes itself) runs compiled; every other trajectory type runs below.
         elif self.ik.compiled and trajectory.supports_compiled:  # one compiled call
-            from . import parallel
-
-            fused = parallel.evaluate_grasp_compiled(
+            fused = evaluate_grasp_compiled(
                 self.ik,
                 object_inertia,
                 trajectory,
@@ -310,11 +308,10 @@ class GraspSafetyEvaluator:
         trajectory = _as_quintic(trajectory)
         for grasp in grasps:
             self.trajectory_for(grasp, trajectory)  # planned joint trajectories: validate
-        from . import parallel  # imports numba when installed: only when first needed
 
         times = trajectory.times_s()
         s_values, s_rate, _ = trajectory.path_parameter(times)
-        executor = parallel.executor_for(self, len(grasps) * len(times))
+        executor = executor_for(self, len(grasps) * len(times))
         jobs = [
             (index, grasp, object_inertia, trajectory, metric, times, s_values, s_rate, seed_q)
             for index, grasp in enumerate(grasps)
@@ -322,7 +319,7 @@ class GraspSafetyEvaluator:
         if executor is None:
             results: Iterable[GraspEvaluation] = (self._evaluate_sampled(*job) for job in jobs)
         else:
-            results = parallel.evaluate_jobs(self, executor, jobs)
+            results = evaluate_jobs(self, executor, jobs, GraspSafetyEvaluator._evaluate_sampled)
         evaluations = []
         for evaluation in results:
             evaluations.append(evaluation)

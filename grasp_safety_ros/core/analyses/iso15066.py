@@ -32,9 +32,9 @@ from typing import Any
 
 import numpy as np
 
-from .exceptions import GraspSafetyError, InvalidInputError
-from .ranking import GraspEvaluation
-from .validation import finite_array, finite_float
+from ..exceptions import GraspSafetyError, InvalidInputError
+from ..input_checks import finite_array, finite_float
+from ..method.ranking import GraspEvaluation
 
 N_PER_MM_IN_N_PER_M = 1000.0
 """1 N/mm = 1000 N/m: the table gives k in N/mm, the core works in N/m."""
@@ -150,7 +150,7 @@ def body_regions_from_mapping(
 
 def data_file_path() -> Path:
     """Path of the package's copy of the table (grasp_safety_ros/data/)."""
-    return Path(__file__).resolve().parent.parent / "data" / DATA_FILE_NAME
+    return Path(__file__).resolve().parents[2] / "data" / DATA_FILE_NAME
 
 
 def load_body_regions(path: str | Path | None = None) -> dict[str, BodyRegion]:

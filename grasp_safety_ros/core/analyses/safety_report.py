@@ -13,8 +13,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..exceptions import InvalidInputError
+from ..method.ranking import Grasp, GraspSafetyEvaluator, Ranking, aggregate
+from ..model.inertia import ObjectInertia
+from ..model.trajectory import Trajectory
 from .effort import EffortEvaluation, check_effort_criterion, evaluate_effort, order_by_effort
-from .exceptions import InvalidInputError
 from .exposed_points import (
     ExposedPointsEvaluation,
     check_metric_point,
@@ -22,12 +25,9 @@ from .exposed_points import (
     evaluate_exposed_points,
     metric_point_series,
 )
-from .inertia import ObjectInertia
 from .iso15066 import PowerForceLimitAssessment, assess_grasp, assess_motion, select_regions
 from .multi_objective import QualityRanking, rank_with_quality
-from .ranking import Grasp, GraspSafetyEvaluator, Ranking, aggregate
 from .redundancy import RedundancyConfig, RedundancyResolution, resolve_redundancy
-from .trajectory import Trajectory
 from .uncertainty import InertiaUncertainty, UncertaintyAnalysis, analyse_inertia_uncertainty
 
 RANK_BY = ("safety", "effort")

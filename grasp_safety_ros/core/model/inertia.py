@@ -8,8 +8,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
-from .exceptions import InvalidInputError
-from .validation import finite_array, finite_float
+from ..exceptions import InvalidInputError
+from ..input_checks import finite_array, finite_float
 
 SYMMETRY_TOLERANCE = 1e-9
 """Relative tolerance on the asymmetry of an inertia tensor."""

@@ -1,0 +1,389 @@
+"""IK of the tip pose, compiled: one pose (``solve_pose``) and a whole trajectory
+(``solve_trajectory``), with the predictor warm start between samples (as ``IKSolver``)."""
+
+import math
+
+import numpy as np
+
+from ._jit import _jit
+from .kinematics import _forward_kinematics, _local_jacobian
+from .lie_group import _jlog6, _log6, _relative_pose
+from .linalg import _damped_step
+
+
+@_jit
+def _predict(
+    axes,
+    prismatic,
+    joint_rotations,
+    joint_translations,
+    fr,
+    ft,
+    rotation_previous,
+    translation_previous,
+    rotation_next,
+    translation_next,
+    max_iteration_step,
+    q_previous,
+    guess,
+    er,
+    et,
+    error,
+    jac,
+    system,
+    rhs,
+    step,
+):
+    """IKSolver._predict, compiled: guess = q_previous + J^+ log6(T_{i-1}^-1 T_i).
+
+    joint_*, fr, ft: the joint and tip poses at q_previous (as the solve that returned it
+    leaves them), so the tip-frame Jacobian there costs no forward kinematics; er, et, error,
+    jac, system, rhs, step: scratch.
+    """
+    _local_jacobian(axes, prismatic, joint_rotations, joint_translations, fr, ft, jac)
+    _relative_pose(
+        rotation_previous, translation_previous, rotation_next, translation_next, er, et
+    )
+    _log6(er, et, error)
+    _damped_step(jac, error, max_iteration_step, system, rhs, step)
+    for k in range(step.shape[0]):
+        guess[k] = q_previous[k] + step[k]
+
+
+@_jit
+def _workspace(n):
+    """Buffers of one IK / effective-mass evaluation for an n-joint chain."""
+    m = 6 if n >= 6 else n
+    return (
+        np.empty((n, 3, 3)),  # 0 joint rotations
+        np.empty((n, 3)),  # 1 joint translations
+        np.empty((3, 3)),  # 2 tip rotation
+        np.empty(3),  # 3 tip translation
+        np.empty((3, 3)),  # 4 error rotation
+        np.empty(3),  # 5 error translation
+        np.empty((3, 3)),  # 6 inverse error rotation
+        np.empty(3),  # 7 inverse error translation
+        np.empty(6),  # 8 error twist
+        np.empty((6, n)),  # 9 frame Jacobian
+        np.empty((6, 6)),  # 10 Jlog6
+        np.empty((6, n)),  # 11 task Jacobian
+        np.empty((m, m)),  # 12 normal matrix
+        np.empty(m),  # 13 right-hand side
+        np.empty(n),  # 14 step
+        np.empty((n, n)),  # 15 mass matrix
+        np.empty((n, 3)),  # 16 motion subspaces, linear (world origin)
+        np.empty((n, 3)),  # 17 ... angular
+        np.empty((n, 3)),  # 18 tip linear Jacobian, transposed, base axes
+        np.empty((3, 3)),  # 19 composite rotational inertia about the world origin
+        np.empty((3, 3)),  # 20 scratch 3x3
+    )
+
+
+@_jit
+def _solve_pose_into(
+    placement_rotations,
+    placement_translations,
+    axes,
+    prismatic,
+    tip_rotation,
+    tip_translation,
+    lower_q,
+    upper_q,
+    target_rotation,
+    target_translation,
+    q_init,
+    position_tolerance,
+    orientation_tolerance,
+    max_iterations,
+    max_iteration_step,
+    q,
+    ws,
+):
+    """IKSolver._solve_python, compiled: q is overwritten; returns (converged, iterations).
+
+    On return, ws holds the joint and tip poses at the returned q.
+    """
+    joint_rotations, joint_translations, fr, ft = ws[0], ws[1], ws[2], ws[3]
+    er, et, ir, it, error, jac, jlog, jk = ws[4], ws[5], ws[6], ws[7], ws[8], ws[9], ws[10], ws[11]
+    system, rhs, step = ws[12], ws[13], ws[14]
+    n = q.shape[0]
+    for k in range(n):
+        q[k] = min(max(q_init[k], lower_q[k]), upper_q[k])
+    for iteration in range(max_iterations + 1):
+        _forward_kinematics(
+            placement_rotations,
+            placement_translations,
+            axes,
+            prismatic,
+            tip_rotation,
+            tip_translation,
+            q,
+            joint_rotations,
+            joint_translations,
+            fr,
+            ft,
+        )
+        _relative_pose(fr, ft, target_rotation, target_translation, er, et)  # current^-1 target
+        _log6(er, et, error)
+        position_error = math.sqrt(et[0] * et[0] + et[1] * et[1] + et[2] * et[2])
+        angle_error = math.sqrt(error[3] * error[3] + error[4] * error[4] + error[5] * error[5])
+        if position_error <= position_tolerance and angle_error <= orientation_tolerance:
+            return True, iteration
+        if iteration == max_iterations:
+            break
+        _local_jacobian(axes, prismatic, joint_rotations, joint_translations, fr, ft, jac)
+        for i in range(3):  # inverse error transform
+            it[i] = -(er[0, i] * et[0] + er[1, i] * et[1] + er[2, i] * et[2])
+            for j in range(3):
+                ir[i, j] = er[j, i]
+        _jlog6(ir, it, jlog)
+        # jk = Jlog6 jac; Jlog6 = [[A, B], [0, A]]: columns independent, no zero products.
+        a00, a01, a02 = jlog[0, 0], jlog[0, 1], jlog[0, 2]
+        a10, a11, a12 = jlog[1, 0], jlog[1, 1], jlog[1, 2]
+        a20, a21, a22 = jlog[2, 0], jlog[2, 1], jlog[2, 2]
+        b00, b01, b02 = jlog[0, 3], jlog[0, 4], jlog[0, 5]
+        b10, b11, b12 = jlog[1, 3], jlog[1, 4], jlog[1, 5]
+        b20, b21, b22 = jlog[2, 3], jlog[2, 4], jlog[2, 5]
+        for k in range(n):
+            v0, v1, v2 = jac[0, k], jac[1, k], jac[2, k]
+            w0, w1, w2 = jac[3, k], jac[4, k], jac[5, k]
+            jk[0, k] = a00 * v0 + a01 * v1 + a02 * v2 + b00 * w0 + b01 * w1 + b02 * w2
+            jk[1, k] = a10 * v0 + a11 * v1 + a12 * v2 + b10 * w0 + b11 * w1 + b12 * w2
+            jk[2, k] = a20 * v0 + a21 * v1 + a22 * v2 + b20 * w0 + b21 * w1 + b22 * w2
+            jk[3, k] = a00 * w0 + a01 * w1 + a02 * w2
+            jk[4, k] = a10 * w0 + a11 * w1 + a12 * w2
+            jk[5, k] = a20 * w0 + a21 * w1 + a22 * w2
+        _damped_step(jk, error, max_iteration_step, system, rhs, step)
+        for k in range(n):
+            q[k] = min(max(q[k] + step[k], lower_q[k]), upper_q[k])
+    return False, max_iterations
+
+
+@_jit
+def solve_pose(
+    placement_rotations,
+    placement_translations,
+    axes,
+    prismatic,
+    tip_rotation,
+    tip_translation,
+    base_rotation,
+    lower_q,
+    upper_q,
+    target_rotation,
+    target_translation,
+    q_init,
+    position_tolerance,
+    orientation_tolerance,
+    max_iterations,
+    max_iteration_step,
+):
+    """One tip pose (world frame) from q_init: (q, converged, iterations)."""
+    n = axes.shape[0]
+    q = np.empty(n)
+    converged, iterations = _solve_pose_into(
+        placement_rotations,
+        placement_translations,
+        axes,
+        prismatic,
+        tip_rotation,
+        tip_translation,
+        lower_q,
+        upper_q,
+        target_rotation,
+        target_translation,
+        q_init,
+        position_tolerance,
+        orientation_tolerance,
+        max_iterations,
+        max_iteration_step,
+        q,
+        _workspace(n),
+    )
+    return q, converged, iterations
+
+
+@_jit
+def _trajectory_step(
+    placement_rotations,
+    placement_translations,
+    axes,
+    prismatic,
+    tip_rotation,
+    tip_translation,
+    lower_q,
+    upper_q,
+    target_rotations,
+    target_translations,
+    times,
+    i,
+    position_tolerance,
+    orientation_tolerance,
+    max_iterations,
+    max_iteration_step,
+    max_joint_step,
+    check_velocity,
+    any_velocity_check,
+    velocity_limits,
+    q_all,
+    iterations,
+    q_fail,
+    guess,
+    q,
+    ws,
+):
+    """Sample i >= 1 of IKSolver._trajectory_python: (status, joint, value); status 0 is OK.
+
+    ws must hold the joint and tip poses at q_all[i - 1] (for the predictor); on return it
+    holds those at q.
+    """
+    n = q.shape[0]
+    _predict(
+        axes,
+        prismatic,
+        ws[0],
+        ws[1],
+        ws[2],
+        ws[3],
+        target_rotations[i - 1],
+        target_translations[i - 1],
+        target_rotations[i],
+        target_translations[i],
+        max_iteration_step,
+        q_all[i - 1],
+        guess,
+        ws[4],
+        ws[5],
+        ws[8],
+        ws[9],
+        ws[12],
+        ws[13],
+        ws[14],
+    )
+    converged, iterations[i] = _solve_pose_into(
+        placement_rotations,
+        placement_translations,
+        axes,
+        prismatic,
+        tip_rotation,
+        tip_translation,
+        lower_q,
+        upper_q,
+        target_rotations[i],
+        target_translations[i],
+        guess,
+        position_tolerance,
+        orientation_tolerance,
+        max_iterations,
+        max_iteration_step,
+        q,
+        ws,
+    )
+    if not converged:
+        for k in range(n):
+            q_fail[k] = q[k]
+        return 1, 0, 0.0
+    worst = 0
+    largest = -1.0
+    for k in range(n):
+        q_all[i, k] = q[k]
+        delta = abs(q[k] - q_all[i - 1, k])
+        if delta > largest:
+            largest = delta
+            worst = k
+    if largest > max_joint_step:
+        return 2, worst, largest
+    elapsed = times[i] - times[i - 1]
+    if any_velocity_check and elapsed > 0:
+        for k in range(n):
+            speed = abs(q[k] - q_all[i - 1, k]) / elapsed
+            if check_velocity[k] and speed > velocity_limits[k] * (1 + 1e-9):
+                return 3, k, speed
+    return 0, 0, 0.0
+
+
+@_jit
+def solve_trajectory(
+    placement_rotations,
+    placement_translations,
+    axes,
+    prismatic,
+    tip_rotation,
+    tip_translation,
+    base_rotation,
+    lower_q,
+    upper_q,
+    target_rotations,
+    target_translations,
+    times,
+    q0,
+    position_tolerance,
+    orientation_tolerance,
+    max_iterations,
+    max_iteration_step,
+    max_joint_step,
+    check_velocity,
+    velocity_limits,
+    q_all,
+    iterations,
+    q_fail,
+):
+    """IKSolver._trajectory_python, compiled: samples 1.. from the solution q0 of sample 0.
+
+    Fills q_all and iterations; returns (status, sample, joint, value) as the Python path.
+    """
+    count = target_rotations.shape[0]
+    n = axes.shape[0]
+    ws = _workspace(n)
+    guess = np.empty(n)
+    q = np.empty(n)
+    any_velocity_check = False
+    for k in range(n):
+        q_all[0, k] = q0[k]
+        if check_velocity[k]:
+            any_velocity_check = True
+    _forward_kinematics(  # the predictor of sample 1 needs the poses at q0
+        placement_rotations,
+        placement_translations,
+        axes,
+        prismatic,
+        tip_rotation,
+        tip_translation,
+        q_all[0],
+        ws[0],
+        ws[1],
+        ws[2],
+        ws[3],
+    )
+    for i in range(1, count):
+        status, joint, value = _trajectory_step(
+            placement_rotations,
+            placement_translations,
+            axes,
+            prismatic,
+            tip_rotation,
+            tip_translation,
+            lower_q,
+            upper_q,
+            target_rotations,
+            target_translations,
+            times,
+            i,
+            position_tolerance,
+            orientation_tolerance,
+            max_iterations,
+            max_iteration_step,
+            max_joint_step,
+            check_velocity,
+            any_velocity_check,
+            velocity_limits,
+            q_all,
+            iterations,
+            q_fail,
+            guess,
+            q,
+            ws,
+        )
+        if status != 0:
+            return status, i, joint, value
+    return 0, count, 0, 0.0

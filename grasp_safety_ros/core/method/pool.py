@@ -1,0 +1,105 @@
+"""A worker pool that spreads the grasps of a large ``rank`` request over threads or processes.
+
+Threads when the compiled kernels are in use (they run without the GIL), else processes; the
+results come back in input order and each grasp is computed by the same code as in the serial
+path, so they equal the serial ones bit for bit. The pool knows the evaluator only by its
+duck type (``config``, ``robot``, ``ik.compiled``; a process worker rebuilds it as
+``type(evaluator)(robot, config)``) and runs the callable it is given on each job.
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing
+import os
+import threading
+import weakref
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import Executor, ProcessPoolExecutor, ThreadPoolExecutor
+from dataclasses import replace
+from functools import partial
+from typing import Any, TypeVar
+
+Job = tuple[Any, ...]
+"""Arguments of one call of the ``evaluate`` callable given to ``evaluate_jobs``."""
+
+Result = TypeVar("Result")
+
+
+def default_workers() -> int:
+    """Cores this process may run on."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def executor_for(evaluator: Any, total_samples: int) -> Executor | None:
+    """The evaluator's worker pool when a request of ``total_samples`` (grasps x samples) is
+    large enough to share out, else None (serial).
+
+    The pool is made on first use and kept on the evaluator for later requests: threads when
+    the compiled kernels are in use (they run without the GIL), else processes, each with its
+    own copy of the evaluator ("fork" from a single-threaded process; "forkserver" otherwise,
+    as forking a process that runs other threads is unsafe: then, as with "spawn", the main
+    module must be importable without side effects, i.e. guarded by ``if __name__ ==
+    "__main__":``).
+    """
+    config = evaluator.config
+    workers = config.workers or default_workers()
+    if workers <= 1 or total_samples < max(config.parallel_min_samples, 1):
+        return None
+    pool: Executor | None = getattr(evaluator, "_grasp_pool", None)
+    if pool is None:
+        if evaluator.ik.compiled:
+            pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="grasp_safety")
+        else:
+            pool = ProcessPoolExecutor(
+                max_workers=workers,
+                mp_context=multiprocessing.get_context(
+                    "fork" if threading.active_count() == 1 else "forkserver"
+                ),
+                initializer=_init_worker,
+                initargs=(type(evaluator), evaluator.robot, replace(config, workers=1)),
+            )
+        evaluator._grasp_pool = pool
+        weakref.finalize(evaluator, pool.shutdown, False)
+    return pool
+
+
+def evaluate_jobs(
+    evaluator: Any,
+    executor: Executor,
+    jobs: Sequence[Job],
+    evaluate: Callable[..., Result],
+) -> Iterator[Result]:
+    """``evaluate(evaluator, *job)`` of each job on the pool, yielded in job order.
+
+    ``evaluate`` must be picklable for a process pool (a module-level function or a method
+    of a module-level class, e.g. ``GraspSafetyEvaluator._evaluate_sampled``); the workers
+    call it on their own copy of the evaluator. Jobs go out in contiguous chunks (about four
+    per worker), which keeps the pool's per-task overhead small and the load balanced.
+    """
+    workers = max(1, getattr(executor, "_max_workers", 2))
+    size = max(1, math.ceil(len(jobs) / (4 * workers)))
+    chunks = [jobs[k : k + size] for k in range(0, len(jobs), size)]
+    if isinstance(executor, ThreadPoolExecutor):
+        results = executor.map(lambda chunk: [evaluate(evaluator, *job) for job in chunk], chunks)
+    else:
+        results = executor.map(partial(_evaluate_chunk_in_worker, evaluate), chunks)
+    return (result for chunk in results for result in chunk)
+
+
+_WORKER_EVALUATOR: Any = None
+
+
+def _init_worker(evaluator_class: Callable[..., Any], robot: Any, config: Any) -> None:
+    global _WORKER_EVALUATOR
+    _WORKER_EVALUATOR = evaluator_class(robot, config)
+
+
+def _evaluate_chunk_in_worker(
+    evaluate: Callable[..., Result], jobs: Sequence[Job]
+) -> list[Result]:
+    assert _WORKER_EVALUATOR is not None
+    return [evaluate(_WORKER_EVALUATOR, *job) for job in jobs]

@@ -1,0 +1,50 @@
+"""Compile the kernels (or load them from numba's disk cache) ahead of the first request."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pinocchio as pin
+
+from ..model.inertia import solid_box
+from ..model.robot import RobotModel
+from ..model.trajectory import ObjectTrajectory
+from .ranking import Grasp, GraspSafetyEvaluator
+
+_WARM_UP_URDF = """<robot name="warm_up"><link name="base"/>
+<link name="a"><inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01"
+ ixy="0" ixz="0" iyz="0"/></inertial></link>
+<link name="b"><inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01"
+ ixy="0" ixz="0" iyz="0"/></inertial></link>
+<joint name="j1" type="revolute"><parent link="base"/><child link="a"/><axis xyz="0 0 1"/>
+ <limit lower="-3" upper="3" effort="1" velocity="10"/></joint>
+<joint name="j2" type="revolute"><parent link="a"/><child link="b"/><origin xyz="0.3 0 0"/>
+ <axis xyz="0 1 0"/><limit lower="-3" upper="3" effort="1" velocity="10"/></joint>
+</robot>"""
+
+
+def warm_up(evaluator: GraspSafetyEvaluator | None = None) -> float:
+    """Compile the kernels (first use on a machine, ~10-20 s) or load them from numba's disk
+    cache (later, < 1 s), so that the first real request does not pay for it.
+
+    Args:
+        evaluator: The evaluator to warm up; None: a small built-in arm (the compiled code
+            does not depend on the robot, so this fills the cache for every robot).
+
+    Returns:
+        The time taken [s]; 0 when the compiled backend is not in use.
+    """
+    start = time.perf_counter()
+    if evaluator is None:
+        evaluator = GraspSafetyEvaluator(RobotModel.from_urdf(_WARM_UP_URDF, "base", "b"))
+    if not evaluator.ik.compiled:
+        return 0.0
+    robot = evaluator.robot
+    pose = robot.transform_tip_to_base(robot.default_seed_positions())
+    trajectory = ObjectTrajectory(pose, pose, 0.02, 0.01)
+    with np.errstate(all="ignore"):  # the pose may be singular: only the compiling matters
+        box = solid_box(1.0, (0.1, 0.1, 0.1))
+        evaluator.evaluate(Grasp(pin.SE3.Identity()), box, trajectory)
+    evaluator.ik.solve(pose, robot.q_from_positions(robot.default_seed_positions()))
+    return time.perf_counter() - start
