@@ -46,7 +46,7 @@ def rank_scenario(scenario: Scenario, metric: str | None = None) -> SafetyReport
     """Load the scenario's robot, rank its grasps and run the analyses the scenario asks for."""
     robot = scenario.robot.load(scenario.base_dir)
     evaluator = GraspSafetyEvaluator(robot, EvaluationConfig(metric=metric or scenario.metric))
-    progress = _progress_printer(len(scenario.grasps) * scenario.trajectory.num_samples)
+    progress = _progress_printer(len(scenario.grasps) * len(scenario.trajectory.times_s()))
     ranking = evaluator.rank(
         scenario.grasps,
         scenario.object_inertia,

@@ -16,11 +16,13 @@ from ..core.analyses.safety_report import RANK_BY, AnalysisOptions
 from ..core.analyses.uncertainty import InertiaUncertainty
 from ..core.exceptions import InvalidInputError
 from ..core.input_checks import finite_array, finite_float, pose_from_position_quat
+from ..core.method.joint_trajectory import PlannedJointTrajectory
 from ..core.method.posture import DEFAULT_RESTARTS, PostureConfig
 from ..core.method.ranking import METRICS, Grasp, check_metric
 from ..core.model.inertia import ObjectInertia, solid_box, solid_cylinder, solid_sphere
 from ..core.model.robot import RobotModel
 from ..core.model.trajectory import ObjectTrajectory
+from ..core.model.waypoint_trajectory import WaypointTrajectory
 
 MAX_SCENARIO_BYTES = 4_000_000
 """Largest scenario file read [bytes]."""
@@ -140,7 +142,7 @@ class Scenario:
 
     robot: RobotSpec
     object_inertia: ObjectInertia
-    trajectory: ObjectTrajectory
+    trajectory: ObjectTrajectory | WaypointTrajectory
     grasps: tuple[Grasp, ...]
     metric: str
     base_dir: Path
@@ -293,21 +295,43 @@ def _check_size(value: Any, field: str) -> None:
         raise InvalidInputError(field, f"must be at most {MAX_OBJECT_SIZE_M:g} m, got {size:g} m")
 
 
-def _pose(section: Any, field: str):
+_LEGACY = frozenset({"name", "quality"})
+"""Keys start and goal have always tolerated (ignored)."""
+
+
+def _pose(section: Any, field: str, allowed: frozenset[str] = frozenset()):
     pose = _mapping(section, field)
-    _check_keys(pose, {"position_m", "quat_xyzw", "name", "quality"}, field)
+    _check_keys(pose, {"position_m", "quat_xyzw"} | allowed, field)
     return pose_from_position_quat(
         _required(pose, "position_m", field), _required(pose, "quat_xyzw", field), field
     )
 
 
-def parse_trajectory(section: Any) -> ObjectTrajectory:
-    """Parse the ``trajectory`` section (object-frame poses in the base frame)."""
+def parse_trajectory(section: Any) -> ObjectTrajectory | WaypointTrajectory:
+    """Parse the ``trajectory`` section (object-frame poses in the base frame): ``start``,
+    ``goal``, ``duration_s``, ``dt_s``, or timed ``waypoints`` and ``dt_s``."""
     trajectory = _mapping(section, "trajectory")
+    if "waypoints" in trajectory:
+        _check_keys(trajectory, {"waypoints", "dt_s"}, "trajectory")
+        waypoints = trajectory["waypoints"]
+        if not isinstance(waypoints, list):
+            raise InvalidInputError(
+                "trajectory.waypoints", f"must be a list of timed poses, got {waypoints!r}"
+            )
+        times, poses = [], []
+        for i, item in enumerate(waypoints):
+            field = f"trajectory.waypoints[{i}]"
+            poses.append(_pose(item, field, frozenset({"time_s"})))
+            times.append(finite_float(_required(item, "time_s", field), f"{field}.time_s"))
+        return WaypointTrajectory(
+            tuple(times),
+            tuple(poses),
+            finite_float(_required(trajectory, "dt_s", "trajectory"), "trajectory.dt_s"),
+        )
     _check_keys(trajectory, {"start", "goal", "duration_s", "dt_s"}, "trajectory")
     return ObjectTrajectory(
-        _pose(_required(trajectory, "start", "trajectory"), "trajectory.start"),
-        _pose(_required(trajectory, "goal", "trajectory"), "trajectory.goal"),
+        _pose(_required(trajectory, "start", "trajectory"), "trajectory.start", _LEGACY),
+        _pose(_required(trajectory, "goal", "trajectory"), "trajectory.goal", _LEGACY),
         finite_float(_required(trajectory, "duration_s", "trajectory"), "trajectory.duration_s"),
         finite_float(_required(trajectory, "dt_s", "trajectory"), "trajectory.dt_s"),
     )
@@ -330,14 +354,50 @@ def parse_grasps(section: Any) -> tuple[tuple[Grasp, ...], tuple[float, ...] | N
     qualities = []
     for i, item in enumerate(section):
         field = f"grasps[{i}]"
-        pose = _pose(item, field)
+        pose = _pose(item, field, frozenset({"name", "quality", "joint_trajectory"}))
         entry = _mapping(item, field)
-        grasps.append(Grasp(pose, str(entry.get("name", f"grasp_{i}"))))
+        planned = None
+        if "joint_trajectory" in entry:
+            planned = parse_joint_trajectory(
+                entry["joint_trajectory"], f"{field}.joint_trajectory"
+            )
+        grasps.append(Grasp(pose, str(entry.get("name", f"grasp_{i}")), planned))
         if "quality" in entry:
             qualities.append(finite_float(entry["quality"], f"{field}.quality"))
     if qualities and len(qualities) != len(grasps):
         raise InvalidInputError("grasps", "give a quality for every grasp or for none")
     return tuple(grasps), tuple(qualities) if qualities else None
+
+
+def parse_joint_trajectory(section: Any, field: str) -> PlannedJointTrajectory:
+    """Parse ``grasps[i].joint_trajectory``: ``joint_names`` and ``points`` with ``time_s``,
+    ``positions`` and optionally ``velocities`` (every point or none)."""
+    trajectory = _mapping(section, field)
+    _check_keys(trajectory, {"joint_names", "points"}, field)
+    names = _required(trajectory, "joint_names", field)
+    if not isinstance(names, list):
+        raise InvalidInputError(f"{field}.joint_names", f"must be a list of names, got {names!r}")
+    points = _required(trajectory, "points", field)
+    if not isinstance(points, list):
+        raise InvalidInputError(f"{field}.points", f"must be a list of points, got {points!r}")
+    times, positions, velocities = [], [], []
+    for k, item in enumerate(points):
+        where = f"{field}.points[{k}]"
+        point = _mapping(item, where)
+        _check_keys(point, {"time_s", "positions", "velocities"}, where)
+        times.append(finite_float(_required(point, "time_s", where), f"{where}.time_s"))
+        positions.append(_required(point, "positions", where))
+        if "velocities" in point:
+            velocities.append(point["velocities"])
+    if velocities and len(velocities) != len(points):
+        raise InvalidInputError(f"{field}.points", "give velocities for every point or for none")
+    return PlannedJointTrajectory(
+        tuple(_string(n, f"{field}.joint_names") for n in names),
+        np.array(times),
+        positions,
+        velocities or None,
+        field,
+    )
 
 
 OPTIONAL_SECTIONS = {
