@@ -463,9 +463,15 @@ def test_too_many_samples_in_total_are_refused(ros: NodeUnderTest) -> None:
 
 def test_slow_request_does_not_block_the_next_for_ever(ros: NodeUnderTest) -> None:
     # Bounds raised for this test only: 1000 grasps x 20001 samples take far longer than
-    # max_compute_time_s, however fast the core is.
+    # max_compute_time_s, however fast the core is. No speed is assumed: the test waits for
+    # the node to hold the compute lock, and the time bounds are generous (the deadline is
+    # checked after every grasp, also on the worker pool: test_performance_paths).
+    max_compute_time_s = 3.0  # the busy request below must arrive within it
     results = ros.set_parameters(
-        max_grasps=1000, max_samples=20001, max_total_samples=30_000_000, max_compute_time_s=1.0
+        max_grasps=1000,
+        max_samples=20001,
+        max_total_samples=30_000_000,
+        max_compute_time_s=max_compute_time_s,
     )
     assert all(r.successful for r in results), results
     try:
@@ -473,18 +479,18 @@ def test_slow_request_does_not_block_the_next_for_ever(ros: NodeUnderTest) -> No
         slow.grasps.poses = [copy.deepcopy(slow.grasps.poses[i % 3]) for i in range(1000)]
         slow.object_trajectory = book_path(duration_s=2000.0)
         slow_future = ros.rank_client.call_async(slow)
-        time.sleep(0.3)  # the slow ranking holds the compute lock by now
+        assert ros.spin_until(ros.node._compute_lock.locked, 60.0), "slow ranking never started"
         started = time.monotonic()
         busy = ros.rank(book_request())
         assert not busy.success
         assert busy.message.startswith("busy:"), busy.message
-        assert time.monotonic() - started < 1.5  # answered after service_busy_timeout_s=0.3
+        assert time.monotonic() - started < max_compute_time_s  # busy after 0.3 s, not later
         # parameters still answer while the ranking runs
-        get = ros.wait(ros.get_client.call_async(GetParameters.Request(names=["metric"])), 2.0)
+        get = ros.wait(ros.get_client.call_async(GetParameters.Request(names=["metric"])), 10.0)
         assert get.values[0].string_value == "mean"
-        abandoned = ros.wait(slow_future, 20.0)
+        abandoned = ros.wait(slow_future, 120.0)
         assert not abandoned.success
-        assert "max_compute_time_s=1" in abandoned.message, abandoned.message
+        assert "max_compute_time_s=3" in abandoned.message, abandoned.message
     finally:
         results = ros.set_parameters(
             max_compute_time_s=NODE_PARAMETERS["max_compute_time_s"],

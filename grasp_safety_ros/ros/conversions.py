@@ -8,6 +8,7 @@ quaternion_msg_from_rotation. Each function raises InvalidInputError naming the 
 
 from __future__ import annotations
 
+import array
 import math
 from collections.abc import Collection, Sequence
 
@@ -251,6 +252,38 @@ def seed_from_joint_state(
 # --- Results ---------------------------------------------------------------------------------
 
 
+def float64_array(values: Sequence[float] | np.ndarray) -> array.array:
+    """``array('d')`` of ``values``: what a float64[] field holds; built from the bytes, so
+    the message setter stores it as is instead of converting element by element."""
+    return array.array("d", np.ascontiguousarray(values, dtype=np.float64).tobytes())
+
+
+_VECTOR3_CHECK_FIELDS = Vector3()._check_fields
+_FAST_VECTOR3 = set(Vector3.__slots__) == {"_x", "_y", "_z", "_check_fields"}
+"""Whether vector3_msgs may fill the slots of geometry_msgs/Vector3 directly (Jazzy's class)."""
+
+
+def vector3_msgs(vectors: np.ndarray) -> list[Vector3]:
+    """geometry_msgs/Vector3 of each row of an (N, 3) array.
+
+    The rows of a response's ``direction`` fields are its bulk (one message per sample): the
+    messages are made without the keyword constructor (its per-field setters cost about 5x
+    more), by filling the generated class's slots with the floats; if the class is not the
+    one this was written for (other slots), the constructor is used.
+    """
+    rows = np.asarray(vectors, dtype=np.float64).reshape(-1, 3).tolist()
+    if not _FAST_VECTOR3:
+        return [Vector3(x=x, y=y, z=z) for x, y, z in rows]
+    new, check = Vector3.__new__, _VECTOR3_CHECK_FIELDS
+    messages = []
+    append = messages.append
+    for x, y, z in rows:
+        vector = new(Vector3)
+        vector._x, vector._y, vector._z, vector._check_fields = x, y, z, check
+        append(vector)
+    return messages
+
+
 def evaluation_msg(evaluation: GraspEvaluation) -> GraspEvaluationMsg:
     """grasp_safety_msgs/GraspEvaluation of a core evaluation (NaN scores when infeasible).
 
@@ -265,12 +298,9 @@ def evaluation_msg(evaluation: GraspEvaluation) -> GraspEvaluationMsg:
         score=float(evaluation.score),
         peak_effective_mass_kg=float(evaluation.peak_effective_mass_kg),
         mean_effective_mass_kg=float(evaluation.mean_effective_mass_kg),
-        time_from_start_s=np.asarray(evaluation.times_s, dtype=float).tolist(),
-        effective_mass_kg=np.asarray(evaluation.effective_mass_kg, dtype=float).tolist(),
-        direction=[
-            Vector3(x=x, y=y, z=z)
-            for x, y, z in np.asarray(evaluation.directions_in_base, dtype=float).tolist()
-        ],
+        time_from_start_s=float64_array(evaluation.times_s),
+        effective_mass_kg=float64_array(evaluation.effective_mass_kg),
+        direction=vector3_msgs(evaluation.directions_in_base),
         direction_is_worst_case=np.asarray(evaluation.direction_is_worst_case, bool).tolist(),
         safety_score=float(evaluation.score),
         iso_min_duration_s=NAN,
@@ -305,25 +335,28 @@ def ranking_msg(
     base_frame: str,
     stamp: Time,
     compute_time_s: float,
+    order: Sequence[int] | None = None,
 ) -> GraspRanking:
     """grasp_safety_msgs/GraspRanking of a core ranking of the grasps in ``grasps``.
 
     The paper's ranking only: the analysis fields are those of the default options with
     nothing beyond the tip computed (see evaluation_msg); report_msg gives the full result.
+    ``order`` (default: the ranking's) sets ``order`` and ``ranked_grasps``.
     """
-    order = [int(i) for i in ranking.order]
+    paper_order = [int(i) for i in ranking.order]
+    final = paper_order if order is None else [int(i) for i in order]
     return GraspRanking(
         header=Header(stamp=stamp, frame_id=base_frame),
         metric=ranking.metric,
-        order=order,
-        ranked_grasps=ranked_pose_array(grasps, ranking.order),
+        order=final,
+        ranked_grasps=ranked_pose_array(grasps, final),
         evaluations=[evaluation_msg(e) for e in ranking.evaluations],
         joint_names=list(ranking.joint_names),
         compute_time_s=float(compute_time_s),
         metric_point="tip",
         rank_by="safety",
-        safety_order=order,
-        paper_order=order,
+        safety_order=paper_order,
+        paper_order=paper_order,
         safety_weight=NAN,
         effort_criterion="",
         order_stability=NAN,
@@ -372,9 +405,9 @@ def report_msg(
     """
     options = report.options
     quality_given = options.grasp_quality is not None
-    message = ranking_msg(report.ranking, grasps, base_frame, stamp, compute_time_s)
-    message.order = [int(i) for i in report.order]
-    message.ranked_grasps = ranked_pose_array(grasps, report.order)
+    message = ranking_msg(
+        report.ranking, grasps, base_frame, stamp, compute_time_s, order=report.order
+    )
     message.metric_point = options.metric_point
     message.rank_by = options.rank_by
     message.safety_order = [int(i) for i in report.safety_order]
@@ -394,8 +427,12 @@ def report_msg(
             _set_iso(evaluation, iso[k])
         if report.exposed and report.exposed[k].feasible:
             exposed = report.exposed[k]
-            evaluation.leading_point_effective_mass_kg = _floats(exposed.leading_effective_mass_kg)
-            evaluation.worst_point_effective_mass_kg = _floats(exposed.worst_effective_mass_kg)
+            evaluation.leading_point_effective_mass_kg = float64_array(
+                exposed.leading_effective_mass_kg
+            )
+            evaluation.worst_point_effective_mass_kg = float64_array(
+                exposed.worst_effective_mass_kg
+            )
         if report.uncertainty is not None:
             spread = report.uncertainty.grasps[k]
             evaluation.worst_case_score = float(spread.worst_case_score)
@@ -410,20 +447,16 @@ def report_msg(
             evaluation.redundancy_applied = bool(resolution.applied)
             evaluation.score_without_redundancy = float(resolution.original_score)
             if resolution.applied:
-                evaluation.effective_mass_with_redundancy_kg = _floats(
+                evaluation.effective_mass_with_redundancy_kg = float64_array(
                     resolution.effective_mass_kg
                 )
         if report.effort:
             effort = report.effort[k]
             evaluation.effort_score = float(effort.score(options.effort_criterion))
             if effort.feasible:
-                evaluation.peak_abs_torque = _floats(effort.peak_abs_torque)
-                evaluation.rms_torque = _floats(effort.rms_torque)
+                evaluation.peak_abs_torque = float64_array(effort.peak_abs_torque)
+                evaluation.rms_torque = float64_array(effort.rms_torque)
     return message
-
-
-def _floats(values: np.ndarray) -> list[float]:
-    return np.asarray(values, dtype=float).tolist()
 
 
 def rank_color(rank: int, count: int) -> tuple[float, float, float, float]:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Generator, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -279,7 +279,9 @@ class GraspSafetyEvaluator:
         """Evaluate every grasp and rank the feasible ones, safest first.
 
         Args:
-            progress: Called as ``progress(done, total)`` after each grasp.
+            progress: Called as ``progress(done, total)`` after each grasp, as soon as it is
+                done (also with the worker pool); it may raise to abandon the ranking, and
+                then no further grasp is started.
         """
         metric = check_metric(metric or self.config.metric)
         seed_q = self.seed_q(seed_positions)  # validate once, before any work
@@ -292,14 +294,19 @@ class GraspSafetyEvaluator:
             for index, grasp in enumerate(grasps)
         ]
         if executor is None:
-            results: Iterable[GraspEvaluation] = (self._evaluate_sampled(*job) for job in jobs)
+            results: Generator[GraspEvaluation, None, None] = (
+                self._evaluate_sampled(*job) for job in jobs
+            )
         else:
             results = evaluate_jobs(self, executor, jobs, GraspSafetyEvaluator._evaluate_sampled)
         evaluations = []
-        for evaluation in results:
-            evaluations.append(evaluation)
-            if progress is not None:
-                progress(len(evaluations), len(grasps))
+        try:
+            for evaluation in results:
+                evaluations.append(evaluation)
+                if progress is not None:
+                    progress(len(evaluations), len(grasps))
+        finally:
+            results.close()  # progress raised: the pool starts no further grasp
         return Ranking(
             joint_names=self.robot.joint_names,
             metric=metric,
