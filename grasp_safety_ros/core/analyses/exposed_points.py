@@ -30,6 +30,7 @@ from ..method.ranking import Grasp, GraspEvaluation, aggregate, check_metric
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
 from ..model.trajectory import ObjectTrajectory
+from .shared import GraspShared, SampledTrajectory
 
 METRIC_POINTS = ("tip", "leading_point", "worst_point")
 """Which point's effective mass a score uses: the tip, the leading point, the worst point."""
@@ -221,11 +222,13 @@ def evaluate_exposed_points(
     grasp: Grasp,
     trajectory: ObjectTrajectory,
     points_in_object_m: Any,
+    shared: GraspShared | None = None,
 ) -> ExposedPointsEvaluation:
     """Effective mass, speed and direction of motion at each object point, per sample.
 
     Reuses the evaluation's joint positions (no IK). ``grasp`` and ``trajectory`` must be the
-    ones the evaluation was computed with.
+    ones the evaluation was computed with; ``shared``, this grasp's GraspShared if the caller
+    has one (object poses and augmented model made once for all analyses).
     """
     points = check_points_in_object(points_in_object_m)
     count_points = len(points)
@@ -248,7 +251,10 @@ def evaluate_exposed_points(
     times = np.asarray(evaluation.times_s, dtype=float)
     if len(times) != evaluation.joint_positions.shape[0]:
         raise InvalidInputError("evaluation.times_s", "must have one entry per joint sample")
-    s_values, s_rate, _ = trajectory.path_parameter(times)
+    if shared is not None and not shared.samples.matches(times):
+        shared = None
+    samples = shared.samples if shared is not None else SampledTrajectory(trajectory, times)
+    s_rate = samples.s_rate
     count = len(times)
     grasp_pose = pin.SE3(grasp.transform_tip_to_object)
     points_in_tip = points @ grasp_pose.rotation  # R_otᵀ (p − t_ot), row-wise
@@ -256,10 +262,14 @@ def evaluate_exposed_points(
     positions = np.empty((count, count_points, 3))
     tangents = np.empty((count, count_points, 3))
     for k, point in enumerate(points):
-        poses, point_tangents = trajectory.tip_path(pin.SE3(np.eye(3), point), s_values)
+        poses, point_tangents = samples.path(pin.SE3(np.eye(3), point))
         positions[:, k] = [pose.translation for pose in poses]
         tangents[:, k] = point_tangents
-    model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
+    model = (
+        shared.augmented_model
+        if shared is not None
+        else augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
+    )
     data = model.createData()
     mobilities = np.empty((count, count_points, 3, 3))
     for i, positions_i in enumerate(evaluation.joint_positions):

@@ -311,25 +311,55 @@ def assess_region(
     speed_m_s: np.ndarray, effective_mass_kg: np.ndarray, duration_s: float, region: BodyRegion
 ) -> RegionAssessment:
     """Assess one region for per-sample speeds [m/s] and effective masses [kg] (validated)."""
-    force = transient_contact_force_n(speed_m_s, effective_mass_kg, region)
-    v_max = max_permissible_speed_m_s(effective_mass_kg, region)
-    if region.max_transient_force_n is None:
-        ratio = np.where(speed_m_s > 0.0, np.inf, 0.0)
-    else:
-        ratio = force / region.max_transient_force_n
-    worst_sample = int(np.argmax(ratio)) if len(ratio) else 0
-    worst = float(ratio[worst_sample]) if len(ratio) else 0.0
-    return RegionAssessment(
-        region=region,
-        contact_force_n=_read_only(force),
-        max_permissible_speed_m_s=_read_only(np.asarray(v_max, dtype=float)),
-        force_ratio=_read_only(ratio),
-        worst_force_ratio=worst,
-        worst_sample=worst_sample,
-        peak_contact_force_n=float(force.max()) if len(force) else 0.0,
-        admissible=worst <= 1.0 + ADMISSIBLE_RATIO_TOLERANCE,
-        min_duration_s=duration_s * worst if worst > 0.0 else 0.0,
-    )
+    return assess_regions(speed_m_s, effective_mass_kg, duration_s, (region,))[0]
+
+
+def assess_regions(
+    speed_m_s: np.ndarray,
+    effective_mass_kg: np.ndarray,
+    duration_s: float,
+    regions: Sequence[BodyRegion],
+) -> tuple[RegionAssessment, ...]:
+    """Assess each region for per-sample speeds [m/s] and effective masses [kg] (validated).
+
+    One array pass over regions x samples, with the elementwise formulas of
+    transient_contact_force_n and max_permissible_speed_m_s (the same numbers as region by
+    region).
+    """
+    permitted = np.array([r.transient_contact_permitted for r in regions], dtype=bool)[:, None]
+    human_mass = np.array([r.effective_mass_kg for r in regions], dtype=float)[:, None]
+    stiffness = np.array([r.spring_constant_n_per_m for r in regions], dtype=float)[:, None]
+    limit = np.array(
+        [r.max_transient_force_n if r.transient_contact_permitted else np.nan for r in regions],
+        dtype=float,
+    )[:, None]
+    root = np.sqrt(reduced_mass_kg(human_mass, effective_mass_kg) * stiffness)  # sqrt(μ·k)
+    force = _read_only(np.asarray(speed_m_s, dtype=float) * root)
+    v_max = _read_only(np.where(permitted, limit / root, 0.0))
+    moving = np.where(np.asarray(speed_m_s) > 0.0, np.inf, 0.0)
+    ratio = _read_only(np.where(permitted, force / limit, moving))
+    count = ratio.shape[1]
+    rows = np.arange(len(regions))
+    worst_sample = np.argmax(ratio, axis=1) if count else np.zeros(len(regions), dtype=int)
+    worst = ratio[rows, worst_sample] if count else np.zeros(len(regions))
+    peak = force.max(axis=1) if count else np.zeros(len(regions))
+    assessed = []
+    for k, region in enumerate(regions):
+        worst_k = float(worst[k])
+        assessed.append(
+            RegionAssessment(
+                region=region,
+                contact_force_n=force[k],
+                max_permissible_speed_m_s=v_max[k],
+                force_ratio=ratio[k],
+                worst_force_ratio=worst_k,
+                worst_sample=int(worst_sample[k]),
+                peak_contact_force_n=float(peak[k]),
+                admissible=worst_k <= 1.0 + ADMISSIBLE_RATIO_TOLERANCE,
+                min_duration_s=duration_s * worst_k if worst_k > 0.0 else 0.0,
+            )
+        )
+    return tuple(assessed)
 
 
 def assess_motion(
@@ -352,7 +382,7 @@ def assess_motion(
     if np.any(mass <= 0.0):
         raise InvalidInputError("iso15066.effective_mass_kg", "must be > 0 at every sample")
     duration = finite_float(duration_s, "iso15066.duration_s", 0.0, None, True)
-    assessed = tuple(assess_region(speed, mass, duration, r) for r in select_regions(regions))
+    assessed = assess_regions(speed, mass, duration, select_regions(regions))
     permitted = [a for a in assessed if a.transient_contact_permitted]
     limiting = max(permitted, key=lambda a: a.worst_force_ratio) if permitted else None
     return PowerForceLimitAssessment(

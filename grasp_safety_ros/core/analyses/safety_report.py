@@ -28,6 +28,7 @@ from .exposed_points import (
 from .iso15066 import PowerForceLimitAssessment, assess_grasp, assess_motion, select_regions
 from .multi_objective import QualityRanking, rank_with_quality
 from .redundancy import RedundancyConfig, RedundancyResolution, resolve_redundancy
+from .shared import GraspShared, SampledTrajectory
 from .uncertainty import InertiaUncertainty, UncertaintyAnalysis, analyse_inertia_uncertainty
 
 RANK_BY = ("safety", "effort")
@@ -160,13 +161,17 @@ def analyse(
         if progress is not None:
             progress(done, per_grasp)
 
+    # Object poses, augmented models and tip paths: made once, shared by the analyses below.
+    feasible_times = next((e.times_s for e in evaluations if e.feasible), np.empty(0))
+    samples = SampledTrajectory(trajectory, feasible_times)
+    shared = [GraspShared(robot, object_inertia, g, samples) for g in grasps]
     exposed: tuple[ExposedPointsEvaluation, ...] = ()
     if options.points_in_object_m is not None:
         exposed_list = []
-        for e, g in zip(evaluations, grasps, strict=True):
+        for e, g, s in zip(evaluations, grasps, shared, strict=True):
             exposed_list.append(
                 evaluate_exposed_points(
-                    robot, e, object_inertia, g, trajectory, options.points_in_object_m
+                    robot, e, object_inertia, g, trajectory, options.points_in_object_m, s
                 )
             )
             step()
@@ -175,8 +180,10 @@ def analyse(
     if options.redundancy:
         config = RedundancyConfig(metric=metric, max_joint_step=evaluator.config.ik.max_joint_step)
         resolutions = []
-        for e, g in zip(evaluations, grasps, strict=True):
-            resolutions.append(resolve_redundancy(robot, e, object_inertia, g, trajectory, config))
+        for e, g, s in zip(evaluations, grasps, shared, strict=True):
+            resolutions.append(
+                resolve_redundancy(robot, e, object_inertia, g, trajectory, config, s)
+            )
             step()
         redundancy = tuple(resolutions)
 
@@ -225,7 +232,9 @@ def analyse(
             resolved = (
                 redundancy[k].joint_positions if redundancy and redundancy[k].applied else None
             )
-            efforts.append(evaluate_effort(robot, e, object_inertia, g, trajectory, resolved))
+            efforts.append(
+                evaluate_effort(robot, e, object_inertia, g, trajectory, resolved, shared[k])
+            )
             step()
         effort = tuple(efforts)
     if options.rank_by == "effort":

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -92,14 +93,23 @@ class ObjectTrajectory:
         translation = (1.0 - s) * start.translation + s * goal.translation
         return pin.SE3(rotation, translation)
 
+    def object_poses(self, s_values: np.ndarray) -> list[pin.SE3]:
+        """Object poses in the base frame at each path parameter (``transform_object_to_base``)."""
+        return [self.transform_object_to_base(float(s)) for s in s_values]
+
     def tip_path(
-        self, transform_tip_to_object: pin.SE3, s_values: np.ndarray
+        self,
+        transform_tip_to_object: pin.SE3,
+        s_values: np.ndarray,
+        object_poses: Sequence[pin.SE3] | None = None,
     ) -> tuple[list[pin.SE3], np.ndarray]:
         """Tip poses in base and path tangents d p_tip/ds [m] (base axes) for a grasp.
 
         Args:
             transform_tip_to_object: The grasp: pose of the tip frame in the object frame.
             s_values: Path parameters in [0, 1].
+            object_poses: ``object_poses(s_values)`` when already computed (they are the same
+                for every grasp).
 
         Returns:
             The tip poses T_base_tip(s) = T_base_object(s)·T_object_tip and, per sample, the
@@ -113,8 +123,9 @@ class ObjectTrajectory:
         )
         angular_in_object = self.rotation_log_in_object
         lever_in_object = np.cross(angular_in_object, grasp.translation)
-        for i, s in enumerate(s_values):
-            object_pose = self.transform_object_to_base(float(s))
+        if object_poses is None:
+            object_poses = self.object_poses(s_values)
+        for i, object_pose in enumerate(object_poses):
             poses.append(object_pose * grasp)
             tangents[i] = linear + object_pose.rotation @ lever_in_object
         return poses, tangents
