@@ -139,7 +139,11 @@ def call(client_executor: Any, client: Any, request: Any, timeout_s: float = 60.
 
 
 def node_spans(node: Any, request: Any) -> dict[str, float]:
-    """Durations [s] of the node's steps for ``request``, done by hand with its functions."""
+    """Durations [s] of the node's steps for ``request``, done by hand with its functions.
+
+    ``<step>`` is the wall-clock time, ``<step>_cpu`` the CPU time of this thread (less
+    affected by other processes; the ranking's pool threads are not counted in it).
+    """
     from rclpy.serialization import serialize_message
 
     from grasp_safety_ros.core.analyses.safety_report import analyse
@@ -150,9 +154,10 @@ def node_spans(node: Any, request: Any) -> dict[str, float]:
     bundle = node._snapshot().bundle
 
     def span(name: str, function: Callable[[], Any]) -> Any:
-        started = time.perf_counter()
+        started, started_cpu = time.perf_counter(), time.thread_time()
         result = function()
         spans[name] = time.perf_counter() - started
+        spans[f"{name}_cpu"] = time.thread_time() - started_cpu
         return result
 
     def convert() -> tuple[Any, Any, Any]:
@@ -200,21 +205,34 @@ def node_spans(node: Any, request: Any) -> dict[str, float]:
 
 
 def latency(arm: ArmWorkload, repeats: int) -> dict[str, Any]:
-    """Round trip of 10 grasps x 101 samples, the ranking's own time and the node's spans."""
+    """Round trip of 10 grasps x 101 samples, the ranking's own time and the node's spans.
+
+    Also the round trip of an empty request to the same node (GetParameters of one name):
+    the floor set by the executor and the middleware.
+    """
+    from rcl_interfaces.srv import GetParameters
+
     request = rank_request(arm, 10)
-    with running_node(arm, 0.02) as (node, _, client_executor, client):
-        round_trips, computes = [], []
-        spans: dict[str, list[float]] = {name: [] for name in SPANS}
+    with running_node(arm, 0.02) as (node, client_node, client_executor, client):
+        get = client_node.create_client(GetParameters, "/grasp_safety/get_parameters")
+        get.wait_for_service(timeout_sec=20.0)
+        round_trips, computes, empty = [], [], []
+        spans: dict[str, list[float]] = {}
         for k in range(repeats + 3):
             started = time.perf_counter()
             response = call(client_executor, client, request)
             elapsed = time.perf_counter() - started
             steps = node_spans(node, request)
+            started = time.perf_counter()
+            future = get.call_async(GetParameters.Request(names=["metric"]))
+            client_executor.spin_until_future_complete(future, timeout_sec=30.0)
+            empty_elapsed = time.perf_counter() - started
             if k >= 3:  # the first calls warm caches up
                 round_trips.append(elapsed)
+                empty.append(empty_elapsed)
                 computes.append(response.ranking.compute_time_s)
-                for name in SPANS:
-                    spans[name].append(steps[name])
+                for name, value in steps.items():
+                    spans.setdefault(name, []).append(value)
         evaluations = response.ranking.evaluations
     result = {
         "robot": arm.name,
@@ -225,7 +243,9 @@ def latency(arm: ArmWorkload, repeats: int) -> dict[str, Any]:
         "latency_ms": summary_ms(round_trips),
         "ranking_ms": summary_ms(spans["rank"]),
         "node_compute_ms": summary_ms(computes),
-        "spans_ms": {name: summary_ms(values)["median"] for name, values in spans.items()},
+        "empty_request_ms": summary_ms(empty),
+        "spans_ms": {name: summary_ms(spans[name])["median"] for name in SPANS},
+        "spans_cpu_ms": {name: summary_ms(spans[f"{name}_cpu"])["median"] for name in SPANS},
     }
     result["median_ms"] = result["latency_ms"]["median"]
     result["latency_over_ranking"] = result["median_ms"] / result["ranking_ms"]["median"]
@@ -260,7 +280,8 @@ def large(arm: ArmWorkload, repeats: int) -> dict[str, Any]:
         "wall_ms": summary_ms(walls),
         "node_compute_ms": summary_ms(computes),
         "response_bytes": len(serialize_message(response)),
-        "spans_ms": {name: 1e3 * value for name, value in spans.items()},
+        "spans_ms": {name: 1e3 * spans[name] for name in SPANS},
+        "spans_cpu_ms": {name: 1e3 * spans[f"{name}_cpu"] for name in SPANS},
     }
 
 
@@ -276,6 +297,9 @@ def run(repeats: int, large_repeats: int) -> dict[str, Any]:
 
 
 def print_results(results: dict[str, Any]) -> None:
+    def spans(values: dict[str, float]) -> str:
+        return ", ".join(f"{k} {v:.2f}" for k, v in values.items())
+
     small = results["latency_10x101"]
     lat, rank = small["latency_ms"], small["ranking_ms"]
     print(
@@ -283,9 +307,9 @@ def print_results(results: dict[str, Any]) -> None:
         f"{lat['p90']:.2f} ms [{lat['min']:.2f}..{lat['max']:.2f}]; ranking alone "
         f"{rank['median']:.2f} ms (latency / ranking = {small['latency_over_ranking']:.2f})"
     )
-    print(
-        "  spans (median ms): " + ", ".join(f"{k} {v:.2f}" for k, v in small["spans_ms"].items())
-    )
+    print(f"  spans (median ms): {spans(small['spans_ms'])}")
+    print(f"  spans (median CPU ms of the calling thread): {spans(small['spans_cpu_ms'])}")
+    print(f"  empty request (GetParameters): {small['empty_request_ms']['median']:.2f} ms")
     big = results.get("end_to_end_1000x201")
     if big:
         print(
@@ -293,7 +317,8 @@ def print_results(results: dict[str, Any]) -> None:
             f"{big['wall_s']:.3f} s (node compute {big['node_compute_ms']['median']:.0f} ms), "
             f"response {big['response_bytes']} bytes ({big['response_bytes'] / 1e6:.1f} MB)"
         )
-        print("  spans (ms): " + ", ".join(f"{k} {v:.1f}" for k, v in big["spans_ms"].items()))
+        print(f"  spans (ms): {spans(big['spans_ms'])}")
+        print(f"  spans (CPU ms): {spans(big['spans_cpu_ms'])}")
     print(f"load average (1 min) before/after: {results['load_average_1min']}")
 
 

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import array
 import math
-from collections.abc import Collection, Sequence
+from collections.abc import Callable, Collection, Sequence
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -26,6 +27,7 @@ from ..core.analyses.iso15066 import PowerForceLimitAssessment, RegionAssessment
 from ..core.analyses.safety_report import SafetyReport
 from ..core.exceptions import InvalidInputError
 from ..core.input_checks import (
+    QUATERNION_NORM_TOLERANCE,
     finite_array,
     finite_float,
     quat_xyzw_from_rotation,
@@ -69,6 +71,12 @@ def transform_from_pose_msg(pose: Pose, field: str) -> pin.SE3:
         [pose.position.x, pose.position.y, pose.position.z], f"{field}.position", (3,)
     )
     return pin.SE3(rotation, np.array(position))
+
+
+def _pose_numbers(pose: Pose) -> tuple[float, ...]:
+    position, orientation = pose.position, pose.orientation
+    x, y, z, w = orientation.x, orientation.y, orientation.z, orientation.w
+    return (position.x, position.y, position.z, x, y, z, w)
 
 
 def pose_msg_from_transform(transform: pin.SE3) -> Pose:
@@ -165,7 +173,31 @@ def check_grasp_array(
         raise InvalidInputError(
             f"{field}.poses", f"has {count} grasps; at most max_grasps={max_grasps} are allowed"
         )
-    return [transform_from_pose_msg(p, f"{field}.poses[{i}]") for i, p in enumerate(grasps.poses)]
+    return transforms_from_pose_msgs(grasps.poses, f"{field}.poses")
+
+
+def transforms_from_pose_msgs(poses: Sequence[Pose], field: str) -> list[pin.SE3]:
+    """transform_from_pose_msg of each pose (``field[i]`` names a bad one), checked at once.
+
+    The numbers are read into one array and checked together; only when one is bad does each
+    pose go through transform_from_pose_msg, for the message naming it. The transforms are
+    computed exactly as there (same norm, same normalisation).
+    """
+    try:
+        values = np.array([_pose_numbers(p) for p in poses], dtype=float).reshape(-1, 7)
+    except (TypeError, ValueError):  # not numbers: the per-pose check names the field
+        values = np.full((len(poses), 7), np.nan)
+    norms = [float(np.linalg.norm(quat)) for quat in values[:, 3:]]
+    if not (
+        np.all(np.isfinite(values))
+        and all(abs(norm - 1.0) <= QUATERNION_NORM_TOLERANCE for norm in norms)
+    ):
+        return [transform_from_pose_msg(p, f"{field}[{i}]") for i, p in enumerate(poses)]
+    transforms = []
+    for row, norm in zip(values, norms, strict=True):
+        x, y, z, w = row[3:] / norm
+        transforms.append(pin.SE3(pin.Quaternion(w, x, y, z).toRotationMatrix(), row[:3].copy()))
+    return transforms
 
 
 def grasps_from_pose_array(
@@ -363,24 +395,63 @@ def ranking_msg(
     )
 
 
+def _slot_constructor(message_type: Any, fields: tuple[str, ...]) -> Callable[..., Any]:
+    """A constructor of ``message_type`` from all its ``fields``, given positionally.
+
+    It fills the generated class's slots directly, where the keyword constructor runs a
+    property setter per field (several times the cost; it counts for messages made per
+    region of every grasp). The values must already have the field types (float, bool,
+    str). A class whose slots are not exactly these fields gets its keyword constructor.
+    """
+    slots = tuple(f"_{name}" for name in fields)
+    if set(message_type.__slots__) != {*slots, "_check_fields"}:
+        return lambda *values: message_type(**dict(zip(fields, values, strict=True)))
+    check_fields = message_type()._check_fields
+
+    def construct(*values: Any) -> Any:
+        message = message_type.__new__(message_type)
+        for slot, value in zip(slots, values, strict=True):
+            setattr(message, slot, value)
+        message._check_fields = check_fields
+        return message
+
+    return construct
+
+
+_body_region_assessment = _slot_constructor(
+    BodyRegionAssessment,
+    (
+        "region",
+        "transient_contact_permitted",
+        "worst_force_ratio",
+        "peak_contact_force_n",
+        "max_transient_force_n",
+        "min_max_permissible_speed_m_s",
+        "admissible",
+        "min_duration_s",
+    ),
+)
+
+
 def region_assessment_msg(assessment: RegionAssessment) -> BodyRegionAssessment:
     """grasp_safety_msgs/BodyRegionAssessment of one region's ISO/TS 15066 assessment.
 
     Where transient contact is not permitted, the core's ratio (inf while the point moves)
     becomes NaN, as does the null limit F_tr; ``min_duration_s`` keeps the core's inf.
     """
-    permitted = assessment.transient_contact_permitted
-    limit = assessment.region.max_transient_force_n
+    region = assessment.region
+    permitted = region.transient_contact_permitted
+    limit = region.max_transient_force_n
     speeds = assessment.max_permissible_speed_m_s
-    return BodyRegionAssessment(
-        region=assessment.region.name,
-        transient_contact_permitted=bool(permitted),
-        worst_force_ratio=float(assessment.worst_force_ratio) if permitted else NAN,
-        peak_contact_force_n=float(assessment.peak_contact_force_n),
-        max_transient_force_n=float(limit) if limit is not None else NAN,
-        min_max_permissible_speed_m_s=float(np.min(speeds)) if len(speeds) else NAN,
-        admissible=bool(assessment.admissible),
-        min_duration_s=float(assessment.min_duration_s),
+    return _body_region_assessment(
+        region.name,
+        bool(permitted),
+        float(assessment.worst_force_ratio) if permitted else NAN,
+        float(assessment.peak_contact_force_n),
+        float(limit) if limit is not None else NAN,
+        float(speeds.min()) if len(speeds) else NAN,
+        bool(assessment.admissible),
+        float(assessment.min_duration_s),
     )
 
 
