@@ -506,6 +506,49 @@ def test_slow_request_does_not_block_the_next_for_ever(ros: NodeUnderTest) -> No
 # --- Topics ------------------------------------------------------------------------------------
 
 
+def test_result_topics_are_built_for_subscribers_only(
+    ros: NodeUnderTest, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """No subscriber: no markers are built; a late subscriber still gets the last ranking."""
+    import grasp_safety_ros.ros.node as node_module
+
+    built: list[int] = []
+    original = node_module.markers_msg
+
+    def counting_markers_msg(*args: Any, **kwargs: Any) -> MarkerArray:
+        built.append(1)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(node_module, "markers_msg", counting_markers_msg)
+    publishers = [ros.node._ranking_pub.publisher, ros.node._markers_pub.publisher]
+    assert ros.spin_until(lambda: all(p.get_subscription_count() == 0 for p in publishers))
+    request = book_request()  # four grasps: a ranking size no other test looks for
+    request.grasps.poses = [*request.grasps.poses, copy.deepcopy(request.grasps.poses[0])]
+    response = ros.rank(request)
+    assert response.success, response.message
+    assert built == []
+    received: dict[str, list[Any]] = {"ranking": [], "markers": []}
+    subscriptions = [
+        ros.client.create_subscription(
+            GraspRanking, "/grasp_safety/ranking", received["ranking"].append, LATCHED
+        ),
+        ros.client.create_subscription(
+            MarkerArray, "/grasp_safety/markers", received["markers"].append, LATCHED
+        ),
+    ]
+    try:
+        assert ros.spin_until(lambda: bool(received["ranking"] and received["markers"]), 30.0)
+        assert built == [1]
+        ranking = received["ranking"][-1]
+        assert ranking.header.stamp == response.ranking.header.stamp
+        assert list(ranking.order) == list(response.ranking.order)
+        arrows = [m for m in received["markers"][-1].markers if m.ns == "grasps"]
+        assert sorted(m.id for m in arrows) == [0, 1, 2, 3]
+    finally:
+        for subscription in subscriptions:
+            ros.client.destroy_subscription(subscription)
+
+
 def test_topics_rank_and_publish(ros: NodeUnderTest, core_ranking: Any) -> None:
     received: dict[str, list[Any]] = {"ranking": [], "ranked": [], "markers": [], "diag": []}
     sub = ros.client.create_subscription
