@@ -25,7 +25,7 @@ from .exposed_points import (
     evaluate_exposed_points,
     metric_point_series,
 )
-from .iso15066 import PowerForceLimitAssessment, assess_grasp, assess_motion, select_regions
+from .iso15066 import PowerForceLimitAssessment, assess_grasp, assess_motions, select_regions
 from .multi_objective import QualityRanking, rank_with_quality
 from .redundancy import RedundancyConfig, RedundancyResolution, resolve_redundancy
 from .shared import GraspShared, SampledTrajectory
@@ -188,12 +188,9 @@ def analyse(
         redundancy = tuple(resolutions)
 
     scores = np.full(len(evaluations), np.nan)
-    iso: list[PowerForceLimitAssessment] = []
-    regions = None if options.iso_regions is None else list(options.iso_regions)
+    series: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # feasible k: (speeds, masses)
     for k, evaluation in enumerate(evaluations):
         if not evaluation.feasible:
-            if options.iso_regions != ():
-                iso.append(assess_grasp(evaluation, regions))
             continue
         masses, speeds = metric_point_series(
             evaluation, exposed[k] if exposed else None, options.metric_point
@@ -201,17 +198,24 @@ def analyse(
         if redundancy and options.metric_point == "tip":
             masses = redundancy[k].effective_mass_kg
         scores[k] = aggregate(masses, evaluation.times_s, metric)
-        if options.iso_regions != ():
-            iso.append(
-                assess_motion(
-                    speeds,
-                    masses,
-                    trajectory.duration_s,
-                    regions,
-                    index=evaluation.index,
-                    name=evaluation.name,
-                )
+        series[k] = (speeds, masses)
+    iso: list[PowerForceLimitAssessment] = []
+    if options.iso_regions != ():
+        regions = None if options.iso_regions is None else list(options.iso_regions)
+        motions = iter(
+            assess_motions(
+                [speeds for speeds, _ in series.values()],
+                [masses for _, masses in series.values()],
+                trajectory.duration_s,
+                regions,
+                [evaluations[k].index for k in series],
+                [evaluations[k].name for k in series],
             )
+        )
+        iso = [
+            next(motions) if k in series else assess_grasp(evaluation, regions)
+            for k, evaluation in enumerate(evaluations)
+        ]
     feasible = np.flatnonzero(~np.isnan(scores))
     safety_order = tuple(int(k) for k in sorted(feasible, key=lambda k: (scores[k], k)))
     quality = rank_with_quality(
