@@ -11,8 +11,9 @@ reentrant callback group, the input topics in a mutually exclusive one, everythi
 One ranking runs at a time (the compute lock: the core's solvers keep scratch data); a request
 that cannot get the lock within ``service_busy_timeout_s`` is answered busy, and a ranking
 longer than ``max_compute_time_s`` is abandoned, so a slow request never blocks the next one
-for ever (checked between grasps of the ranking; the analyses after it run to the end). The GIL
-still makes a long ranking share the CPU with the other callbacks.
+for ever (checked after every grasp of the ranking, also on the worker pool; the analyses
+after it run to the end). The GIL still makes a long ranking share the CPU with the other
+callbacks. The result topics are built only when they have a subscriber (_OnDemandPublisher).
 """
 
 from __future__ import annotations
