@@ -460,11 +460,11 @@ def test_closing_the_pool_stream_starts_no_further_job() -> None:
 
     with ThreadPoolExecutor(max_workers=2) as executor:
         stream = evaluate_jobs(None, executor, [(k,) for k in range(100)], evaluate)
-        assert [next(stream) for _ in range(3)] == [0, 1, 2]  # first chunk: jobs 0..12
+        assert [next(stream) for _ in range(3)] == [0, 1, 2]
         stream.close()
         gate.set()
-    # 0, 1, 2, then each worker finishes the one job it had started (3 and 13); the other
-    # 95 jobs never start (before: every chunk ran to its end).
+    # 0, 1, 2, then each of the two workers finishes the one job it had started; the other
+    # 95 jobs never start (with chunks of jobs, every started chunk would run to its end).
     assert len(started) <= 3 + 2, sorted(started)
 
 

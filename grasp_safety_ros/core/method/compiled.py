@@ -45,14 +45,28 @@ def chain_arrays(robot: RobotModel) -> ChainArrays | None:
     Supported: a serial chain of revolute and prismatic joints (Pinocchio's RX/RY/RZ,
     PX/PY/PZ and their unaligned variants; not continuous joints), the tip frame on the last.
     """
+    arrays = chain_arrays_or_reason(robot)
+    return arrays if isinstance(arrays, ChainArrays) else None
+
+
+_NOT_COMPILED = "not supported by the compiled kernels"
+
+
+def chain_arrays_or_reason(robot: RobotModel) -> ChainArrays | str:
+    """``chain_arrays``, or the reason the compiled kernels cannot handle the chain (e.g.
+    ``continuous joint j3 not supported by the compiled kernels``)."""
     model = robot.model
     n = model.nv
-    if model.nq != n or model.njoints != n + 1:
-        return None
-    if any(model.parents[k] != k - 1 for k in range(1, n + 1)):
-        return None
+    for k in range(1, model.njoints):
+        joint = model.joints[k]
+        if joint.nq != joint.nv:
+            return f"continuous joint {model.names[k]} {_NOT_COMPILED}"
+        if joint.nv != 1:
+            return f"{joint.shortname()} joint {model.names[k]} ({joint.nv} DOF) {_NOT_COMPILED}"
+    if model.njoints != n + 1 or any(model.parents[k] != k - 1 for k in range(1, n + 1)):
+        return f"branched chain {_NOT_COMPILED}"
     if model.frames[robot.tip_frame_id].parentJoint != n:
-        return None
+        return f"tip frame not on the last joint: {_NOT_COMPILED}"
     data = model.createData()
     pin.computeJointJacobians(model, data, pin.neutral(model))
     axes = np.empty((n, 3))
@@ -63,11 +77,11 @@ def chain_arrays(robot: RobotModel) -> ChainArrays | None:
         linear, angular = column[:3], column[3:]
         if np.linalg.norm(angular) > 1e-12:
             if np.linalg.norm(linear) > 1e-12 or abs(np.linalg.norm(angular) - 1.0) > 1e-12:
-                return None
+                return f"joint {model.names[k + 1]} (screw motion) {_NOT_COMPILED}"
             axes[k] = angular
         else:
             if abs(np.linalg.norm(linear) - 1.0) > 1e-12:
-                return None
+                return f"joint {model.names[k + 1]} (non-unit axis) {_NOT_COMPILED}"
             axes[k], prismatic[k] = linear, 1.0
     placements = [model.jointPlacements[k] for k in range(1, n + 1)]
     tip = model.frames[robot.tip_frame_id].placement

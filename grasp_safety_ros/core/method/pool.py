@@ -12,12 +12,12 @@ from __future__ import annotations
 import math
 import multiprocessing
 import os
-import queue
 import threading
 import weakref
-from collections.abc import Callable, Generator, Sequence
+from collections.abc import Callable, Generator, Iterator, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, ThreadPoolExecutor
 from dataclasses import replace
+from functools import partial
 from typing import Any, TypeVar
 
 Job = tuple[Any, ...]
@@ -77,67 +77,30 @@ def evaluate_jobs(
 
     ``evaluate`` must be picklable for a process pool (a module-level function or a method
     of a module-level class, e.g. ``GraspSafetyEvaluator._evaluate_sampled``); the workers
-    call it on their own copy of the evaluator. Jobs go out in contiguous chunks (about four
-    per worker), which keeps the pool's per-task overhead small and the load balanced.
-
-    Thread workers hand each result over as soon as it is done, so the consumer sees (and may
-    act on, e.g. check a deadline) every job as it completes. Closing the generator (the
-    consumer stops early or raises) stops the work: thread workers start no further job,
-    chunks not yet started on a process pool are cancelled.
+    call it on their own copy of the evaluator. On processes, jobs go out in contiguous chunks
+    (about four per worker), which keeps the pool's per-task overhead small and the load
+    balanced; on threads one job is one task (the overhead is small), so the caller sees each
+    result, and can stop, as soon as it is ready. Closing the returned generator early (an
+    abandoned ranking) cancels the tasks not started yet; a running thread task finishes its
+    one job.
     """
+    if isinstance(executor, ThreadPoolExecutor):
+        return _close_early(executor.map(lambda job: [evaluate(evaluator, *job)], jobs))
     workers = max(1, getattr(executor, "_max_workers", 2))
     size = max(1, math.ceil(len(jobs) / (4 * workers)))
     chunks = [jobs[k : k + size] for k in range(0, len(jobs), size)]
-    if isinstance(executor, ThreadPoolExecutor):
-        return _stream_from_threads(evaluator, executor, chunks, evaluate)
-    return _stream_from_processes(executor, chunks, evaluate)
+    return _close_early(executor.map(partial(_evaluate_chunk_in_worker, evaluate), chunks))
 
 
-def _stream_from_threads(
-    evaluator: Any,
-    executor: Executor,
-    chunks: Sequence[Sequence[Job]],
-    evaluate: Callable[..., Result],
-) -> Generator[Result, None, None]:
-    stop = threading.Event()
-    outboxes: list[queue.SimpleQueue[tuple[bool, Any]]] = [queue.SimpleQueue() for _ in chunks]
-
-    def work(chunk: Sequence[Job], outbox: queue.SimpleQueue[tuple[bool, Any]]) -> None:
-        for job in chunk:
-            if stop.is_set():
-                return
-            try:
-                outbox.put((True, evaluate(evaluator, *job)))
-            except BaseException as error:  # handed to the consumer, raised there
-                outbox.put((False, error))
-                return
-
-    futures = []
+def _close_early(results: Iterator[list[Result]]) -> Generator[Result, None, None]:
+    """The results of Executor.map's chunks; closing it closes the map (cancels the rest)."""
     try:
-        futures = [executor.submit(work, c, o) for c, o in zip(chunks, outboxes, strict=True)]
-        for chunk, outbox in zip(chunks, outboxes, strict=True):
-            for _ in chunk:
-                done, value = outbox.get()
-                if not done:
-                    raise value
-                yield value
+        for chunk in results:
+            yield from chunk
     finally:
-        stop.set()
-        for future in futures:
-            future.cancel()
-
-
-def _stream_from_processes(
-    executor: Executor, chunks: Sequence[Sequence[Job]], evaluate: Callable[..., Result]
-) -> Generator[Result, None, None]:
-    futures = []
-    try:
-        futures = [executor.submit(_evaluate_chunk_in_worker, evaluate, c) for c in chunks]
-        for future in futures:
-            yield from future.result()
-    finally:
-        for future in futures:
-            future.cancel()
+        close = getattr(results, "close", None)
+        if close is not None:
+            close()
 
 
 _WORKER_EVALUATOR: Any = None

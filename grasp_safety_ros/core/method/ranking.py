@@ -133,12 +133,15 @@ class Ranking:
         metric: The aggregate used.
         order: Indices of the feasible grasps, safest first (ties keep input order).
         evaluations: One per candidate, in candidate order.
+        backend: What ran: ``compiled`` or ``python``, with the reason when ``auto`` fell
+            back, e.g. ``python (numba not installed)``; empty when not recorded.
     """
 
     joint_names: tuple[str, ...]
     metric: str
     order: tuple[int, ...]
     evaluations: tuple[GraspEvaluation, ...]
+    backend: str = ""
 
 
 def aggregate(effective_mass_kg: np.ndarray, times_s: np.ndarray, metric: str) -> float:
@@ -279,9 +282,7 @@ class GraspSafetyEvaluator:
         """Evaluate every grasp and rank the feasible ones, safest first.
 
         Args:
-            progress: Called as ``progress(done, total)`` after each grasp, as soon as it is
-                done (also with the worker pool); it may raise to abandon the ranking, and
-                then no further grasp is started.
+            progress: Called as ``progress(done, total)`` after each grasp.
         """
         metric = check_metric(metric or self.config.metric)
         seed_q = self.seed_q(seed_positions)  # validate once, before any work
@@ -306,12 +307,13 @@ class GraspSafetyEvaluator:
                 if progress is not None:
                     progress(len(evaluations), len(grasps))
         finally:
-            results.close()  # progress raised: the pool starts no further grasp
+            results.close()  # progress raised: stop the work still queued
         return Ranking(
             joint_names=self.robot.joint_names,
             metric=metric,
             order=order_by_score(evaluations),
             evaluations=tuple(evaluations),
+            backend=self.ik.backend_used,
         )
 
 
