@@ -48,8 +48,8 @@ NAN = float("nan")
 LABEL_OFFSET_M = np.array([0.0, 0.0, 0.03])
 """Labels float this far above the grasp point (base axes)."""
 MAX_ABS_POSITION_M = 1000.0
-"""Pose coordinates beyond this are refused: no manipulator reaches them, and absurd values
-(1e300) made the IK search for seconds before finding the grasp infeasible."""
+"""Pose coordinates and object CoMs beyond this are refused: no manipulator reaches them, and
+absurd values (1e300) made the IK search for seconds (poses) or the effective mass NaN (CoM)."""
 
 
 # --- Poses -----------------------------------------------------------------------------------
@@ -189,9 +189,10 @@ def check_grasp_array(
 def transforms_from_pose_msgs(poses: Sequence[Pose], field: str) -> list[pin.SE3]:
     """transform_from_pose_msg of each pose (``field[i]`` names a bad one), checked at once.
 
-    The numbers are read into one array and checked together; only when one is bad does each
-    pose go through transform_from_pose_msg, for the message naming it. The transforms are
-    computed exactly as there (same norm, same normalisation).
+    The numbers are read into one array and checked together (the checks of
+    transform_from_pose_msg: keep them the same); only when one is bad does each pose go
+    through transform_from_pose_msg, for the message naming it. The transforms are computed
+    exactly as there (same norm, same normalisation).
     """
     try:
         values = np.array([_pose_numbers(p) for p in poses], dtype=float).reshape(-1, 7)
@@ -201,6 +202,7 @@ def transforms_from_pose_msgs(poses: Sequence[Pose], field: str) -> list[pin.SE3
     if not (
         np.all(np.isfinite(values))
         and all(abs(norm - 1.0) <= QUATERNION_NORM_TOLERANCE for norm in norms)
+        and np.all(np.abs(values[:, :3]) <= MAX_ABS_POSITION_M)
     ):
         return [transform_from_pose_msg(p, f"{field}[{i}]") for i, p in enumerate(poses)]
     transforms = []
@@ -247,6 +249,12 @@ def object_inertia_from_msg(
             f"{field}.m", f"must be at most max_mass_kg={max_mass_kg:g}, got {mass:g}"
         )
     com = finite_array([inertia.com.x, inertia.com.y, inertia.com.z], f"{field}.com", (3,))
+    if np.max(np.abs(com)) > MAX_ABS_POSITION_M:  # 1e300 m gave NaN effective masses
+        raise InvalidInputError(
+            f"{field}.com",
+            f"must be within +/-{MAX_ABS_POSITION_M:g} m per coordinate, got "
+            f"{[float(v) for v in com]}",
+        )
     components = [inertia.ixx, inertia.ixy, inertia.ixz, inertia.iyy, inertia.iyz, inertia.izz]
     tensor = inertia_tensor_from_components(components, f"{field}.ixx..izz")
     try:
