@@ -15,12 +15,13 @@ from typing import Any
 
 import numpy as np
 import pinocchio as pin
-from builtin_interfaces.msg import Time
+from builtin_interfaces.msg import Duration, Time
 from geometry_msgs.msg import Inertia, Point, Pose, PoseArray, Quaternion, Vector3
 from grasp_safety_msgs.msg import BodyRegionAssessment, GraspRanking
 from grasp_safety_msgs.msg import GraspEvaluation as GraspEvaluationMsg
 from nav_msgs.msg import Path
 from std_msgs.msg import ColorRGBA, Header
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ..core.analyses.iso15066 import PowerForceLimitAssessment, RegionAssessment
@@ -33,6 +34,8 @@ from ..core.input_checks import (
     quat_xyzw_from_rotation,
     rotation_from_quat_xyzw,
 )
+from ..core.method.executable import joint_velocities_accelerations
+from ..core.method.posture import PostureSelection, single_posture
 from ..core.method.ranking import Grasp, GraspEvaluation, Ranking
 from ..core.model.inertia import ObjectInertia
 from ..core.model.robot import RobotModel
@@ -361,7 +364,111 @@ def evaluation_msg(evaluation: GraspEvaluation) -> GraspEvaluationMsg:
         combined_score=NAN,
         score_without_redundancy=NAN,
         effort_score=NAN,
+        score_single_ik=NAN,
+        score_range_min=NAN,
+        score_range_max=NAN,
     )
+
+
+def duration_msg(seconds: float) -> Duration:
+    """builtin_interfaces/Duration of a non-negative time [s], rounded to the nanosecond."""
+    nanoseconds = round(float(seconds) * 1e9)
+    return Duration(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
+
+
+def _slot_constructor(message_type: Any, fields: tuple[str, ...]) -> Callable[..., Any]:
+    """A constructor of ``message_type`` from all its ``fields``, given positionally.
+
+    It fills the generated class's slots directly, where the keyword constructor runs a
+    property setter per field (several times the cost; it counts for messages made per
+    sample or per region of every grasp). The values must already have the field types
+    (float, bool, str, int, ``array('d')`` for float64[], messages). A class whose slots are
+    not exactly these fields gets its keyword constructor.
+    """
+    slots = tuple(f"_{name}" for name in fields)
+    if set(message_type.__slots__) != {*slots, "_check_fields"}:
+        return lambda *values: message_type(**dict(zip(fields, values, strict=True)))
+    check_fields = message_type()._check_fields
+
+    def construct(*values: Any) -> Any:
+        message = message_type.__new__(message_type)
+        for slot, value in zip(slots, values, strict=True):
+            setattr(message, slot, value)
+        message._check_fields = check_fields
+        return message
+
+    return construct
+
+
+_FAST_POINTS = set(JointTrajectoryPoint.__slots__) == {
+    "_positions",
+    "_velocities",
+    "_accelerations",
+    "_effort",
+    "_time_from_start",
+    "_check_fields",
+} and set(Duration.__slots__) == {"_sec", "_nanosec", "_check_fields"}
+"""Whether joint_trajectory_msg may fill the slots of the points directly (Jazzy's classes)."""
+_POINT_CHECK_FIELDS = JointTrajectoryPoint()._check_fields
+_DURATION_CHECK_FIELDS = Duration()._check_fields
+
+
+def joint_trajectory_msg(
+    joint_names: Sequence[str], times_s: np.ndarray, joint_positions: np.ndarray, header: Header
+) -> JointTrajectory:
+    """trajectory_msgs/JointTrajectory of sampled joint positions [rad or m] at times [s]:
+    velocities and accelerations from core.method.executable (C2 spline, at rest at both ends);
+    no points when there are no samples. Give ``header`` a zero stamp: in a JointTrajectory
+    the stamp is when execution starts, and 0 means on receipt."""
+    message = JointTrajectory(header=header, joint_names=list(joint_names))
+    if len(times_s) == 0:
+        return message
+    velocities, accelerations = joint_velocities_accelerations(times_s, joint_positions)
+    # One point per sample: made by filling the messages' slots when the classes are the
+    # ones this was written for (the keyword constructors cost several times more); stamps
+    # rounded as duration_msg rounds them.
+    nanoseconds = np.round(np.asarray(times_s, dtype=float) * 1e9).astype(np.int64).tolist()
+    rows = zip(
+        nanoseconds,
+        np.asarray(joint_positions, dtype=float).tolist(),
+        velocities.tolist(),
+        accelerations.tolist(),
+        strict=True,
+    )
+    if not _FAST_POINTS:
+        message.points = [
+            JointTrajectoryPoint(
+                positions=q,
+                velocities=qd,
+                accelerations=qdd,
+                time_from_start=Duration(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000),
+            )
+            for ns, q, qd, qdd in rows
+        ]
+        return message
+    new_point, new_duration = JointTrajectoryPoint.__new__, Duration.__new__
+    check_point, check_duration = _POINT_CHECK_FIELDS, _DURATION_CHECK_FIELDS
+    points = []
+    for ns, q, qd, qdd in rows:
+        stamp = new_duration(Duration)
+        stamp._sec, stamp._nanosec = ns // 1_000_000_000, ns % 1_000_000_000
+        stamp._check_fields = check_duration
+        point = new_point(JointTrajectoryPoint)
+        point._positions, point._velocities = array.array("d", q), array.array("d", qd)
+        point._accelerations, point._effort = array.array("d", qdd), array.array("d")
+        point._time_from_start, point._check_fields = stamp, check_point
+        points.append(point)
+    message.points = points
+    return message
+
+
+def _set_posture(message: GraspEvaluationMsg, posture: PostureSelection) -> None:
+    message.score_single_ik = float(posture.score_single_ik)
+    message.score_range_min = float(posture.score_range[0])
+    message.score_range_max = float(posture.score_range[1])
+    message.start_positions = float64_array(posture.start_positions)
+    message.postures_tried = int(posture.postures_tried)
+    message.postures_feasible = int(posture.postures_feasible)
 
 
 def ranked_pose_array(grasps: PoseArray, order: Sequence[int]) -> PoseArray:
@@ -395,7 +502,7 @@ def ranking_msg(
     """
     paper_order = [int(i) for i in ranking.order]
     final = paper_order if order is None else [int(i) for i in order]
-    return GraspRanking(
+    message = GraspRanking(
         header=Header(stamp=stamp, frame_id=base_frame),
         metric=ranking.metric,
         order=final,
@@ -412,29 +519,18 @@ def ranking_msg(
         effort_criterion="",
         order_stability=NAN,
     )
-
-
-def _slot_constructor(message_type: Any, fields: tuple[str, ...]) -> Callable[..., Any]:
-    """A constructor of ``message_type`` from all its ``fields``, given positionally.
-
-    It fills the generated class's slots directly, where the keyword constructor runs a
-    property setter per field (several times the cost; it counts for messages made per
-    region of every grasp). The values must already have the field types (float, bool,
-    str). A class whose slots are not exactly these fields gets its keyword constructor.
-    """
-    slots = tuple(f"_{name}" for name in fields)
-    if set(message_type.__slots__) != {*slots, "_check_fields"}:
-        return lambda *values: message_type(**dict(zip(fields, values, strict=True)))
-    check_fields = message_type()._check_fields
-
-    def construct(*values: Any) -> Any:
-        message = message_type.__new__(message_type)
-        for slot, value in zip(slots, values, strict=True):
-            setattr(message, slot, value)
-        message._check_fields = check_fields
-        return message
-
-    return construct
+    postures = ranking.postures or tuple(single_posture(e) for e in ranking.evaluations)
+    for evaluation, item, posture in zip(
+        ranking.evaluations, message.evaluations, postures, strict=True
+    ):
+        _set_posture(item, posture)
+        item.joint_trajectory = joint_trajectory_msg(
+            ranking.joint_names,
+            evaluation.times_s,
+            evaluation.joint_positions,
+            Header(frame_id=base_frame),
+        )
+    return message
 
 
 _body_region_assessment = _slot_constructor(
@@ -539,6 +635,12 @@ def report_msg(
             if resolution.applied:
                 evaluation.effective_mass_with_redundancy_kg = float64_array(
                     resolution.effective_mass_kg
+                )
+                evaluation.joint_trajectory = joint_trajectory_msg(
+                    report.ranking.joint_names,
+                    resolution.times_s,
+                    resolution.joint_positions,
+                    Header(frame_id=base_frame),
                 )
         if report.effort:
             effort = report.effort[k]
