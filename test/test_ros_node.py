@@ -520,7 +520,7 @@ def test_slow_request_does_not_block_the_next_for_ever(ros: NodeUnderTest) -> No
 def test_result_topics_are_built_for_subscribers_only(
     ros: NodeUnderTest, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """No subscriber: no markers are built; a late subscriber still gets the last ranking."""
+    """No subscriber: no markers are built; a late subscriber still gets the last ones."""
     import grasp_safety_ros.ros.node as node_module
 
     built: list[int] = []
@@ -531,7 +531,7 @@ def test_result_topics_are_built_for_subscribers_only(
         return original(*args, **kwargs)
 
     monkeypatch.setattr(node_module, "markers_msg", counting_markers_msg)
-    publishers = [ros.node._ranking_pub.publisher, ros.node._markers_pub.publisher]
+    publishers = [ros.node._ranking_pub, ros.node._markers_pub.publisher]
     assert ros.spin_until(lambda: all(p.get_subscription_count() == 0 for p in publishers))
     request = book_request()  # four grasps: a ranking size no other test looks for
     request.grasps.poses = [*request.grasps.poses, copy.deepcopy(request.grasps.poses[0])]
