@@ -35,13 +35,9 @@ from grasp_safety_ros.core.method.effective_mass import (
     translational_mobilities_in_base,
     translational_mobility_in_base,
 )
-from grasp_safety_ros.core.method.ik import (
-    IKSolver,
-    compiled_available,
-    exp3_batch,
-    tip_path_arrays,
-)
+from grasp_safety_ros.core.method.ik import IKSolver, compiled_available
 from grasp_safety_ros.core.method.ranking import Ranking
+from grasp_safety_ros.core.model.trajectory import exp3_batch, tip_path_arrays
 
 needs_numba = pytest.mark.skipif(not compiled_available(), reason="numba is not installed")
 RTOL = 1e-9

@@ -30,11 +30,11 @@ import numpy as np
 import pinocchio as pin
 
 from ..exceptions import InvalidInputError
+from ..method.effective_mass import augmented_model
 from ..method.ranking import Grasp, GraspEvaluation
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
-from ..model.trajectory import ObjectTrajectory
-from .shared import GraspShared, SampledTrajectory
+from ..model.trajectory import Trajectory
 
 EFFORT_CRITERIA = ("peak_fraction", "rms_fraction")
 """Effort scores: max over joints of peak |τ| / limit, or of RMS τ / limit (lower is better)."""
@@ -115,39 +115,16 @@ def effort_limits(robot: RobotModel) -> np.ndarray:
 
 
 def tip_twist_and_derivative(
-    trajectory: ObjectTrajectory,
+    trajectory: Trajectory,
     transform_tip_to_object: pin.SE3,
     times_s: np.ndarray,
-    shared: GraspShared | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Tip twist (N, 6) [m/s, rad/s] and its time derivative (N, 6), base axes.
 
     Linear part: velocity / classical acceleration of the tip origin; angular part: angular
-    velocity / acceleration of the object (= of the tip). ``shared``: the grasp's GraspShared
-    (tip path and object poses made once), if the caller has one for these times.
+    velocity / acceleration of the object (= of the tip).
     """
-    grasp = pin.SE3(transform_tip_to_object)
-    times = np.asarray(times_s, dtype=float)
-    if shared is None or not shared.samples.matches(times):
-        samples = SampledTrajectory(trajectory, times)
-        _, tangents = samples.path(grasp)
-    else:
-        samples = shared.samples
-        _, tangents = shared.tip_path
-    s_rate, s_accel = samples.s_rate, samples.s_accel
-    omega = trajectory.rotation_log_in_object  # object angular velocity per unit s, object axes
-    curvature_in_object = np.cross(omega, np.cross(omega, grasp.translation))
-    twist = np.empty((len(times), 6))
-    twist_rate = np.empty((len(times), 6))
-    for i, object_pose in enumerate(samples.object_poses):
-        rotation = object_pose.rotation
-        angular = rotation @ omega
-        second = rotation @ curvature_in_object  # d² p_tip / ds²
-        twist[i, :3] = tangents[i] * s_rate[i]
-        twist[i, 3:] = angular * s_rate[i]
-        twist_rate[i, :3] = second * s_rate[i] ** 2 + tangents[i] * s_accel[i]
-        twist_rate[i, 3:] = angular * s_accel[i]
-    return twist, twist_rate
+    return trajectory.tip_twists(transform_tip_to_object, times_s)
 
 
 def evaluate_effort(
@@ -155,17 +132,14 @@ def evaluate_effort(
     evaluation: GraspEvaluation,
     object_inertia: ObjectInertia,
     grasp: Grasp,
-    trajectory: ObjectTrajectory,
+    trajectory: Trajectory,
     joint_positions: np.ndarray | None = None,
-    shared: GraspShared | None = None,
 ) -> EffortEvaluation:
     """Joint velocities, accelerations and torques with the object, per sample, and summaries.
 
     Args:
         joint_positions: (N, n) positions to use instead of the evaluation's (e.g.
             RedundancyResolution.joint_positions); same samples and tip poses.
-        shared: This grasp's GraspShared, if the caller has one (augmented model, tip path
-            and object poses made once for all analyses).
     """
     n = robot.num_joints
     limits = effort_limits(robot)
@@ -197,18 +171,12 @@ def evaluate_effort(
         )
     kinematic_model = robot.model
     kinematics = kinematic_model.createData()
-    if shared is None or not shared.samples.matches(times):
-        shared = GraspShared(robot, object_inertia, grasp, SampledTrajectory(trajectory, times))
-    model = shared.augmented_model
+    model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
     data = model.createData()
     q_all = [robot.q_from_positions(p) for p in positions]
     # The IK makes q a function of the path parameter s only: null-space rates from
     # differences over s (unwrapped for continuous joints), then the chain rule in time.
-    s_values, s_rate, s_accel = (
-        shared.samples.s_values,
-        shared.samples.s_rate,
-        shared.samples.s_accel,
-    )
+    s_values, s_rate, s_accel = trajectory.path_parameter(times)
     unwrapped = np.empty_like(positions)
     unwrapped[0] = positions[0]
     for i in range(1, len(times)):
@@ -221,7 +189,7 @@ def evaluate_effort(
     velocity_fd = dq_ds * s_rate[:, None]
     acceleration_fd = d2q_ds2 * s_rate[:, None] ** 2 + dq_ds * s_accel[:, None]
     twist_base, twist_rate_base = tip_twist_and_derivative(
-        trajectory, grasp.transform_tip_to_object, times, shared
+        trajectory, grasp.transform_tip_to_object, times
     )
     rotation = robot.transform_base_to_world.rotation
     velocities = np.empty_like(positions)

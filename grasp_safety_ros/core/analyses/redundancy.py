@@ -66,13 +66,12 @@ import numpy as np
 import pinocchio as pin
 
 from ..exceptions import InvalidInputError
-from ..method.effective_mass import translational_mobility_in_base
+from ..method.effective_mass import augmented_model, translational_mobility_in_base
 from ..method.ranking import Grasp, GraspEvaluation, aggregate, check_metric
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
-from ..model.trajectory import ObjectTrajectory
+from ..model.trajectory import Trajectory
 from .effort import effort_limits
-from .shared import GraspShared, SampledTrajectory
 
 TASK_DIMENSION = 6
 """Tip pose coordinates the trajectory fixes (position and orientation)."""
@@ -433,14 +432,12 @@ def resolve_redundancy(
     evaluation: GraspEvaluation,
     object_inertia: ObjectInertia,
     grasp: Grasp,
-    trajectory: ObjectTrajectory,
+    trajectory: Trajectory,
     config: RedundancyConfig | None = None,
-    shared: GraspShared | None = None,
 ) -> RedundancyResolution:
     """Lower the effective mass of one evaluated grasp through a smooth null-space motion.
 
-    ``grasp`` and ``trajectory`` must be the ones the evaluation was computed with; ``shared``,
-    this grasp's GraspShared if the caller has one (augmented model and tip path made once).
+    ``grasp`` and ``trajectory`` must be the ones the evaluation was computed with.
     """
     config = config or RedundancyConfig()
     original = np.asarray(evaluation.joint_positions, dtype=float)
@@ -455,15 +452,15 @@ def resolve_redundancy(
             config,
             f"no redundancy: {robot.model.nv} joints for a {TASK_DIMENSION}-D tip pose",
         )
-    times = np.asarray(evaluation.times_s, dtype=float)
-    if shared is None or not shared.samples.matches(times):
-        shared = GraspShared(robot, object_inertia, grasp, SampledTrajectory(trajectory, times))
-    model = shared.augmented_model
+    model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
     problem = _SampleProblem(robot, model, config)
-    samples = shared.samples
-    s_values, s_rate, s_accel = samples.s_values, samples.s_rate, samples.s_accel
-    poses, _ = shared.tip_path
-    targets = [robot.transform_base_to_world * pose for pose in poses]
+    times = np.asarray(evaluation.times_s, dtype=float)
+    s_values, s_rate, s_accel = trajectory.path_parameter(times)
+    tip = trajectory.tip_motion(grasp.transform_tip_to_object, times)
+    targets = [
+        robot.transform_base_to_world * pin.SE3(rotation, position)
+        for rotation, position in zip(tip.rotations, tip.positions, strict=True)
+    ]
     directions = np.asarray(evaluation.directions_in_base, dtype=float)
     worst = np.asarray(evaluation.direction_is_worst_case, dtype=bool)
     q_original = [robot.q_from_positions(p) for p in original]

@@ -16,7 +16,7 @@ import numpy as np
 from ..exceptions import InvalidInputError
 from ..method.ranking import Grasp, GraspSafetyEvaluator, Ranking, aggregate
 from ..model.inertia import ObjectInertia
-from ..model.trajectory import ObjectTrajectory
+from ..model.trajectory import Trajectory
 from .effort import EffortEvaluation, check_effort_criterion, evaluate_effort, order_by_effort
 from .exposed_points import (
     ExposedPointsEvaluation,
@@ -25,10 +25,9 @@ from .exposed_points import (
     evaluate_exposed_points,
     metric_point_series,
 )
-from .iso15066 import PowerForceLimitAssessment, assess_grasp, assess_motions, select_regions
+from .iso15066 import PowerForceLimitAssessment, assess_grasp, assess_motion, select_regions
 from .multi_objective import QualityRanking, rank_with_quality
 from .redundancy import RedundancyConfig, RedundancyResolution, resolve_redundancy
-from .shared import GraspShared, SampledTrajectory
 from .uncertainty import InertiaUncertainty, UncertaintyAnalysis, analyse_inertia_uncertainty
 
 RANK_BY = ("safety", "effort")
@@ -126,7 +125,7 @@ def analyse(
     evaluator: GraspSafetyEvaluator,
     grasps: Sequence[Grasp],
     object_inertia: ObjectInertia,
-    trajectory: ObjectTrajectory,
+    trajectory: Trajectory,
     options: AnalysisOptions | None = None,
     seed_positions: Sequence[float] | np.ndarray | None = None,
     metric: str | None = None,
@@ -161,17 +160,18 @@ def analyse(
         if progress is not None:
             progress(done, per_grasp)
 
-    # Object poses, augmented models and tip paths: made once, shared by the analyses below.
-    feasible_times = next((e.times_s for e in evaluations if e.feasible), np.empty(0))
-    samples = SampledTrajectory(trajectory, feasible_times)
-    shared = [GraspShared(robot, object_inertia, g, samples) for g in grasps]
     exposed: tuple[ExposedPointsEvaluation, ...] = ()
     if options.points_in_object_m is not None:
         exposed_list = []
-        for e, g, s in zip(evaluations, grasps, shared, strict=True):
+        for e, g in zip(evaluations, grasps, strict=True):
             exposed_list.append(
                 evaluate_exposed_points(
-                    robot, e, object_inertia, g, trajectory, options.points_in_object_m, s
+                    robot,
+                    e,
+                    object_inertia,
+                    g,
+                    evaluator.trajectory_for(g, trajectory),
+                    options.points_in_object_m,
                 )
             )
             step()
@@ -180,17 +180,19 @@ def analyse(
     if options.redundancy:
         config = RedundancyConfig(metric=metric, max_joint_step=evaluator.config.ik.max_joint_step)
         resolutions = []
-        for e, g, s in zip(evaluations, grasps, shared, strict=True):
-            resolutions.append(
-                resolve_redundancy(robot, e, object_inertia, g, trajectory, config, s)
-            )
+        for e, g in zip(evaluations, grasps, strict=True):
+            motion = evaluator.trajectory_for(g, trajectory)
+            resolutions.append(resolve_redundancy(robot, e, object_inertia, g, motion, config))
             step()
         redundancy = tuple(resolutions)
 
     scores = np.full(len(evaluations), np.nan)
-    series: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # feasible k: (speeds, masses)
+    iso: list[PowerForceLimitAssessment] = []
+    regions = None if options.iso_regions is None else list(options.iso_regions)
     for k, evaluation in enumerate(evaluations):
         if not evaluation.feasible:
+            if options.iso_regions != ():
+                iso.append(assess_grasp(evaluation, regions))
             continue
         masses, speeds = metric_point_series(
             evaluation, exposed[k] if exposed else None, options.metric_point
@@ -198,24 +200,17 @@ def analyse(
         if redundancy and options.metric_point == "tip":
             masses = redundancy[k].effective_mass_kg
         scores[k] = aggregate(masses, evaluation.times_s, metric)
-        series[k] = (speeds, masses)
-    iso: list[PowerForceLimitAssessment] = []
-    if options.iso_regions != ():
-        regions = None if options.iso_regions is None else list(options.iso_regions)
-        motions = iter(
-            assess_motions(
-                [speeds for speeds, _ in series.values()],
-                [masses for _, masses in series.values()],
-                trajectory.duration_s,
-                regions,
-                [evaluations[k].index for k in series],
-                [evaluations[k].name for k in series],
+        if options.iso_regions != ():
+            iso.append(
+                assess_motion(
+                    speeds,
+                    masses,
+                    evaluator.trajectory_for(grasps[k], trajectory).duration_s,
+                    regions,
+                    index=evaluation.index,
+                    name=evaluation.name,
+                )
             )
-        )
-        iso = [
-            next(motions) if k in series else assess_grasp(evaluation, regions)
-            for k, evaluation in enumerate(evaluations)
-        ]
     feasible = np.flatnonzero(~np.isnan(scores))
     safety_order = tuple(int(k) for k in sorted(feasible, key=lambda k: (scores[k], k)))
     quality = rank_with_quality(
@@ -236,9 +231,8 @@ def analyse(
             resolved = (
                 redundancy[k].joint_positions if redundancy and redundancy[k].applied else None
             )
-            efforts.append(
-                evaluate_effort(robot, e, object_inertia, g, trajectory, resolved, shared[k])
-            )
+            motion = evaluator.trajectory_for(g, trajectory)
+            efforts.append(evaluate_effort(robot, e, object_inertia, g, motion, resolved))
             step()
         effort = tuple(efforts)
     if options.rank_by == "effort":

@@ -47,9 +47,6 @@ NUMBA_AVAILABLE = _numba_installed()
 BACKENDS = ("auto", "compiled", "python")
 """IK / effective-mass implementations: see the module docstring."""
 
-_EPS = float(np.finfo(float).eps)
-_PREC3 = _EPS ** (1.0 / 4.0)  # Pinocchio's TaylorSeriesExpansion<double>::precision<3>()
-
 
 @dataclass(frozen=True)
 class IKConfig:
@@ -130,60 +127,6 @@ def check_backend(backend: str, field_name: str = "backend") -> str:
             field_name, "'compiled' needs numba (pip install numba); use 'auto' or 'python'"
         )
     return backend
-
-
-def exp3_batch(rotation_vectors: np.ndarray) -> np.ndarray:
-    """Pinocchio's exp3 (same formula and Taylor branch) for an (N, 3) array of vectors."""
-    v = np.asarray(rotation_vectors, dtype=float)
-    t2 = np.einsum("ij,ij->i", v, v) + _EPS * _EPS
-    t = np.sqrt(t2)
-    ct, st = np.cos(t), np.sin(t)
-    large = t > _PREC3
-    with np.errstate(divide="ignore", invalid="ignore"):
-        alpha_vxvx = np.where(large, (1.0 - ct) / t2, 0.5 - t2 / 24.0)
-        alpha_vx = np.where(large, st / t, 1.0 - t2 / 6.0)
-    ct = np.where(large, ct, 1.0 - t2 / 2.0)
-    result = alpha_vxvx[:, None, None] * v[:, :, None] * v[:, None, :]
-    result[:, 0, 1] -= alpha_vx * v[:, 2]
-    result[:, 1, 0] += alpha_vx * v[:, 2]
-    result[:, 0, 2] += alpha_vx * v[:, 1]
-    result[:, 2, 0] -= alpha_vx * v[:, 1]
-    result[:, 1, 2] -= alpha_vx * v[:, 0]
-    result[:, 2, 1] += alpha_vx * v[:, 0]
-    for k in range(3):
-        result[:, k, k] += ct
-    return result
-
-
-def tip_path_arrays(
-    trajectory: Any, transform_tip_to_object: pin.SE3, s_values: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """ObjectTrajectory.tip_path as arrays, vectorised over the samples.
-
-    Args:
-        trajectory: An ObjectTrajectory.
-        transform_tip_to_object: The grasp.
-        s_values: Path parameters in [0, 1].
-
-    Returns:
-        Tip rotations (N, 3, 3) and positions (N, 3) [m] in the base frame, and the path
-        tangents d p_tip / ds (N, 3) [m], base axes; equal to ``tip_path`` up to rounding.
-    """
-    s = np.asarray(s_values, dtype=float)
-    grasp = pin.SE3(transform_tip_to_object)
-    start = trajectory.transform_object_to_base_start
-    goal = trajectory.transform_object_to_base_goal
-    log = np.asarray(trajectory.rotation_log_in_object, dtype=float)
-    object_rotations = np.matmul(start.rotation, exp3_batch(s[:, None] * log))
-    start_p, goal_p = start.translation, goal.translation
-    object_translations = (1.0 - s)[:, None] * start_p + s[:, None] * goal_p
-    rotations = np.matmul(object_rotations, grasp.rotation)
-    translations = np.einsum("nij,j->ni", object_rotations, grasp.translation) + (
-        object_translations
-    )
-    lever_in_object = np.cross(log, grasp.translation)
-    tangents = (goal_p - start_p) + np.einsum("nij,j->ni", object_rotations, lever_in_object)
-    return rotations, translations, tangents
 
 
 class IKSolver:

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import NamedTuple, Protocol
 
 import numpy as np
 import pinocchio as pin
@@ -12,8 +12,47 @@ import pinocchio as pin
 from ..exceptions import InvalidInputError
 from ..input_checks import finite_float
 
+_EPS = float(np.finfo(float).eps)
+_PREC3 = _EPS ** (1.0 / 4.0)  # Pinocchio's TaylorSeriesExpansion<double>::precision<3>()
+
 MAX_SAMPLES = 1_000_000
 """Upper bound on the number of samples of one trajectory."""
+
+
+class TipMotion(NamedTuple):
+    """The tip path a grasp induces, sampled (the common interface of object trajectories).
+
+    Every trajectory type (``ObjectTrajectory``, ``WaypointTrajectory``,
+    ``JointSpaceTrajectory``) offers ``times_s()``, ``duration_s``, ``path_parameter(times)``,
+    ``object_poses(times)``, ``tip_motion(grasp, times)``, ``tip_twists(grasp, times)`` and
+    ``supports_compiled``; the evaluator and the analyses use only these.
+    """
+
+    rotations: np.ndarray  # (N, 3, 3) tip frame in the base frame
+    positions: np.ndarray  # (N, 3) [m] tip origin in the base frame
+    tangents: np.ndarray  # (N, 3) [m] direction of tip motion, base axes (see each type)
+    speeds: np.ndarray  # (N,) [m/s] tip speed
+
+
+class Trajectory(Protocol):
+    """What the evaluator and the analyses need of an object trajectory (see TipMotion)."""
+
+    supports_compiled: bool
+
+    @property
+    def duration_s(self) -> float: ...
+
+    def times_s(self) -> np.ndarray: ...
+
+    def path_parameter(self, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+
+    def object_poses(self, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def tip_motion(self, transform_tip_to_object: pin.SE3, times_s: np.ndarray) -> TipMotion: ...
+
+    def tip_twists(
+        self, transform_tip_to_object: pin.SE3, times_s: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]: ...
 
 
 def quintic_time_scaling(tau: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -45,6 +84,9 @@ class ObjectTrajectory:
     duration_s: float
     dt_s: float
     rotation_log_in_object: np.ndarray = field(init=False, repr=False)
+
+    supports_compiled = True
+    """The compiled fused kernel computes this trajectory's tip path itself."""
 
     def __post_init__(self) -> None:
         duration = finite_float(
@@ -93,23 +135,14 @@ class ObjectTrajectory:
         translation = (1.0 - s) * start.translation + s * goal.translation
         return pin.SE3(rotation, translation)
 
-    def object_poses(self, s_values: np.ndarray) -> list[pin.SE3]:
-        """Object poses in the base frame at each path parameter (``transform_object_to_base``)."""
-        return [self.transform_object_to_base(float(s)) for s in s_values]
-
     def tip_path(
-        self,
-        transform_tip_to_object: pin.SE3,
-        s_values: np.ndarray,
-        object_poses: Sequence[pin.SE3] | None = None,
+        self, transform_tip_to_object: pin.SE3, s_values: np.ndarray
     ) -> tuple[list[pin.SE3], np.ndarray]:
         """Tip poses in base and path tangents d p_tip/ds [m] (base axes) for a grasp.
 
         Args:
             transform_tip_to_object: The grasp: pose of the tip frame in the object frame.
             s_values: Path parameters in [0, 1].
-            object_poses: ``object_poses(s_values)`` when already computed (they are the same
-                for every grasp).
 
         Returns:
             The tip poses T_base_tip(s) = T_base_object(s)·T_object_tip and, per sample, the
@@ -123,9 +156,102 @@ class ObjectTrajectory:
         )
         angular_in_object = self.rotation_log_in_object
         lever_in_object = np.cross(angular_in_object, grasp.translation)
-        if object_poses is None:
-            object_poses = self.object_poses(s_values)
-        for i, object_pose in enumerate(object_poses):
+        for i, s in enumerate(s_values):
+            object_pose = self.transform_object_to_base(float(s))
             poses.append(object_pose * grasp)
             tangents[i] = linear + object_pose.rotation @ lever_in_object
         return poses, tangents
+
+    def object_poses(self, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Object rotations (N, 3, 3) and positions (N, 3) [m] in the base frame at the times."""
+        motion = self.tip_motion(pin.SE3.Identity(), times_s)
+        return motion.rotations, motion.positions
+
+    def tip_motion(self, transform_tip_to_object: pin.SE3, times_s: np.ndarray) -> TipMotion:
+        """Tip poses, path tangents d p_tip/ds [m] and speeds |d p_tip/ds|·ds/dt [m/s].
+
+        Equal to ``tip_path_arrays`` at s(t) (the Python evaluation path's tip path).
+        """
+        s_values, s_rate, _ = self.path_parameter(times_s)
+        rotations, positions, tangents = tip_path_arrays(self, transform_tip_to_object, s_values)
+        return TipMotion(rotations, positions, tangents, np.linalg.norm(tangents, axis=1) * s_rate)
+
+    def tip_twists(
+        self, transform_tip_to_object: pin.SE3, times_s: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Tip twist (N, 6) [m/s, rad/s] and its time derivative (N, 6), base axes.
+
+        Linear part: velocity / classical acceleration of the tip origin; angular part: angular
+        velocity / acceleration of the object (= of the tip).
+        """
+        grasp = pin.SE3(transform_tip_to_object)
+        times = np.asarray(times_s, dtype=float)
+        s_values, s_rate, s_accel = self.path_parameter(times)
+        _, tangents = self.tip_path(grasp, s_values)
+        omega = self.rotation_log_in_object  # object angular velocity per unit s, object axes
+        curvature_in_object = np.cross(omega, np.cross(omega, grasp.translation))
+        twist = np.empty((len(times), 6))
+        twist_rate = np.empty((len(times), 6))
+        for i, s in enumerate(s_values):
+            rotation = self.transform_object_to_base(float(s)).rotation
+            angular = rotation @ omega
+            second = rotation @ curvature_in_object  # d² p_tip / ds²
+            twist[i, :3] = tangents[i] * s_rate[i]
+            twist[i, 3:] = angular * s_rate[i]
+            twist_rate[i, :3] = second * s_rate[i] ** 2 + tangents[i] * s_accel[i]
+            twist_rate[i, 3:] = angular * s_accel[i]
+        return twist, twist_rate
+
+
+def exp3_batch(rotation_vectors: np.ndarray) -> np.ndarray:
+    """Pinocchio's exp3 (same formula and Taylor branch) for an (N, 3) array of vectors."""
+    v = np.asarray(rotation_vectors, dtype=float)
+    t2 = np.einsum("ij,ij->i", v, v) + _EPS * _EPS
+    t = np.sqrt(t2)
+    ct, st = np.cos(t), np.sin(t)
+    large = t > _PREC3
+    with np.errstate(divide="ignore", invalid="ignore"):
+        alpha_vxvx = np.where(large, (1.0 - ct) / t2, 0.5 - t2 / 24.0)
+        alpha_vx = np.where(large, st / t, 1.0 - t2 / 6.0)
+    ct = np.where(large, ct, 1.0 - t2 / 2.0)
+    result = alpha_vxvx[:, None, None] * v[:, :, None] * v[:, None, :]
+    result[:, 0, 1] -= alpha_vx * v[:, 2]
+    result[:, 1, 0] += alpha_vx * v[:, 2]
+    result[:, 0, 2] += alpha_vx * v[:, 1]
+    result[:, 2, 0] -= alpha_vx * v[:, 1]
+    result[:, 1, 2] -= alpha_vx * v[:, 0]
+    result[:, 2, 1] += alpha_vx * v[:, 0]
+    for k in range(3):
+        result[:, k, k] += ct
+    return result
+
+
+def tip_path_arrays(
+    trajectory: ObjectTrajectory, transform_tip_to_object: pin.SE3, s_values: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """ObjectTrajectory.tip_path as arrays, vectorised over the samples.
+
+    Args:
+        trajectory: An ObjectTrajectory.
+        transform_tip_to_object: The grasp.
+        s_values: Path parameters in [0, 1].
+
+    Returns:
+        Tip rotations (N, 3, 3) and positions (N, 3) [m] in the base frame, and the path
+        tangents d p_tip / ds (N, 3) [m], base axes; equal to ``tip_path`` up to rounding.
+    """
+    s = np.asarray(s_values, dtype=float)
+    grasp = pin.SE3(transform_tip_to_object)
+    start = trajectory.transform_object_to_base_start
+    goal = trajectory.transform_object_to_base_goal
+    log = np.asarray(trajectory.rotation_log_in_object, dtype=float)
+    object_rotations = np.matmul(start.rotation, exp3_batch(s[:, None] * log))
+    start_p, goal_p = start.translation, goal.translation
+    object_translations = (1.0 - s)[:, None] * start_p + s[:, None] * goal_p
+    rotations = np.matmul(object_rotations, grasp.rotation)
+    translations = np.einsum("nij,j->ni", object_rotations, grasp.translation) + (
+        object_translations
+    )
+    lever_in_object = np.cross(log, grasp.translation)
+    tangents = (goal_p - start_p) + np.einsum("nij,j->ni", object_rotations, lever_in_object)
+    return rotations, translations, tangents
