@@ -18,8 +18,9 @@ Measured in one process, interleaved, repeated (median and spread):
   each joint step, |(I - J^+ J) dq| / |dq|);
 - the physical floor (4k flops per evaluation + 2k per IK iteration) and our distance to it;
 - where the time goes (cProfile of one ranking, ours and the peer's);
-- service latency: 10 grasps x 101 samples through the running node (in-process, rclpy),
-  when the node and grasp_safety_msgs are importable;
+- service cost (bench/service.py): 10 grasps x 101 samples through the running node
+  (in-process, rclpy; median, p90, the ranking's own time) and 1,000 grasps x 201 samples
+  end to end with the response's size, when the node and grasp_safety_msgs are importable;
 - posture selection (bench/postures.py): ms per grasp and score gain per restart count on
   Panda, Baxter and the book; alone: ``bench/run.py --postures-only``.
 
@@ -37,10 +38,8 @@ import math
 import os
 import platform
 import pstats
-import random
 import statistics
 import sys
-import threading
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -399,103 +398,19 @@ def bench_arm(arm: ArmWorkload, args: argparse.Namespace, kdl: Any) -> dict[str,
 
 # ----------------------------------------------------------------------------- service
 def service_latency(arm: ArmWorkload, repeats: int) -> dict[str, Any]:
-    """Median latency of RankGrasps (10 grasps x 101 samples) through the in-process node."""
+    """The node's service cost (bench/service.py): 10 grasps x 101 samples (latency, the
+    ranking's own time, spans) and 1,000 grasps x 201 samples end to end (Baxter)."""
     try:
-        import rclpy
-        from builtin_interfaces.msg import Time
-        from geometry_msgs.msg import PoseArray, PoseStamped
-        from grasp_safety_msgs.srv import RankGrasps
-        from nav_msgs.msg import Path as PathMsg
-        from rclpy.context import Context
-        from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
-        from rclpy.parameter import Parameter
-        from std_msgs.msg import Header
+        import service as service_bench
 
-        from grasp_safety_ros.ros.conversions import (
-            inertia_msg_from_object,
-            pose_msg_from_transform,
-        )
-        from grasp_safety_ros.ros.node import EXECUTOR_THREADS, GraspSafetyNode
-    except ImportError as error:
-        return {"median_ms": None, "reason": f"node or messages not importable: {error}"}
-
-    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    context = Context()
-    rclpy.init(context=context, domain_id=random.SystemRandom().randint(0, 101))
-    trajectory = arm.trajectory(2.0, 0.02)
-    grasps = grasps_around_box(np.array(arm.approach_from), 10)
-    obj = box_object()
-    parameters = {
-        "urdf": arm.urdf,
-        "base_frame": arm.base_frame,
-        "tip_frame": arm.tip_frame,
-        "ik_seed": [float(x) for x in arm.seed_positions],
-        "use_joint_states_seed": False,
-        "trajectory.dt_s": 0.02,
-        "diagnostics_period_s": 5.0,
+        results = service_bench.run(repeats, large_repeats=1)
+    except (ImportError, RuntimeError) as error:
+        return {"median_ms": None, "reason": f"node not measurable: {error}"}
+    return {
+        **results["latency_10x101"],
+        "end_to_end_1000x201": results.get("end_to_end_1000x201"),
+        "load_average_1min": results["load_average_1min"],
     }
-    node = GraspSafetyNode(
-        context=context,
-        parameter_overrides=[Parameter(k, value=v) for k, v in parameters.items()],
-    )
-    executor = MultiThreadedExecutor(num_threads=EXECUTOR_THREADS, context=context)
-    executor.add_node(node)
-    thread = threading.Thread(target=executor.spin, daemon=True)
-    thread.start()
-    client_node = rclpy.create_node("grasp_safety_bench_client", context=context)
-    client_executor = SingleThreadedExecutor(context=context)
-    client_executor.add_node(client_node)
-    client = client_node.create_client(RankGrasps, "/grasp_safety/rank_grasps")
-    try:
-        if not client.wait_for_service(timeout_sec=20.0):
-            return {"median_ms": None, "reason": "service /grasp_safety/rank_grasps not found"}
-        request = RankGrasps.Request()
-        request.grasps = PoseArray(
-            header=Header(frame_id="object"),
-            poses=[pose_msg_from_transform(g.transform_tip_to_object) for g in grasps],
-        )
-        ends = (
-            trajectory.transform_object_to_base_start,
-            trajectory.transform_object_to_base_goal,
-        )
-        request.object_trajectory = PathMsg(
-            header=Header(frame_id=arm.base_frame),
-            poses=[
-                PoseStamped(header=Header(stamp=stamp), pose=pose_msg_from_transform(pose))
-                for stamp, pose in zip((Time(sec=0), Time(sec=2)), ends, strict=True)
-            ],
-        )
-        request.object_inertia = inertia_msg_from_object(obj)
-        request.metric = "mean"
-        latencies, computes = [], []
-        for k in range(repeats + 3):
-            start = time.perf_counter()
-            future = client.call_async(request)
-            client_executor.spin_until_future_complete(future, timeout_sec=30.0)
-            elapsed = time.perf_counter() - start
-            response = future.result()
-            if response is None or not response.success:
-                message = "no answer" if response is None else response.message
-                return {"median_ms": None, "reason": f"request failed: {message}"}
-            if k >= 3:  # the first calls warm caches up
-                latencies.append(elapsed * 1e3)
-                computes.append(response.ranking.compute_time_s * 1e3)
-        feasible = sum(1 for e in response.ranking.evaluations if e.feasible)
-        return {
-            "robot": arm.name,
-            "grasps": len(grasps),
-            "samples_per_grasp": trajectory.num_samples,
-            "feasible_grasps": feasible,
-            "median_ms": statistics.median(latencies),
-            "latency_ms": summary(latencies),
-            "node_compute_ms": summary(computes),
-        }
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        client_node.destroy_node()
-        rclpy.shutdown(context=context)
-        thread.join(timeout=5.0)
 
 
 # ----------------------------------------------------------------------------- main
@@ -675,10 +590,18 @@ def print_table(results: dict[str, Any]) -> None:
         print(f"service latency: n/a ({service.get('reason')})")
     else:
         print(
-            f"service latency (10 x 101, Baxter): median {fmt(service['median_ms'])} ms "
+            f"service latency (10 x 101, Baxter): median {fmt(service['median_ms'])} ms, p90 "
+            f"{fmt(service['latency_ms']['p90'])} ms "
             f"[{fmt(service['latency_ms']['min'])}..{fmt(service['latency_ms']['max'])}], "
-            f"node compute {fmt(service['node_compute_ms']['median'])} ms"
+            f"ranking alone {fmt(service['ranking_ms']['median'])} ms "
+            f"(x{fmt(service['latency_over_ranking'])})"
         )
+        large = service.get("end_to_end_1000x201")
+        if large:
+            print(
+                f"service end to end (1000 x 201, Baxter): {fmt(large['wall_s'], '.3f')} s, "
+                f"response {large['response_bytes']} bytes"
+            )
 
 
 if __name__ == "__main__":

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import importlib.util
 import sys
+import threading
 from dataclasses import replace
 from pathlib import Path
 from types import ModuleType
@@ -430,3 +431,57 @@ def test_small_requests_stay_serial(arm6: RobotModel) -> None:
     seed = random_positions(arm6, np.random.default_rng(12))
     evaluator.rank(grasps_near_identity(2), BOX, reach_trajectory(arm6, seed), seed_positions=seed)
     assert getattr(evaluator, "_grasp_pool", None) is None
+
+
+class _AbandonError(Exception):
+    pass
+
+
+def test_closing_the_pool_stream_starts_no_further_job() -> None:
+    """Abandoning a pooled request stops it per job, not per chunk (deterministic gates)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from grasp_safety_ros.core.method.pool import evaluate_jobs
+
+    gate = threading.Event()
+    started: list[int] = []
+    lock = threading.Lock()
+
+    def evaluate(_: object, index: int) -> int:
+        with lock:
+            started.append(index)
+        if index >= 3:  # every job but the first three waits until the stream is closed
+            gate.wait(10.0)
+        return index
+
+    with ThreadPoolExecutor(max_workers=2) as executor:
+        stream = evaluate_jobs(None, executor, [(k,) for k in range(100)], evaluate)
+        assert [next(stream) for _ in range(3)] == [0, 1, 2]
+        stream.close()
+        gate.set()
+    # 0, 1, 2, then each of the two workers finishes the one job it had started; the other
+    # 95 jobs never start (with chunks of jobs, every started chunk would run to its end).
+    assert len(started) <= 3 + 2, sorted(started)
+
+
+def test_progress_that_raises_abandons_a_pooled_ranking(arm7: RobotModel) -> None:
+    rng = np.random.default_rng(13)
+    seed = random_positions(arm7, rng)
+    trajectory = reach_trajectory(arm7, seed, dt=0.05)
+    pooled = GraspSafetyEvaluator(arm7, EvaluationConfig(workers=2, parallel_min_samples=1))
+    calls: list[int] = []
+
+    def progress(done: int, total: int) -> None:
+        calls.append(done)
+        if done == 2:
+            raise _AbandonError
+
+    with pytest.raises(_AbandonError):
+        pooled.rank(grasps_near_identity(40), BOX, trajectory, seed, progress=progress)
+    assert calls == [1, 2]  # called per grasp, in order, with the pool
+    # the pool is free again and gives the serial result
+    serial = GraspSafetyEvaluator(arm7, EvaluationConfig(workers=1))
+    grasps = grasps_near_identity(4)
+    assert_identical_ranking(
+        pooled.rank(grasps, BOX, trajectory, seed), serial.rank(grasps, BOX, trajectory, seed)
+    )

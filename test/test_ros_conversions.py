@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -57,6 +58,8 @@ from grasp_safety_ros.ros.conversions import (
     trajectory_from_multi_dof,
     trajectory_from_path,
     transform_from_pose_msg,
+    transforms_from_pose_msgs,
+    vector3_msgs,
 )
 
 
@@ -577,6 +580,50 @@ def test_markers_follow_the_given_order_and_flag_iso(arm6: RobotModel) -> None:
     left_out = markers_msg(ranking, grasps, trajectory, "b", Time(), order=order[:1]).markers
     text = {m.id: m.text for m in left_out if m.type == Marker.TEXT_VIEW_FACING}
     assert text[order[1]].endswith("not ranked") and text[2] == "unreachable: infeasible"
+
+
+def test_poses_checked_at_once_equal_pose_by_pose() -> None:
+    rng = np.random.default_rng(5)
+    poses = []
+    for _ in range(30):
+        quat = rng.normal(size=4)
+        quat *= (1.0 + rng.uniform(-9e-4, 9e-4)) / np.linalg.norm(quat)  # near-unit too
+        poses.append(pose(tuple(rng.uniform(-2, 2, 3)), tuple(quat)))
+    batch = transforms_from_pose_msgs(poses, "grasps.poses")
+    for got, message in zip(batch, poses, strict=True):
+        want = transform_from_pose_msg(message, "grasps.poses[k]")
+        assert np.array_equal(got.rotation, want.rotation)
+        assert np.array_equal(got.translation, want.translation)
+    bad_values = {
+        ("orientation", "w"): [math.nan, 2.0, 0.0],
+        ("position", "x"): [math.inf, 1e300, -1001.0],
+    }
+    for (part, axis), values in bad_values.items():
+        for value in values:
+            broken = [copy.deepcopy(p) for p in poses]
+            setattr(getattr(broken[7], part), axis, value)
+            with pytest.raises(InvalidInputError) as batch_error:
+                transforms_from_pose_msgs(broken, "grasps.poses")
+            with pytest.raises(InvalidInputError) as single_error:
+                transform_from_pose_msg(broken[7], "grasps.poses[7]")
+            assert str(batch_error.value) == str(single_error.value)
+
+
+def test_vector3_msgs_equal_the_keyword_constructor() -> None:
+    rows = np.random.default_rng(6).normal(size=(5, 3))
+    messages = vector3_msgs(rows)
+    assert [type(m) for m in messages] == [Vector3] * 5
+    assert messages == [Vector3(x=float(x), y=float(y), z=float(z)) for x, y, z in rows]
+    assert vector3_msgs(np.empty((0, 3))) == []
+
+
+def test_object_com_far_away_is_refused() -> None:
+    inertia = Inertia(m=0.3, ixx=1e-3, iyy=1e-3, izz=1e-3)
+    inertia.com.x = 1e300  # finite, but the effective masses would be NaN
+    with pytest.raises(InvalidInputError, match=r"^object_inertia\.com: must be within"):
+        object_inertia_from_msg(inertia, 1000.0)
+    inertia.com.x = 0.5
+    assert object_inertia_from_msg(inertia, 1000.0).com_in_object_m[0] == 0.5
 
 
 def test_path_with_three_poses_is_a_waypoint_trajectory() -> None:

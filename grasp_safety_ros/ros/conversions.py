@@ -8,9 +8,11 @@ quaternion_msg_from_rotation. Each function raises InvalidInputError naming the 
 
 from __future__ import annotations
 
+import array
 import math
-from collections.abc import Collection, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -27,6 +29,7 @@ from ..core.analyses.iso15066 import PowerForceLimitAssessment, RegionAssessment
 from ..core.analyses.safety_report import SafetyReport
 from ..core.exceptions import InvalidInputError
 from ..core.input_checks import (
+    QUATERNION_NORM_TOLERANCE,
     finite_array,
     finite_float,
     quat_xyzw_from_rotation,
@@ -51,8 +54,8 @@ NAN = float("nan")
 LABEL_OFFSET_M = np.array([0.0, 0.0, 0.03])
 """Labels float this far above the grasp point (base axes)."""
 MAX_ABS_POSITION_M = 1000.0
-"""Pose coordinates beyond this are refused: no manipulator reaches them, and absurd values
-(1e300) made the IK search for seconds before finding the grasp infeasible."""
+"""Pose coordinates and object CoMs beyond this are refused: no manipulator reaches them, and
+absurd values (1e300) made the IK search for seconds (poses) or the effective mass NaN (CoM)."""
 
 
 # --- Poses -----------------------------------------------------------------------------------
@@ -84,6 +87,12 @@ def transform_from_pose_msg(pose: Pose, field: str) -> pin.SE3:
             f"{[float(v) for v in position]}",
         )
     return pin.SE3(rotation, np.array(position))
+
+
+def _pose_numbers(pose: Pose) -> tuple[float, ...]:
+    position, orientation = pose.position, pose.orientation
+    x, y, z, w = orientation.x, orientation.y, orientation.z, orientation.w
+    return (position.x, position.y, position.z, x, y, z, w)
 
 
 def pose_msg_from_transform(transform: pin.SE3) -> Pose:
@@ -353,7 +362,33 @@ def check_grasp_array(
         raise InvalidInputError(
             f"{field}.poses", f"has {count} grasps; at most max_grasps={max_grasps} are allowed"
         )
-    return [transform_from_pose_msg(p, f"{field}.poses[{i}]") for i, p in enumerate(grasps.poses)]
+    return transforms_from_pose_msgs(grasps.poses, f"{field}.poses")
+
+
+def transforms_from_pose_msgs(poses: Sequence[Pose], field: str) -> list[pin.SE3]:
+    """transform_from_pose_msg of each pose (``field[i]`` names a bad one), checked at once.
+
+    The numbers are read into one array and checked together (the checks of
+    transform_from_pose_msg: keep them the same); only when one is bad does each pose go
+    through transform_from_pose_msg, for the message naming it. The transforms are computed
+    exactly as there (same norm, same normalisation).
+    """
+    try:
+        values = np.array([_pose_numbers(p) for p in poses], dtype=float).reshape(-1, 7)
+    except (TypeError, ValueError):  # not numbers: the per-pose check names the field
+        values = np.full((len(poses), 7), np.nan)
+    norms = [float(np.linalg.norm(quat)) for quat in values[:, 3:]]
+    if not (
+        np.all(np.isfinite(values))
+        and all(abs(norm - 1.0) <= QUATERNION_NORM_TOLERANCE for norm in norms)
+        and np.all(np.abs(values[:, :3]) <= MAX_ABS_POSITION_M)
+    ):
+        return [transform_from_pose_msg(p, f"{field}[{i}]") for i, p in enumerate(poses)]
+    transforms = []
+    for row, norm in zip(values, norms, strict=True):
+        x, y, z, w = row[3:] / norm
+        transforms.append(pin.SE3(pin.Quaternion(w, x, y, z).toRotationMatrix(), row[:3].copy()))
+    return transforms
 
 
 def grasps_from_pose_array(
@@ -393,6 +428,12 @@ def object_inertia_from_msg(
             f"{field}.m", f"must be at most max_mass_kg={max_mass_kg:g}, got {mass:g}"
         )
     com = finite_array([inertia.com.x, inertia.com.y, inertia.com.z], f"{field}.com", (3,))
+    if np.max(np.abs(com)) > MAX_ABS_POSITION_M:  # 1e300 m gave NaN effective masses
+        raise InvalidInputError(
+            f"{field}.com",
+            f"must be within +/-{MAX_ABS_POSITION_M:g} m per coordinate, got "
+            f"{[float(v) for v in com]}",
+        )
     components = [inertia.ixx, inertia.ixy, inertia.ixz, inertia.iyy, inertia.iyz, inertia.izz]
     tensor = inertia_tensor_from_components(components, f"{field}.ixx..izz")
     try:
@@ -440,6 +481,38 @@ def seed_from_joint_state(
 # --- Results ---------------------------------------------------------------------------------
 
 
+def float64_array(values: Sequence[float] | np.ndarray) -> array.array:
+    """``array('d')`` of ``values``: what a float64[] field holds; built from the bytes, so
+    the message setter stores it as is instead of converting element by element."""
+    return array.array("d", np.ascontiguousarray(values, dtype=np.float64).tobytes())
+
+
+_VECTOR3_CHECK_FIELDS = Vector3()._check_fields
+_FAST_VECTOR3 = set(Vector3.__slots__) == {"_x", "_y", "_z", "_check_fields"}
+"""Whether vector3_msgs may fill the slots of geometry_msgs/Vector3 directly (Jazzy's class)."""
+
+
+def vector3_msgs(vectors: np.ndarray) -> list[Vector3]:
+    """geometry_msgs/Vector3 of each row of an (N, 3) array.
+
+    The rows of a response's ``direction`` fields are its bulk (one message per sample): the
+    messages are made without the keyword constructor (its per-field setters cost about 5x
+    more), by filling the generated class's slots with the floats; if the class is not the
+    one this was written for (other slots), the constructor is used.
+    """
+    rows = np.asarray(vectors, dtype=np.float64).reshape(-1, 3).tolist()
+    if not _FAST_VECTOR3:
+        return [Vector3(x=x, y=y, z=z) for x, y, z in rows]
+    new, check = Vector3.__new__, _VECTOR3_CHECK_FIELDS
+    messages = []
+    append = messages.append
+    for x, y, z in rows:
+        vector = new(Vector3)
+        vector._x, vector._y, vector._z, vector._check_fields = x, y, z, check
+        append(vector)
+    return messages
+
+
 def evaluation_msg(evaluation: GraspEvaluation) -> GraspEvaluationMsg:
     """grasp_safety_msgs/GraspEvaluation of a core evaluation (NaN scores when infeasible).
 
@@ -454,12 +527,9 @@ def evaluation_msg(evaluation: GraspEvaluation) -> GraspEvaluationMsg:
         score=float(evaluation.score),
         peak_effective_mass_kg=float(evaluation.peak_effective_mass_kg),
         mean_effective_mass_kg=float(evaluation.mean_effective_mass_kg),
-        time_from_start_s=np.asarray(evaluation.times_s, dtype=float).tolist(),
-        effective_mass_kg=np.asarray(evaluation.effective_mass_kg, dtype=float).tolist(),
-        direction=[
-            Vector3(x=x, y=y, z=z)
-            for x, y, z in np.asarray(evaluation.directions_in_base, dtype=float).tolist()
-        ],
+        time_from_start_s=float64_array(evaluation.times_s),
+        effective_mass_kg=float64_array(evaluation.effective_mass_kg),
+        direction=vector3_msgs(evaluation.directions_in_base),
         direction_is_worst_case=np.asarray(evaluation.direction_is_worst_case, bool).tolist(),
         safety_score=float(evaluation.score),
         iso_min_duration_s=NAN,
@@ -482,6 +552,43 @@ def duration_msg(seconds: float) -> Duration:
     return Duration(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
 
 
+def _slot_constructor(message_type: Any, fields: tuple[str, ...]) -> Callable[..., Any]:
+    """A constructor of ``message_type`` from all its ``fields``, given positionally.
+
+    It fills the generated class's slots directly, where the keyword constructor runs a
+    property setter per field (several times the cost; it counts for messages made per
+    sample or per region of every grasp). The values must already have the field types
+    (float, bool, str, int, ``array('d')`` for float64[], messages). A class whose slots are
+    not exactly these fields gets its keyword constructor.
+    """
+    slots = tuple(f"_{name}" for name in fields)
+    if set(message_type.__slots__) != {*slots, "_check_fields"}:
+        return lambda *values: message_type(**dict(zip(fields, values, strict=True)))
+    check_fields = message_type()._check_fields
+
+    def construct(*values: Any) -> Any:
+        message = message_type.__new__(message_type)
+        for slot, value in zip(slots, values, strict=True):
+            setattr(message, slot, value)
+        message._check_fields = check_fields
+        return message
+
+    return construct
+
+
+_FAST_POINTS = set(JointTrajectoryPoint.__slots__) == {
+    "_positions",
+    "_velocities",
+    "_accelerations",
+    "_effort",
+    "_time_from_start",
+    "_check_fields",
+} and set(Duration.__slots__) == {"_sec", "_nanosec", "_check_fields"}
+"""Whether joint_trajectory_msg may fill the slots of the points directly (Jazzy's classes)."""
+_POINT_CHECK_FIELDS = JointTrajectoryPoint()._check_fields
+_DURATION_CHECK_FIELDS = Duration()._check_fields
+
+
 def joint_trajectory_msg(
     joint_names: Sequence[str], times_s: np.ndarray, joint_positions: np.ndarray, header: Header
 ) -> JointTrajectory:
@@ -493,21 +600,41 @@ def joint_trajectory_msg(
     if len(times_s) == 0:
         return message
     velocities, accelerations = joint_velocities_accelerations(times_s, joint_positions)
-    message.points = [
-        JointTrajectoryPoint(
-            positions=q,
-            velocities=qd,
-            accelerations=qdd,
-            time_from_start=duration_msg(t),
-        )
-        for t, q, qd, qdd in zip(
-            np.asarray(times_s, dtype=float).tolist(),
-            np.asarray(joint_positions, dtype=float).tolist(),
-            velocities.tolist(),
-            accelerations.tolist(),
-            strict=True,
-        )
-    ]
+    # One point per sample: made by filling the messages' slots when the classes are the
+    # ones this was written for (the keyword constructors cost several times more); stamps
+    # rounded as duration_msg rounds them.
+    nanoseconds = np.round(np.asarray(times_s, dtype=float) * 1e9).astype(np.int64).tolist()
+    rows = zip(
+        nanoseconds,
+        np.asarray(joint_positions, dtype=float).tolist(),
+        velocities.tolist(),
+        accelerations.tolist(),
+        strict=True,
+    )
+    if not _FAST_POINTS:
+        message.points = [
+            JointTrajectoryPoint(
+                positions=q,
+                velocities=qd,
+                accelerations=qdd,
+                time_from_start=Duration(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000),
+            )
+            for ns, q, qd, qdd in rows
+        ]
+        return message
+    new_point, new_duration = JointTrajectoryPoint.__new__, Duration.__new__
+    check_point, check_duration = _POINT_CHECK_FIELDS, _DURATION_CHECK_FIELDS
+    points = []
+    for ns, q, qd, qdd in rows:
+        stamp = new_duration(Duration)
+        stamp._sec, stamp._nanosec = ns // 1_000_000_000, ns % 1_000_000_000
+        stamp._check_fields = check_duration
+        point = new_point(JointTrajectoryPoint)
+        point._positions, point._velocities = array.array("d", q), array.array("d", qd)
+        point._accelerations, point._effort = array.array("d", qdd), array.array("d")
+        point._time_from_start, point._check_fields = stamp, check_point
+        points.append(point)
+    message.points = points
     return message
 
 
@@ -515,7 +642,7 @@ def _set_posture(message: GraspEvaluationMsg, posture: PostureSelection) -> None
     message.score_single_ik = float(posture.score_single_ik)
     message.score_range_min = float(posture.score_range[0])
     message.score_range_max = float(posture.score_range[1])
-    message.start_positions = _floats(posture.start_positions)
+    message.start_positions = float64_array(posture.start_positions)
     message.postures_tried = int(posture.postures_tried)
     message.postures_feasible = int(posture.postures_feasible)
 
@@ -541,26 +668,29 @@ def ranking_msg(
     base_frame: str,
     stamp: Time,
     compute_time_s: float,
+    order: Sequence[int] | None = None,
 ) -> GraspRanking:
     """grasp_safety_msgs/GraspRanking of a core ranking of the grasps in ``grasps``.
 
     The paper's ranking only: the analysis fields are those of the default options with
     nothing beyond the tip computed (see evaluation_msg); report_msg gives the full result.
+    ``order`` (default: the ranking's) sets ``order`` and ``ranked_grasps``.
     """
-    order = [int(i) for i in ranking.order]
+    paper_order = [int(i) for i in ranking.order]
+    final = paper_order if order is None else [int(i) for i in order]
     message = GraspRanking(
         header=Header(stamp=stamp, frame_id=base_frame),
         metric=ranking.metric,
-        order=order,
-        ranked_grasps=ranked_pose_array(grasps, ranking.order),
+        order=final,
+        ranked_grasps=ranked_pose_array(grasps, final),
         evaluations=[evaluation_msg(e) for e in ranking.evaluations],
         joint_names=list(ranking.joint_names),
         compute_time_s=float(compute_time_s),
         backend=ranking.backend,
         metric_point="tip",
         rank_by="safety",
-        safety_order=order,
-        paper_order=order,
+        safety_order=paper_order,
+        paper_order=paper_order,
         safety_weight=NAN,
         effort_criterion="",
         order_stability=NAN,
@@ -579,24 +709,40 @@ def ranking_msg(
     return message
 
 
+_body_region_assessment = _slot_constructor(
+    BodyRegionAssessment,
+    (
+        "region",
+        "transient_contact_permitted",
+        "worst_force_ratio",
+        "peak_contact_force_n",
+        "max_transient_force_n",
+        "min_max_permissible_speed_m_s",
+        "admissible",
+        "min_duration_s",
+    ),
+)
+
+
 def region_assessment_msg(assessment: RegionAssessment) -> BodyRegionAssessment:
     """grasp_safety_msgs/BodyRegionAssessment of one region's ISO/TS 15066 assessment.
 
     Where transient contact is not permitted, the core's ratio (inf while the point moves)
     becomes NaN, as does the null limit F_tr; ``min_duration_s`` keeps the core's inf.
     """
-    permitted = assessment.transient_contact_permitted
-    limit = assessment.region.max_transient_force_n
+    region = assessment.region
+    permitted = region.transient_contact_permitted
+    limit = region.max_transient_force_n
     speeds = assessment.max_permissible_speed_m_s
-    return BodyRegionAssessment(
-        region=assessment.region.name,
-        transient_contact_permitted=bool(permitted),
-        worst_force_ratio=float(assessment.worst_force_ratio) if permitted else NAN,
-        peak_contact_force_n=float(assessment.peak_contact_force_n),
-        max_transient_force_n=float(limit) if limit is not None else NAN,
-        min_max_permissible_speed_m_s=float(np.min(speeds)) if len(speeds) else NAN,
-        admissible=bool(assessment.admissible),
-        min_duration_s=float(assessment.min_duration_s),
+    return _body_region_assessment(
+        region.name,
+        bool(permitted),
+        float(assessment.worst_force_ratio) if permitted else NAN,
+        float(assessment.peak_contact_force_n),
+        float(limit) if limit is not None else NAN,
+        float(speeds.min()) if len(speeds) else NAN,
+        bool(assessment.admissible),
+        float(assessment.min_duration_s),
     )
 
 
@@ -621,9 +767,9 @@ def report_msg(
     """
     options = report.options
     quality_given = options.grasp_quality is not None
-    message = ranking_msg(report.ranking, grasps, base_frame, stamp, compute_time_s)
-    message.order = [int(i) for i in report.order]
-    message.ranked_grasps = ranked_pose_array(grasps, report.order)
+    message = ranking_msg(
+        report.ranking, grasps, base_frame, stamp, compute_time_s, order=report.order
+    )
     message.metric_point = options.metric_point
     message.rank_by = options.rank_by
     message.safety_order = [int(i) for i in report.safety_order]
@@ -643,8 +789,12 @@ def report_msg(
             _set_iso(evaluation, iso[k])
         if report.exposed and report.exposed[k].feasible:
             exposed = report.exposed[k]
-            evaluation.leading_point_effective_mass_kg = _floats(exposed.leading_effective_mass_kg)
-            evaluation.worst_point_effective_mass_kg = _floats(exposed.worst_effective_mass_kg)
+            evaluation.leading_point_effective_mass_kg = float64_array(
+                exposed.leading_effective_mass_kg
+            )
+            evaluation.worst_point_effective_mass_kg = float64_array(
+                exposed.worst_effective_mass_kg
+            )
         if report.uncertainty is not None:
             spread = report.uncertainty.grasps[k]
             evaluation.worst_case_score = float(spread.worst_case_score)
@@ -659,7 +809,7 @@ def report_msg(
             evaluation.redundancy_applied = bool(resolution.applied)
             evaluation.score_without_redundancy = float(resolution.original_score)
             if resolution.applied:
-                evaluation.effective_mass_with_redundancy_kg = _floats(
+                evaluation.effective_mass_with_redundancy_kg = float64_array(
                     resolution.effective_mass_kg
                 )
                 evaluation.joint_trajectory = joint_trajectory_msg(
@@ -672,13 +822,9 @@ def report_msg(
             effort = report.effort[k]
             evaluation.effort_score = float(effort.score(options.effort_criterion))
             if effort.feasible:
-                evaluation.peak_abs_torque = _floats(effort.peak_abs_torque)
-                evaluation.rms_torque = _floats(effort.rms_torque)
+                evaluation.peak_abs_torque = float64_array(effort.peak_abs_torque)
+                evaluation.rms_torque = float64_array(effort.rms_torque)
     return message
-
-
-def _floats(values: np.ndarray) -> list[float]:
-    return np.asarray(values, dtype=float).tolist()
 
 
 def rank_color(rank: int, count: int) -> tuple[float, float, float, float]:

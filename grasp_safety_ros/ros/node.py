@@ -11,8 +11,9 @@ reentrant callback group, the input topics in a mutually exclusive one, everythi
 One ranking runs at a time (the compute lock: the core's solvers keep scratch data); a request
 that cannot get the lock within ``service_busy_timeout_s`` is answered busy, and a ranking
 longer than ``max_compute_time_s`` is abandoned, so a slow request never blocks the next one
-for ever (checked between grasps of the ranking; the analyses after it run to the end). The GIL
-still makes a long ranking share the CPU with the other callbacks.
+for ever (checked after every grasp of the ranking, also on the worker pool; the analyses
+after it run to the end). The GIL still makes a long ranking share the CPU with the other
+callbacks. The markers are built only when they have a subscriber (_OnDemandPublisher).
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from grasp_safety_msgs.srv import RankGrasps
 from nav_msgs.msg import Path
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.event_handler import PublisherEventCallbacks, QoSPublisherMatchedInfo
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import Executor, ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
@@ -144,6 +146,43 @@ class _Snapshot:
     inertia_override: ObjectInertia | None
 
 
+class _OnDemandPublisher:
+    """A latched (transient-local) publisher that builds its message only for subscribers.
+
+    ``publish(build)`` builds and publishes at once when the topic has a subscriber; else it
+    keeps ``build`` and runs it when the next subscriber connects (the publisher's matched
+    event), so a late subscriber still gets the latest message and nobody pays for messages
+    no one receives.
+    """
+
+    def __init__(self, node: Node, msg_type: Any, topic: str) -> None:
+        self._lock = threading.Lock()
+        self._pending: Callable[[], Any] | None = None
+        self.publisher = node.create_publisher(
+            msg_type,
+            topic,
+            LATCHED,
+            event_callbacks=PublisherEventCallbacks(matched=self._on_matched),
+        )
+
+    def publish(self, build: Callable[[], Any]) -> None:
+        """Publish ``build()`` now if someone subscribes, else when someone does."""
+        with self._lock:  # keeps the order: a late publish never overtakes a newer one
+            if self.publisher.get_subscription_count() > 0:
+                self._pending = None
+                self.publisher.publish(build())
+            else:
+                self._pending = build
+
+    def _on_matched(self, info: QoSPublisherMatchedInfo) -> None:
+        if info.current_count_change <= 0:
+            return
+        with self._lock:
+            build, self._pending = self._pending, None
+            if build is not None:
+                self.publisher.publish(build())
+
+
 class GraspSafetyNode(Node):
     """Ranks grasps by the effective mass of robot + object along the object's trajectory.
 
@@ -202,7 +241,7 @@ class GraspSafetyNode(Node):
         self._topic_group = MutuallyExclusiveCallbackGroup()
         self._ranking_pub = self.create_publisher(GraspRanking, "~/ranking", LATCHED)
         self._ranked_pub = self.create_publisher(PoseArray, "~/ranked_grasps", LATCHED)
-        self._markers_pub = self.create_publisher(MarkerArray, "~/markers", LATCHED)
+        self._markers_pub = _OnDemandPublisher(self, MarkerArray, "~/markers")
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_service(
             RankGrasps,
@@ -709,7 +748,7 @@ class GraspSafetyNode(Node):
         self._ranking_pub.publish(result)
         self._ranked_pub.publish(result.ranked_grasps)
         self._markers_pub.publish(
-            markers_msg(
+            lambda: markers_msg(
                 ranking,
                 grasps,
                 trajectory,
@@ -788,6 +827,8 @@ class GraspSafetyNode(Node):
         )
 
     def _publish_diagnostics(self) -> None:
+        if self._diagnostics_pub.get_subscription_count() == 0:
+            return  # volatile: nobody would receive it
         self._diagnostics_pub.publish(
             DiagnosticArray(
                 header=Header(stamp=self.get_clock().now().to_msg()),

@@ -23,6 +23,7 @@ planned joint trajectory the same holds for slowing the whole timed motion unifo
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -313,25 +314,95 @@ def assess_region(
     speed_m_s: np.ndarray, effective_mass_kg: np.ndarray, duration_s: float, region: BodyRegion
 ) -> RegionAssessment:
     """Assess one region for per-sample speeds [m/s] and effective masses [kg] (validated)."""
-    force = transient_contact_force_n(speed_m_s, effective_mass_kg, region)
-    v_max = max_permissible_speed_m_s(effective_mass_kg, region)
-    if region.max_transient_force_n is None:
-        ratio = np.where(speed_m_s > 0.0, np.inf, 0.0)
-    else:
-        ratio = force / region.max_transient_force_n
-    worst_sample = int(np.argmax(ratio)) if len(ratio) else 0
-    worst = float(ratio[worst_sample]) if len(ratio) else 0.0
-    return RegionAssessment(
-        region=region,
-        contact_force_n=_read_only(force),
-        max_permissible_speed_m_s=_read_only(np.asarray(v_max, dtype=float)),
-        force_ratio=_read_only(ratio),
-        worst_force_ratio=worst,
-        worst_sample=worst_sample,
-        peak_contact_force_n=float(force.max()) if len(force) else 0.0,
-        admissible=worst <= 1.0 + ADMISSIBLE_RATIO_TOLERANCE,
-        min_duration_s=duration_s * worst if worst > 0.0 else 0.0,
+    return assess_regions(speed_m_s, effective_mass_kg, duration_s, (region,))[0]
+
+
+@functools.lru_cache(maxsize=64)
+def _region_columns(
+    regions: tuple[BodyRegion, ...],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(R, 1) columns of the regions: permitted, m_h [kg], k [N/m], F_tr [N] (NaN: none)."""
+    columns = (
+        np.array([r.transient_contact_permitted for r in regions], dtype=bool),
+        np.array([r.effective_mass_kg for r in regions], dtype=float),
+        np.array([r.spring_constant_n_per_m for r in regions], dtype=float),
+        np.array([r.max_transient_force_n or np.nan for r in regions], dtype=float),
     )
+    return tuple(_read_only(column[:, None]) for column in columns)  # type: ignore[return-value]
+
+
+def assess_regions(
+    speed_m_s: np.ndarray,
+    effective_mass_kg: np.ndarray,
+    duration_s: float,
+    regions: Sequence[BodyRegion],
+) -> tuple[RegionAssessment, ...]:
+    """Assess each region for per-sample speeds [m/s] and effective masses [kg] (validated).
+
+    One array pass over regions x samples (see _assess_regions_batch).
+    """
+    speed = np.asarray(speed_m_s, dtype=float)[None]
+    mass = np.asarray(effective_mass_kg, dtype=float)[None]
+    return _assess_regions_batch(speed, mass, duration_s, tuple(regions))[0]
+
+
+def _assess_regions_batch(
+    speed_m_s: np.ndarray,
+    effective_mass_kg: np.ndarray,
+    duration_s: float,
+    regions: tuple[BodyRegion, ...],
+) -> list[tuple[RegionAssessment, ...]]:
+    """Per motion, the assessment of each region; speeds and masses (M, N), validated.
+
+    One array pass over regions x motions x samples, with the elementwise formulas of
+    transient_contact_force_n and max_permissible_speed_m_s (the same numbers as one region
+    and one motion at a time).
+    """
+    permitted, human_mass, stiffness, limit = (c[:, :, None] for c in _region_columns(regions))
+    root = np.sqrt(reduced_mass_kg(human_mass, effective_mass_kg) * stiffness)  # sqrt(μ·k)
+    force = _read_only(speed_m_s * root)  # (R, M, N)
+    v_max = _read_only(np.where(permitted, limit / root, 0.0))
+    moving = np.where(speed_m_s > 0.0, np.inf, 0.0)
+    ratio = _read_only(np.where(permitted, force / limit, moving))
+    count = ratio.shape[2]
+    if count:
+        worst_sample = np.argmax(ratio, axis=2)
+        worst = np.take_along_axis(ratio, worst_sample[:, :, None], axis=2)[:, :, 0]
+        peak = force.max(axis=2)
+    else:
+        worst_sample = np.zeros(ratio.shape[:2], dtype=int)
+        worst = peak = np.zeros(ratio.shape[:2])
+    worst_list, sample_list, peak_list = worst.tolist(), worst_sample.tolist(), peak.tolist()
+    motions = []
+    for m in range(ratio.shape[1]):
+        assessed = []
+        for k, region in enumerate(regions):
+            worst_k = worst_list[k][m]
+            assessed.append(
+                RegionAssessment(
+                    region=region,
+                    contact_force_n=force[k, m],
+                    max_permissible_speed_m_s=v_max[k, m],
+                    force_ratio=ratio[k, m],
+                    worst_force_ratio=worst_k,
+                    worst_sample=sample_list[k][m],
+                    peak_contact_force_n=peak_list[k][m],
+                    admissible=worst_k <= 1.0 + ADMISSIBLE_RATIO_TOLERANCE,
+                    min_duration_s=duration_s * worst_k if worst_k > 0.0 else 0.0,
+                )
+            )
+        motions.append(tuple(assessed))
+    return motions
+
+
+def _checked_motion(speed_m_s: Any, effective_mass_kg: Any) -> tuple[np.ndarray, np.ndarray]:
+    speed = finite_array(speed_m_s, "iso15066.speed_m_s")
+    if speed.ndim != 1 or np.any(speed < 0.0):
+        raise InvalidInputError("iso15066.speed_m_s", "must be a 1-D array of speeds >= 0")
+    mass = finite_array(effective_mass_kg, "iso15066.effective_mass_kg", speed.shape)
+    if np.any(mass <= 0.0):
+        raise InvalidInputError("iso15066.effective_mass_kg", "must be > 0 at every sample")
+    return speed, mass
 
 
 def assess_motion(
@@ -347,14 +418,50 @@ def assess_motion(
     Use this for any point of the moving body (e.g. an exposed point of the object); for the
     tip of an evaluated grasp use ``assess_grasp``.
     """
-    speed = finite_array(speed_m_s, "iso15066.speed_m_s")
-    if speed.ndim != 1 or np.any(speed < 0.0):
-        raise InvalidInputError("iso15066.speed_m_s", "must be a 1-D array of speeds >= 0")
-    mass = finite_array(effective_mass_kg, "iso15066.effective_mass_kg", speed.shape)
-    if np.any(mass <= 0.0):
-        raise InvalidInputError("iso15066.effective_mass_kg", "must be > 0 at every sample")
+    return assess_motions([speed_m_s], [effective_mass_kg], duration_s, regions, [index], [name])[
+        0
+    ]
+
+
+def assess_motions(
+    speeds_m_s: Sequence[Any],
+    effective_masses_kg: Sequence[Any],
+    duration_s: float,
+    regions: Sequence[str | BodyRegion] | Mapping[str, BodyRegion] | None = None,
+    indices: Sequence[int] | None = None,
+    names: Sequence[str] | None = None,
+) -> list[PowerForceLimitAssessment]:
+    """``assess_motion`` of several motions of the same duration (e.g. the grasps of a ranking).
+
+    Motions with the same number of samples are assessed in one array pass; the results are
+    those of assess_motion one by one.
+    """
+    count = len(speeds_m_s)
+    if len(effective_masses_kg) != count:
+        raise InvalidInputError(
+            "iso15066.effective_mass_kg", f"must have one series per motion ({count})"
+        )
+    indices = list(range(count)) if indices is None else list(indices)
+    names = [""] * count if names is None else list(names)
+    checked = [_checked_motion(v, m) for v, m in zip(speeds_m_s, effective_masses_kg, strict=True)]
     duration = finite_float(duration_s, "iso15066.duration_s", 0.0, None, True)
-    assessed = tuple(assess_region(speed, mass, duration, r) for r in select_regions(regions))
+    selected = select_regions(regions)
+    assessed: list[tuple[RegionAssessment, ...]] = []
+    if count and len({len(speed) for speed, _ in checked}) == 1:
+        speeds = np.array([speed for speed, _ in checked])
+        masses = np.array([mass for _, mass in checked])
+        assessed = _assess_regions_batch(speeds, masses, duration, selected)
+    else:
+        assessed = [assess_regions(speed, mass, duration, selected) for speed, mass in checked]
+    return [
+        _motion_assessment(regions_k, duration, index, name)
+        for regions_k, index, name in zip(assessed, indices, names, strict=True)
+    ]
+
+
+def _motion_assessment(
+    assessed: tuple[RegionAssessment, ...], duration: float, index: int, name: str
+) -> PowerForceLimitAssessment:
     permitted = [a for a in assessed if a.transient_contact_permitted]
     limiting = max(permitted, key=lambda a: a.worst_force_ratio) if permitted else None
     return PowerForceLimitAssessment(
