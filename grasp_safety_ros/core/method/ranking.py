@@ -212,15 +212,10 @@ class GraspSafetyEvaluator:
     ) -> GraspEvaluation:
         """``evaluate`` with the sample times, path parameters and IK seed already computed."""
         robot = self.robot
-        if self.ik.compiled:  # tip path, IK and effective mass in one compiled call
+        tip_path = tip_path_arrays(trajectory, grasp.transform_tip_to_object, s_values)
+        if self.ik.compiled:  # IK and effective mass in one compiled call
             fused = evaluate_grasp_compiled(
-                self.ik,
-                object_inertia,
-                trajectory,
-                grasp.transform_tip_to_object,
-                times,
-                s_values,
-                seed_q,
+                self.ik, object_inertia, grasp.transform_tip_to_object, tip_path, times, seed_q
             )
             if fused.reason:
                 return _infeasible(index, grasp.name, fused.reason, robot.num_joints)
@@ -228,9 +223,7 @@ class GraspSafetyEvaluator:
             masses, directions, worst = fused.effective_masses, fused.directions, fused.worst
             tangent_norms = fused.tangent_norms
         else:
-            rotations, translations, tangents = tip_path_arrays(
-                trajectory, grasp.transform_tip_to_object, s_values
-            )
+            rotations, translations, tangents = tip_path
             ik = self.ik.solve_trajectory_arrays(rotations, translations, times, s_values, seed_q)
             if not ik.feasible:
                 return _infeasible(index, grasp.name, ik.reason, robot.num_joints)
@@ -248,10 +241,7 @@ class GraspSafetyEvaluator:
             masses[moving] = effective_masses_along(mobilities[moving], directions[moving])
         for i in np.flatnonzero(worst):
             directions[i], masses[i] = worst_direction(mobilities[i])
-        if robot.model.nq == robot.model.nv:  # no continuous joint: positions are q
-            positions = np.array(q_all)
-        else:
-            positions = np.array([robot.positions_from_q(q) for q in q_all])
+        positions = positions_along(robot, q_all)
         return GraspEvaluation(
             index=index,
             name=grasp.name,
@@ -306,6 +296,25 @@ class GraspSafetyEvaluator:
             order=order_by_score(evaluations),
             evaluations=tuple(evaluations),
         )
+
+
+def positions_along(robot: RobotModel, q_all: np.ndarray) -> np.ndarray:
+    """``robot.positions_from_q`` of every row of q_all (N, nq), vectorised: (N, joints)."""
+    model = robot.model
+    if model.nq == model.nv:  # no continuous joint: positions are q
+        return np.array(q_all)
+    joints = list(model.joints)[1:]
+    if len(joints) != robot.num_joints:  # not one model joint per chain joint
+        return np.array([robot.positions_from_q(q) for q in q_all]).reshape(-1, robot.num_joints)
+    q_all = np.asarray(q_all, dtype=float).reshape(-1, model.nq)
+    columns = []
+    for joint in joints:
+        index = joint.idx_q
+        if joint.nq == 2:  # continuous: (cos, sin)
+            columns.append(np.arctan2(q_all[:, index + 1], q_all[:, index]))
+        else:
+            columns.append(q_all[:, index])
+    return np.stack(columns, axis=1)
 
 
 def _infeasible(index: int, name: str, reason: str, num_joints: int) -> GraspEvaluation:
