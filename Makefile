@@ -6,18 +6,25 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 IFACE_STAMP := $(VENV)/.interfaces
+KERNELS_STAMP := $(VENV)/.kernels
+KERNELS := grasp_safety_ros/core/kernels
 IFACE_SRC := $(shell find msg_defs -type f 2>/dev/null) scripts/build_interfaces.sh
 
 .PHONY: all setup demo test bench lint clean
 
 all: setup
 
-setup: $(IFACE_STAMP)
+setup: $(IFACE_STAMP) $(KERNELS_STAMP)
 
 $(STAMP): requirements.txt setup.py
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q -r requirements.txt
 	$(PY) -m pip install -q --no-deps -e .
+	touch $@
+
+# numba's cache goes stale across kernel files (see core/kernels/__init__.py): recompile here.
+$(KERNELS_STAMP): $(STAMP) $(wildcard $(KERNELS)/*.py)
+	rm -f $(KERNELS)/__pycache__/*.nbi $(KERNELS)/__pycache__/*.nbc
 	$(PY) -c "from grasp_safety_ros.core.method.warm_up import warm_up; print(f'compiled kernels ready ({warm_up():.1f} s)')"
 	touch $@
 
@@ -25,13 +32,13 @@ $(IFACE_STAMP): $(STAMP) $(IFACE_SRC)
 	bash scripts/build_interfaces.sh
 	touch $@
 
-demo: $(IFACE_STAMP)
+demo: setup
 	$(VENV)/bin/grasp-safety demo --out demo_output
 
-test: $(IFACE_STAMP)
+test: setup
 	$(PY) -m pytest -q test
 
-bench: $(IFACE_STAMP)
+bench: setup
 	$(PY) bench/run.py --json bench/results.json
 
 lint: $(STAMP)
