@@ -185,6 +185,8 @@ def test_integrate_and_difference_of_continuous_joints_equal_pinocchio() -> None
 
     robot = ROBOTS["continuous"]()
     model, chain = robot.model, chain_arrays(robot)
+    assert chain is not None
+    index = (chain.q_index, chain.continuous)
     rng = np.random.default_rng(12)
     out = np.empty(model.nq)
     for scale in (1.0, 1.0 + 1e-7):  # (cos, sin) slightly off the unit circle, as iterates
@@ -196,11 +198,11 @@ def test_integrate_and_difference_of_continuous_joints_equal_pinocchio() -> None
             q_to = pin.integrate(model, q, rng.uniform(-3.0, 3.0, model.nv))
             expected = pin.difference(model, q, q_to)
             for k in range(model.nv):
-                assert _joint_difference(chain, q, q_to, k) == expected[k]
+                assert _joint_difference(*index, q, q_to, k) == expected[k]
     q = robot.q_from_positions(np.zeros(6))
     for angle in (1e-3, 0.5, 3.0, np.pi):  # every branch of Pinocchio's SO(2) log
         q_to = pin.integrate(model, q, np.full(6, angle))
-        assert _joint_difference(chain, q, q_to, 0) == pin.difference(model, q, q_to)[0]
+        assert _joint_difference(*index, q, q_to, 0) == pin.difference(model, q, q_to)[0]
 
 
 def test_configuration_is_validated() -> None:

@@ -61,6 +61,14 @@ def _jit(function: Callable[..., Any]) -> Callable[..., Any]:
     return numba.njit(cache=True, nogil=True, error_model="numpy")(function)
 
 
+def _jit_inline(function: Callable[..., Any]) -> Callable[..., Any]:
+    """``_jit`` for small helpers called per joint: inlined into the caller by numba, so the
+    named tuples they take are not passed through a call each time."""
+    if numba is None:  # pragma: no cover
+        return function
+    return numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")(function)
+
+
 _EPS = float(np.finfo(np.float64).eps)
 _PREC2 = _EPS ** (1.0 / 3.0)  # Pinocchio's TaylorSeriesExpansion<double>::precision<2>()
 _PREC3 = _EPS ** (1.0 / 4.0)  # ... precision<3>()

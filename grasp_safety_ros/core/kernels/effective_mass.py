@@ -6,12 +6,12 @@ of each body, the object merged into the last), one value passed as a whole."""
 
 import math
 
-from ._jit import _jit
+from ._jit import _jit, _jit_inline
 from .ik import _workspace
 from .kinematics import _forward_kinematics, _joint_axis_in_world
 
 
-@_jit
+@_jit_inline
 def _mobility_from_frames(chain, bodies, ws, out):
     """[J M^-1 J^T]_3x3 at the tip origin, base axes [1/kg], from the joint and tip poses in ws.
 
@@ -19,14 +19,14 @@ def _mobility_from_frames(chain, bodies, ws, out):
     levers[k] and rotational inertia about it rotational_inertias[k] (joint-k frame), by the
     composite-rigid-body algorithm in world axes; M^-1 through its Cholesky factor.
     """
-    base_rotation = chain.base_rotation
+    base_rotation, axes, prismatic = chain.base_rotation, chain.axes, chain.prismatic
     masses, levers = bodies.masses, bodies.levers
     rotational_inertias = bodies.rotational_inertias
     jr, jp, ft = ws[0], ws[1], ws[3]
     mass_matrix, sv, sw, jt, io, tmp = ws[15], ws[16], ws[17], ws[18], ws[19], ws[20]
-    n = chain.axes.shape[0]
+    n = axes.shape[0]
     for k in range(n):
-        u0, u1, u2, w0, w1, w2, slide = _joint_axis_in_world(chain, jr, k)
+        u0, u1, u2, w0, w1, w2, slide = _joint_axis_in_world(axes, prismatic, jr, k)
         p0, p1, p2 = jp[k, 0], jp[k, 1], jp[k, 2]
         sw[k, 0], sw[k, 1], sw[k, 2] = w0, w1, w2
         sv[k, 0] = (p1 * w2 - p2 * w1) + slide * u0

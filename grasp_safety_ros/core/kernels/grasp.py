@@ -57,7 +57,8 @@ def evaluate_grasp(
                     + r1 * rotations_tip_in_base[i, 1, b]
                     + r2 * rotations_tip_in_base[i, 2, b]
                 )
-    q_all = out.q_all
+    q_all, mobilities, tangent_norms = out.q_all, out.mobilities, out.tangent_norms
+    worst, directions, effective_masses = out.worst, out.directions, out.effective_masses
     if q0_given:
         for k in range(seed_q.shape[0]):
             q_all[0, k] = seed_q[k]
@@ -78,22 +79,22 @@ def evaluate_grasp(
             if status != 0:
                 return status, i, joint, value
         # ws holds the joint poses at q_all[i] (the IK's last forward kinematics).
-        mobility = out.mobilities[i]
+        mobility = mobilities[i]
         _mobility_from_frames(chain, bodies, ws, mobility)
         t0, t1, t2 = tangents_in_base[i, 0], tangents_in_base[i, 1], tangents_in_base[i, 2]
         norm = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
-        out.tangent_norms[i] = norm
+        tangent_norms[i] = norm
         if norm < stationary_tangent:
-            out.worst[i] = True
+            worst[i] = True
             continue
-        out.worst[i] = False
+        worst[i] = False
         d0, d1, d2 = t0 / norm, t1 / norm, t2 / norm
-        out.directions[i, 0], out.directions[i, 1], out.directions[i, 2] = d0, d1, d2
+        directions[i, 0], directions[i, 1], directions[i, 2] = d0, d1, d2
         unit_norm = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
         u0, u1, u2 = d0 / unit_norm, d1 / unit_norm, d2 / unit_norm
         quadratic = 0.0
         for a in range(3):
             ua = u0 if a == 0 else (u1 if a == 1 else u2)
             quadratic += ua * (mobility[a, 0] * u0 + mobility[a, 1] * u1 + mobility[a, 2] * u2)
-        out.effective_masses[i] = 1.0 / quadratic
+        effective_masses[i] = 1.0 / quadratic
     return 0, count, 0, 0.0

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from ._jit import _jit
+from ._jit import _jit, _jit_inline
 from .kinematics import _forward_kinematics, _integrate, _joint_difference, _local_jacobian
 from .lie_group import _jlog6, _log6, _relative_pose
 from .linalg import _damped_step
@@ -43,7 +43,7 @@ def _workspace(n):
     )
 
 
-@_jit
+@_jit_inline
 def _predict(
     chain,
     rotation_previous,
@@ -70,7 +70,7 @@ def _predict(
     _integrate(chain, q_previous, step, guess, False)
 
 
-@_jit
+@_jit_inline
 def _solve_pose_into(chain, settings, target_rotation, target_translation, q_init, q, ws):
     """IKSolver._solve_python, compiled: q is overwritten; returns (converged, iterations).
 
@@ -140,7 +140,7 @@ def solve_pose(chain, settings, target_rotation, target_translation, q_init):
     return q, converged, iterations
 
 
-@_jit
+@_jit_inline
 def _trajectory_step(chain, settings, target_rotations, target_translations, times, i, out, ws):
     """Sample i >= 1 of IKSolver._trajectory_python: (status, joint, value); status 0 is OK.
 
@@ -149,6 +149,8 @@ def _trajectory_step(chain, settings, target_rotations, target_translations, tim
     those at q_all[i] (or at q_fail).
     """
     q_all, q = out.q_all, out.q_fail
+    q_index, continuous = chain.q_index, chain.continuous
+    check_velocity, velocity_limits = settings.check_velocity, settings.velocity_limits
     _predict(
         chain,
         target_rotations[i - 1],
@@ -168,10 +170,12 @@ def _trajectory_step(chain, settings, target_rotations, target_translations, tim
     for k in range(q.shape[0]):
         q_all[i, k] = q[k]
     n = chain.axes.shape[0]
+    deltas = ws[14]  # the step is scratch again
     worst = 0
     largest = -1.0
     for k in range(n):
-        delta = abs(_joint_difference(chain, q_all[i - 1], q, k))
+        delta = abs(_joint_difference(q_index, continuous, q_all[i - 1], q, k))
+        deltas[k] = delta
         if delta > largest:
             largest = delta
             worst = k
@@ -180,8 +184,8 @@ def _trajectory_step(chain, settings, target_rotations, target_translations, tim
     elapsed = times[i] - times[i - 1]
     if settings.any_velocity_check and elapsed > 0:
         for k in range(n):
-            speed = abs(_joint_difference(chain, q_all[i - 1], q, k)) / elapsed
-            if settings.check_velocity[k] and speed > settings.velocity_limits[k] * (1 + 1e-9):
+            speed = deltas[k] / elapsed
+            if check_velocity[k] and speed > velocity_limits[k] * (1 + 1e-9):
                 return 3, k, speed
     return 0, 0, 0.0
 

@@ -3,7 +3,7 @@ integrate / difference of its configurations, compiled."""
 
 import math
 
-from ._jit import _jit
+from ._jit import _jit_inline
 
 # ----------------------------------------------------------------------------- kinematics
 # Conventions: a chain is ``method.compiled.ChainArrays`` (one value, passed as a whole): n
@@ -14,14 +14,16 @@ from ._jit import _jit
 # ws[2], ws[3] the tip rotation and translation. Inner functions allocate nothing.
 
 
-@_jit
+@_jit_inline
 def _forward_kinematics(chain, q, ws):
     """World poses of every joint frame (ws[0], ws[1]) and of the tip frame (ws[2], ws[3]).
 
     prismatic[k] is 1.0 for a prismatic joint, 0.0 for a revolute one: the joint turns by
     q (1 - prismatic) and slides by q prismatic (exactly the identity / zero otherwise).
     """
+    # Fields are read into locals once: reading them inside loops costs a reference count each.
     pr, pt, axes = chain.placement_rotations, chain.placement_translations, chain.axes
+    prismatic, continuous, q_index = chain.prismatic, chain.continuous, chain.q_index
     jr, jt, fr, ft = ws[0], ws[1], ws[2], ws[3]
     n = axes.shape[0]
     for k in range(n):
@@ -39,13 +41,13 @@ def _forward_kinematics(chain, q, ws):
                 fr[i, 1] = r0 * pr[k, 0, 1] + r1 * pr[k, 1, 1] + r2 * pr[k, 2, 1]
                 fr[i, 2] = r0 * pr[k, 0, 2] + r1 * pr[k, 1, 2] + r2 * pr[k, 2, 2]
         ax, ay, az = axes[k, 0], axes[k, 1], axes[k, 2]
-        index = chain.q_index[k]
-        if chain.continuous[k]:  # (cos, sin) as given, as Pinocchio (no renormalisation)
+        index = q_index[k]
+        if continuous[k]:  # (cos, sin) as given, as Pinocchio (no renormalisation)
             slide = 0.0
             c = q[index]
             s = q[index + 1]
         else:
-            slide = q[index] * chain.prismatic[k]
+            slide = q[index] * prismatic[k]
             angle = q[index] - slide
             c = math.cos(angle)
             s = math.sin(angle)
@@ -72,27 +74,29 @@ def _forward_kinematics(chain, q, ws):
             fr[i, j] = r0 * tip_rotation[0, j] + r1 * tip_rotation[1, j] + r2 * tip_rotation[2, j]
 
 
-@_jit
-def _joint_axis_in_world(chain, joint_rotations, k):
+@_jit_inline
+def _joint_axis_in_world(axes, prismatic, joint_rotations, k):
     """Joint k's unit axis in world axes (u) and the joint's angular part w = u (revolute)
-    or 0 (prismatic): (u0, u1, u2, w0, w1, w2, slide), slide = 1.0 for prismatic."""
-    ax, ay, az = chain.axes[k, 0], chain.axes[k, 1], chain.axes[k, 2]
+    or 0 (prismatic): (u0, u1, u2, w0, w1, w2, slide), slide = 1.0 for prismatic (the
+    chain's axes and prismatic arrays)."""
+    ax, ay, az = axes[k, 0], axes[k, 1], axes[k, 2]
     jr = joint_rotations
     u0 = jr[k, 0, 0] * ax + jr[k, 0, 1] * ay + jr[k, 0, 2] * az
     u1 = jr[k, 1, 0] * ax + jr[k, 1, 1] * ay + jr[k, 1, 2] * az
     u2 = jr[k, 2, 0] * ax + jr[k, 2, 1] * ay + jr[k, 2, 2] * az
-    slide = chain.prismatic[k]
+    slide = prismatic[k]
     turn = 1.0 - slide
     return u0, u1, u2, u0 * turn, u1 * turn, u2 * turn, slide
 
 
-@_jit
+@_jit_inline
 def _local_jacobian(chain, ws, out):
     """Tip-frame Jacobian (6 x n, LOCAL: [linear; angular] in tip axes), as Pinocchio's, at
     the poses in ws."""
     jr, jt, fr, ft = ws[0], ws[1], ws[2], ws[3]
-    for k in range(chain.axes.shape[0]):
-        u0, u1, u2, w0, w1, w2, slide = _joint_axis_in_world(chain, jr, k)
+    axes, prismatic = chain.axes, chain.prismatic
+    for k in range(axes.shape[0]):
+        u0, u1, u2, w0, w1, w2, slide = _joint_axis_in_world(axes, prismatic, jr, k)
         dx, dy, dz = jt[k, 0] - ft[0], jt[k, 1] - ft[1], jt[k, 2] - ft[2]
         l0 = (dy * w2 - dz * w1) + slide * u0
         l1 = (dz * w0 - dx * w2) + slide * u1
@@ -102,13 +106,15 @@ def _local_jacobian(chain, ws, out):
             out[3 + i, k] = fr[0, i] * w0 + fr[1, i] * w1 + fr[2, i] * w2
 
 
-@_jit
+@_jit_inline
 def _integrate(chain, q, step, out, clamp):
     """Pinocchio's integrate(q, step) into out (may be q); clamp: then clip to the chain's
     position limits (continuous joints have none)."""
+    q_index, continuous = chain.q_index, chain.continuous
+    lower_q, upper_q = chain.lower_q, chain.upper_q
     for k in range(step.shape[0]):
-        index = chain.q_index[k]
-        if chain.continuous[k]:  # SO(2): rotate (cos, sin), first-order renormalisation
+        index = q_index[k]
+        if continuous[k]:  # SO(2): rotate (cos, sin), first-order renormalisation
             ca, sa = q[index], q[index + 1]
             co, so = math.cos(step[k]), math.sin(step[k])
             r0 = co * ca - so * sa
@@ -117,16 +123,17 @@ def _integrate(chain, q, step, out, clamp):
             out[index] = r0 * scale
             out[index + 1] = r1 * scale
         elif clamp:
-            out[index] = min(max(q[index] + step[k], chain.lower_q[index]), chain.upper_q[index])
+            out[index] = min(max(q[index] + step[k], lower_q[index]), upper_q[index])
         else:
             out[index] = q[index] + step[k]
 
 
-@_jit
-def _joint_difference(chain, q_from, q_to, k):
-    """Pinocchio's difference(q_from, q_to) for joint k [rad or m]."""
-    index = chain.q_index[k]
-    if not chain.continuous[k]:
+@_jit_inline
+def _joint_difference(q_index, continuous, q_from, q_to, k):
+    """Pinocchio's difference(q_from, q_to) for joint k [rad or m] (the chain's q_index and
+    continuous arrays)."""
+    index = q_index[k]
+    if not continuous[k]:
         return q_to[index] - q_from[index]
     ca0, sa0 = q_from[index], q_from[index + 1]
     ca1, sa1 = q_to[index], q_to[index + 1]

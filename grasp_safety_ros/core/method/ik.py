@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import importlib.util
 import math
+import weakref
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -156,6 +157,29 @@ def exp3_batch(rotation_vectors: np.ndarray) -> np.ndarray:
     return result
 
 
+_OBJECT_PATHS: list[tuple[Any, np.ndarray, np.ndarray, np.ndarray]] = []
+"""The last object path of ``object_path_arrays`` (weakref to the trajectory, s, R, p)."""
+
+
+def object_path_arrays(trajectory: Any, s_values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Object rotations (N, 3, 3) and positions (N, 3) [m] in the base frame at the path
+    parameters, vectorised; the last result is kept, as every grasp of a ranking needs it."""
+    s = np.asarray(s_values, dtype=float)
+    if _OBJECT_PATHS:
+        reference, cached_s, rotations, translations = _OBJECT_PATHS[0]
+        if reference() is trajectory and np.array_equal(cached_s, s):
+            return rotations, translations
+    start = trajectory.transform_object_to_base_start
+    goal = trajectory.transform_object_to_base_goal
+    log = np.asarray(trajectory.rotation_log_in_object, dtype=float)
+    rotations = np.matmul(start.rotation, exp3_batch(s[:, None] * log))
+    translations = (1.0 - s)[:, None] * start.translation + s[:, None] * goal.translation
+    for array in (rotations, translations):
+        array.setflags(write=False)
+    _OBJECT_PATHS[:] = [(weakref.ref(trajectory), s.copy(), rotations, translations)]
+    return rotations, translations
+
+
 def tip_path_arrays(
     trajectory: Any, transform_tip_to_object: pin.SE3, s_values: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -170,20 +194,25 @@ def tip_path_arrays(
         Tip rotations (N, 3, 3) and positions (N, 3) [m] in the base frame, and the path
         tangents d p_tip / ds (N, 3) [m], base axes; equal to ``tip_path`` up to rounding.
     """
-    s = np.asarray(s_values, dtype=float)
-    grasp = pin.SE3(transform_tip_to_object)
-    start = trajectory.transform_object_to_base_start
-    goal = trajectory.transform_object_to_base_goal
-    log = np.asarray(trajectory.rotation_log_in_object, dtype=float)
-    object_rotations = np.matmul(start.rotation, exp3_batch(s[:, None] * log))
-    start_p, goal_p = start.translation, goal.translation
-    object_translations = (1.0 - s)[:, None] * start_p + s[:, None] * goal_p
-    rotations = np.matmul(object_rotations, grasp.rotation)
-    translations = np.einsum("nij,j->ni", object_rotations, grasp.translation) + (
-        object_translations
+    object_rotations, object_translations = object_path_arrays(trajectory, s_values)
+    count = len(object_translations)
+    stacked = object_rotations.reshape(3 * count, 3)  # one matrix product per quantity
+    grasp_p = np.asarray(transform_tip_to_object.translation, dtype=float)
+    w = np.asarray(trajectory.rotation_log_in_object, dtype=float)
+    lever_in_object = np.array(  # w x p (np.cross is slow on one vector)
+        [
+            w[1] * grasp_p[2] - w[2] * grasp_p[1],
+            w[2] * grasp_p[0] - w[0] * grasp_p[2],
+            w[0] * grasp_p[1] - w[1] * grasp_p[0],
+        ]
     )
-    lever_in_object = np.cross(log, grasp.translation)
-    tangents = (goal_p - start_p) + np.einsum("nij,j->ni", object_rotations, lever_in_object)
+    rotations = (stacked @ np.asarray(transform_tip_to_object.rotation)).reshape(count, 3, 3)
+    translations = (stacked @ grasp_p).reshape(count, 3) + object_translations
+    linear = (
+        trajectory.transform_object_to_base_goal.translation
+        - trajectory.transform_object_to_base_start.translation
+    )
+    tangents = (stacked @ lever_in_object).reshape(count, 3) + linear
     return rotations, translations, tangents
 
 
