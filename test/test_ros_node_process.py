@@ -5,7 +5,6 @@ file and stops cleanly on SIGINT; start-up errors give one clear log line and ex
 from __future__ import annotations
 
 import os
-import random
 import re
 import signal
 import subprocess
@@ -19,6 +18,7 @@ from conftest import ARM6_AXES, serial_arm_urdf
 from grasp_safety_msgs.srv import RankGrasps
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from ros_domains import claim_ros_domain
 from std_msgs.msg import String
 from test_ros_node import book_request
 
@@ -37,7 +37,11 @@ def command(*ros_args: str) -> list[str]:
 
 @pytest.fixture()
 def ros_env(tmp_path: Path) -> Iterator[dict[str, str]]:
-    domain_id = random.SystemRandom().randint(0, 101)
+    with claim_ros_domain() as claim:
+        yield from _ros_env(tmp_path, claim.domain_id)
+
+
+def _ros_env(tmp_path: Path, domain_id: int) -> Iterator[dict[str, str]]:
     env = {
         **os.environ,
         "ROS_DOMAIN_ID": str(domain_id),

@@ -63,6 +63,22 @@ def rank_scenario(scenario: Scenario, metric: str | None = None) -> SafetyReport
     )
 
 
+def run_header(scenario: Scenario, report: SafetyReport) -> str:
+    """The line printed before the table: robot, problem size and the backend that ran."""
+    urdf = scenario.robot.urdf
+    if urdf.startswith("example-robot-data:"):
+        robot = urdf.split(":", 1)[1]
+    elif "<" in urdf:
+        robot = "(inline URDF)"
+    else:
+        robot = Path(urdf).name
+    return (
+        f"robot {robot} ({scenario.robot.base_frame} -> {scenario.robot.tip_frame}), "
+        f"{len(scenario.grasps)} grasps x {scenario.trajectory.num_samples} samples, "
+        f"backend {report.ranking.backend}"
+    )
+
+
 def _write_outputs(
     report: SafetyReport, json_path: Path | None, plot_path: Path | None, title: str
 ) -> None:
@@ -81,6 +97,7 @@ def _write_outputs(
 def _command_rank(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
     report = rank_scenario(scenario, args.metric)
+    print(run_header(scenario, report))
     print(report_text(report))
     _write_outputs(report, args.json, args.plot, Path(args.scenario).name)
     return 0
@@ -91,6 +108,7 @@ def _command_demo(args: argparse.Namespace) -> int:
     print(f"demo: the paper's book experiment on Baxter ({path})")
     scenario = load_scenario(path)
     report = rank_scenario(scenario)
+    print(run_header(scenario, report))
     print(report_text(report))
     out = Path(args.out)
     _write_outputs(report, out / "ranking.json", out / "ranking.png", "book on Baxter (demo)")

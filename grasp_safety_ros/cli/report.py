@@ -55,8 +55,10 @@ def evaluation_to_dict(evaluation: GraspEvaluation) -> dict[str, Any]:
 
 
 def ranking_to_dict(ranking: Ranking) -> dict[str, Any]:
-    """The paper's ranking: joint names, metric, ranking (indices) and per-grasp results."""
+    """The paper's ranking: joint names, metric, ranking (indices), per-grasp results and the
+    backend that ran (``compiled`` or ``python``, with the reason of a fallback)."""
     return {
+        "backend": ranking.backend,
         "joint_names": list(ranking.joint_names),
         "metric": ranking.metric,
         "score_unit": SCORE_UNITS[ranking.metric],

@@ -44,6 +44,9 @@ INFEASIBLE_RGBA = (0.5, 0.5, 0.5, 0.6)
 NAN = float("nan")
 LABEL_OFFSET_M = np.array([0.0, 0.0, 0.03])
 """Labels float this far above the grasp point (base axes)."""
+MAX_ABS_POSITION_M = 1000.0
+"""Pose coordinates beyond this are refused: no manipulator reaches them, and absurd values
+(1e300) made the IK search for seconds before finding the grasp infeasible."""
 
 
 # --- Poses -----------------------------------------------------------------------------------
@@ -61,12 +64,19 @@ def quaternion_msg_from_rotation(rotation: np.ndarray) -> Quaternion:
 
 
 def transform_from_pose_msg(pose: Pose, field: str) -> pin.SE3:
-    """Rigid transform of a geometry_msgs/Pose; checks finiteness and a unit quaternion."""
+    """Rigid transform of a geometry_msgs/Pose; checks finiteness, a unit quaternion and
+    coordinates within +/- MAX_ABS_POSITION_M."""
     quat_xyzw = quat_xyzw_from_msg(pose.orientation)
     rotation = rotation_from_quat_xyzw(quat_xyzw, f"{field}.orientation")
     position = finite_array(
         [pose.position.x, pose.position.y, pose.position.z], f"{field}.position", (3,)
     )
+    if np.max(np.abs(position)) > MAX_ABS_POSITION_M:
+        raise InvalidInputError(
+            f"{field}.position",
+            f"must be within +/-{MAX_ABS_POSITION_M:g} m per coordinate, got "
+            f"{[float(v) for v in position]}",
+        )
     return pin.SE3(rotation, np.array(position))
 
 
@@ -320,6 +330,7 @@ def ranking_msg(
         evaluations=[evaluation_msg(e) for e in ranking.evaluations],
         joint_names=list(ranking.joint_names),
         compute_time_s=float(compute_time_s),
+        backend=ranking.backend,
         metric_point="tip",
         rank_by="safety",
         safety_order=order,

@@ -40,6 +40,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import (
     DurabilityPolicy,
+    HistoryPolicy,
     QoSProfile,
     ReliabilityPolicy,
     qos_profile_sensor_data,
@@ -83,6 +84,13 @@ LATCHED = QoSProfile(
 )
 """Results: late subscribers (RViz, ``ros2 topic echo``) get the last ranking."""
 INPUT = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+SERVICE = QoSProfile(
+    history=HistoryPolicy.KEEP_ALL,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+"""Requests wait in the service's queue until a thread takes them; the default (keep the last
+10) silently dropped the oldest when more than EXECUTOR_THREADS + 10 were in flight."""
 _STANDARD_OVERRIDES = ("use_sim_time", "qos_overrides.", "start_type_description_service")
 
 
@@ -102,6 +110,10 @@ class ComputeTimeExceededError(GraspSafetyError):
     """A ranking ran longer than max_compute_time_s and was abandoned."""
 
 
+class ShuttingDownError(GraspSafetyError):
+    """The node is shutting down: the ranking was abandoned."""
+
+
 @dataclass
 class _Status:
     """What /diagnostics reports (guarded by the node's state lock)."""
@@ -114,6 +126,7 @@ class _Status:
     last_source: str = ""
     last_error: str = ""
     last_was_error: bool = False
+    robot_description_error: str = ""  # why the last /robot_description was not used
 
 
 @dataclass(frozen=True)
@@ -149,6 +162,7 @@ class GraspSafetyNode(Node):
     def _setup(self) -> None:
         self._state_lock = threading.Lock()
         self._compute_lock = threading.Lock()
+        self._stopping = threading.Event()  # set by abandon_rankings at shut-down
         self._started = False
         self._startup_rejection = ""
         self._startup_failure = ""
@@ -194,46 +208,73 @@ class GraspSafetyNode(Node):
             RankGrasps,
             "~/rank_grasps",
             self._on_rank_grasps,
+            qos_profile=SERVICE,
             callback_group=self._service_group,
         )
         self.create_subscription(
             PoseArray,
             "~/candidate_grasps",
-            self._on_candidates,
+            self._guarded("candidate_grasps", self._on_candidates),
             INPUT,
             callback_group=self._topic_group,
         )
         self.create_subscription(
             Float64MultiArray,
             "~/candidate_grasp_quality",
-            self._on_quality,
+            self._guarded("candidate_grasp_quality", self._on_quality),
             INPUT,
             callback_group=self._topic_group,
         )
         self.create_subscription(
             Path,
             "~/object_trajectory",
-            self._on_trajectory,
+            self._guarded("object_trajectory", self._on_trajectory),
             INPUT,
             callback_group=self._topic_group,
         )
         self.create_subscription(
             InertiaStamped,
             "~/object_inertia",
-            self._on_inertia,
+            self._guarded("object_inertia", self._on_inertia),
             INPUT,
             callback_group=self._topic_group,
         )
         self.create_subscription(
-            JointState, "/joint_states", self._on_joint_states, qos_profile_sensor_data
+            JointState,
+            "/joint_states",
+            self._guarded("/joint_states", self._on_joint_states),
+            qos_profile_sensor_data,
         )
-        self.create_subscription(String, "/robot_description", self._on_robot_description, LATCHED)
+        self.create_subscription(
+            String,
+            "/robot_description",
+            self._guarded("/robot_description", self._on_robot_description),
+            LATCHED,
+        )
         self._diagnostics_timer = self.create_timer(
             self._settings.diagnostics_period_s, self._publish_diagnostics
         )
         self._started = True
         if self._robot is not None:
             self._log_robot(self._robot)
+
+    def _guarded(self, source: str, callback: Callable[[Any], None]) -> Callable[[Any], None]:
+        """``callback`` for a topic; an unexpected exception (a bug) is logged and reported on
+        /diagnostics instead of stopping the executor."""
+
+        def guarded(msg: Any) -> None:
+            try:
+                callback(msg)
+            except Exception as error:  # last resort: keep serving
+                self.get_logger().error(f"{source}: internal error:\n{traceback.format_exc()}")
+                self._report_error(source, _internal_error(error))
+
+        return guarded
+
+    def abandon_rankings(self) -> None:
+        """Make the running ranking (and any later one) stop at its next progress check: for
+        shut-down, so that no executor thread outlives the node."""
+        self._stopping.set()
 
     def _warn_unknown_overrides(self) -> None:
         for name in sorted(self._parameter_overrides):
@@ -306,6 +347,12 @@ class GraspSafetyNode(Node):
             else:
                 self._startup_rejection = reason
             return SetParametersResult(successful=False, reason=reason)
+        except Exception as error:  # last resort: refuse the change rather than stop
+            self.get_logger().error(f"parameters: internal error:\n{traceback.format_exc()}")
+            reason = _internal_error(error)
+            if not self._started:
+                self._startup_rejection = reason
+            return SetParametersResult(successful=False, reason=reason)
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, changes: dict[str, Any]) -> None:
@@ -341,18 +388,30 @@ class GraspSafetyNode(Node):
             self.get_logger().debug("/robot_description ignored: parameters give the robot")
             return
         try:
+            if not msg.data.lstrip().startswith("<"):  # never a file path or a package name
+                raise InvalidInputError(
+                    "/robot_description",
+                    f"must be URDF XML; got {len(msg.data)} characters not starting with '<'",
+                )
             bundle = build_robot(settings, msg.data)
-        except GraspSafetyError as error:
+        except Exception as error:  # GraspSafetyError, or a bug on a strange description
+            reason = str(error)
+            if not isinstance(error, GraspSafetyError):
+                self.get_logger().error(f"/robot_description:\n{traceback.format_exc()}")
+                reason = _internal_error(error)
             if self._waiting_for_robot:
                 # wait_for_robot raises it, main() logs it once
-                self._startup_failure = f"robot from /robot_description: {error}"
+                self._startup_failure = f"robot from /robot_description: {reason}"
             else:
-                self._report_error("/robot_description", error)
+                with self._state_lock:
+                    self._status.robot_description_error = reason
+                self._report_error("/robot_description", reason)  # the working model stays
             return
         with self._state_lock:
             if _robot_key(self._settings) != _robot_key(settings):
                 return  # robot parameters changed meanwhile; they rebuilt the model
             self._robot = bundle
+            self._status.robot_description_error = ""
         if bundle is not None:
             self._log_robot(bundle)
 
@@ -385,7 +444,7 @@ class GraspSafetyNode(Node):
         except Exception as error:  # last resort: answer and log rather than drop the request
             self.get_logger().error(f"rank_grasps: internal error:\n{traceback.format_exc()}")
             response.success = False
-            response.message = f"internal error: {type(error).__name__}: {error}"
+            response.message = _internal_error(error)
             self._report_error("rank_grasps", error)
         return response
 
@@ -590,7 +649,9 @@ class GraspSafetyNode(Node):
             )
         try:
             started = time.perf_counter()
-            deadline_check = _deadline_check(started + settings.max_compute_time_s, settings)
+            deadline_check = _deadline_check(
+                started + settings.max_compute_time_s, settings, self._stopping
+            )
             ranking = bundle.evaluator.rank(
                 grasps,
                 object_inertia,
@@ -648,7 +709,7 @@ class GraspSafetyNode(Node):
 
     # --- Diagnostics -------------------------------------------------------------------------
 
-    def _report_error(self, source: str, error: BaseException) -> None:
+    def _report_error(self, source: str, error: BaseException | str) -> None:
         with self._state_lock:
             self._status.refused += 1
             self._status.last_error = f"{source}: {error}"
@@ -675,6 +736,7 @@ class GraspSafetyNode(Node):
                 level, message = DiagnosticStatus.OK, "ready, no ranking yet"
             values = {
                 "robot_source": bundle.origin if bundle else "",
+                "backend": bundle.evaluator.ik.backend_used if bundle else "",
                 "base_frame": settings.base_frame,
                 "tip_frame": settings.tip_frame,
                 "rankings": status.rankings,
@@ -684,6 +746,7 @@ class GraspSafetyNode(Node):
                 "last_feasible_grasps": status.last_feasible,
                 "last_infeasible_grasps": status.last_infeasible,
                 "last_error": status.last_error,
+                "robot_description_error": status.robot_description_error,
             }
         return DiagnosticStatus(
             level=level,
@@ -736,10 +799,22 @@ def _analysis_options(
     return replace(defaults, metric_point=metric_point, grasp_quality=quality)
 
 
-def _deadline_check(deadline: float, settings: NodeSettings) -> Callable[[int, int], None]:
-    """A progress callback for rank() and analyse() that abandons the work after the deadline."""
+def _internal_error(error: BaseException) -> str:
+    """The answer to an unexpected exception (a bug): its type and text."""
+    return f"internal error: {type(error).__name__}: {error}"
+
+
+def _deadline_check(
+    deadline: float, settings: NodeSettings, stopping: threading.Event
+) -> Callable[[int, int], None]:
+    """A progress callback for rank() and analyse() that abandons the work after the deadline
+    or when the node shuts down."""
 
     def check(done: int, total: int) -> None:
+        if done < total and stopping.is_set():
+            raise ShuttingDownError(
+                f"ranking abandoned after {done} of {total} steps: the node is shutting down"
+            )
         if done < total and time.perf_counter() > deadline:
             raise ComputeTimeExceededError(
                 f"ranking abandoned after {done} of {total} steps: longer than "
@@ -774,6 +849,8 @@ def main(args: list[str] | None = None) -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        if node is not None:
+            node.abandon_rankings()
         if executor is not None:
             executor.shutdown()
         if node is not None:

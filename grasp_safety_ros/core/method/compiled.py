@@ -108,19 +108,28 @@ def chain_arrays(robot: RobotModel) -> ChainArrays | None:
     RX/RY/RZ, RUBX/RUBY/RUBZ, PX/PY/PZ and their unaligned variants), the tip frame on the
     last.
     """
+    arrays = chain_arrays_or_reason(robot)
+    return arrays if isinstance(arrays, ChainArrays) else None
+
+
+_NOT_COMPILED = "not supported by the compiled kernels"
+
+
+def chain_arrays_or_reason(robot: RobotModel) -> ChainArrays | str:
+    """``chain_arrays``, or the reason the compiled kernels cannot handle the chain (e.g.
+    ``JointModelPlanar joint j3 (3 DOF) not supported by the compiled kernels``)."""
     model = robot.model
     n = model.nv
-    if model.njoints != n + 1:
-        return None
-    if any(model.parents[k] != k - 1 for k in range(1, n + 1)):
-        return None
-    if model.frames[robot.tip_frame_id].parentJoint != n:
-        return None
     joints = list(model.joints)[1:]
     continuous = np.array([_is_continuous(joint) for joint in joints], dtype=np.bool_)
-    for joint, unbounded in zip(joints, continuous, strict=True):
+    for k, (joint, unbounded) in enumerate(zip(joints, continuous, strict=True)):
         if joint.nv != 1 or joint.nq != (2 if unbounded else 1):
-            return None
+            name = model.names[k + 1]
+            return f"{joint.shortname()} joint {name} ({joint.nv} DOF) {_NOT_COMPILED}"
+    if model.njoints != n + 1 or any(model.parents[k] != k - 1 for k in range(1, n + 1)):
+        return f"branched chain {_NOT_COMPILED}"
+    if model.frames[robot.tip_frame_id].parentJoint != n:
+        return f"tip frame not on the last joint: {_NOT_COMPILED}"
     data = model.createData()
     pin.computeJointJacobians(model, data, pin.neutral(model))
     axes = np.empty((n, 3))
@@ -131,11 +140,11 @@ def chain_arrays(robot: RobotModel) -> ChainArrays | None:
         linear, angular = column[:3], column[3:]
         if np.linalg.norm(angular) > 1e-12:
             if np.linalg.norm(linear) > 1e-12 or abs(np.linalg.norm(angular) - 1.0) > 1e-12:
-                return None
+                return f"joint {model.names[k + 1]} (screw motion) {_NOT_COMPILED}"
             axes[k] = angular
         else:
             if continuous[k] or abs(np.linalg.norm(linear) - 1.0) > 1e-12:
-                return None
+                return f"joint {model.names[k + 1]} (non-unit axis) {_NOT_COMPILED}"
             axes[k], prismatic[k] = linear, 1.0
     placements = [model.jointPlacements[k] for k in range(1, n + 1)]
     tip = model.frames[robot.tip_frame_id].placement

@@ -33,7 +33,7 @@ import pinocchio as pin
 
 from ..exceptions import InvalidInputError
 from ..model.robot import RobotModel
-from .compiled import chain_arrays, grasp_buffers, ik_settings
+from .compiled import ChainArrays, chain_arrays_or_reason, grasp_buffers, ik_settings
 
 
 def _numba_installed() -> bool:
@@ -234,7 +234,8 @@ class IKSolver:
                 lower[joint.idx_q : joint.idx_q + joint.nq] = -np.inf
                 upper[joint.idx_q : joint.idx_q + joint.nq] = np.inf
         self._lower_q, self._upper_q = lower, upper
-        self.chain = chain_arrays(robot) if backend != "python" else None
+        chain = chain_arrays_or_reason(robot) if backend != "python" else "requested"
+        self.chain = chain if isinstance(chain, ChainArrays) else None
         self.settings = (
             ik_settings(self.config, robot.velocity_limits) if self.chain is not None else None
         )
@@ -246,6 +247,13 @@ class IKSolver:
                 f"joints here: {', '.join(j.shortname() for j in model.joints[1:])}",
             )
         self.compiled = NUMBA_AVAILABLE and self.chain is not None
+        if self.compiled or backend == "python":
+            self.backend_used = "compiled" if self.compiled else "python"
+        elif not NUMBA_AVAILABLE:
+            self.backend_used = "python (numba not installed)"
+        else:
+            self.backend_used = f"python ({chain})"
+        """What runs: ``compiled`` or ``python``, with the reason when ``auto`` fell back."""
         self._dgesv: Any = None if self.compiled else _lapack_dgesv()
         self._identity6 = np.eye(6)
         self._identity_n = np.eye(model.nv)

@@ -14,7 +14,7 @@ import multiprocessing
 import os
 import threading
 import weakref
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Generator, Iterator, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, ThreadPoolExecutor
 from dataclasses import replace
 from functools import partial
@@ -72,22 +72,35 @@ def evaluate_jobs(
     executor: Executor,
     jobs: Sequence[Job],
     evaluate: Callable[..., Result],
-) -> Iterator[Result]:
+) -> Generator[Result, None, None]:
     """``evaluate(evaluator, *job)`` of each job on the pool, yielded in job order.
 
     ``evaluate`` must be picklable for a process pool (a module-level function or a method
     of a module-level class, e.g. ``GraspSafetyEvaluator._evaluate_sampled``); the workers
-    call it on their own copy of the evaluator. Jobs go out in contiguous chunks (about four
-    per worker), which keeps the pool's per-task overhead small and the load balanced.
+    call it on their own copy of the evaluator. On processes, jobs go out in contiguous chunks
+    (about four per worker), which keeps the pool's per-task overhead small and the load
+    balanced; on threads one job is one task (the overhead is small), so the caller sees each
+    result, and can stop, as soon as it is ready. Closing the returned generator early (an
+    abandoned ranking) cancels the tasks not started yet; a running thread task finishes its
+    one job.
     """
+    if isinstance(executor, ThreadPoolExecutor):
+        return _close_early(executor.map(lambda job: [evaluate(evaluator, *job)], jobs))
     workers = max(1, getattr(executor, "_max_workers", 2))
     size = max(1, math.ceil(len(jobs) / (4 * workers)))
     chunks = [jobs[k : k + size] for k in range(0, len(jobs), size)]
-    if isinstance(executor, ThreadPoolExecutor):
-        results = executor.map(lambda chunk: [evaluate(evaluator, *job) for job in chunk], chunks)
-    else:
-        results = executor.map(partial(_evaluate_chunk_in_worker, evaluate), chunks)
-    return (result for chunk in results for result in chunk)
+    return _close_early(executor.map(partial(_evaluate_chunk_in_worker, evaluate), chunks))
+
+
+def _close_early(results: Iterator[list[Result]]) -> Generator[Result, None, None]:
+    """The results of Executor.map's chunks; closing it closes the map (cancels the rest)."""
+    try:
+        for chunk in results:
+            yield from chunk
+    finally:
+        close = getattr(results, "close", None)
+        if close is not None:
+            close()
 
 
 _WORKER_EVALUATOR: Any = None

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Generator, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -133,12 +133,15 @@ class Ranking:
         metric: The aggregate used.
         order: Indices of the feasible grasps, safest first (ties keep input order).
         evaluations: One per candidate, in candidate order.
+        backend: What ran: ``compiled`` or ``python``, with the reason when ``auto`` fell
+            back, e.g. ``python (numba not installed)``; empty when not recorded.
     """
 
     joint_names: tuple[str, ...]
     metric: str
     order: tuple[int, ...]
     evaluations: tuple[GraspEvaluation, ...]
+    backend: str = ""
 
 
 def aggregate(effective_mass_kg: np.ndarray, times_s: np.ndarray, metric: str) -> float:
@@ -282,19 +285,25 @@ class GraspSafetyEvaluator:
             for index, grasp in enumerate(grasps)
         ]
         if executor is None:
-            results: Iterable[GraspEvaluation] = (self._evaluate_sampled(*job) for job in jobs)
+            results: Generator[GraspEvaluation, None, None] = (
+                self._evaluate_sampled(*job) for job in jobs
+            )
         else:
             results = evaluate_jobs(self, executor, jobs, GraspSafetyEvaluator._evaluate_sampled)
         evaluations = []
-        for evaluation in results:
-            evaluations.append(evaluation)
-            if progress is not None:
-                progress(len(evaluations), len(grasps))
+        try:
+            for evaluation in results:
+                evaluations.append(evaluation)
+                if progress is not None:
+                    progress(len(evaluations), len(grasps))
+        finally:
+            results.close()  # progress raised: stop the work still queued
         return Ranking(
             joint_names=self.robot.joint_names,
             metric=metric,
             order=order_by_score(evaluations),
             evaluations=tuple(evaluations),
+            backend=self.ik.backend_used,
         )
 
 
