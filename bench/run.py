@@ -21,7 +21,9 @@ Measured in one process, interleaved, repeated (median and spread):
 - the physical floor (4k flops per evaluation + 2k per IK iteration) and our distance to it;
 - where the time goes (cProfile of one ranking, ours and the peer's);
 - service latency: 10 grasps x 101 samples through the running node (in-process, rclpy),
-  when the node and grasp_safety_msgs are importable.
+  when the node and grasp_safety_msgs are importable;
+- posture selection (bench/postures.py): ms per grasp and score gain per restart count on
+  Panda, Baxter and the book; alone: ``bench/run.py --postures-only``.
 
 Usage: .venv/bin/python bench/run.py --json bench/results.json   (not a test; ~2-4 minutes)
 """
@@ -49,6 +51,7 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np
+from postures import bench_postures, print_postures
 from pykdl_peer import PyKDLPipeline, build_chain, load_pykdl
 from reference import ReferenceIK, reference_effective_masses
 from workload import ARMS, ArmWorkload, box_object, grasps_around_box
@@ -568,7 +571,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument("--no-peer", action="store_true", help="skip PyKDL")
     parser.add_argument("--no-service", action="store_true", help="skip the node latency")
+    parser.add_argument(
+        "--postures-only",
+        action="store_true",
+        help="run only the posture-selection section (bench/postures.py, ~1 min)",
+    )
+    parser.add_argument("--posture-grasps", type=int, default=20)
     args = parser.parse_args(argv)
+    if args.postures_only:
+        postures = bench_postures(args.posture_grasps)
+        if args.json:
+            args.json.parent.mkdir(parents=True, exist_ok=True)
+            args.json.write_text(json.dumps({"posture_selection": postures}, indent=2) + "\n")
+        print_postures(postures)
+        return 0
 
     load_before = os.getloadavg()
     kdl, kdl_reason = (None, "skipped (--no-peer)") if args.no_peer else load_pykdl()
@@ -582,6 +598,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.continuous_arm == "none"
         else bench_continuous(ARMS[args.continuous_arm], args.repeats)
     )
+    print("[postures] cost and gain of posture selection", file=sys.stderr)
+    posture_selection = bench_postures(args.posture_grasps)
     if args.no_service:
         service = {"median_ms": None, "reason": "skipped (--no-service)"}
     else:
@@ -645,6 +663,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "distance_to_floor": worst("distance_to_floor"),
         "service_latency_ms_median": service.get("median_ms"),
         "service": service,
+        "posture_selection": posture_selection,
         "pykdl_unavailable_reason": kdl_reason or None,
         "arms": arms,
         "machine": {
@@ -666,6 +685,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(text + "\n")
     print_table(results)
+    print_postures(posture_selection)
     return 0
 
 

@@ -27,9 +27,12 @@ from grasp_safety_ros.core import (
 from grasp_safety_ros.core.analyses.exposed_points import box_corners_in_object
 from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions, SafetyReport, analyse
 from grasp_safety_ros.core.analyses.uncertainty import InertiaUncertainty
+from grasp_safety_ros.core.method.executable import joint_velocities_accelerations
+from grasp_safety_ros.core.method.posture import PostureConfig, select_postures
 from grasp_safety_ros.core.method.ranking import GraspEvaluation, Ranking
 from grasp_safety_ros.ros.conversions import (
     check_grasp_array,
+    duration_msg,
     grasps_from_pose_array,
     inertia_msg_from_object,
     markers_msg,
@@ -312,6 +315,57 @@ def test_ranking_message(arm6: RobotModel) -> None:
     unreachable = message.evaluations[2]
     assert math.isnan(unreachable.score) and math.isnan(unreachable.peak_effective_mass_kg)
     assert unreachable.reason and len(unreachable.effective_mass_kg) == 0
+
+
+def test_duration_message_rounds_to_the_nanosecond_with_carry() -> None:
+    assert (duration_msg(0.0).sec, duration_msg(0.0).nanosec) == (0, 0)
+    assert (duration_msg(1.25).sec, duration_msg(1.25).nanosec) == (1, 250_000_000)
+    assert (duration_msg(1.9999999999).sec, duration_msg(1.9999999999).nanosec) == (2, 0)
+    assert (duration_msg(0.02).sec, duration_msg(0.02).nanosec) == (0, 20_000_000)
+
+
+def test_joint_trajectory_and_posture_fields_round_trip(arm6: RobotModel) -> None:
+    ranking, grasps, trajectory = _ranking(arm6)
+    evaluator = GraspSafetyEvaluator(arm6)
+    obj = solid_box(0.5, [0.1, 0.1, 0.1])
+    selected = select_postures(evaluator, grasps, obj, trajectory, ranking, PostureConfig(4))
+    request = PoseArray(
+        header=Header(frame_id="object"),
+        poses=[pose_msg_from_transform(g.transform_tip_to_object) for g in grasps],
+    )
+    message = ranking_msg(selected, request, "base_link", Time(sec=9), 0.25)
+    for got, want, posture in zip(
+        message.evaluations, selected.evaluations, selected.postures, strict=True
+    ):
+        trajectory_msg = got.joint_trajectory
+        assert trajectory_msg.header.frame_id == "base_link"
+        assert list(trajectory_msg.joint_names) == list(arm6.joint_names)
+        assert len(trajectory_msg.points) == len(want.times_s)
+        positions = np.array([p.positions for p in trajectory_msg.points]).reshape(-1, 6)
+        velocities = np.array([p.velocities for p in trajectory_msg.points]).reshape(-1, 6)
+        accelerations = np.array([p.accelerations for p in trajectory_msg.points]).reshape(-1, 6)
+        times = [
+            p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec for p in trajectory_msg.points
+        ]
+        qd, qdd = joint_velocities_accelerations(want.times_s, want.joint_positions)
+        np.testing.assert_array_equal(positions, want.joint_positions)
+        np.testing.assert_array_equal(velocities, qd.reshape(-1, 6))
+        np.testing.assert_array_equal(accelerations, qdd.reshape(-1, 6))
+        np.testing.assert_allclose(times, want.times_s, rtol=0, atol=1e-9)
+        assert got.postures_tried == posture.postures_tried
+        assert got.postures_feasible == posture.postures_feasible
+        np.testing.assert_array_equal(got.start_positions, posture.start_positions)
+        for field, value in (
+            ("score_single_ik", posture.score_single_ik),
+            ("score_range_min", posture.score_range[0]),
+            ("score_range_max", posture.score_range[1]),
+        ):
+            assert getattr(got, field) == value or (
+                math.isnan(getattr(got, field)) and math.isnan(value)
+            )
+    unreachable = message.evaluations[2]
+    assert not unreachable.joint_trajectory.points and unreachable.postures_feasible == 0
+    assert list(unreachable.start_positions) == []
 
 
 def test_markers(arm6: RobotModel) -> None:

@@ -50,6 +50,8 @@ from grasp_safety_ros.core.analyses.iso15066 import assess_grasp
 from grasp_safety_ros.core.analyses.multi_objective import rank_with_quality
 from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions, analyse
 from grasp_safety_ros.core.analyses.uncertainty import InertiaUncertainty
+from grasp_safety_ros.core.method.executable import joint_velocities_accelerations
+from grasp_safety_ros.core.method.posture import PostureConfig, select_postures
 from grasp_safety_ros.paths import config_file
 from grasp_safety_ros.ros.conversions import inertia_msg_from_object, pose_msg_from_transform
 from grasp_safety_ros.ros.node import EXECUTOR_THREADS, GraspSafetyNode
@@ -81,6 +83,7 @@ NODE_PARAMETERS = {
     "max_compute_time_s": 1.5,
     "service_busy_timeout_s": 0.3,
     "diagnostics_period_s": 0.5,
+    "posture.restarts": 0,  # the paper's single IK; posture selection: its own tests below
 }
 
 
@@ -1016,3 +1019,90 @@ def test_quality_topic_pairs_with_candidate_sets(ros: NodeUnderTest) -> None:
             ros.client.destroy_subscription(subscription)
         for publisher in publishers:
             ros.client.destroy_publisher(publisher)
+
+
+# --- Posture selection and the executable joint trajectory -----------------------------------
+
+
+def _seconds(duration: Any) -> float:
+    return duration.sec + 1e-9 * duration.nanosec
+
+
+def assert_joint_trajectory(evaluation: Any, joint_names: Any, times: Any, positions: Any) -> None:
+    trajectory = evaluation.joint_trajectory
+    assert list(trajectory.joint_names) == list(joint_names)
+    assert len(trajectory.points) == len(times)
+    velocities, accelerations = joint_velocities_accelerations(times, positions)
+    for point, t, q, qd, qdd in zip(
+        trajectory.points, times, positions, velocities, accelerations, strict=True
+    ):
+        assert _seconds(point.time_from_start) == pytest.approx(t, abs=1e-9)
+        np.testing.assert_allclose(point.positions, q, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(point.velocities, qd, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(point.accelerations, qdd, rtol=0, atol=1e-12)
+
+
+def test_single_ik_posture_fields_and_joint_trajectory(
+    ros: NodeUnderTest, core_ranking: Any
+) -> None:
+    response = ros.rank(book_request())
+    assert response.success, response.message
+    ranking = response.ranking
+    for got, want in zip(ranking.evaluations, core_ranking.evaluations, strict=True):
+        assert got.score_single_ik == got.score == got.score_range_min == got.score_range_max
+        assert (got.postures_tried, got.postures_feasible) == (1, 1)
+        np.testing.assert_allclose(got.start_positions, want.joint_positions[0], atol=1e-12)
+        assert_joint_trajectory(got, ranking.joint_names, want.times_s, want.joint_positions)
+        header = got.joint_trajectory.header
+        assert header.frame_id == "base" and (header.stamp.sec, header.stamp.nanosec) == (0, 0)
+
+
+def test_posture_selection_by_parameter_equals_the_core(
+    ros: NodeUnderTest, core_evaluator: GraspSafetyEvaluator, core_ranking: Any
+) -> None:
+    (result,) = ros.set_parameters(posture__restarts=6)
+    assert result.successful, result.reason
+    try:
+        response = ros.rank(book_request())
+    finally:
+        (result,) = ros.set_parameters(posture__restarts=0)
+        assert result.successful, result.reason
+    assert response.success, response.message
+    expected = select_postures(
+        core_evaluator,
+        BOOK_GRASPS,
+        BOOK.object_inertia,
+        book_trajectory(),
+        core_ranking,
+        PostureConfig(restarts=6),
+    )
+    assert_matches_core(response.ranking, expected)
+    for got, want, posture in zip(
+        response.ranking.evaluations, expected.evaluations, expected.postures, strict=True
+    ):
+        assert got.score_single_ik == pytest.approx(posture.score_single_ik, rel=1e-12)
+        assert got.score_range_min == pytest.approx(posture.score_range[0], rel=1e-12)
+        assert got.score_range_max == pytest.approx(posture.score_range[1], rel=1e-12)
+        assert got.score <= got.score_single_ik
+        assert (got.postures_tried, got.postures_feasible) == (
+            posture.postures_tried,
+            posture.postures_feasible,
+        )
+        np.testing.assert_allclose(got.start_positions, posture.start_positions, atol=1e-12)
+        assert_joint_trajectory(
+            got, response.ranking.joint_names, want.times_s, want.joint_positions
+        )
+
+
+def test_posture_restarts_parameter_is_typed_and_bounded(ros: NodeUnderTest) -> None:
+    (result,) = ros.set_parameters(posture__restarts=-1)
+    assert not result.successful and result.reason
+    (result,) = ros.set_parameters(posture__restarts=1.5)
+    assert not result.successful and result.reason
+    future = ros.get_client.call_async(GetParameters.Request(names=["posture.restarts"]))
+    (value,) = ros.wait(future).values
+    assert value.integer_value == 0
+    descriptor = ros.node.describe_parameter("posture.restarts")
+    assert descriptor.integer_range[0].from_value == 0
+    assert descriptor.integer_range[0].to_value >= 100
+    assert "restarts" in descriptor.description

@@ -324,5 +324,25 @@ def test_quick_run_peak_force_follows_effective_mass(quick_run) -> None:
         assert grasp["approach_speed_m_s"] == pytest.approx(0.2182, rel=0.01)
 
 
+def test_quick_run_posture_selection_against_single_ik(quick_run) -> None:
+    out, results = quick_run
+    postures = results["posture_selection"]
+    assert postures["experiment"] == "book" and len(postures["grasps"]) == 3
+    for g in postures["grasps"]:
+        assert g["mean_effective_mass_selected_kg"] <= g["mean_effective_mass_single_ik_kg"]
+        assert 1 <= g["postures_feasible"] <= g["postures_tried"]
+        if g["selected_is_single_ik"]:
+            assert g["peak_force_change"] == 0.0
+            continue
+        assert g["start_positions_selected"] != g["start_positions_single_ik"]
+        # a change of the effective mass at impact well above the peak's numerical noise
+        # (0.14 %) moves the peak force the same way
+        if abs(g["effective_mass_at_impact_change"]) > 0.005:
+            assert g["peak_force_change"] * g["effective_mass_at_impact_change"] > 0.0
+    report = (out / "results.md").read_text(encoding="utf-8")
+    assert "## Posture selection: single IK against the selected posture" in report
+    assert "posture selection vs single IK" in format_summary(results)
+
+
 def test_baxter_seed_is_the_validation_seed() -> None:
     assert tuple(SEED_POSITIONS) == tuple(BAXTER_SEED)

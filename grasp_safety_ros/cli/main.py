@@ -11,6 +11,7 @@ from pathlib import Path
 
 from ..core.analyses.safety_report import SafetyReport, analyse
 from ..core.exceptions import GraspSafetyError
+from ..core.method.posture import select_postures
 from ..core.method.ranking import METRICS, EvaluationConfig, GraspSafetyEvaluator
 from ..paths import config_file
 from .report import report_text, report_to_dict
@@ -52,6 +53,14 @@ def rank_scenario(scenario: Scenario, metric: str | None = None) -> SafetyReport
         scenario.trajectory,
         seed_positions=scenario.robot.seed,
         progress=progress,
+    )
+    ranking = select_postures(
+        evaluator,
+        scenario.grasps,
+        scenario.object_inertia,
+        scenario.trajectory,
+        ranking,
+        scenario.posture,
     )
     return analyse(
         evaluator,

@@ -9,6 +9,8 @@ import numpy as np
 
 from ..core.analyses.iso15066 import PowerForceLimitAssessment
 from ..core.analyses.safety_report import SafetyReport
+from ..core.method.executable import joint_velocities_accelerations
+from ..core.method.posture import PostureSelection
 from ..core.method.ranking import GraspEvaluation, Ranking
 
 SCORE_UNITS = {"mean": "kg", "max": "kg", "integral": "kg*s"}
@@ -29,11 +31,13 @@ def numbers(values: np.ndarray) -> list[Any]:
 
 
 def evaluation_to_dict(evaluation: GraspEvaluation) -> dict[str, Any]:
-    """One grasp of the paper's ranking (samples carry q in joint_names order)."""
+    """One grasp of the paper's ranking (samples carry q and qd in joint_names order)."""
+    velocities, _ = joint_velocities_accelerations(evaluation.times_s, evaluation.joint_positions)
     samples = [
         {
             "t_s": float(evaluation.times_s[i]),
             "q": evaluation.joint_positions[i].tolist(),
+            "qd": velocities[i].tolist(),
             "direction_in_base": evaluation.directions_in_base[i].tolist(),
             "effective_mass_kg": float(evaluation.effective_mass_kg[i]),
             "direction_is_worst_case": bool(evaluation.direction_is_worst_case[i]),
@@ -54,16 +58,31 @@ def evaluation_to_dict(evaluation: GraspEvaluation) -> dict[str, Any]:
     }
 
 
+def posture_to_dict(posture: PostureSelection) -> dict[str, Any]:
+    """How one grasp's posture was chosen (core.method.posture); scores in the ranking's unit."""
+    return {
+        "restarts": posture.restarts,
+        "score_single_ik": number(posture.score_single_ik),
+        "score_range": [number(posture.score_range[0]), number(posture.score_range[1])],
+        "start_positions": posture.start_positions.tolist(),
+        "postures_tried": posture.postures_tried,
+        "postures_feasible": posture.postures_feasible,
+    }
+
+
 def ranking_to_dict(ranking: Ranking) -> dict[str, Any]:
     """The paper's ranking: joint names, metric, ranking (indices), per-grasp results and the
     backend that ran (``compiled`` or ``python``, with the reason of a fallback)."""
+    grasps = [evaluation_to_dict(e) for e in ranking.evaluations]
+    for grasp, posture in zip(grasps, ranking.postures, strict=False):
+        grasp["posture"] = posture_to_dict(posture)
     return {
         "backend": ranking.backend,
         "joint_names": list(ranking.joint_names),
         "metric": ranking.metric,
         "score_unit": SCORE_UNITS[ranking.metric],
         "ranking": list(ranking.order),
-        "grasps": [evaluation_to_dict(e) for e in ranking.evaluations],
+        "grasps": grasps,
     }
 
 
@@ -165,8 +184,12 @@ def _add_per_grasp_series(report: SafetyReport, k: int, grasp: dict[str, Any]) -
             "score_without": number(resolution.original_score),
         }
         if resolution.applied:
+            velocities, _ = joint_velocities_accelerations(
+                resolution.times_s, resolution.joint_positions
+            )
             for i, sample in enumerate(samples):
                 sample["q_redundancy"] = resolution.joint_positions[i].tolist()
+                sample["qd_redundancy"] = velocities[i].tolist()
                 sample["effective_mass_redundancy_kg"] = float(resolution.effective_mass_kg[i])
     if report.effort:
         effort = report.effort[k]
@@ -260,6 +283,19 @@ def report_text(report: SafetyReport) -> str:
                 f"{rank:>4}  {k:>5}  {evaluations[k].name[:16]:<16} "
                 f"safety score {report.scores[k]:.4f}{extra}"
             )
+    postures = report.ranking.postures
+    if postures and postures[0].restarts > 0:
+        lines += ["", f"posture selection ({postures[0].restarts} IK restarts per grasp):"]
+        for p in postures:
+            name = evaluations[p.index].name[:16]
+            if p.postures_feasible:
+                lines.append(
+                    f"  {name:<16} single IK {p.score_single_ik:.4f} -> {p.score:.4f} "
+                    f"(range {p.score_range[0]:.4f}..{p.score_range[1]:.4f}, "
+                    f"{p.postures_feasible}/{p.postures_tried} postures feasible)"
+                )
+            else:
+                lines.append(f"  {name:<16} no feasible posture ({p.postures_tried} tried)")
     if report.iso:
         lines += _iso_lines(report)
     if report.uncertainty is not None:

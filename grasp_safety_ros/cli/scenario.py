@@ -15,6 +15,7 @@ from ..core.analyses.safety_report import RANK_BY, AnalysisOptions
 from ..core.analyses.uncertainty import InertiaUncertainty
 from ..core.exceptions import InvalidInputError
 from ..core.input_checks import finite_array, finite_float, pose_from_position_quat
+from ..core.method.posture import DEFAULT_RESTARTS, PostureConfig
 from ..core.method.ranking import METRICS, Grasp, check_metric
 from ..core.model.inertia import ObjectInertia, solid_box, solid_cylinder, solid_sphere
 from ..core.model.robot import RobotModel
@@ -52,6 +53,7 @@ class Scenario:
     Attributes:
         options: The analyses beyond the paper (metric point, ISO/TS 15066, uncertainty,
             grasp quality, redundancy, effort), from the optional sections of the file.
+        posture: Posture selection (section ``posture``; default DEFAULT_RESTARTS restarts).
     """
 
     robot: RobotSpec
@@ -61,6 +63,7 @@ class Scenario:
     metric: str
     base_dir: Path
     options: AnalysisOptions = field(default_factory=AnalysisOptions)
+    posture: PostureConfig = field(default_factory=lambda: PostureConfig(DEFAULT_RESTARTS))
 
 
 def _mapping(value: Any, field: str) -> Mapping[str, Any]:
@@ -226,7 +229,17 @@ OPTIONAL_SECTIONS = {
     "redundancy",
     "effort",
     "rank_by",
+    "posture",
 }
+
+
+def parse_posture(section: Any) -> PostureConfig:
+    """Parse the ``posture`` section: ``{restarts: N, seed: S}``."""
+    posture = _mapping(section, "posture")
+    _check_keys(posture, {"restarts", "seed"}, "posture")
+    return PostureConfig(
+        restarts=posture.get("restarts", DEFAULT_RESTARTS), seed=posture.get("seed", 0)
+    )
 
 
 def _flag(value: Any, field: str) -> bool:
@@ -305,6 +318,7 @@ def parse_scenario(data: Any, base_dir: Path) -> Scenario:
         metric=check_metric(metric),
         base_dir=base_dir,
         options=parse_options(root, points, quality),
+        posture=parse_posture(root.get("posture", {})),
     )
 
 

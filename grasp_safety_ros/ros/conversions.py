@@ -13,12 +13,13 @@ from collections.abc import Collection, Sequence
 
 import numpy as np
 import pinocchio as pin
-from builtin_interfaces.msg import Time
+from builtin_interfaces.msg import Duration, Time
 from geometry_msgs.msg import Inertia, Point, Pose, PoseArray, Quaternion, Vector3
 from grasp_safety_msgs.msg import BodyRegionAssessment, GraspRanking
 from grasp_safety_msgs.msg import GraspEvaluation as GraspEvaluationMsg
 from nav_msgs.msg import Path
 from std_msgs.msg import ColorRGBA, Header
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ..core.analyses.iso15066 import PowerForceLimitAssessment, RegionAssessment
@@ -30,6 +31,8 @@ from ..core.input_checks import (
     quat_xyzw_from_rotation,
     rotation_from_quat_xyzw,
 )
+from ..core.method.executable import joint_velocities_accelerations
+from ..core.method.posture import PostureSelection, single_posture
 from ..core.method.ranking import Grasp, GraspEvaluation, Ranking
 from ..core.model.inertia import ObjectInertia
 from ..core.model.robot import RobotModel
@@ -291,7 +294,54 @@ def evaluation_msg(evaluation: GraspEvaluation) -> GraspEvaluationMsg:
         combined_score=NAN,
         score_without_redundancy=NAN,
         effort_score=NAN,
+        score_single_ik=NAN,
+        score_range_min=NAN,
+        score_range_max=NAN,
     )
+
+
+def duration_msg(seconds: float) -> Duration:
+    """builtin_interfaces/Duration of a non-negative time [s], rounded to the nanosecond."""
+    nanoseconds = round(float(seconds) * 1e9)
+    return Duration(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
+
+
+def joint_trajectory_msg(
+    joint_names: Sequence[str], times_s: np.ndarray, joint_positions: np.ndarray, header: Header
+) -> JointTrajectory:
+    """trajectory_msgs/JointTrajectory of sampled joint positions [rad or m] at times [s]:
+    velocities and accelerations from core.method.executable (C2 spline, at rest at both ends);
+    no points when there are no samples. Give ``header`` a zero stamp: in a JointTrajectory
+    the stamp is when execution starts, and 0 means on receipt."""
+    message = JointTrajectory(header=header, joint_names=list(joint_names))
+    if len(times_s) == 0:
+        return message
+    velocities, accelerations = joint_velocities_accelerations(times_s, joint_positions)
+    message.points = [
+        JointTrajectoryPoint(
+            positions=q,
+            velocities=qd,
+            accelerations=qdd,
+            time_from_start=duration_msg(t),
+        )
+        for t, q, qd, qdd in zip(
+            np.asarray(times_s, dtype=float).tolist(),
+            np.asarray(joint_positions, dtype=float).tolist(),
+            velocities.tolist(),
+            accelerations.tolist(),
+            strict=True,
+        )
+    ]
+    return message
+
+
+def _set_posture(message: GraspEvaluationMsg, posture: PostureSelection) -> None:
+    message.score_single_ik = float(posture.score_single_ik)
+    message.score_range_min = float(posture.score_range[0])
+    message.score_range_max = float(posture.score_range[1])
+    message.start_positions = _floats(posture.start_positions)
+    message.postures_tried = int(posture.postures_tried)
+    message.postures_feasible = int(posture.postures_feasible)
 
 
 def ranked_pose_array(grasps: PoseArray, order: Sequence[int]) -> PoseArray:
@@ -322,7 +372,7 @@ def ranking_msg(
     nothing beyond the tip computed (see evaluation_msg); report_msg gives the full result.
     """
     order = [int(i) for i in ranking.order]
-    return GraspRanking(
+    message = GraspRanking(
         header=Header(stamp=stamp, frame_id=base_frame),
         metric=ranking.metric,
         order=order,
@@ -339,6 +389,18 @@ def ranking_msg(
         effort_criterion="",
         order_stability=NAN,
     )
+    postures = ranking.postures or tuple(single_posture(e) for e in ranking.evaluations)
+    for evaluation, item, posture in zip(
+        ranking.evaluations, message.evaluations, postures, strict=True
+    ):
+        _set_posture(item, posture)
+        item.joint_trajectory = joint_trajectory_msg(
+            ranking.joint_names,
+            evaluation.times_s,
+            evaluation.joint_positions,
+            Header(frame_id=base_frame),
+        )
+    return message
 
 
 def region_assessment_msg(assessment: RegionAssessment) -> BodyRegionAssessment:
@@ -423,6 +485,12 @@ def report_msg(
             if resolution.applied:
                 evaluation.effective_mass_with_redundancy_kg = _floats(
                     resolution.effective_mass_kg
+                )
+                evaluation.joint_trajectory = joint_trajectory_msg(
+                    report.ranking.joint_names,
+                    resolution.times_s,
+                    resolution.joint_positions,
+                    Header(frame_id=base_frame),
                 )
         if report.effort:
             effort = report.effort[k]

@@ -32,7 +32,12 @@ from geometry_msgs.msg import Inertia, InertiaStamped, PoseArray
 from grasp_safety_msgs.msg import GraspRanking
 from grasp_safety_msgs.srv import RankGrasps
 from nav_msgs.msg import Path
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import (
+    IntegerRange,
+    ParameterDescriptor,
+    ParameterType,
+    SetParametersResult,
+)
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.exceptions import InvalidParameterValueException
 from rclpy.executors import Executor, ExternalShutdownException, MultiThreadedExecutor
@@ -53,6 +58,7 @@ from ..core.analyses.exposed_points import check_metric_point
 from ..core.analyses.safety_report import AnalysisOptions, analyse
 from ..core.exceptions import GraspSafetyError, InvalidInputError
 from ..core.input_checks import finite_array
+from ..core.method.posture import select_postures
 from ..core.method.ranking import check_metric
 from ..core.model.inertia import ObjectInertia
 from .conversions import (
@@ -69,6 +75,7 @@ from .parameters import (
     PARAMETERS,
     ROBOT_PARAMETERS,
     NodeSettings,
+    ParameterSpec,
     RobotBundle,
     build_robot,
     check_parameter,
@@ -179,12 +186,7 @@ class GraspSafetyNode(Node):
 
         self.add_on_set_parameters_callback(self._on_set_parameters)
         declarations = [
-            (
-                name,
-                spec.default,
-                ParameterDescriptor(description=spec.description, dynamic_typing=True),
-            )
-            for name, spec in PARAMETERS.items()
+            (name, spec.default, _descriptor(spec)) for name, spec in PARAMETERS.items()
         ]
         try:
             self.declare_parameters("", declarations)
@@ -660,6 +662,15 @@ class GraspSafetyNode(Node):
                 metric=metric,
                 progress=deadline_check,
             )
+            ranking = select_postures(
+                bundle.evaluator,
+                grasps,
+                object_inertia,
+                trajectory,
+                ranking,
+                settings.posture,
+                progress=deadline_check,
+            )
             report = analyse(
                 bundle.evaluator,
                 grasps,
@@ -797,6 +808,18 @@ def _analysis_options(
             "object.points_in_object_m, object.box_size_m or object.cylinder_*",
         )
     return replace(defaults, metric_point=metric_point, grasp_quality=quality)
+
+
+def _descriptor(spec: ParameterSpec) -> ParameterDescriptor:
+    """The declaration descriptor of a parameter: typed when it has an integer range."""
+    if spec.integer_range is None:
+        return ParameterDescriptor(description=spec.description, dynamic_typing=True)
+    lowest, highest = spec.integer_range
+    return ParameterDescriptor(
+        type=ParameterType.PARAMETER_INTEGER,
+        description=spec.description,
+        integer_range=[IntegerRange(from_value=lowest, to_value=highest, step=1)],
+    )
 
 
 def _internal_error(error: BaseException) -> str:

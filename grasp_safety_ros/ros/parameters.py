@@ -26,6 +26,7 @@ from ..core.analyses.safety_report import RANK_BY, AnalysisOptions
 from ..core.analyses.uncertainty import InertiaUncertainty
 from ..core.exceptions import FrameNotFoundError, GraspSafetyError, InvalidInputError
 from ..core.input_checks import finite_array, finite_float
+from ..core.method.posture import DEFAULT_RESTARTS, MAX_RESTARTS, PostureConfig
 from ..core.method.ranking import METRICS, EvaluationConfig, GraspSafetyEvaluator
 from ..core.method.warm_up import warm_up
 from ..core.model.inertia import ObjectInertia
@@ -34,10 +35,16 @@ from ..core.model.robot import RobotModel
 
 @dataclass(frozen=True)
 class ParameterSpec:
-    """One node parameter: its default value and a one-line description (with units)."""
+    """One node parameter: its default value and a one-line description (with units).
+
+    Attributes:
+        integer_range: (lowest, highest) of an integer parameter declared with a typed
+            descriptor (type INTEGER and this IntegerRange); None: dynamically typed.
+    """
 
     default: Any
     description: str
+    integer_range: tuple[int, int] | None = None
 
 
 PARAMETERS: Mapping[str, ParameterSpec] = {
@@ -140,6 +147,12 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
     "rank_by": ParameterSpec(
         "safety", f"final order: {' | '.join(RANK_BY)} (effort turns effort.enabled on)"
     ),
+    "posture.restarts": ParameterSpec(
+        DEFAULT_RESTARTS,
+        "IK restarts at the start pose per grasp besides the seed's; the lowest-score posture "
+        "is kept; 0: the paper's single IK",
+        integer_range=(0, MAX_RESTARTS),
+    ),
 }
 """Every parameter of the node, by name."""
 
@@ -176,6 +189,7 @@ class NodeSettings:
             (metric_point, object points, iso_ts_15066.*, uncertainty.*, safety_weight,
             redundancy.*, effort.*, rank_by); a request may change metric_point and add grasp
             quality.
+        posture: Posture selection (``posture.restarts``).
         ik_seed: The seed parameter, or None when empty (length checked against the robot
             in build_robot).
     """
@@ -200,6 +214,7 @@ class NodeSettings:
     service_busy_timeout_s: float
     diagnostics_period_s: float
     analysis: AnalysisOptions = dataclasses.field(default_factory=AnalysisOptions)
+    posture: PostureConfig = dataclasses.field(default_factory=PostureConfig)
 
     @property
     def robot_source(self) -> str:
@@ -268,6 +283,8 @@ def check_parameter(name: str, value: Any) -> Any:
         return _integer(name, value, 1, _MAX_COUNT)
     if name in ("uncertainty.samples", "uncertainty.seed"):
         return _integer(name, value, 0, _MAX_COUNT)
+    if PARAMETERS[name].integer_range is not None:
+        return _integer(name, value, *PARAMETERS[name].integer_range)
     if name == "ik_seed":
         return _numbers(name, value, None)
     if name == "object.com_in_object_m":
@@ -471,6 +488,7 @@ def settings_from_parameters(values: Mapping[str, Any]) -> NodeSettings:
         service_busy_timeout_s=v["service_busy_timeout_s"],
         diagnostics_period_s=v["diagnostics_period_s"],
         analysis=analysis_from_parameters(v),
+        posture=PostureConfig(restarts=v["posture.restarts"]),
     )
 
 

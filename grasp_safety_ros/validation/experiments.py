@@ -18,6 +18,7 @@ from scipy.stats import spearmanr
 
 from ..core.input_checks import pose_from_position_quat
 from ..core.method.effective_mass import effective_mass_along, translational_mobility_in_base
+from ..core.method.posture import DEFAULT_RESTARTS, PostureConfig, select_posture
 from ..core.method.ranking import Grasp, GraspEvaluation, GraspSafetyEvaluator
 from ..core.model.inertia import (
     ObjectInertia,
@@ -356,6 +357,85 @@ def run_experiment(
     return runs
 
 
+def posture_comparison(
+    robot: RobotModel,
+    experiment: Experiment,
+    runs: Sequence[GraspRun],
+    setup: CollisionSetup,
+    restarts: int = DEFAULT_RESTARTS,
+    log: Callable[[str], None] | None = None,
+) -> dict[str, Any]:
+    """Pillar impacts of the single-IK posture (``runs``) against the selected posture
+    (core.method.posture, ``restarts``) for the same grasps, same object path and same pillar.
+
+    Returns:
+        The posture_selection part of results.json: per grasp the mean effective mass, the
+        effective mass at impact and the peak force of both postures, their relative changes,
+        and the change of the peak force a spring sensor predicts, sqrt(M_sel / M_single) - 1.
+    """
+    evaluator = GraspSafetyEvaluator(robot)
+    config = PostureConfig(restarts=restarts)
+    grasps = []
+    for run in runs:
+        candidate = run.grasp
+        chosen, selection = select_posture(
+            evaluator,
+            Grasp(candidate.transform_tip_to_object, candidate.name),
+            candidate.object_inertia,
+            experiment.trajectory,
+            run.evaluation,
+            config,
+            "mean",
+        )
+        collision = run.collision
+        if selection.selected > 0:
+            collision = simulate_collision(
+                robot,
+                ROBOT_SOURCE,
+                candidate.object_inertia,
+                candidate.transform_tip_to_object,
+                chosen,
+                setup,
+                experiment.shape,
+            )
+        single, selected = run.collision, collision
+        mass_ratio = selected.effective_mass_at_impact_kg / single.effective_mass_at_impact_kg
+        grasps.append(
+            {
+                "name": candidate.name,
+                "postures_tried": selection.postures_tried,
+                "postures_feasible": selection.postures_feasible,
+                "selected_is_single_ik": selection.selected == 0,
+                "start_positions_single_ik": run.evaluation.joint_positions[0].tolist(),
+                "start_positions_selected": chosen.joint_positions[0].tolist(),
+                "mean_effective_mass_single_ik_kg": run.evaluation.mean_effective_mass_kg,
+                "mean_effective_mass_selected_kg": chosen.mean_effective_mass_kg,
+                "score_range_kg": list(selection.score_range),
+                "effective_mass_at_impact_single_ik_kg": single.effective_mass_at_impact_kg,
+                "effective_mass_at_impact_selected_kg": selected.effective_mass_at_impact_kg,
+                "peak_force_single_ik_n": single.peak_force_n,
+                "peak_force_selected_n": selected.peak_force_n,
+                "mean_effective_mass_change": chosen.mean_effective_mass_kg
+                / run.evaluation.mean_effective_mass_kg
+                - 1.0,
+                "effective_mass_at_impact_change": mass_ratio - 1.0,
+                "peak_force_change": selected.peak_force_n / single.peak_force_n - 1.0,
+                "predicted_peak_force_change_sqrt": math.sqrt(mass_ratio) - 1.0,
+                "first_torque_saturation_time_selected_s": _finite(
+                    selected.first_saturation_time_s
+                ),
+            }
+        )
+        if log is not None:
+            log(
+                f"  posture {candidate.name}: M_eff at impact "
+                f"{single.effective_mass_at_impact_kg:.4f} -> "
+                f"{selected.effective_mass_at_impact_kg:.4f} kg, peak force "
+                f"{single.peak_force_n:.2f} -> {selected.peak_force_n:.2f} N"
+            )
+    return {"experiment": experiment.key, "restarts": restarts, "grasps": grasps}
+
+
 def _robot_only_effective_mass(robot: RobotModel, evaluation: GraspEvaluation) -> np.ndarray:
     data = robot.model.createData()
     masses = np.empty(len(evaluation.times_s))
@@ -577,6 +657,7 @@ def reproduce(
     book = book_experiment()
     tensor_runs = run_experiment(robot, tensor, config, log)
     book_runs = run_experiment(robot, book, config, log)
+    postures = posture_comparison(robot, book, book_runs, config.setup, log=log)
     simulated = time.perf_counter()
     command = COMMAND.format(out=out_dir) + (" --quick" if quick else "")
     results: dict[str, Any] = {
@@ -594,6 +675,7 @@ def reproduce(
         "impulse_check": summarise_impulses(
             [(tensor.key, tensor_runs), (book.key, book_runs)], config.impulse
         ),
+        "posture_selection": postures,
     }
     low, high = PAPER_BOOK_PEAK_FORCES_N
     results["book"]["paper_gazebo"] = {
@@ -650,4 +732,12 @@ def format_summary(results: dict[str, Any]) -> str:
         f"{impulse['worst_rel_error']:.2e} over {impulse['cases']} free impacts "
         f"(e = {impulse['restitution_min']:.3f}..{impulse['restitution_max']:.3f})",
     ]
+    postures = results.get("posture_selection")
+    if postures:
+        changes = ", ".join(
+            f"{g['name']} M_eff {100 * g['effective_mass_at_impact_change']:+.1f} % / force "
+            f"{100 * g['peak_force_change']:+.1f} %"
+            for g in postures["grasps"]
+        )
+        lines.append(f"  posture selection vs single IK (book, at impact): {changes}")
     return "\n".join(lines)

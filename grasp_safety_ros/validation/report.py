@@ -359,6 +359,48 @@ def _headline_table(results: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _signed_percent(change: float | None, digits: int = 1) -> str:
+    return "n/a" if change is None else f"{100.0 * change:+.{digits}f} %"
+
+
+def _posture_section(results: dict[str, Any]) -> str:
+    """Single-IK posture against the selected posture (core.method.posture) for the same grasps."""
+    postures = results.get("posture_selection")
+    if not postures:
+        return ""
+    rows = [
+        "| grasp | postures feasible/tried | mean M_eff [kg] | M_eff at impact [kg] | "
+        "peak force [N] | ΔM_eff at impact | Δ peak force | √ prediction |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for g in postures["grasps"]:
+        rows.append(
+            f"| {g['name']} | {g['postures_feasible']}/{g['postures_tried']} | "
+            f"{_number(g['mean_effective_mass_single_ik_kg'], 4)} → "
+            f"{_number(g['mean_effective_mass_selected_kg'], 4)} | "
+            f"{_number(g['effective_mass_at_impact_single_ik_kg'], 4)} → "
+            f"{_number(g['effective_mass_at_impact_selected_kg'], 4)} | "
+            f"{_number(g['peak_force_single_ik_n'], 2)} → "
+            f"{_number(g['peak_force_selected_n'], 2)} | "
+            f"{_signed_percent(g['effective_mass_at_impact_change'])} | "
+            f"{_signed_percent(g['peak_force_change'])} | "
+            f"{_signed_percent(g['predicted_peak_force_change_sqrt'])} |"
+        )
+    table = "\n".join(rows)
+    return f"""
+## Posture selection: single IK against the selected posture
+
+Book, same grasps, same object path and pillar as above; the single-IK rows are the book's
+runs above, the selected posture is core.method.posture's with {postures["restarts"]} IK restarts
+(the lowest mean tip effective mass among the feasible start postures found, each followed
+along the path). The controller tracks the selected posture's joint trajectory from its own
+start configuration. "√ prediction" is the change of the peak force a spring sensor predicts
+from the change of the effective mass at impact, √(M_sel / M_single) − 1.
+
+{table}
+"""
+
+
 def results_markdown(results: dict[str, Any]) -> str:
     """The markdown report of a validation run."""
     setup = results["setup"]
@@ -417,7 +459,7 @@ in {results["timing_s"]["total"]:.0f} s ({versions}). Everything below is genera
 {book["description"]}
 
 {_grasp_table(book, [])}
-
+{_posture_section(results)}
 ## Ablations
 
 Each ablation changes one setting and is simulated from

@@ -211,10 +211,10 @@ class CompiledGraspResult(NamedTuple):
 
 
 _ENTRY_POINTS: dict[Any, Any] = {}
-"""The compiled overload of each kernel called through ``_call``."""
+"""The compiled overload of each kernel called through ``call_kernel``."""
 
 
-def _call(kernel: Any, *args: Any) -> Any:
+def call_kernel(kernel: Any, *args: Any) -> Any:
     """kernel(*args), bypassing numba's dispatcher after the first call.
 
     The dispatcher types every argument on each call, in Python for tuples (tens of µs for
@@ -234,7 +234,7 @@ def _call(kernel: Any, *args: Any) -> Any:
     return result
 
 
-def _plain(array: Any) -> np.ndarray:
+def plain_array(array: Any) -> np.ndarray:
     """A C-contiguous, writable float64 array of ``array`` (copied only when needed)."""
     array = np.ascontiguousarray(array, dtype=float)
     return array if array.flags.writeable else array.copy()
@@ -266,18 +266,18 @@ def evaluate_grasp_compiled(
     if robot_arrays is None:
         robot_arrays = _ROBOT_INERTIAS.setdefault(robot, robot_inertia_arrays(robot))
     bodies = augmented_inertia_arrays(robot, object_inertia, transform_tip_to_object, robot_arrays)
-    rotations, positions, tangents = (_plain(array) for array in tip_path)
-    times_s = _plain(times_s)
+    rotations, positions, tangents = (plain_array(array) for array in tip_path)
+    times_s = plain_array(times_s)
     nq = robot.model.nq
     out = grasp_buffers(len(times_s), nq)
     path = (rotations, positions, tangents, times_s)
-    status, index, joint, value = _call(
+    status, index, joint, value = call_kernel(
         evaluate_grasp,
         chain,
         settings,
         bodies,
         *path,
-        _plain(seed_q),
+        plain_array(seed_q),
         False,
         STATIONARY_TANGENT_M,
         out,
@@ -287,8 +287,13 @@ def evaluate_grasp_compiled(
         converged = False
         q_fail = out.q_fail
         for restart in solver.restarts():
-            q0, converged, restart_iterations = solve_pose(
-                chain, settings, out.target_rotations[0], out.target_translations[0], restart
+            q0, converged, restart_iterations = call_kernel(
+                solve_pose,
+                chain,
+                settings,
+                out.target_rotations[0],
+                out.target_translations[0],
+                plain_array(restart),
             )
             total += int(restart_iterations)
             if converged:
@@ -306,13 +311,13 @@ def evaluate_grasp_compiled(
                 np.zeros(0, dtype=bool),
                 empty,
             )
-        status, index, joint, value = _call(
+        status, index, joint, value = call_kernel(
             evaluate_grasp,
             chain,
             settings,
             bodies,
             *path,
-            _plain(q0),
+            plain_array(q0),
             True,
             STATIONARY_TANGENT_M,
             out,

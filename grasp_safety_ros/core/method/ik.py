@@ -33,7 +33,14 @@ import pinocchio as pin
 
 from ..exceptions import InvalidInputError
 from ..model.robot import RobotModel
-from .compiled import ChainArrays, chain_arrays_or_reason, grasp_buffers, ik_settings
+from .compiled import (
+    ChainArrays,
+    call_kernel,
+    chain_arrays_or_reason,
+    grasp_buffers,
+    ik_settings,
+    plain_array,
+)
 
 
 def _numba_installed() -> bool:
@@ -269,12 +276,13 @@ class IKSolver:
         """
         target_in_world = self.robot.transform_base_to_world * transform_tip_to_base
         if self.compiled:
-            q, converged, iterations = _kernels().solve_pose(
+            q, converged, iterations = call_kernel(
+                _kernels().solve_pose,
                 self.chain,
                 self.settings,
-                np.array(target_in_world.rotation),
-                np.array(target_in_world.translation),
-                np.asarray(q_init, dtype=float),
+                plain_array(target_in_world.rotation),
+                plain_array(target_in_world.translation),
+                plain_array(q_init),
             )
             return q, bool(converged), int(iterations)
         return self._solve_python(target_in_world, q_init)
@@ -486,12 +494,13 @@ class IKSolver:
     ) -> tuple[int, int, int, float, np.ndarray, np.ndarray, np.ndarray]:
         out = grasp_buffers(len(rotations_world), self.robot.model.nq)
         out.q_all[0] = q0
-        status, index, joint, value = _kernels().solve_trajectory(
+        status, index, joint, value = call_kernel(
+            _kernels().solve_trajectory,
             self.chain,
             self.settings,
-            np.ascontiguousarray(rotations_world),
-            np.ascontiguousarray(translations_world),
-            np.ascontiguousarray(times_s, dtype=float),
+            plain_array(rotations_world),
+            plain_array(translations_world),
+            plain_array(times_s),
             out,
         )
         return (

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Generator, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
@@ -21,6 +22,9 @@ from .effective_mass import (
 )
 from .ik import IKConfig, IKSolver, check_backend, tip_path_arrays
 from .pool import evaluate_jobs, executor_for
+
+if TYPE_CHECKING:
+    from .posture import PostureSelection
 
 METRICS = ("mean", "max", "integral")
 """Aggregates of the per-sample effective mass: mean [kg], max [kg], integral [kg s]."""
@@ -133,6 +137,8 @@ class Ranking:
         metric: The aggregate used.
         order: Indices of the feasible grasps, safest first (ties keep input order).
         evaluations: One per candidate, in candidate order.
+        postures: How each candidate's posture was chosen (core.method.posture), in candidate
+            order; empty when posture selection was not run.
         backend: What ran: ``compiled`` or ``python``, with the reason when ``auto`` fell
             back, e.g. ``python (numba not installed)``; empty when not recorded.
     """
@@ -141,6 +147,7 @@ class Ranking:
     metric: str
     order: tuple[int, ...]
     evaluations: tuple[GraspEvaluation, ...]
+    postures: tuple[PostureSelection, ...] = ()
     backend: str = ""
 
 

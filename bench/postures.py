@@ -1,0 +1,128 @@
+"""Benchmark section: cost and gain of posture selection (core.method.posture) per grasp.
+
+For each arm workload (bench/workload.py: Panda and Baxter's right arm, a box, grasps around
+it, 2 s at dt 0.01 s) and for the paper's book on Baxter (config/book_baxter.yaml), the
+ranking is run with ``posture.restarts`` = 0 (the paper's single IK), 2, 4, 8, 16, 32, 64:
+
+- ms per grasp of posture selection (``select_postures`` after ``rank``; the single IK
+  excluded), one core, median over repeats: wall-clock and CPU time of the process (the
+  latter less inflated when other processes share the cores);
+- the gain: mean over the grasps feasible with the single IK of 1 - score / score_single_ik
+  [%], and grasps feasible with selection but not with the single IK.
+
+Run alone: .venv/bin/python bench/run.py --postures-only [--json bench/results_postures.json]
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+from typing import Any
+
+import numpy as np
+from workload import ARMS, box_object, grasps_around_box
+
+from grasp_safety_ros.cli.scenario import load_scenario
+from grasp_safety_ros.core import EvaluationConfig, GraspSafetyEvaluator
+from grasp_safety_ros.core.method.posture import PostureConfig, select_postures
+from grasp_safety_ros.paths import config_file
+
+RESTARTS = (0, 2, 4, 8, 16, 32, 64)
+
+
+def _workloads(grasps: int) -> list[tuple[str, Any, Any, Any, Any, Any]]:
+    """(name, evaluator, grasps, inertia, trajectory, seed) of each workload."""
+    loads = []
+    for name in ("panda", "baxter"):
+        arm = ARMS[name]
+        evaluator = GraspSafetyEvaluator(arm.robot(), EvaluationConfig(workers=1))
+        candidates = grasps_around_box(np.array(arm.approach_from), grasps)
+        loads.append(
+            (
+                f"{name} ({grasps} grasps)",
+                evaluator,
+                candidates,
+                box_object(),
+                arm.trajectory(2.0, 0.01),
+                np.array(arm.seed_positions),
+            )
+        )
+    book = load_scenario(config_file("book_baxter.yaml"))
+    evaluator = GraspSafetyEvaluator(book.robot.load(book.base_dir), EvaluationConfig(workers=1))
+    loads.append(
+        (
+            "baxter book (3 grasps)",
+            evaluator,
+            list(book.grasps),
+            book.object_inertia,
+            book.trajectory,
+            book.robot.seed,
+        )
+    )
+    return loads
+
+
+def bench_postures(grasps: int = 20, repeats: int = 3) -> dict[str, Any]:
+    """Cost [ms per grasp] and gain [%] of posture selection per restart count and workload."""
+    results: dict[str, Any] = {}
+    for name, evaluator, candidates, inertia, trajectory, seed in _workloads(grasps):
+        ranking = evaluator.rank(candidates, inertia, trajectory, seed_positions=seed)
+        rows = []
+        for restarts in RESTARTS:
+            config = PostureConfig(restarts=restarts)
+            times, cpu_times = [], []
+            for _ in range(repeats):
+                start, cpu_start = time.perf_counter(), time.process_time()
+                selected = select_postures(
+                    evaluator, candidates, inertia, trajectory, ranking, config
+                )
+                times.append(time.perf_counter() - start)
+                cpu_times.append(time.process_time() - cpu_start)
+            gains = [
+                1.0 - p.score / p.score_single_ik
+                for p in selected.postures
+                if np.isfinite(p.score_single_ik)
+            ]
+            rescued = sum(
+                1
+                for p in selected.postures
+                if np.isfinite(p.score) and np.isnan(p.score_single_ik)
+            )
+            rows.append(
+                {
+                    "restarts": restarts,
+                    "ms_per_grasp": 1e3 * statistics.median(times) / len(candidates),
+                    "cpu_ms_per_grasp": 1e3 * statistics.median(cpu_times) / len(candidates),
+                    "mean_gain_percent": 100.0 * float(np.mean(gains)) if gains else None,
+                    "max_gain_percent": 100.0 * float(np.max(gains)) if gains else None,
+                    "feasible": sum(1 for e in selected.evaluations if e.feasible),
+                    "rescued_by_selection": rescued,
+                    "postures_tried_mean": float(
+                        np.mean([p.postures_tried for p in selected.postures])
+                    ),
+                }
+            )
+            print(
+                f"[postures] {name}: restarts {restarts:>2}: "
+                f"{rows[-1]['ms_per_grasp']:7.2f} ms/grasp "
+                f"(CPU {rows[-1]['cpu_ms_per_grasp']:7.2f}), gain "
+                f"{rows[-1]['mean_gain_percent'] or 0.0:5.2f} % mean, "
+                f"{rows[-1]['max_gain_percent'] or 0.0:5.2f} % max, feasible "
+                f"{rows[-1]['feasible']}/{len(candidates)}",
+                flush=True,
+            )
+        results[name] = rows
+    return results
+
+
+def print_postures(results: dict[str, Any]) -> None:
+    """The table of ``bench_postures``."""
+    print("\nposture selection: CPU ms per grasp (one core) / mean score gain vs the single IK")
+    header = f"{'workload':<24}" + "".join(f"{'r=' + str(r):>16}" for r in RESTARTS)
+    print(header)
+    for name, rows in results.items():
+        cells = "".join(
+            f"{row['cpu_ms_per_grasp']:>7.1f} / {row['mean_gain_percent'] or 0.0:>5.2f}%"
+            for row in rows
+        )
+        print(f"{name:<24}{cells}")

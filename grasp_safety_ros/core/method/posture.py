@@ -1,0 +1,264 @@
+"""Posture selection: search the arm's redundancy for the start posture with the lowest score.
+
+For a redundant arm (or an arm with several IK branches) one tip pose has many joint
+solutions, and the effective mass depends on which one the arm is in. The paper (and
+``GraspSafetyEvaluator.rank``) follows one IK solution, from one seed. Here, per grasp:
+
+1. the single IK of the paper: the evaluation from the configured seed (restart 0);
+2. ``restarts`` more IK solutions of the tip pose at the first sample, from deterministic
+   seeds: a scrambled Halton sequence (seeded by ``seed``) within the joint limits
+   ([-pi, pi] for unlimited joints). A start posture within ``duplicate_tolerance_rad``
+   (inf-norm) of one already found is not followed again;
+3. each distinct start posture followed along the whole trajectory with the evaluator's own
+   warm start (``GraspSafetyEvaluator.evaluate`` seeded with it: sample 0 converges at once,
+   in 0 iterations, to that posture), and scored;
+4. the feasible one with the lowest score is kept (ties: the earliest, so the single IK).
+
+The null-space refinement (core.analyses.redundancy, when enabled) then starts from the kept
+posture. A grasp is infeasible only when no start posture gives a feasible trajectory.
+``restarts=0`` returns the ranking unchanged.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+import pinocchio as pin
+from scipy.stats import qmc
+
+from ..exceptions import InvalidInputError
+from ..model.inertia import ObjectInertia
+from ..model.trajectory import ObjectTrajectory
+from .ranking import Grasp, GraspEvaluation, GraspSafetyEvaluator, Ranking, order_by_score
+
+MAX_RESTARTS = 1000
+"""Largest number of posture restarts accepted per grasp."""
+
+DEFAULT_RESTARTS = 8
+"""Default restarts of the CLI and the node (README, "Posture selection": cost vs gain)."""
+
+
+@dataclass(frozen=True)
+class PostureConfig:
+    """Settings of posture selection.
+
+    Attributes:
+        restarts: Start postures tried besides the single IK's, in [0, MAX_RESTARTS];
+            0: the paper's single IK only (the ranking is returned unchanged).
+        seed: Seed of the scrambled Halton sequence of the IK seeds (repeatable results).
+        duplicate_tolerance_rad: Start postures closer than this (largest joint difference)
+            [rad or m] to one already found are not followed again.
+    """
+
+    restarts: int = 0
+    seed: int = 0
+    duplicate_tolerance_rad: float = 1e-3
+
+    def __post_init__(self) -> None:
+        for name, value, top in (
+            ("posture.restarts", self.restarts, MAX_RESTARTS),
+            ("posture.seed", self.seed, 2**32 - 1),
+        ):
+            if not isinstance(value, int) or isinstance(value, bool) or not 0 <= value <= top:
+                raise InvalidInputError(name, f"must be an integer in [0, {top}], got {value!r}")
+        tolerance = self.duplicate_tolerance_rad
+        if not (
+            isinstance(tolerance, (int, float))
+            and not isinstance(tolerance, bool)
+            and np.isfinite(tolerance)
+            and tolerance > 0
+        ):
+            raise InvalidInputError(
+                "posture.duplicate_tolerance_rad",
+                f"must be a finite number > 0, got {tolerance!r}",
+            )
+
+
+@dataclass(frozen=True)
+class PostureSelection:
+    """How one grasp's posture was chosen.
+
+    Attributes:
+        index: Position in the candidate list.
+        restarts: Restarts asked for (besides the single IK).
+        score: Score of the kept posture (the evaluation's score); NaN if infeasible.
+        score_single_ik: Score of the paper's single IK from the configured seed; NaN when
+            that one is infeasible.
+        score_range: (lowest, highest) score over the feasible postures found; NaN if none.
+        start_positions: (n,) joint positions at t = 0 of the kept posture [rad or m], chain
+            order; empty if infeasible.
+        postures_tried: Distinct start postures followed along the trajectory (the single
+            IK's counts as one, also when it fails).
+        postures_feasible: Of those, the ones whose whole trajectory is feasible.
+        selected: Which of the tried postures was kept (0: the single IK's); -1 if none.
+    """
+
+    index: int
+    restarts: int
+    score: float
+    score_single_ik: float
+    score_range: tuple[float, float]
+    start_positions: np.ndarray
+    postures_tried: int
+    postures_feasible: int
+    selected: int
+
+
+def restart_seeds(evaluator: GraspSafetyEvaluator, config: PostureConfig) -> np.ndarray:
+    """The (restarts, n) IK seeds of posture selection [rad or m], chain order, deterministic."""
+    robot = evaluator.robot
+    if config.restarts == 0:
+        return np.empty((0, robot.num_joints))
+    lower = np.where(np.isfinite(robot.lower_limits), robot.lower_limits, -np.pi)
+    upper = np.where(np.isfinite(robot.upper_limits), robot.upper_limits, np.pi)
+    unit = qmc.Halton(d=robot.num_joints, scramble=True, seed=config.seed).random(config.restarts)
+    return lower + unit * (upper - lower)
+
+
+def single_posture(evaluation: GraspEvaluation, restarts: int = 0) -> PostureSelection:
+    """The selection record of an evaluation from the single IK alone."""
+    feasible = evaluation.feasible
+    return PostureSelection(
+        index=evaluation.index,
+        restarts=restarts,
+        score=evaluation.score,
+        score_single_ik=evaluation.score,
+        score_range=(evaluation.score, evaluation.score),
+        start_positions=np.array(evaluation.joint_positions[0]) if feasible else np.empty(0),
+        postures_tried=1,
+        postures_feasible=int(feasible),
+        selected=0 if feasible else -1,
+    )
+
+
+def select_posture(
+    evaluator: GraspSafetyEvaluator,
+    grasp: Grasp,
+    object_inertia: ObjectInertia,
+    trajectory: ObjectTrajectory,
+    single_ik: GraspEvaluation,
+    config: PostureConfig,
+    metric: str,
+    seeds: np.ndarray | None = None,
+) -> tuple[GraspEvaluation, PostureSelection]:
+    """The lowest-score posture of one grasp (module docstring).
+
+    Args:
+        single_ik: The grasp's evaluation from the configured seed (the paper's single IK).
+        metric: The score's aggregate (the single IK's).
+        seeds: ``restart_seeds(evaluator, config)``, when already computed.
+
+    Returns:
+        The kept evaluation (``single_ik`` itself when nothing scores lower) and the record.
+    """
+    if seeds is None:
+        seeds = restart_seeds(evaluator, config)
+    robot, solver = evaluator.robot, evaluator.ik
+    start_tip_in_base = trajectory.transform_object_to_base_start * pin.SE3(
+        grasp.transform_tip_to_object
+    )
+    tolerance = config.duplicate_tolerance_rad
+    found: list[np.ndarray] = []
+    if single_ik.feasible:
+        found.append(np.asarray(single_ik.joint_positions[0], dtype=float))
+    candidates = [single_ik]
+    converged_any = single_ik.feasible
+    for seed in seeds:
+        q, converged, _ = solver.solve(start_tip_in_base, robot.q_from_positions(seed))
+        if not converged:
+            continue
+        converged_any = True
+        positions = robot.positions_from_q(q)
+        if any(np.max(np.abs(positions - other)) < tolerance for other in found):
+            continue
+        found.append(positions)
+        candidates.append(
+            evaluator.evaluate(
+                grasp,
+                object_inertia,
+                trajectory,
+                index=single_ik.index,
+                seed_positions=positions,
+                metric=metric,
+            )
+        )
+    feasible = [k for k, e in enumerate(candidates) if e.feasible]
+    if not feasible:
+        tried = len(seeds) + 1
+        detail = "" if converged_any else ", none reached the start pose"
+        reason = (
+            f"no feasible posture from {tried} IK seeds{detail}; single IK: {single_ik.reason}"
+        )
+        return replace(single_ik, reason=reason), PostureSelection(
+            index=single_ik.index,
+            restarts=config.restarts,
+            score=float("nan"),
+            score_single_ik=float("nan"),
+            score_range=(float("nan"), float("nan")),
+            start_positions=np.empty(0),
+            postures_tried=len(candidates),
+            postures_feasible=0,
+            selected=-1,
+        )
+    scores = np.array([candidates[k].score for k in feasible])
+    best = feasible[int(np.argmin(scores))]  # argmin keeps the first of equal scores
+    chosen = candidates[best]
+    return chosen, PostureSelection(
+        index=single_ik.index,
+        restarts=config.restarts,
+        score=chosen.score,
+        score_single_ik=single_ik.score,
+        score_range=(float(scores.min()), float(scores.max())),
+        start_positions=np.array(chosen.joint_positions[0]),
+        postures_tried=len(candidates),
+        postures_feasible=len(feasible),
+        selected=best,
+    )
+
+
+def select_postures(
+    evaluator: GraspSafetyEvaluator,
+    grasps: Sequence[Grasp],
+    object_inertia: ObjectInertia,
+    trajectory: ObjectTrajectory,
+    ranking: Ranking,
+    config: PostureConfig,
+    progress: Callable[[int, int], None] | None = None,
+) -> Ranking:
+    """Posture selection on every grasp of ``ranking`` (from ``evaluator.rank`` on the same
+    grasps, inertia and trajectory); re-ranked by the kept postures' scores.
+
+    Returns:
+        A Ranking whose ``postures`` holds one PostureSelection per grasp; with
+        ``config.restarts == 0`` the same evaluations and order (the paper's single IK).
+
+    Args:
+        progress: Called as ``progress(done, total)`` after each grasp; it may raise.
+    """
+    grasps = list(grasps)
+    if len(grasps) != len(ranking.evaluations):
+        raise InvalidInputError(
+            "grasps", f"must match the ranking's {len(ranking.evaluations)} evaluations"
+        )
+    if config.restarts == 0:
+        postures = tuple(single_posture(e) for e in ranking.evaluations)
+        return replace(ranking, postures=postures)
+    seeds = restart_seeds(evaluator, config)
+    evaluations: list[GraspEvaluation] = []
+    selections: list[PostureSelection] = []
+    for k, (grasp, single_ik) in enumerate(zip(grasps, ranking.evaluations, strict=True)):
+        evaluation, selection = select_posture(
+            evaluator, grasp, object_inertia, trajectory, single_ik, config, ranking.metric, seeds
+        )
+        evaluations.append(evaluation)
+        selections.append(selection)
+        if progress is not None:
+            progress(k + 1, len(grasps))
+    return replace(
+        ranking,
+        order=order_by_score(evaluations),
+        evaluations=tuple(evaluations),
+        postures=tuple(selections),
+    )

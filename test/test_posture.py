@@ -1,0 +1,315 @@
+"""Posture selection (core.method.posture) and joint velocities (core.method.executable)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from conftest import ARM7_AXES, BAXTER_SEED, book_trajectory, random_positions, serial_arm_urdf
+
+from grasp_safety_ros.core import (
+    EvaluationConfig,
+    Grasp,
+    GraspSafetyEvaluator,
+    InvalidInputError,
+    ObjectTrajectory,
+    RobotModel,
+    solid_box,
+)
+from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions, analyse
+from grasp_safety_ros.core.input_checks import pose_from_position_quat
+from grasp_safety_ros.core.method.executable import joint_velocities_accelerations
+from grasp_safety_ros.core.method.posture import PostureConfig, select_postures
+
+BOOK = solid_box(0.34, (0.15, 0.22, 0.015))
+
+
+def book_grasps() -> list[Grasp]:
+    return [
+        Grasp(pose_from_position_quat([-0.075, y, 0.0], [0, 0, 0, 1], "g"), f"spine_{y}")
+        for y in (-0.1, 0.0, 0.1)
+    ]
+
+
+@pytest.fixture(scope="module")
+def baxter_book(baxter: RobotModel):
+    evaluator = GraspSafetyEvaluator(baxter, EvaluationConfig(workers=1))
+    trajectory = book_trajectory(dt_s=0.05)
+    grasps = book_grasps()
+    ranking = evaluator.rank(grasps, BOOK, trajectory, seed_positions=BAXTER_SEED)
+    return evaluator, grasps, trajectory, ranking
+
+
+def test_config_rejects_bad_values() -> None:
+    with pytest.raises(InvalidInputError, match=r"posture\.restarts: must be an integer"):
+        PostureConfig(restarts=-1)
+    with pytest.raises(InvalidInputError, match=r"posture\.restarts"):
+        PostureConfig(restarts=True)  # type: ignore[arg-type]
+    with pytest.raises(InvalidInputError, match=r"posture\.duplicate_tolerance_rad"):
+        PostureConfig(duplicate_tolerance_rad=0.0)
+
+
+def test_zero_restarts_is_the_single_ik_bit_for_bit(baxter_book) -> None:
+    evaluator, grasps, trajectory, ranking = baxter_book
+    selected = select_postures(
+        evaluator, grasps, BOOK, trajectory, ranking, PostureConfig(restarts=0)
+    )
+    fresh = evaluator.rank(grasps, BOOK, trajectory, seed_positions=BAXTER_SEED)
+    assert selected.order == fresh.order
+    for a, b in zip(selected.evaluations, fresh.evaluations, strict=True):
+        assert a.score == b.score
+        assert np.array_equal(a.joint_positions, b.joint_positions)
+        assert np.array_equal(a.effective_mass_kg, b.effective_mass_kg)
+    for p, e in zip(selected.postures, selected.evaluations, strict=True):
+        assert (p.postures_tried, p.postures_feasible, p.selected) == (1, 1, 0)
+        assert p.score == p.score_single_ik == e.score
+        assert np.array_equal(p.start_positions, e.joint_positions[0])
+
+
+def test_selection_never_scores_worse_and_reports_consistently(baxter_book) -> None:
+    evaluator, grasps, trajectory, ranking = baxter_book
+    selected = select_postures(
+        evaluator, grasps, BOOK, trajectory, ranking, PostureConfig(restarts=12)
+    )
+    for p, e, single in zip(
+        selected.postures, selected.evaluations, ranking.evaluations, strict=True
+    ):
+        assert e.feasible and single.feasible
+        assert p.score_single_ik == single.score
+        assert p.score == e.score <= single.score
+        assert p.score_range[0] == p.score <= p.score_range[1]
+        assert 1 <= p.postures_feasible <= p.postures_tried <= 13
+        assert np.array_equal(p.start_positions, e.joint_positions[0])
+        # the kept posture is really followed from its start: the tip is where the grasp says
+        tip = evaluator.robot.transform_tip_to_base(e.joint_positions[0])
+        target = (
+            trajectory.transform_object_to_base_start * grasps[e.index].transform_tip_to_object
+        )
+        assert np.linalg.norm(pin.log6(tip.actInv(target)).vector) < 1e-5
+    scores = [e.score for e in selected.evaluations]
+    assert list(selected.order) == sorted(range(3), key=lambda k: scores[k])
+    assert any(p.score < p.score_single_ik - 1e-4 for p in selected.postures)
+
+
+@pytest.mark.parametrize("robot_kind", ["arm6", "arm7"])
+def test_never_worse_on_random_grasps(robot_kind: str, request: pytest.FixtureRequest) -> None:
+    robot: RobotModel = request.getfixturevalue(robot_kind)
+    rng = np.random.default_rng(7)
+    evaluator = GraspSafetyEvaluator(robot, EvaluationConfig(workers=1))
+    seed = random_positions(robot, rng)
+    tip = robot.transform_tip_to_base(seed)
+    grasps = []
+    for k in range(6):
+        offset = pin.SE3(pin.exp3(rng.normal(scale=0.3, size=3)), rng.normal(scale=0.05, size=3))
+        grasps.append(Grasp(offset, f"g{k}"))
+    # object start so that grasp 0's tip is exactly at the seed's tip pose; move by 5 cm
+    start = tip * grasps[0].transform_tip_to_object.inverse()
+    goal = pin.SE3(start.rotation @ pin.exp3(np.array([0.0, 0.0, 0.2])), start.translation)
+    goal.translation = goal.translation + np.array([0.03, -0.04, 0.02])
+    trajectory = ObjectTrajectory(start, goal, 1.0, 0.05)
+    ranking = evaluator.rank(grasps, BOOK, trajectory, seed_positions=seed)
+    selected = select_postures(
+        evaluator, grasps, BOOK, trajectory, ranking, PostureConfig(restarts=10)
+    )
+    assert ranking.evaluations[0].feasible
+    for single, kept, p in zip(
+        ranking.evaluations, selected.evaluations, selected.postures, strict=True
+    ):
+        if single.feasible:
+            assert kept.feasible and kept.score <= single.score
+        else:
+            assert kept.feasible == (p.postures_feasible > 0)
+
+
+def test_seven_dof_start_posture_as_good_as_many_random_ik_solutions(baxter_book) -> None:
+    """The independent oracle: 150 IK solutions of the start pose from uniformly random seeds
+    (another generator than the selection's), each followed along the trajectory."""
+    evaluator, grasps, trajectory, ranking = baxter_book
+    robot = evaluator.robot
+    selected = select_postures(
+        evaluator, grasps[:1], BOOK, trajectory, _subset(ranking, 0), PostureConfig(restarts=16)
+    )
+    rng = np.random.default_rng(2024)
+    start = trajectory.transform_object_to_base_start * grasps[0].transform_tip_to_object
+    best = np.inf
+    feasible = 0
+    for _ in range(150):
+        q, converged, _ = evaluator.ik.solve(
+            start, robot.q_from_positions(random_positions(robot, rng))
+        )
+        if not converged:
+            continue
+        e = evaluator.evaluate(grasps[0], BOOK, trajectory, seed_positions=q)
+        if e.feasible:
+            feasible += 1
+            best = min(best, e.score)
+    assert feasible >= 20
+    assert selected.evaluations[0].score <= 1.01 * best
+
+
+def _subset(ranking, k: int):
+    from dataclasses import replace
+
+    e = ranking.evaluations[k]
+    return replace(ranking, order=(0,) if e.feasible else (), evaluations=(e,))
+
+
+PLANAR_URDF = """<robot name="planar"><link name="base"/>
+<link name="l1"><inertial><origin xyz="0.25 0 0"/><mass value="2"/>
+ <inertia ixx="0.01" iyy="0.05" izz="0.05" ixy="0" ixz="0" iyz="0"/></inertial></link>
+<link name="l2"><inertial><origin xyz="0.2 0 0"/><mass value="1.5"/>
+ <inertia ixx="0.01" iyy="0.03" izz="0.03" ixy="0" ixz="0" iyz="0"/></inertial></link>
+<link name="l3"><inertial><origin xyz="0.05 0 0"/><mass value="0.5"/>
+ <inertia ixx="0.002" iyy="0.002" izz="0.002" ixy="0" ixz="0" iyz="0"/></inertial></link>
+<link name="tool"/>
+<joint name="shoulder" type="revolute"><parent link="base"/><child link="l1"/>
+ <axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="50" velocity="10"/></joint>
+<joint name="elbow" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0.5 0 0"/>
+ <axis xyz="0 0 1"/><limit lower="-1.0" upper="2.5" effort="50" velocity="10"/></joint>
+<joint name="wrist" type="revolute"><parent link="l2"/><child link="l3"/><origin xyz="0.4 0 0"/>
+ <axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="50" velocity="10"/></joint>
+<joint name="tool_joint" type="fixed"><parent link="l3"/><child link="tool"/>
+ <origin xyz="0.1 0 0"/></joint></robot>"""
+
+
+def _planar_case(goal_x: float):
+    """A planar 3R arm (two IK branches: elbow up / down), the object carried from x = 0.95
+    to ``goal_x`` at constant orientation; the seed is on the elbow-negative branch, whose
+    elbow limit (-1 rad) it reaches when the wrist comes closer than 0.79 m to the base."""
+    robot = RobotModel.from_urdf(PLANAR_URDF, "base", "tool")
+    evaluator = GraspSafetyEvaluator(robot, EvaluationConfig(workers=1))
+    start = pin.SE3(np.eye(3), np.array([0.95, 0.0, 0.0]))
+    goal = pin.SE3(np.eye(3), np.array([goal_x, 0.0, 0.0]))
+    trajectory = ObjectTrajectory(start, goal, 1.0, 0.02)
+    grasps = [Grasp(pin.SE3.Identity(), "centre")]
+    seed = (0.3, -0.6, 0.3)
+    return evaluator, grasps, trajectory, seed
+
+
+def test_grasp_infeasible_only_by_joint_limits_becomes_feasible() -> None:
+    evaluator, grasps, trajectory, seed = _planar_case(goal_x=0.6)
+    ranking = evaluator.rank(grasps, BOOK, trajectory, seed_positions=seed)
+    single = ranking.evaluations[0]
+    assert not single.feasible and "joint limits reached: elbow" in single.reason
+    selected = select_postures(
+        evaluator, grasps, BOOK, trajectory, ranking, PostureConfig(restarts=8)
+    )
+    kept, posture = selected.evaluations[0], selected.postures[0]
+    assert kept.feasible and selected.order == (0,)
+    assert np.isnan(posture.score_single_ik) and posture.postures_feasible >= 1
+    assert kept.joint_positions[0][1] > 0.0  # the other (elbow-positive) branch
+    assert np.all(kept.joint_positions[:, 1] <= 2.5)
+
+
+def test_infeasible_reason_says_how_many_seeds_were_tried() -> None:
+    evaluator, grasps, trajectory, seed = _planar_case(goal_x=1.2)  # beyond the 1 m reach
+    ranking = evaluator.rank(grasps, BOOK, trajectory, seed_positions=seed)
+    selected = select_postures(
+        evaluator, grasps, BOOK, trajectory, ranking, PostureConfig(restarts=5)
+    )
+    kept, posture = selected.evaluations[0], selected.postures[0]
+    assert not kept.feasible and selected.order == ()
+    assert kept.reason.startswith("no feasible posture from 6 IK seeds")
+    assert ranking.evaluations[0].reason in kept.reason
+    assert posture.postures_feasible == 0 and posture.postures_tried >= 1
+
+
+def test_redundancy_refinement_starts_from_the_selected_posture(baxter_book) -> None:
+    evaluator, grasps, trajectory, ranking = baxter_book
+    selected = select_postures(
+        evaluator, grasps, BOOK, trajectory, ranking, PostureConfig(restarts=8)
+    )
+    report = analyse(
+        evaluator, grasps, BOOK, trajectory, AnalysisOptions(redundancy=True), ranking=selected
+    )
+    for r, e in zip(report.redundancy, selected.evaluations, strict=True):
+        assert np.array_equal(r.original_joint_positions, e.joint_positions)
+        assert r.score <= e.score
+
+
+def test_joint_velocities_match_finite_differences_and_minimum_norm_rate(baxter) -> None:
+    evaluator = GraspSafetyEvaluator(baxter, EvaluationConfig(workers=1))
+    trajectory = book_trajectory(dt_s=0.01)
+    grasp = book_grasps()[0]
+    e = evaluator.evaluate(grasp, BOOK, trajectory, seed_positions=BAXTER_SEED)
+    qd, qdd = joint_velocities_accelerations(e.times_s, e.joint_positions)
+    q, t = e.joint_positions, e.times_s
+    assert np.abs(qd[[0, -1]]).max() < 1e-12  # at rest at both ends
+    central = (q[2:] - q[:-2]) / (t[2:] - t[:-2])[:, None]
+    scale = np.abs(central).max()
+    assert np.abs(qd[1:-1] - central).max() < 2e-3 * scale
+    # accelerations: piecewise linear, they integrate to the velocities exactly ...
+    h = np.diff(t)[:, None]
+    assert np.abs(qd[1:] - qd[:-1] - 0.5 * h * (qdd[1:] + qdd[:-1])).max() < 1e-9 * scale
+    # ... and follow a wider (5-sample) second difference, except where the IK's 1e-6
+    # tolerance shows as noise of order 1e-6 / dt^2 (a Gauss-Newton correction)
+    k = 5
+    central2 = (q[2 * k :] - 2 * q[k:-k] + q[: -2 * k]) / ((k * 0.01) ** 2)
+    errors2 = np.abs(qdd[k:-k] - central2).max(axis=1)
+    assert np.percentile(errors2, 90) < 0.02 * np.abs(central2).max()
+    assert errors2.max() < 0.2 * np.abs(central2).max()
+    # the IK tracks the tip minimum-norm: qd = J^+ V, V the analytic tip twist (LOCAL)
+    s, s_rate, _ = trajectory.path_parameter(t)
+    model, data = baxter.model, baxter.model.createData()
+    errors = []
+    for i in range(5, len(t) - 5, 10):
+        h = 1e-6
+        poses, _ = trajectory.tip_path(grasp.transform_tip_to_object, np.array([s[i], s[i] + h]))
+        twist = pin.log6(poses[0].actInv(poses[1])).vector / h * s_rate[i]
+        jac = pin.computeFrameJacobian(model, data, q[i], baxter.tip_frame_id, pin.LOCAL)
+        errors.append(np.abs(np.linalg.pinv(jac) @ twist - qd[i]).max())
+    assert max(errors) < 1e-2 * scale
+
+
+def test_joint_velocities_reject_bad_shapes() -> None:
+    with pytest.raises(InvalidInputError, match="joint_positions"):
+        joint_velocities_accelerations(np.arange(3.0), np.zeros((4, 2)))
+    with pytest.raises(InvalidInputError, match="times_s"):
+        joint_velocities_accelerations(np.array([0.0, 1.0, 1.0]), np.zeros((3, 2)))
+
+
+def test_seven_dof_inline_arm_selection_finds_lower_score() -> None:
+    robot = RobotModel.from_urdf(serial_arm_urdf(ARM7_AXES, seed=1), "base_link", "tool")
+    evaluator = GraspSafetyEvaluator(robot, EvaluationConfig(workers=1))
+    rng = np.random.default_rng(3)
+    seed = random_positions(robot, rng) * 0.5
+    start = robot.transform_tip_to_base(seed)
+    goal = pin.SE3(start.rotation, start.translation + np.array([0.05, 0.05, 0.0]))
+    trajectory = ObjectTrajectory(start, goal, 1.0, 0.05)
+    grasps = [Grasp(pin.SE3.Identity(), "tip")]
+    ranking = evaluator.rank(grasps, BOOK, trajectory, seed_positions=seed)
+    selected = select_postures(
+        evaluator, grasps, BOOK, trajectory, ranking, PostureConfig(restarts=16)
+    )
+    p = selected.postures[0]
+    assert p.postures_feasible >= 2 and p.score_range[1] > p.score_range[0]
+    assert p.score <= p.score_single_ik
+
+
+def test_scenario_posture_section_and_cli_json() -> None:
+    import yaml
+
+    from grasp_safety_ros.cli.main import rank_scenario
+    from grasp_safety_ros.cli.report import report_to_dict
+    from grasp_safety_ros.cli.scenario import parse_scenario
+    from grasp_safety_ros.paths import config_file
+
+    path = config_file("book_baxter.yaml")
+    data = yaml.safe_load(path.read_text())
+    assert parse_scenario(data, path.parent).posture == PostureConfig(restarts=8)
+    for bad, field in (({"restarts": -1}, "restarts"), ({"restarts": "8"}, "restarts")):
+        with pytest.raises(InvalidInputError, match=rf"posture\.{field}: must be an integer"):
+            parse_scenario({**data, "posture": bad}, path.parent)
+    with pytest.raises(InvalidInputError, match=r"posture\.tries: unknown field"):
+        parse_scenario({**data, "posture": {"tries": 3}}, path.parent)
+    scenario = parse_scenario({**data, "posture": {"restarts": 0}}, path.parent)
+    paper = GraspSafetyEvaluator(scenario.robot.load(path.parent)).rank(
+        scenario.grasps, scenario.object_inertia, scenario.trajectory, scenario.robot.seed
+    )
+    result = report_to_dict(rank_scenario(scenario))
+    assert result["paper_ranking"] == list(paper.order)
+    for grasp, e in zip(result["grasps"], paper.evaluations, strict=True):
+        assert grasp["score"] == e.score and grasp["posture"]["restarts"] == 0
+        assert [s["q"] for s in grasp["samples"]] == e.joint_positions.tolist()
+        qd, _ = joint_velocities_accelerations(e.times_s, e.joint_positions)
+        assert [s["qd"] for s in grasp["samples"]] == qd.tolist()
