@@ -671,8 +671,8 @@ def test_invalid_parameters_are_refused_with_a_reason(ros: NodeUnderTest) -> Non
     assert not result.successful and "ik_seed" in result.reason
     (result,) = ros.set_parameters(metric="median")
     assert not result.successful and "metric" in result.reason
-    (result,) = ros.set_parameters(trajectory__dt_s="fast")
-    assert not result.successful and "trajectory.dt_s" in result.reason
+    (result,) = ros.set_parameters(trajectory__dt_s="fast")  # declared a double
+    assert not result.successful and "expected 'Type.DOUBLE' got 'Type.STRING'" in result.reason
     response = ros.rank(book_request())  # nothing changed
     assert response.success and response.ranking.metric == "mean"
 

@@ -32,14 +32,9 @@ from geometry_msgs.msg import Inertia, InertiaStamped, PoseArray
 from grasp_safety_msgs.msg import GraspRanking
 from grasp_safety_msgs.srv import RankGrasps
 from nav_msgs.msg import Path
-from rcl_interfaces.msg import (
-    IntegerRange,
-    ParameterDescriptor,
-    ParameterType,
-    SetParametersResult,
-)
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
-from rclpy.exceptions import InvalidParameterValueException
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import Executor, ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -71,11 +66,11 @@ from .conversions import (
     seed_from_joint_state,
     trajectory_from_path,
 )
+from .declaration import declare_node_parameters, typed_parameters
 from .parameters import (
     PARAMETERS,
     ROBOT_PARAMETERS,
     NodeSettings,
-    ParameterSpec,
     RobotBundle,
     build_robot,
     check_parameter,
@@ -184,14 +179,14 @@ class GraspSafetyNode(Node):
         self._inertia_override: ObjectInertia | None = None
         self._status = _Status()
 
+        self.add_pre_set_parameters_callback(typed_parameters)
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        declarations = [
-            (name, spec.default, _descriptor(spec)) for name, spec in PARAMETERS.items()
-        ]
         try:
-            self.declare_parameters("", declarations)
-        except InvalidParameterValueException:
-            raise StartupError(self._startup_rejection or "invalid parameter") from None
+            declare_node_parameters(self)
+        except GraspSafetyError as error:
+            raise StartupError(str(error)) from None
+        except (InvalidParameterValueException, InvalidParameterTypeException) as error:
+            raise StartupError(self._startup_rejection or str(error)) from None
         self._values = {name: self.get_parameter(name).value for name in PARAMETERS}
         try:
             self._settings = settings_from_parameters(self._values)
@@ -808,18 +803,6 @@ def _analysis_options(
             "object.points_in_object_m, object.box_size_m or object.cylinder_*",
         )
     return replace(defaults, metric_point=metric_point, grasp_quality=quality)
-
-
-def _descriptor(spec: ParameterSpec) -> ParameterDescriptor:
-    """The declaration descriptor of a parameter: typed when it has an integer range."""
-    if spec.integer_range is None:
-        return ParameterDescriptor(description=spec.description, dynamic_typing=True)
-    lowest, highest = spec.integer_range
-    return ParameterDescriptor(
-        type=ParameterType.PARAMETER_INTEGER,
-        description=spec.description,
-        integer_range=[IntegerRange(from_value=lowest, to_value=highest, step=1)],
-    )
 
 
 def _internal_error(error: BaseException) -> str:

@@ -38,13 +38,16 @@ class ParameterSpec:
     """One node parameter: its default value and a one-line description (with units).
 
     Attributes:
-        integer_range: (lowest, highest) of an integer parameter declared with a typed
-            descriptor (type INTEGER and this IntegerRange); None: dynamically typed.
+        item_type: For list parameters, the type of their items (float or str); needed when
+            the default list is empty. The node declares every parameter with the type of its
+            default (``bool``, ``int``, ``float``, ``str`` or a list of ``item_type``).
+        read_only: Only read at start-up: the node refuses to change it at run time.
     """
 
     default: Any
     description: str
-    integer_range: tuple[int, int] | None = None
+    item_type: type | None = None
+    read_only: bool = False
 
 
 PARAMETERS: Mapping[str, ParameterSpec] = {
@@ -58,6 +61,7 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
         10.0,
         "start-up wait for the /robot_description topic when both robot_description and urdf "
         "are empty [s]; 0 waits for ever",
+        read_only=True,
     ),
     "base_frame": ParameterSpec("", "base frame of the arm chain (URDF link or frame)"),
     "tip_frame": ParameterSpec("", "tip (end-effector) frame of the arm chain"),
@@ -65,7 +69,9 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
         "object", "frame_id that marks grasps (and inertia) given in the object frame"
     ),
     "ik_seed": ParameterSpec(
-        [], "IK seed, one position per chain joint, base to tip [rad or m]; empty: see docs"
+        [],
+        "IK seed, one position per chain joint, base to tip [rad or m]; empty: see docs",
+        item_type=float,
     ),
     "use_joint_states_seed": ParameterSpec(
         True, "seed IK with the chain joints of /joint_states when ik_seed is empty"
@@ -109,16 +115,19 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
         [],
         "exposed object points, object frame, flat x y z x y z ... [m]; empty: from "
         "object.box_size_m or object.cylinder_*, else none",
+        item_type=float,
     ),
     "object.box_size_m": ParameterSpec(
-        [], "box edges along the object axes [m] (points: its 8 corners about the CoM); []: none"
+        [],
+        "box edges along the object axes [m] (points: its 8 corners about the CoM); []: none",
+        item_type=float,
     ),
     "object.cylinder_radius_m": ParameterSpec(
         0.0, "cylinder radius [m], axis = object z (points: 8 per rim about the CoM); 0: none"
     ),
     "object.cylinder_length_m": ParameterSpec(0.0, "cylinder length [m]; 0: no cylinder"),
     "iso_ts_15066.regions": ParameterSpec(
-        [], "ISO/TS 15066 body regions to assess; empty: all of them"
+        [], "ISO/TS 15066 body regions to assess; empty: all of them", item_type=str
     ),
     "uncertainty.mass_fraction": ParameterSpec(
         0.0, "relative object mass error bound, in [0, 1); all three bounds 0: no analysis"
@@ -151,7 +160,6 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
         DEFAULT_RESTARTS,
         "IK restarts at the start pose per grasp besides the seed's; the lowest-score posture "
         "is kept; 0: the paper's single IK",
-        integer_range=(0, MAX_RESTARTS),
     ),
 }
 """Every parameter of the node, by name."""
@@ -283,8 +291,8 @@ def check_parameter(name: str, value: Any) -> Any:
         return _integer(name, value, 1, _MAX_COUNT)
     if name in ("uncertainty.samples", "uncertainty.seed"):
         return _integer(name, value, 0, _MAX_COUNT)
-    if PARAMETERS[name].integer_range is not None:
-        return _integer(name, value, *PARAMETERS[name].integer_range)
+    if name == "posture.restarts":
+        return _integer(name, value, 0, MAX_RESTARTS)
     if name == "ik_seed":
         return _numbers(name, value, None)
     if name == "object.com_in_object_m":
@@ -349,6 +357,61 @@ def _regions(name: str, value: Any) -> tuple[str, ...]:
     if len(set(names)) != len(names):
         raise InvalidInputError(name, f"regions repeat: {_show(names)}")
     return tuple(names)
+
+
+@dataclass(frozen=True)
+class ParameterConstraints:
+    """What check_parameter accepts, for ``ros2 param describe``.
+
+    Attributes:
+        value_range: Closed range (minimum, maximum) of a number, or None where the accepted
+            set is not a closed interval (ROS ranges are closed).
+        text: The constraint in words (empty when the type says it all).
+    """
+
+    value_range: tuple[float, float] | None
+    text: str
+
+
+def parameter_constraints(name: str) -> ParameterConstraints:
+    """The constraints check_parameter applies to ``name`` on its own (not cross-parameter)."""
+    closed: tuple[float, float] | None = None
+    text = ""
+    if name in _CHOICES:
+        text = f"one of: {', '.join(_CHOICES[name])}"
+    elif name in ("max_grasps", "max_samples", "max_total_samples"):
+        closed = (1, _MAX_COUNT)
+    elif name in ("uncertainty.samples", "uncertainty.seed"):
+        closed = (0, _MAX_COUNT)
+    elif name == "posture.restarts":
+        closed = (0, MAX_RESTARTS)
+    elif name in _RANGES:
+        closed = _RANGES[name]
+    elif name in _POSITIVE:
+        text = "> 0"
+    elif name in _FRACTIONS:
+        text = "in [0, 1)"
+    elif name == "object_frame":
+        text = "non-empty"
+    elif name in ("base_frame", "tip_frame"):
+        text = "required: a frame of the robot description"
+    elif name == "robot_description":
+        text = "empty or URDF XML"
+    elif name == "ik_seed":
+        text = "empty or one finite value per chain joint"
+    elif name == "object.com_in_object_m":
+        text = "3 finite values"
+    elif name == "object.inertia_about_com_kgm2":
+        text = "6 finite values"
+    elif name == "object.points_in_object_m":
+        text = f"x y z per point (a multiple of 3 finite values), at most {_MAX_POINTS} points"
+    elif name == "object.box_size_m":
+        text = "empty or 3 edge lengths > 0"
+    elif name == "iso_ts_15066.regions":
+        text = f"distinct names from: {', '.join(BODY_REGIONS)}"
+    elif name in PARAMETERS and isinstance(PARAMETERS[name].default, float):
+        text = ">= 0"
+    return ParameterConstraints(closed, text)
 
 
 def points_from_parameters(values: Mapping[str, Any]) -> np.ndarray | None:
