@@ -34,13 +34,9 @@ from grasp_safety_ros.core.method.effective_mass import (
     translational_mobilities_in_base,
     translational_mobility_in_base,
 )
-from grasp_safety_ros.core.method.ik import (
-    IKSolver,
-    compiled_available,
-    exp3_batch,
-    tip_path_arrays,
-)
+from grasp_safety_ros.core.method.ik import IKSolver, compiled_available
 from grasp_safety_ros.core.method.ranking import Ranking
+from grasp_safety_ros.core.model.trajectory import exp3_batch, tip_path_arrays
 
 needs_numba = pytest.mark.skipif(not compiled_available(), reason="numba is not installed")
 RTOL = 1e-9
@@ -493,3 +489,35 @@ def test_small_requests_stay_serial(arm6: RobotModel) -> None:
     seed = random_positions(arm6, np.random.default_rng(12))
     evaluator.rank(grasps_near_identity(2), BOX, reach_trajectory(arm6, seed), seed_positions=seed)
     assert getattr(evaluator, "_grasp_pool", None) is None
+
+
+@needs_numba
+def test_waypoint_trajectories_run_the_compiled_kernel(
+    arm7: RobotModel, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from grasp_safety_ros.core.method import ranking as ranking_module
+    from grasp_safety_ros.core.model.waypoint_trajectory import WaypointTrajectory
+
+    rng = np.random.default_rng(14)
+    seed = random_positions(arm7, rng)
+    quintic = reach_trajectory(arm7, seed)
+    start, goal = quintic.transform_object_to_base_start, quintic.transform_object_to_base_goal
+    middle = pin.SE3(
+        start.rotation @ pin.exp3(np.array([0.05, 0.0, 0.05])),
+        0.5 * (start.translation + goal.translation) + np.array([0.0, 0.02, 0.0]),
+    )
+    waypoints = WaypointTrajectory((0.0, 0.6, 1.0), (start, middle, goal), 0.02)
+    calls = []
+    fused = ranking_module.evaluate_grasp_compiled
+    monkeypatch.setattr(
+        ranking_module,
+        "evaluate_grasp_compiled",
+        lambda *args, **kwargs: calls.append(1) or fused(*args, **kwargs),
+    )
+    python, compiled = evaluators(arm7)
+    grasps = grasps_near_identity(4)
+    expected = python.rank(grasps, BOX, waypoints, seed_positions=seed)
+    assert not calls
+    assert len(expected.order) >= 2
+    assert_same_ranking(compiled.rank(grasps, BOX, waypoints, seed_positions=seed), expected)
+    assert len(calls) == len(grasps)

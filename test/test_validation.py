@@ -346,3 +346,26 @@ def test_quick_run_posture_selection_against_single_ik(quick_run) -> None:
 
 def test_baxter_seed_is_the_validation_seed() -> None:
     assert tuple(SEED_POSITIONS) == tuple(BAXTER_SEED)
+
+
+def test_quick_run_waypoint_path(quick_run) -> None:
+    """The book along the three-waypoint path: simulated with the same pillar setup; its
+    effective masses at impact are about 8 % apart (quick run), far above the noise, and the
+    peak forces follow them; the report shows the change from the straight path."""
+    out, results = quick_run
+    waypoints, straight = results["book_waypoints"], results["book"]
+    assert len(waypoints["grasps"]) == 3
+    assert waypoints["ordering_holds"]
+    assert waypoints["effective_mass_ratio_worst_to_best"] > 1.05
+    for grasp, other in zip(waypoints["grasps"], straight["grasps"], strict=True):
+        assert grasp["tracking_error_before_contact_rad"] < 1e-3
+        assert abs(grasp["contact_time_s"] - 1.5) < 2e-3
+        # Another path: the effective mass at impact is not the straight path's.
+        assert (
+            abs(grasp["effective_mass_at_impact_kg"] / other["effective_mass_at_impact_kg"] - 1)
+            > 0.01
+        )
+    changes = waypoints["change_from_straight_path"]
+    assert [c["name"] for c in changes] == [g["name"] for g in straight["grasps"]]
+    report = (out / "results.md").read_text(encoding="utf-8")
+    assert "## Book along a timed waypoint path" in report

@@ -10,7 +10,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from ..core.analyses.safety_report import SafetyReport, analyse
-from ..core.exceptions import GraspSafetyError
+from ..core.exceptions import GraspSafetyError, InvalidInputError
 from ..core.method.posture import select_postures
 from ..core.method.ranking import METRICS, EvaluationConfig, GraspSafetyEvaluator
 from ..paths import config_file
@@ -46,7 +46,7 @@ def rank_scenario(scenario: Scenario, metric: str | None = None) -> SafetyReport
     """Load the scenario's robot, rank its grasps and run the analyses the scenario asks for."""
     robot = scenario.robot.load(scenario.base_dir)
     evaluator = GraspSafetyEvaluator(robot, EvaluationConfig(metric=metric or scenario.metric))
-    progress = _progress_printer(len(scenario.grasps) * scenario.trajectory.num_samples)
+    progress = _progress_printer(len(scenario.grasps) * len(scenario.trajectory.times_s()))
     ranking = evaluator.rank(
         scenario.grasps,
         scenario.object_inertia,
@@ -92,14 +92,23 @@ def _write_outputs(
     report: SafetyReport, json_path: Path | None, plot_path: Path | None, title: str
 ) -> None:
     if json_path is not None:
-        json_path.parent.mkdir(parents=True, exist_ok=True)
         text = json.dumps(report_to_dict(report), indent=1, allow_nan=False)
-        json_path.write_text(text, encoding="utf-8")
+        try:
+            json_path.parent.mkdir(parents=True, exist_ok=True)
+            json_path.write_text(text, encoding="utf-8")
+        except OSError as error:
+            raise InvalidInputError(
+                "--json", f"cannot write '{json_path}': {error.strerror or error}"
+            ) from None
         print(f"wrote {json_path}")
     if plot_path is not None:
         from .plotting import plot_report
 
-        plot_report(report, plot_path, title)
+        try:
+            plot_report(report, plot_path, title)
+        except (OSError, ValueError) as error:  # ValueError: a format matplotlib lacks
+            reason = getattr(error, "strerror", None) or " ".join(str(error).split())
+            raise InvalidInputError("--plot", f"cannot write '{plot_path}': {reason}") from None
         print(f"wrote {plot_path}")
 
 
@@ -164,7 +173,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return int(args.handler(args))
     except GraspSafetyError as error:
-        print(f"grasp-safety: error: {error}", file=sys.stderr)
+        one_line = " ".join(line.strip() for line in str(error).splitlines())
+        print(f"grasp-safety: error: {one_line}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except BrokenPipeError:  # output piped into a reader that stopped early (head, less)
         sys.stderr.close()

@@ -38,10 +38,18 @@ def plot_report(report: SafetyReport, path: str | Path, title: str = "") -> Path
         _label(e.name, e.index) + ("" if e.feasible else " (infeasible)") for e in evaluations
     ]
     if feasible:
-        times = feasible[0].times_s
+        # One time grid for all grasps (sample times may differ: waypoint times, planned
+        # joint trajectories); each row interpolated onto it, blank outside its own times.
+        times = np.linspace(
+            min(e.times_s[0] for e in feasible),
+            max(e.times_s[-1] for e in feasible),
+            max(len(e.times_s) for e in feasible),
+        )
         grid = np.full((len(evaluations), len(times)), np.nan)
         for e in feasible:
-            grid[e.index] = e.effective_mass_kg
+            grid[e.index] = np.interp(
+                times, e.times_s, e.effective_mass_kg, left=np.nan, right=np.nan
+            )
         image = heat_ax.imshow(
             np.ma.masked_invalid(grid),
             aspect="auto",

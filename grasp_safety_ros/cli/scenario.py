@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -15,11 +16,94 @@ from ..core.analyses.safety_report import RANK_BY, AnalysisOptions
 from ..core.analyses.uncertainty import InertiaUncertainty
 from ..core.exceptions import InvalidInputError
 from ..core.input_checks import finite_array, finite_float, pose_from_position_quat
+from ..core.method.joint_trajectory import PlannedJointTrajectory
 from ..core.method.posture import DEFAULT_RESTARTS, PostureConfig
 from ..core.method.ranking import METRICS, Grasp, check_metric
 from ..core.model.inertia import ObjectInertia, solid_box, solid_cylinder, solid_sphere
 from ..core.model.robot import RobotModel
 from ..core.model.trajectory import ObjectTrajectory
+from ..core.model.waypoint_trajectory import WaypointTrajectory
+
+MAX_SCENARIO_BYTES = 4_000_000
+"""Largest scenario file read [bytes]."""
+
+MAX_NESTING_DEPTH = 64
+"""Deepest nesting of lists and mappings in a scenario file."""
+
+MAX_EXPANDED_NODES = 1_000_000
+"""Most YAML nodes a scenario may expand to, aliases (``*name``) counted at full size."""
+
+MAX_GRASPS = 10_000
+"""Most grasps in a scenario."""
+
+MAX_GRASP_SAMPLES = 10_000_000
+"""Most grasps x trajectory samples (IK solves) in a scenario."""
+
+MAX_POINTS = 1_000
+"""Most exposed points (``object.points_m``)."""
+
+MAX_UNCERTAINTY_SAMPLES = 10_000
+"""Most random inertia samples (``uncertainty.samples``)."""
+
+MAX_OBJECT_MASS_KG = 10_000.0
+"""Heaviest object [kg]."""
+
+MAX_OBJECT_SIZE_M = 100.0
+"""Largest object dimension, CoM offset and radius of gyration [m] (far beyond any gripper;
+much larger objects make the augmented mass matrix numerically singular)."""
+
+
+_SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml when available
+
+
+def _check_yaml_structure(text: str) -> None:
+    """Refuse YAML nested deeper than MAX_NESTING_DEPTH or expanding to more than
+    MAX_EXPANDED_NODES nodes (aliases ``*name`` counted at the full size of their anchor, so a
+    "billion laughs" file is refused however short); one pass over the parser's events."""
+    child_sizes: list[int] = [0]
+    anchor_stack: list[str | None] = []
+    anchor_sizes: dict[str, int] = {}
+    for event in yaml.parse(text, Loader=_SAFE_LOADER):
+        if isinstance(event, yaml.CollectionStartEvent):
+            if len(anchor_stack) >= MAX_NESTING_DEPTH:
+                raise InvalidInputError(
+                    "scenario",
+                    f"nesting deeper than {MAX_NESTING_DEPTH} levels at line "
+                    f"{event.start_mark.line + 1}",
+                )
+            anchor_stack.append(event.anchor)
+            child_sizes.append(0)
+            continue
+        if isinstance(event, yaml.CollectionEndEvent):
+            size, anchor = 1 + child_sizes.pop(), anchor_stack.pop()
+        elif isinstance(event, yaml.AliasEvent):
+            size, anchor = anchor_sizes.get(event.anchor, 1), None
+        elif isinstance(event, yaml.ScalarEvent):
+            size, anchor = 1, event.anchor
+        else:  # stream and document start and end
+            continue
+        if anchor is not None:
+            anchor_sizes[anchor] = size
+        child_sizes[-1] += size
+        if child_sizes[-1] > MAX_EXPANDED_NODES:
+            raise InvalidInputError(
+                "scenario",
+                f"expands to more than {MAX_EXPANDED_NODES} YAML nodes (aliases counted at "
+                f"full size), near line {event.start_mark.line + 1}",
+            )
+
+
+def load_yaml(text: str, where: str) -> Any:
+    """Parse YAML text, bounded by _check_yaml_structure; errors as one-line
+    InvalidInputError('scenario')."""
+    try:
+        _check_yaml_structure(text)
+        return yaml.load(text, Loader=_SAFE_LOADER)  # a safe loader
+    except (yaml.YAMLError, ValueError, OverflowError) as error:
+        if isinstance(error, InvalidInputError):
+            raise
+        reason = " ".join(str(error).split())
+        raise InvalidInputError("scenario", f"{where} is not valid YAML: {reason}") from None
 
 
 @dataclass(frozen=True)
@@ -58,7 +142,7 @@ class Scenario:
 
     robot: RobotSpec
     object_inertia: ObjectInertia
-    trajectory: ObjectTrajectory
+    trajectory: ObjectTrajectory | WaypointTrajectory
     grasps: tuple[Grasp, ...]
     metric: str
     base_dir: Path
@@ -85,9 +169,11 @@ def _string(value: Any, field: str) -> str:
 
 
 def _check_keys(section: Mapping[str, Any], allowed: set[str], prefix: str) -> None:
-    unknown = sorted(set(section) - allowed)
+    unknown = sorted(
+        k if isinstance(k, str) else json.dumps(k, default=str) for k in set(section) - allowed
+    )
     if unknown:
-        where = f"{prefix}.{unknown[0]}" if prefix else str(unknown[0])
+        where = f"{prefix}.{unknown[0]}" if prefix else unknown[0]
         raise InvalidInputError(where, f"unknown field; allowed: {', '.join(sorted(allowed))}")
 
 
@@ -126,6 +212,11 @@ def parse_object(section: Any) -> tuple[ObjectInertia, np.ndarray | None]:
     obj = _mapping(section, "object")
     inertia = _parse_inertia(obj)
     if "points_m" in obj:
+        if isinstance(obj["points_m"], list) and len(obj["points_m"]) > MAX_POINTS:
+            raise InvalidInputError(
+                "object.points_m",
+                f"has {len(obj['points_m'])} points; at most {MAX_POINTS} are allowed",
+            )
         points = finite_array(obj["points_m"], "object.points_m")
         if points.ndim != 2 or points.shape[1] != 3 or len(points) == 0:
             raise InvalidInputError(
@@ -147,9 +238,14 @@ def _parse_inertia(obj: Mapping[str, Any]) -> ObjectInertia:
     shapes = {"inertia_about_com_kgm2", "box_size_m", "cylinder", "sphere"}
     _check_keys(obj, {"mass_kg", "com_in_object_m", "points_m"} | shapes, "object")
     mass = finite_float(
-        _required(obj, "mass_kg", "object"), "object.mass_kg", minimum=0.0, strict_minimum=True
+        _required(obj, "mass_kg", "object"),
+        "object.mass_kg",
+        minimum=0.0,
+        maximum=MAX_OBJECT_MASS_KG,
+        strict_minimum=True,
     )
     com = finite_array(obj.get("com_in_object_m", [0.0, 0.0, 0.0]), "object.com_in_object_m", (3,))
+    _check_size(com, "object.com_in_object_m")
     given = sorted(shapes & set(obj))
     if len(given) != 1:
         raise InvalidInputError(
@@ -161,38 +257,81 @@ def _parse_inertia(obj: Mapping[str, Any]) -> ObjectInertia:
         tensor = finite_array(
             obj["inertia_about_com_kgm2"], "object.inertia_about_com_kgm2", (3, 3)
         )
-        return ObjectInertia(mass, com, tensor)
+        inertia = ObjectInertia(mass, com, tensor)
+        gyration_m = float(
+            np.sqrt(np.max(np.linalg.eigvalsh(inertia.inertia_about_com_kgm2)) / mass)
+        )
+        if gyration_m > MAX_OBJECT_SIZE_M:
+            raise InvalidInputError(
+                "object.inertia_about_com_kgm2",
+                f"radius of gyration sqrt(I_max / mass_kg) = {gyration_m:g} m; at most "
+                f"{MAX_OBJECT_SIZE_M:g} m",
+            )
+        return inertia
     if "box_size_m" in obj:
+        _check_size(obj["box_size_m"], "object.box_size_m")
         return solid_box(mass, obj["box_size_m"], com)
     if "cylinder" in obj:
         cylinder = _mapping(obj["cylinder"], "object.cylinder")
         _check_keys(cylinder, {"radius_m", "length_m"}, "object.cylinder")
-        return solid_cylinder(
-            mass,
-            _required(cylinder, "radius_m", "object.cylinder"),
-            _required(cylinder, "length_m", "object.cylinder"),
-            com,
-        )
+        radius = _required(cylinder, "radius_m", "object.cylinder")
+        length = _required(cylinder, "length_m", "object.cylinder")
+        _check_size(radius, "object.cylinder.radius_m")
+        _check_size(length, "object.cylinder.length_m")
+        return solid_cylinder(mass, radius, length, com)
     sphere = _mapping(obj["sphere"], "object.sphere")
     _check_keys(sphere, {"radius_m"}, "object.sphere")
-    return solid_sphere(mass, _required(sphere, "radius_m", "object.sphere"), com)
+    radius = _required(sphere, "radius_m", "object.sphere")
+    _check_size(radius, "object.sphere.radius_m")
+    return solid_sphere(mass, radius, com)
 
 
-def _pose(section: Any, field: str):
+def _check_size(value: Any, field: str) -> None:
+    """Refuse a length or vector [m] longer than MAX_OBJECT_SIZE_M; other checks (type, sign,
+    shape) are the inertia constructors'."""
+    array = finite_array(value, field)
+    size = float(np.max(np.abs(array), initial=0.0))
+    if size > MAX_OBJECT_SIZE_M:
+        raise InvalidInputError(field, f"must be at most {MAX_OBJECT_SIZE_M:g} m, got {size:g} m")
+
+
+_LEGACY = frozenset({"name", "quality"})
+"""Keys start and goal have always tolerated (ignored)."""
+
+
+def _pose(section: Any, field: str, allowed: frozenset[str] = frozenset()):
     pose = _mapping(section, field)
-    _check_keys(pose, {"position_m", "quat_xyzw", "name", "quality"}, field)
+    _check_keys(pose, {"position_m", "quat_xyzw"} | allowed, field)
     return pose_from_position_quat(
         _required(pose, "position_m", field), _required(pose, "quat_xyzw", field), field
     )
 
 
-def parse_trajectory(section: Any) -> ObjectTrajectory:
-    """Parse the ``trajectory`` section (object-frame poses in the base frame)."""
+def parse_trajectory(section: Any) -> ObjectTrajectory | WaypointTrajectory:
+    """Parse the ``trajectory`` section (object-frame poses in the base frame): ``start``,
+    ``goal``, ``duration_s``, ``dt_s``, or timed ``waypoints`` and ``dt_s``."""
     trajectory = _mapping(section, "trajectory")
+    if "waypoints" in trajectory:
+        _check_keys(trajectory, {"waypoints", "dt_s"}, "trajectory")
+        waypoints = trajectory["waypoints"]
+        if not isinstance(waypoints, list):
+            raise InvalidInputError(
+                "trajectory.waypoints", f"must be a list of timed poses, got {waypoints!r}"
+            )
+        times, poses = [], []
+        for i, item in enumerate(waypoints):
+            field = f"trajectory.waypoints[{i}]"
+            poses.append(_pose(item, field, frozenset({"time_s"})))
+            times.append(finite_float(_required(item, "time_s", field), f"{field}.time_s"))
+        return WaypointTrajectory(
+            tuple(times),
+            tuple(poses),
+            finite_float(_required(trajectory, "dt_s", "trajectory"), "trajectory.dt_s"),
+        )
     _check_keys(trajectory, {"start", "goal", "duration_s", "dt_s"}, "trajectory")
     return ObjectTrajectory(
-        _pose(_required(trajectory, "start", "trajectory"), "trajectory.start"),
-        _pose(_required(trajectory, "goal", "trajectory"), "trajectory.goal"),
+        _pose(_required(trajectory, "start", "trajectory"), "trajectory.start", _LEGACY),
+        _pose(_required(trajectory, "goal", "trajectory"), "trajectory.goal", _LEGACY),
         finite_float(_required(trajectory, "duration_s", "trajectory"), "trajectory.duration_s"),
         finite_float(_required(trajectory, "dt_s", "trajectory"), "trajectory.dt_s"),
     )
@@ -207,18 +346,58 @@ def parse_grasps(section: Any) -> tuple[tuple[Grasp, ...], tuple[float, ...] | N
     """
     if not isinstance(section, list) or not section:
         raise InvalidInputError("grasps", "must be a non-empty list of poses")
+    if len(section) > MAX_GRASPS:
+        raise InvalidInputError(
+            "grasps", f"has {len(section)} grasps; at most {MAX_GRASPS} are allowed"
+        )
     grasps = []
     qualities = []
     for i, item in enumerate(section):
         field = f"grasps[{i}]"
-        pose = _pose(item, field)
+        pose = _pose(item, field, frozenset({"name", "quality", "joint_trajectory"}))
         entry = _mapping(item, field)
-        grasps.append(Grasp(pose, str(entry.get("name", f"grasp_{i}"))))
+        planned = None
+        if "joint_trajectory" in entry:
+            planned = parse_joint_trajectory(
+                entry["joint_trajectory"], f"{field}.joint_trajectory"
+            )
+        grasps.append(Grasp(pose, str(entry.get("name", f"grasp_{i}")), planned))
         if "quality" in entry:
             qualities.append(finite_float(entry["quality"], f"{field}.quality"))
     if qualities and len(qualities) != len(grasps):
         raise InvalidInputError("grasps", "give a quality for every grasp or for none")
     return tuple(grasps), tuple(qualities) if qualities else None
+
+
+def parse_joint_trajectory(section: Any, field: str) -> PlannedJointTrajectory:
+    """Parse ``grasps[i].joint_trajectory``: ``joint_names`` and ``points`` with ``time_s``,
+    ``positions`` and optionally ``velocities`` (every point or none)."""
+    trajectory = _mapping(section, field)
+    _check_keys(trajectory, {"joint_names", "points"}, field)
+    names = _required(trajectory, "joint_names", field)
+    if not isinstance(names, list):
+        raise InvalidInputError(f"{field}.joint_names", f"must be a list of names, got {names!r}")
+    points = _required(trajectory, "points", field)
+    if not isinstance(points, list):
+        raise InvalidInputError(f"{field}.points", f"must be a list of points, got {points!r}")
+    times, positions, velocities = [], [], []
+    for k, item in enumerate(points):
+        where = f"{field}.points[{k}]"
+        point = _mapping(item, where)
+        _check_keys(point, {"time_s", "positions", "velocities"}, where)
+        times.append(finite_float(_required(point, "time_s", where), f"{where}.time_s"))
+        positions.append(_required(point, "positions", where))
+        if "velocities" in point:
+            velocities.append(point["velocities"])
+    if velocities and len(velocities) != len(points):
+        raise InvalidInputError(f"{field}.points", "give velocities for every point or for none")
+    return PlannedJointTrajectory(
+        tuple(_string(n, f"{field}.joint_names") for n in names),
+        np.array(times),
+        positions,
+        velocities or None,
+        field,
+    )
 
 
 OPTIONAL_SECTIONS = {
@@ -273,6 +452,12 @@ def parse_options(
             "seed",
         }
         _check_keys(section, allowed, "uncertainty")
+        samples = section.get("samples")
+        if isinstance(samples, int) and samples > MAX_UNCERTAINTY_SAMPLES:
+            raise InvalidInputError(
+                "uncertainty.samples",
+                f"must be at most {MAX_UNCERTAINTY_SAMPLES}, got {samples}",
+            )
         renamed = {("num_random_samples" if k == "samples" else k): v for k, v in section.items()}
         uncertainty = InertiaUncertainty(**renamed)
     effort = _mapping(root.get("effort", {}), "effort")
@@ -286,18 +471,24 @@ def parse_options(
             "metric_point",
             f"{metric_point!r} needs object.points_m or a box or cylinder object",
         )
-    return AnalysisOptions(
-        metric_point=metric_point,
-        points_in_object_m=points,
-        iso_regions=None if regions is None else tuple(regions),
-        uncertainty=uncertainty,
-        grasp_quality=quality,
-        safety_weight=finite_float(root.get("safety_weight", 0.5), "safety_weight", 0.0, 1.0),
-        redundancy=_flag(root.get("redundancy", False), "redundancy"),
-        effort=_flag(effort.get("enabled", True), "effort.enabled"),
-        rank_by=rank_by,
-        effort_criterion=effort.get("criterion", "peak_fraction"),
-    )
+    try:
+        return AnalysisOptions(
+            metric_point=metric_point,
+            points_in_object_m=points,
+            iso_regions=None if regions is None else tuple(regions),
+            uncertainty=uncertainty,
+            grasp_quality=quality,
+            safety_weight=finite_float(root.get("safety_weight", 0.5), "safety_weight", 0.0, 1.0),
+            redundancy=_flag(root.get("redundancy", False), "redundancy"),
+            effort=_flag(effort.get("enabled", True), "effort.enabled"),
+            rank_by=rank_by,
+            effort_criterion=effort.get("criterion", "peak_fraction"),
+        )
+    except InvalidInputError as error:  # the core says iso15066.<field>; the file iso_ts_15066
+        if not error.field.startswith("iso15066."):
+            raise
+        field = "iso_ts_15066." + error.field[len("iso15066.") :]
+        raise InvalidInputError(field, error.reason) from None
 
 
 def parse_scenario(data: Any, base_dir: Path) -> Scenario:
@@ -310,10 +501,18 @@ def parse_scenario(data: Any, base_dir: Path) -> Scenario:
         raise InvalidInputError("metric", f"must be one of {', '.join(METRICS)}, got {metric!r}")
     object_inertia, points = parse_object(_required(root, "object", ""))
     grasps, quality = parse_grasps(_required(root, "grasps", ""))
+    trajectory = parse_trajectory(_required(root, "trajectory", ""))
+    if len(grasps) * trajectory.num_samples > MAX_GRASP_SAMPLES:
+        raise InvalidInputError(
+            "grasps",
+            f"{len(grasps)} grasps x {trajectory.num_samples} trajectory samples = "
+            f"{len(grasps) * trajectory.num_samples} IK solves; at most {MAX_GRASP_SAMPLES} "
+            "(fewer grasps or a larger trajectory.dt_s)",
+        )
     return Scenario(
         robot=parse_robot(_required(root, "robot", "")),
         object_inertia=object_inertia,
-        trajectory=parse_trajectory(_required(root, "trajectory", "")),
+        trajectory=trajectory,
         grasps=grasps,
         metric=check_metric(metric),
         base_dir=base_dir,
@@ -323,14 +522,23 @@ def parse_scenario(data: Any, base_dir: Path) -> Scenario:
 
 
 def load_scenario(path: str | Path) -> Scenario:
-    """Read and validate a scenario YAML file."""
+    """Read and validate a scenario YAML file (at most MAX_SCENARIO_BYTES, UTF-8)."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        with path.open("rb") as stream:
+            raw = stream.read(MAX_SCENARIO_BYTES + 1)
     except OSError as error:
-        raise InvalidInputError("scenario", f"cannot read '{path}': {error.strerror}") from None
+        reason = error.strerror or str(error)
+        raise InvalidInputError("scenario", f"cannot read '{path}': {reason}") from None
+    if len(raw) > MAX_SCENARIO_BYTES:
+        raise InvalidInputError(
+            "scenario", f"'{path}' is larger than {MAX_SCENARIO_BYTES} bytes, the limit"
+        )
     try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as error:
-        raise InvalidInputError("scenario", f"'{path}' is not valid YAML: {error}") from None
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as error:
+        raise InvalidInputError(
+            "scenario", f"'{path}' is not UTF-8 text (byte {error.start}: {error.reason})"
+        ) from None
+    data = load_yaml(text, f"'{path}'")
     return parse_scenario(data, path.resolve().parent)

@@ -10,16 +10,17 @@ from __future__ import annotations
 
 import math
 from collections.abc import Collection, Sequence
+from dataclasses import replace
 
 import numpy as np
 import pinocchio as pin
 from builtin_interfaces.msg import Duration, Time
-from geometry_msgs.msg import Inertia, Point, Pose, PoseArray, Quaternion, Vector3
+from geometry_msgs.msg import Inertia, Point, Pose, PoseArray, Quaternion, Transform, Vector3
 from grasp_safety_msgs.msg import BodyRegionAssessment, GraspRanking
 from grasp_safety_msgs.msg import GraspEvaluation as GraspEvaluationMsg
 from nav_msgs.msg import Path
 from std_msgs.msg import ColorRGBA, Header
-from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint, MultiDOFJointTrajectory
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ..core.analyses.iso15066 import PowerForceLimitAssessment, RegionAssessment
@@ -32,11 +33,13 @@ from ..core.input_checks import (
     rotation_from_quat_xyzw,
 )
 from ..core.method.executable import joint_velocities_accelerations
+from ..core.method.joint_trajectory import PlannedJointTrajectory
 from ..core.method.posture import PostureSelection, single_posture
 from ..core.method.ranking import Grasp, GraspEvaluation, Ranking
 from ..core.model.inertia import ObjectInertia
 from ..core.model.robot import RobotModel
 from ..core.model.trajectory import ObjectTrajectory
+from ..core.model.waypoint_trajectory import WaypointTrajectory
 from .parameters import inertia_tensor_from_components
 
 SCORE_UNITS = {"mean": "kg", "max": "kg", "integral": "kg*s"}
@@ -113,6 +116,70 @@ def stamp_to_seconds(stamp: Time) -> float:
 # --- Trajectory, grasps, inertia -------------------------------------------------------------
 
 
+def duration_to_seconds(duration: Duration) -> float:
+    """Seconds of a builtin_interfaces/Duration."""
+    return float(duration.sec) + 1e-9 * float(duration.nanosec)
+
+
+def transform_from_transform_msg(transform: Transform, field: str) -> pin.SE3:
+    """Rigid transform of a geometry_msgs/Transform; checks finiteness and a unit quaternion."""
+    rotation = rotation_from_quat_xyzw(quat_xyzw_from_msg(transform.rotation), f"{field}.rotation")
+    t = transform.translation
+    translation = finite_array([t.x, t.y, t.z], f"{field}.translation", (3,))
+    return pin.SE3(rotation, np.array(translation))
+
+
+def timed_trajectory(
+    times_s: Sequence[float],
+    poses: Sequence[pin.SE3],
+    time_fields: Sequence[str],
+    dt_s: float,
+    default_duration_s: float,
+    max_samples: int,
+    field: str,
+) -> ObjectTrajectory | WaypointTrajectory:
+    """The object trajectory of timed poses (times as sent; only differences matter).
+
+    Two poses: the quintic from the first to the second over their time difference, or
+    ``default_duration_s`` when the times are equal. N >= 3: the waypoint trajectory through
+    all of them (times strictly increasing). ``time_fields`` name each time in messages.
+    """
+    count = len(poses)
+    if count < 2:
+        raise InvalidInputError(
+            field,
+            f"has {count} pose{'s' if count != 1 else ''}; at least 2 (start, goal) are needed",
+        )
+    relative = [t - times_s[0] for t in times_s]
+    for k in range(1, count):
+        if (
+            not math.isfinite(relative[k])
+            or relative[k] < relative[k - 1]
+            or (count > 2 and relative[k] == relative[k - 1])
+        ):
+            equal = "; equal times are allowed only for 2 poses" if count > 2 else ""
+            raise InvalidInputError(
+                time_fields[k],
+                f"times must increase strictly{equal}: {relative[k]:.9f} s after the first "
+                f"pose, previous {relative[k - 1]:.9f} s",
+            )
+    duration = relative[-1] if relative[-1] > 0 else default_duration_s
+    if dt_s > duration:
+        raise InvalidInputError(
+            field, f"duration {duration:g} s is shorter than trajectory.dt_s={dt_s:g} s"
+        )
+    samples = math.ceil(duration / dt_s - 1e-9) + 1 + max(count - 2, 0)
+    if samples > max_samples:
+        raise InvalidInputError(
+            field,
+            f"duration {duration:g} s at trajectory.dt_s={dt_s:g} s gives {samples} samples; "
+            f"at most max_samples={max_samples} are allowed",
+        )
+    if count == 2:
+        return ObjectTrajectory(poses[0], poses[1], duration, dt_s)
+    return WaypointTrajectory(tuple(relative), tuple(poses), dt_s)
+
+
 def trajectory_from_path(
     path: Path,
     base_frame: str,
@@ -120,49 +187,158 @@ def trajectory_from_path(
     default_duration_s: float,
     max_samples: int,
     field: str = "object_trajectory",
-) -> ObjectTrajectory:
-    """The object trajectory of a nav_msgs/Path of exactly two object poses in the base frame.
+) -> ObjectTrajectory | WaypointTrajectory:
+    """The object trajectory of a nav_msgs/Path of N >= 2 object poses in the base frame.
 
-    The core trajectory is one quintic segment, so a Path must hold exactly the start and the
-    goal; more poses are refused rather than silently dropped (their waypoints would change
-    the motion being assessed). The duration is the stamp difference of the two poses, or
-    ``default_duration_s`` when the stamps are equal (e.g. both zero).
+    Two poses: the quintic from the first to the second; duration = stamp difference, or
+    ``default_duration_s`` when the stamps are equal (e.g. both zero). N >= 3: timed waypoints
+    at their stamps (strictly increasing), relative to the first (see ``timed_trajectory``).
     """
     check_frame_id(path.header.frame_id, [base_frame], f"{field}.header.frame_id")
-    count = len(path.poses)
-    if count != 2:
-        raise InvalidInputError(
-            f"{field}.poses",
-            f"has {count} pose{'s' if count != 1 else ''}; exactly 2 (start, goal) are needed: "
-            "the trajectory is one quintic segment from the first pose to the second",
-        )
     for i, stamped in enumerate(path.poses):
         if stamped.header.frame_id:
             check_frame_id(stamped.header.frame_id, [base_frame], f"{field}.poses[{i}].header")
-    start = transform_from_pose_msg(path.poses[0].pose, f"{field}.poses[0].pose")
-    goal = transform_from_pose_msg(path.poses[1].pose, f"{field}.poses[1].pose")
-    t_start = stamp_to_seconds(path.poses[0].header.stamp)
-    t_goal = stamp_to_seconds(path.poses[1].header.stamp)
-    if t_goal < t_start:
+    poses = [
+        transform_from_pose_msg(p.pose, f"{field}.poses[{i}].pose")
+        for i, p in enumerate(path.poses)
+    ]
+    return timed_trajectory(
+        [stamp_to_seconds(p.header.stamp) for p in path.poses],
+        poses,
+        [f"{field}.poses[{i}].header.stamp" for i in range(len(poses))],
+        dt_s,
+        default_duration_s,
+        max_samples,
+        f"{field}.poses",
+    )
+
+
+def trajectory_from_multi_dof(
+    trajectory: MultiDOFJointTrajectory,
+    base_frame: str,
+    dt_s: float,
+    default_duration_s: float,
+    max_samples: int,
+    field: str = "object_multi_dof_trajectory",
+) -> ObjectTrajectory | WaypointTrajectory:
+    """The object trajectory of a trajectory_msgs/MultiDOFJointTrajectory of the object.
+
+    One joint (the object frame, any name), one transform per point: the object pose in the
+    base frame (``header.frame_id``) at ``time_from_start``. Times as for a Path
+    (``timed_trajectory``); the points' velocities and accelerations are not used (the
+    interpolation through the poses is the waypoint trajectory's).
+    """
+    check_frame_id(trajectory.header.frame_id, [base_frame], f"{field}.header.frame_id")
+    if len(trajectory.joint_names) != 1:
         raise InvalidInputError(
-            f"{field}.poses",
-            f"stamps are not in order: the goal ({t_goal:.9f} s) is before the start "
-            f"({t_start:.9f} s)",
+            f"{field}.joint_names",
+            f"must name exactly one joint (the object), got {list(trajectory.joint_names)}",
         )
-    duration = t_goal - t_start if t_goal > t_start else default_duration_s
-    if dt_s > duration:
+    poses = []
+    for i, point in enumerate(trajectory.points):
+        if len(point.transforms) != 1:
+            raise InvalidInputError(
+                f"{field}.points[{i}].transforms",
+                f"must hold exactly one transform (the object), got {len(point.transforms)}",
+            )
+        poses.append(
+            transform_from_transform_msg(point.transforms[0], f"{field}.points[{i}].transforms[0]")
+        )
+    return timed_trajectory(
+        [duration_to_seconds(p.time_from_start) for p in trajectory.points],
+        poses,
+        [f"{field}.points[{i}].time_from_start" for i in range(len(poses))],
+        dt_s,
+        default_duration_s,
+        max_samples,
+        f"{field}.points",
+    )
+
+
+def planned_from_joint_trajectory(
+    trajectory: JointTrajectory, field: str
+) -> PlannedJointTrajectory | None:
+    """The planned joint trajectory of a trajectory_msgs/JointTrajectory; None when it has no
+    points (IK for that grasp).
+
+    Times are ``time_from_start`` (strictly increasing); ``velocities`` are used when every
+    point has one per joint, ignored when every point has none; accelerations are not used.
+    Joint names may be in any order and include joints off the chain.
+    """
+    points = trajectory.points
+    if not points:
+        return None
+    times = [duration_to_seconds(p.time_from_start) for p in points]
+    for k in range(1, len(times)):
+        if times[k] <= times[k - 1]:
+            raise InvalidInputError(
+                f"{field}.points[{k}].time_from_start",
+                f"must be > points[{k - 1}].time_from_start={times[k - 1]:.9f} s (strictly "
+                f"increasing), got {times[k]:.9f} s",
+            )
+    with_velocities = [len(p.velocities) > 0 for p in points]
+    if any(with_velocities) and not all(with_velocities):
+        k = with_velocities.index(not with_velocities[0])
         raise InvalidInputError(
-            f"{field}.poses",
-            f"duration {duration:g} s is shorter than trajectory.dt_s={dt_s:g} s",
+            f"{field}.points[{k}].velocities", "give velocities for every point or for none"
         )
-    samples = math.ceil(duration / dt_s - 1e-9) + 1
-    if samples > max_samples:
+    return PlannedJointTrajectory(
+        tuple(trajectory.joint_names),
+        np.array(times),
+        [list(p.positions) for p in points],
+        [list(p.velocities) for p in points] if all(with_velocities) else None,
+        field,
+    )
+
+
+def trajectory_from_msg(
+    message: Path | MultiDOFJointTrajectory,
+    base_frame: str,
+    dt_s: float,
+    default_duration_s: float,
+    max_samples: int,
+) -> ObjectTrajectory | WaypointTrajectory:
+    """``trajectory_from_path`` or ``trajectory_from_multi_dof``, by message type."""
+    if isinstance(message, MultiDOFJointTrajectory):
+        return trajectory_from_multi_dof(
+            message, base_frame, dt_s, default_duration_s, max_samples
+        )
+    return trajectory_from_path(message, base_frame, dt_s, default_duration_s, max_samples)
+
+
+def object_trajectory_of_request(
+    path: Path, multi_dof: MultiDOFJointTrajectory
+) -> Path | MultiDOFJointTrajectory:
+    """The request's object trajectory: the Path, or the MultiDOFJointTrajectory when the
+    Path is empty; both given is refused."""
+    if path.poses and multi_dof.points:
         raise InvalidInputError(
-            f"{field}.poses",
-            f"duration {duration:g} s at trajectory.dt_s={dt_s:g} s gives {samples} samples; "
-            f"at most max_samples={max_samples} are allowed",
+            "object_multi_dof_trajectory",
+            "give the object trajectory once: object_trajectory (Path) or "
+            "object_multi_dof_trajectory, not both",
         )
-    return ObjectTrajectory(start, goal, duration, dt_s)
+    return multi_dof if multi_dof.points else path
+
+
+def grasps_with_joint_trajectories(
+    grasps: Sequence[Grasp],
+    joint_trajectories: Sequence[JointTrajectory],
+    field: str = "joint_trajectories",
+) -> list[Grasp]:
+    """Attach one planned joint trajectory per grasp (empty list: IK for all; an entry
+    without points: IK for that grasp)."""
+    if not joint_trajectories:
+        return list(grasps)
+    if len(joint_trajectories) != len(grasps):
+        raise InvalidInputError(
+            field,
+            f"must have one entry per grasp ({len(grasps)}) or none, got "
+            f"{len(joint_trajectories)}",
+        )
+    return [
+        replace(grasp, joint_trajectory=planned_from_joint_trajectory(message, f"{field}[{i}]"))
+        for i, (grasp, message) in enumerate(zip(grasps, joint_trajectories, strict=True))
+    ]
 
 
 def check_grasp_array(
@@ -184,7 +360,7 @@ def grasps_from_pose_array(
     grasps: PoseArray,
     object_frame: str,
     base_frame: str,
-    trajectory: ObjectTrajectory,
+    trajectory: ObjectTrajectory | WaypointTrajectory,
     max_grasps: int,
     field: str = "grasps",
 ) -> list[Grasp]:
@@ -514,7 +690,7 @@ def rank_color(rank: int, count: int) -> tuple[float, float, float, float]:
 def markers_msg(
     ranking: Ranking,
     grasps: Sequence[Grasp],
-    trajectory: ObjectTrajectory,
+    trajectory: ObjectTrajectory | WaypointTrajectory,
     base_frame: str,
     stamp: Time,
     *,

@@ -47,6 +47,7 @@ from rclpy.qos import (
 )
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, Header, String
+from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from ..core.analyses.exposed_points import check_metric_point
@@ -60,11 +61,13 @@ from .conversions import (
     check_frame_id,
     check_grasp_array,
     grasps_from_pose_array,
+    grasps_with_joint_trajectories,
     markers_msg,
     object_inertia_from_msg,
+    object_trajectory_of_request,
     report_msg,
     seed_from_joint_state,
-    trajectory_from_path,
+    trajectory_from_msg,
 )
 from .declaration import declare_node_parameters, typed_parameters
 from .parameters import (
@@ -175,7 +178,7 @@ class GraspSafetyNode(Node):
         self._candidates_pending = False
         self._candidates_quality: tuple[float, ...] | None = None  # paired with _candidates
         self._pending_quality: tuple[float, ...] | None = None  # waits for the next set
-        self._trajectory: Path | None = None
+        self._trajectory: Path | MultiDOFJointTrajectory | None = None
         self._inertia_override: ObjectInertia | None = None
         self._status = _Status()
 
@@ -226,6 +229,13 @@ class GraspSafetyNode(Node):
             Path,
             "~/object_trajectory",
             self._guarded("object_trajectory", self._on_trajectory),
+            INPUT,
+            callback_group=self._topic_group,
+        )
+        self.create_subscription(
+            MultiDOFJointTrajectory,
+            "~/object_multi_dof_trajectory",
+            self._on_trajectory,
             INPUT,
             callback_group=self._topic_group,
         )
@@ -424,7 +434,9 @@ class GraspSafetyNode(Node):
         try:
             response.ranking = self._rank(
                 request.grasps,
-                request.object_trajectory,
+                object_trajectory_of_request(
+                    request.object_trajectory, request.object_multi_dof_trajectory
+                ),
                 request.object_inertia,
                 request.metric,
                 source="rank_grasps",
@@ -432,6 +444,7 @@ class GraspSafetyNode(Node):
                 quality=_quality(request.grasp_quality, "grasp_quality"),
                 metric_point=request.metric_point,
                 quality_field="grasp_quality",
+                joint_trajectories=request.joint_trajectories,
             )
             response.success = True
         except GraspSafetyError as error:
@@ -506,10 +519,15 @@ class GraspSafetyNode(Node):
                 return
         self._rank_topics()
 
-    def _on_trajectory(self, msg: Path) -> None:
+    def _on_trajectory(self, msg: Path | MultiDOFJointTrajectory) -> None:
         settings = self._snapshot().settings
+        source = (
+            "object_multi_dof_trajectory"
+            if isinstance(msg, MultiDOFJointTrajectory)
+            else "object_trajectory"
+        )
         try:
-            trajectory_from_path(
+            trajectory_from_msg(
                 msg,
                 settings.base_frame,
                 settings.trajectory_dt_s,
@@ -517,7 +535,7 @@ class GraspSafetyNode(Node):
                 settings.max_samples,
             )
         except GraspSafetyError as error:
-            self._report_error("object_trajectory", error)
+            self._report_error(source, error)
             return
         with self._state_lock:
             self._trajectory = msg
@@ -577,7 +595,7 @@ class GraspSafetyNode(Node):
     def _rank(
         self,
         grasps_msg: PoseArray,
-        path_msg: Path,
+        trajectory_msg: Path | MultiDOFJointTrajectory,
         inertia_msg: Inertia | None,
         metric: str,
         source: str,
@@ -585,12 +603,14 @@ class GraspSafetyNode(Node):
         quality: tuple[float, ...] | None = None,
         metric_point: str = "",
         quality_field: str = "grasp_quality",
+        joint_trajectories: Sequence[JointTrajectory] = (),
     ) -> GraspRanking:
         """Convert, rank, analyse, publish; return the GraspRanking. Raises GraspSafetyError.
 
         Args:
             quality: One grasp quality per grasp (higher is better), or None.
             metric_point: The request's metric point; empty: the parameter's.
+            joint_trajectories: One planned joint trajectory per grasp, or none (IK).
         """
         state = self._snapshot()
         settings, bundle = state.settings, state.bundle
@@ -599,8 +619,8 @@ class GraspSafetyNode(Node):
                 "no robot description yet: set the robot_description or urdf parameter or "
                 "publish the URDF on /robot_description"
             )
-        trajectory = trajectory_from_path(
-            path_msg,
+        trajectory = trajectory_from_msg(
+            trajectory_msg,
             settings.base_frame,
             settings.trajectory_dt_s,
             settings.trajectory_duration_s,
@@ -614,11 +634,16 @@ class GraspSafetyNode(Node):
             settings.max_grasps,
             grasps_field,
         )
-        total = len(grasps) * trajectory.num_samples
+        grasps = grasps_with_joint_trajectories(grasps, joint_trajectories)
+        samples = len(trajectory.times_s())
+        total = sum(
+            samples if g.joint_trajectory is None else len(g.joint_trajectory.times_s)
+            for g in grasps
+        )
         if total > settings.max_total_samples:
             raise InvalidInputError(
                 f"{grasps_field}.poses",
-                f"{len(grasps)} grasps x {trajectory.num_samples} samples = {total} samples; at "
+                f"{len(grasps)} grasps x {samples} samples = {total} samples; at "
                 f"most max_total_samples={settings.max_total_samples} are allowed",
             )
         object_inertia = state.inertia_override

@@ -28,6 +28,7 @@ from ..core.model.inertia import (
 )
 from ..core.model.robot import RobotModel
 from ..core.model.trajectory import ObjectTrajectory
+from ..core.model.waypoint_trajectory import WaypointTrajectory
 from .scene import ContactConfig, ObjectShape, SensorConfig
 from .simulation import (
     CollisionResult,
@@ -61,6 +62,12 @@ BOOK_GRASP_Y_M = (-0.1, 0.0, 0.1)
 TENSOR_GRASP_ROTATION = np.array([[0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 """Tip axes in the tensor object's frame: tip z (approach) = -x, tip x = +y, tip y = -z."""
 
+VIA_TIME_S = 1.0
+VIA_LIFT_M = 0.08
+VIA_TURN_RAD = 0.3
+"""The waypoint case: the book passes 8 cm above the straight path's midpoint at 1 s, turned
+by 0.3 rad about its spine (object y), and reaches the same goal at the same 2 s."""
+
 PAPER_BOOK_PEAK_FORCES_N = (100.0, 130.0)
 """Gazebo peak impact forces of the safest and least safe book grasps in the paper [N]."""
 
@@ -91,7 +98,7 @@ class Experiment:
     key: str
     title: str
     grasps: tuple[CandidateGrasp, ...]
-    trajectory: ObjectTrajectory
+    trajectory: ObjectTrajectory | WaypointTrajectory
     shape: ObjectShape
     description: str
 
@@ -187,6 +194,56 @@ def book_experiment() -> Experiment:
             "wrist trajectory."
         ),
     )
+
+
+def book_waypoints_experiment() -> Experiment:
+    """The book's grasps along a three-waypoint path with the straight path's ends and time."""
+    straight = book_experiment()
+    start, goal = tip_start_goal()
+    via = pin.SE3(
+        start.rotation @ pin.exp3(np.array([0.0, VIA_TURN_RAD, 0.0])),
+        0.5 * (start.translation + goal.translation) + np.array([0.0, 0.0, VIA_LIFT_M]),
+    )
+    return replace(
+        straight,
+        key="book_waypoints",
+        title="Book along a timed waypoint path (3 waypoints)",
+        trajectory=WaypointTrajectory(
+            (0.0, VIA_TIME_S, DURATION_S), (start, via, goal), SAMPLE_PERIOD_S
+        ),
+        description=(
+            "The book and grasps above along a timed waypoint path: p0 at 0 s, the midpoint of "
+            f"p0 and pf raised by {VIA_LIFT_M:g} m and turned by {VIA_TURN_RAD:g} rad about the "
+            f"spine (object y) at {VIA_TIME_S:g} s, pf at {DURATION_S:g} s (C2 quintic-spline "
+            "interpolation, at rest at both ends). Main pillar setup only (no ablations, no "
+            "free impacts); the change columns compare with the straight path."
+        ),
+    )
+
+
+def compare_paths(
+    straight: Sequence[GraspRun], waypoints: Sequence[GraspRun]
+) -> list[dict[str, Any]]:
+    """Per grasp, waypoint path over straight path − 1: effective mass at impact, approach
+    speed, peak force, and peak force per unit approach speed (the speed-free part, which a
+    spring load cell makes grow like √M_eff)."""
+    rows = []
+    for a, b in zip(straight, waypoints, strict=True):
+        first, second = a.collision, b.collision
+        mass = second.effective_mass_at_impact_kg / first.effective_mass_at_impact_kg
+        speed = second.approach_speed_m_s / first.approach_speed_m_s
+        peak = second.peak_force_n / first.peak_force_n
+        rows.append(
+            {
+                "name": a.grasp.name,
+                "effective_mass_at_impact_change": float(mass - 1.0),
+                "sqrt_effective_mass_change": float(np.sqrt(mass) - 1.0),
+                "approach_speed_change": float(speed - 1.0),
+                "peak_force_change": float(peak - 1.0),
+                "peak_force_per_speed_change": float(peak / speed - 1.0),
+            }
+        )
+    return rows
 
 
 @dataclass(frozen=True)
@@ -658,6 +715,10 @@ def reproduce(
     tensor_runs = run_experiment(robot, tensor, config, log)
     book_runs = run_experiment(robot, book, config, log)
     postures = posture_comparison(robot, book, book_runs, config.setup, log=log)
+    waypoints = book_waypoints_experiment()
+    waypoint_runs = run_experiment(
+        robot, waypoints, replace(config, variants=(), impulse_times_s=()), log
+    )
     simulated = time.perf_counter()
     command = COMMAND.format(out=out_dir) + (" --quick" if quick else "")
     results: dict[str, Any] = {
@@ -671,6 +732,11 @@ def reproduce(
         "book": {
             "description": book.description,
             **summarise_experiment(book_runs, config.variants),
+        },
+        "book_waypoints": {
+            "description": waypoints.description,
+            **summarise_experiment(waypoint_runs, ()),
+            "change_from_straight_path": compare_paths(book_runs, waypoint_runs),
         },
         "impulse_check": summarise_impulses(
             [(tensor.key, tensor_runs), (book.key, book_runs)], config.impulse

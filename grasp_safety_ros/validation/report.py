@@ -401,6 +401,47 @@ from the change of the effective mass at impact, √(M_sel / M_single) − 1.
 """
 
 
+def _waypoint_section(results: dict[str, Any]) -> str:
+    """The book along the timed waypoint path, and its change from the straight path."""
+    waypoints = results.get("book_waypoints")
+    if waypoints is None:
+        return ""
+    rows = [
+        "| grasp | M_eff at impact | √M_eff | approach speed | peak force "
+        "| peak force / approach speed |",
+        "|---|---|---|---|---|---|",
+    ]
+    for change in waypoints["change_from_straight_path"]:
+        rows.append(
+            f"| {change['name']} | {_signed(change['effective_mass_at_impact_change'])} "
+            f"| {_signed(change['sqrt_effective_mass_change'])} "
+            f"| {_signed(change['approach_speed_change'])} "
+            f"| {_signed(change['peak_force_change'])} "
+            f"| {_signed(change['peak_force_per_speed_change'])} |"
+        )
+    order = "holds" if waypoints["ordering_holds"] else "does not hold"
+    return f"""## Book along a timed waypoint path
+
+{waypoints["description"]}
+
+{_grasp_table(waypoints, [])}
+
+Peak force worst/best {_number(waypoints["peak_force_ratio_worst_to_best"], 4)} for effective
+masses at impact worst/best {_number(waypoints["effective_mass_ratio_worst_to_best"], 4)};
+the order by effective mass at impact {order} for the peak force (safest first by peak force:
+{", ".join(waypoints["order_by_peak_force"])}).
+
+Change from the straight path, same grasp, impact planned at the same time:
+
+{chr(10).join(rows)}
+
+"""
+
+
+def _signed(value: float) -> str:
+    return f"{100.0 * value:+.2f} %"
+
+
 def results_markdown(results: dict[str, Any]) -> str:
     """The markdown report of a validation run."""
     setup = results["setup"]
@@ -460,7 +501,7 @@ in {results["timing_s"]["total"]:.0f} s ({versions}). Everything below is genera
 
 {_grasp_table(book, [])}
 {_posture_section(results)}
-## Ablations
+{_waypoint_section(results)}## Ablations
 
 Each ablation changes one setting and is simulated from
 {setup["variants_simulated_from_to_s"][0]:g} s to {setup["variants_simulated_from_to_s"][1]:g} s,

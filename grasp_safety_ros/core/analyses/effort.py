@@ -34,7 +34,7 @@ from ..method.effective_mass import augmented_model
 from ..method.ranking import Grasp, GraspEvaluation
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
-from ..model.trajectory import ObjectTrajectory
+from ..model.trajectory import Trajectory
 
 EFFORT_CRITERIA = ("peak_fraction", "rms_fraction")
 """Effort scores: max over joints of peak |τ| / limit, or of RMS τ / limit (lower is better)."""
@@ -115,7 +115,7 @@ def effort_limits(robot: RobotModel) -> np.ndarray:
 
 
 def tip_twist_and_derivative(
-    trajectory: ObjectTrajectory,
+    trajectory: Trajectory,
     transform_tip_to_object: pin.SE3,
     times_s: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -124,23 +124,7 @@ def tip_twist_and_derivative(
     Linear part: velocity / classical acceleration of the tip origin; angular part: angular
     velocity / acceleration of the object (= of the tip).
     """
-    grasp = pin.SE3(transform_tip_to_object)
-    times = np.asarray(times_s, dtype=float)
-    s_values, s_rate, s_accel = trajectory.path_parameter(times)
-    _, tangents = trajectory.tip_path(grasp, s_values)
-    omega = trajectory.rotation_log_in_object  # object angular velocity per unit s, object axes
-    curvature_in_object = np.cross(omega, np.cross(omega, grasp.translation))
-    twist = np.empty((len(times), 6))
-    twist_rate = np.empty((len(times), 6))
-    for i, s in enumerate(s_values):
-        rotation = trajectory.transform_object_to_base(float(s)).rotation
-        angular = rotation @ omega
-        second = rotation @ curvature_in_object  # d² p_tip / ds²
-        twist[i, :3] = tangents[i] * s_rate[i]
-        twist[i, 3:] = angular * s_rate[i]
-        twist_rate[i, :3] = second * s_rate[i] ** 2 + tangents[i] * s_accel[i]
-        twist_rate[i, 3:] = angular * s_accel[i]
-    return twist, twist_rate
+    return trajectory.tip_twists(transform_tip_to_object, times_s)
 
 
 def evaluate_effort(
@@ -148,7 +132,7 @@ def evaluate_effort(
     evaluation: GraspEvaluation,
     object_inertia: ObjectInertia,
     grasp: Grasp,
-    trajectory: ObjectTrajectory,
+    trajectory: Trajectory,
     joint_positions: np.ndarray | None = None,
 ) -> EffortEvaluation:
     """Joint velocities, accelerations and torques with the object, per sample, and summaries.

@@ -4,8 +4,8 @@ A point p of the object is rigidly attached to the tip, so its velocity is v_p =
 (r = tip -> p, world axes) and its Jacobian J_p = J_v − r̂ J_ω. With the object merged into the
 tip body (the augmented joint-space inertia M_aug), the point's translational mobility is
 A_p = J_p M_aug⁻¹ J_pᵀ [1/kg] and its effective mass along its own unit direction of motion u_p
-is M_eff,p = 1 / (u_pᵀ A_p u_p). u_p is the tangent d p/ds of the point's path (like the tip's
-in ObjectTrajectory.tip_path); where a point does not translate (|d p/ds| < 1e-9 m), its
+is M_eff,p = 1 / (u_pᵀ A_p u_p). u_p is the tangent of the point's path (like the tip's, from
+the trajectory's ``tip_motion``); where a point does not translate (|tangent| < 1e-9 m), its
 direction of largest effective mass is used, as for the tip.
 
 Per sample, the *leading point* is the one furthest ahead along its own direction of motion,
@@ -29,7 +29,7 @@ from ..method.effective_mass import augmented_model
 from ..method.ranking import Grasp, GraspEvaluation, aggregate, check_metric
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
-from ..model.trajectory import ObjectTrajectory
+from ..model.trajectory import Trajectory
 
 METRIC_POINTS = ("tip", "leading_point", "worst_point")
 """Which point's effective mass a score uses: the tip, the leading point, the worst point."""
@@ -219,7 +219,7 @@ def evaluate_exposed_points(
     evaluation: GraspEvaluation,
     object_inertia: ObjectInertia,
     grasp: Grasp,
-    trajectory: ObjectTrajectory,
+    trajectory: Trajectory,
     points_in_object_m: Any,
 ) -> ExposedPointsEvaluation:
     """Effective mass, speed and direction of motion at each object point, per sample.
@@ -248,17 +248,18 @@ def evaluate_exposed_points(
     times = np.asarray(evaluation.times_s, dtype=float)
     if len(times) != evaluation.joint_positions.shape[0]:
         raise InvalidInputError("evaluation.times_s", "must have one entry per joint sample")
-    s_values, s_rate, _ = trajectory.path_parameter(times)
     count = len(times)
     grasp_pose = pin.SE3(grasp.transform_tip_to_object)
     points_in_tip = points @ grasp_pose.rotation  # R_otᵀ (p − t_ot), row-wise
     points_in_tip -= grasp_pose.translation @ grasp_pose.rotation
     positions = np.empty((count, count_points, 3))
     tangents = np.empty((count, count_points, 3))
+    speeds = np.empty((count, count_points))
     for k, point in enumerate(points):
-        poses, point_tangents = trajectory.tip_path(pin.SE3(np.eye(3), point), s_values)
-        positions[:, k] = [pose.translation for pose in poses]
-        tangents[:, k] = point_tangents
+        motion = trajectory.tip_motion(pin.SE3(np.eye(3), point), times)
+        positions[:, k] = motion.positions
+        tangents[:, k] = motion.tangents
+        speeds[:, k] = motion.speeds
     model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
     data = model.createData()
     mobilities = np.empty((count, count_points, 3, 3))
@@ -288,7 +289,7 @@ def evaluate_exposed_points(
         positions_in_base_m=_read_only(positions),
         directions_in_base=_read_only(directions),
         direction_is_worst_case=_read_only(stationary),
-        speed_m_s=_read_only(norms * s_rate[:, None]),
+        speed_m_s=_read_only(speeds),
         effective_mass_kg=_read_only(masses),
         leading_point_index=_read_only(leading),
         worst_point_index=_read_only(worst),

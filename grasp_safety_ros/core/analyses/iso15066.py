@@ -16,7 +16,9 @@ Minimum duration: the effective mass along the path does not depend on the durat
 depends only on the path parameter) and the speed of a quintic scales as 1/T, so re-timing to
 T' multiplies every force ratio by T/T'; the shortest admissible duration is
 T_min = T · max_t F(t)/F_max (for a ratio <= 1 the motion is admissible as it is, and T_min <= T
-is still reported). All maxima are over the trajectory samples.
+is still reported). All maxima are over the trajectory samples. For a timed waypoint path or a
+planned joint trajectory the same holds for slowing the whole timed motion uniformly
+(t -> t·T'/T: the path, hence the effective mass, is unchanged and every speed scales by T/T').
 """
 
 from __future__ import annotations

@@ -70,7 +70,7 @@ from ..method.effective_mass import augmented_model, translational_mobility_in_b
 from ..method.ranking import Grasp, GraspEvaluation, aggregate, check_metric
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
-from ..model.trajectory import ObjectTrajectory
+from ..model.trajectory import Trajectory
 from .effort import effort_limits
 
 TASK_DIMENSION = 6
@@ -432,7 +432,7 @@ def resolve_redundancy(
     evaluation: GraspEvaluation,
     object_inertia: ObjectInertia,
     grasp: Grasp,
-    trajectory: ObjectTrajectory,
+    trajectory: Trajectory,
     config: RedundancyConfig | None = None,
 ) -> RedundancyResolution:
     """Lower the effective mass of one evaluated grasp through a smooth null-space motion.
@@ -456,8 +456,11 @@ def resolve_redundancy(
     problem = _SampleProblem(robot, model, config)
     times = np.asarray(evaluation.times_s, dtype=float)
     s_values, s_rate, s_accel = trajectory.path_parameter(times)
-    poses, _ = trajectory.tip_path(grasp.transform_tip_to_object, s_values)
-    targets = [robot.transform_base_to_world * pose for pose in poses]
+    tip = trajectory.tip_motion(grasp.transform_tip_to_object, times)
+    targets = [
+        robot.transform_base_to_world * pin.SE3(rotation, position)
+        for rotation, position in zip(tip.rotations, tip.positions, strict=True)
+    ]
     directions = np.asarray(evaluation.directions_in_base, dtype=float)
     worst = np.asarray(evaluation.direction_is_worst_case, dtype=bool)
     q_original = [robot.q_from_positions(p) for p in original]

@@ -16,7 +16,7 @@ import numpy as np
 from ..exceptions import InvalidInputError
 from ..method.ranking import Grasp, GraspSafetyEvaluator, Ranking, aggregate
 from ..model.inertia import ObjectInertia
-from ..model.trajectory import ObjectTrajectory
+from ..model.trajectory import Trajectory
 from .effort import EffortEvaluation, check_effort_criterion, evaluate_effort, order_by_effort
 from .exposed_points import (
     ExposedPointsEvaluation,
@@ -125,7 +125,7 @@ def analyse(
     evaluator: GraspSafetyEvaluator,
     grasps: Sequence[Grasp],
     object_inertia: ObjectInertia,
-    trajectory: ObjectTrajectory,
+    trajectory: Trajectory,
     options: AnalysisOptions | None = None,
     seed_positions: Sequence[float] | np.ndarray | None = None,
     metric: str | None = None,
@@ -166,7 +166,12 @@ def analyse(
         for e, g in zip(evaluations, grasps, strict=True):
             exposed_list.append(
                 evaluate_exposed_points(
-                    robot, e, object_inertia, g, trajectory, options.points_in_object_m
+                    robot,
+                    e,
+                    object_inertia,
+                    g,
+                    evaluator.trajectory_for(g, trajectory),
+                    options.points_in_object_m,
                 )
             )
             step()
@@ -176,7 +181,8 @@ def analyse(
         config = RedundancyConfig(metric=metric, max_joint_step=evaluator.config.ik.max_joint_step)
         resolutions = []
         for e, g in zip(evaluations, grasps, strict=True):
-            resolutions.append(resolve_redundancy(robot, e, object_inertia, g, trajectory, config))
+            motion = evaluator.trajectory_for(g, trajectory)
+            resolutions.append(resolve_redundancy(robot, e, object_inertia, g, motion, config))
             step()
         redundancy = tuple(resolutions)
 
@@ -199,7 +205,7 @@ def analyse(
                 assess_motion(
                     speeds,
                     masses,
-                    trajectory.duration_s,
+                    evaluator.trajectory_for(grasps[k], trajectory).duration_s,
                     regions,
                     index=evaluation.index,
                     name=evaluation.name,
@@ -225,7 +231,8 @@ def analyse(
             resolved = (
                 redundancy[k].joint_positions if redundancy and redundancy[k].applied else None
             )
-            efforts.append(evaluate_effort(robot, e, object_inertia, g, trajectory, resolved))
+            motion = evaluator.trajectory_for(g, trajectory)
+            efforts.append(evaluate_effort(robot, e, object_inertia, g, motion, resolved))
             step()
         effort = tuple(efforts)
     if options.rank_by == "effort":

@@ -252,7 +252,7 @@ def evaluate_grasp_compiled(
 
     Args:
         tip_path: Tip rotations (N, 3, 3), positions (N, 3) [m] and path tangents
-            d p_tip / ds (N, 3) [m], base frame (``tip_path_arrays`` of any trajectory type).
+            d p_tip / ds (N, 3) [m], base frame (``tip_motion`` of any trajectory type).
 
     Directions and effective masses of samples where the tip does not translate (``worst``)
     are left for the caller. Random restarts of sample 0 run here, as in ``solve_first``.

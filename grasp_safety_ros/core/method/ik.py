@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import importlib.util
 import math
-import weakref
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -55,9 +54,6 @@ NUMBA_AVAILABLE = _numba_installed()
 
 BACKENDS = ("auto", "compiled", "python")
 """IK / effective-mass implementations: see the module docstring."""
-
-_EPS = float(np.finfo(float).eps)
-_PREC3 = _EPS ** (1.0 / 4.0)  # Pinocchio's TaylorSeriesExpansion<double>::precision<3>()
 
 
 @dataclass(frozen=True)
@@ -139,88 +135,6 @@ def check_backend(backend: str, field_name: str = "backend") -> str:
             field_name, "'compiled' needs numba (pip install numba); use 'auto' or 'python'"
         )
     return backend
-
-
-def exp3_batch(rotation_vectors: np.ndarray) -> np.ndarray:
-    """Pinocchio's exp3 (same formula and Taylor branch) for an (N, 3) array of vectors."""
-    v = np.asarray(rotation_vectors, dtype=float)
-    t2 = np.einsum("ij,ij->i", v, v) + _EPS * _EPS
-    t = np.sqrt(t2)
-    ct, st = np.cos(t), np.sin(t)
-    large = t > _PREC3
-    with np.errstate(divide="ignore", invalid="ignore"):
-        alpha_vxvx = np.where(large, (1.0 - ct) / t2, 0.5 - t2 / 24.0)
-        alpha_vx = np.where(large, st / t, 1.0 - t2 / 6.0)
-    ct = np.where(large, ct, 1.0 - t2 / 2.0)
-    result = alpha_vxvx[:, None, None] * v[:, :, None] * v[:, None, :]
-    result[:, 0, 1] -= alpha_vx * v[:, 2]
-    result[:, 1, 0] += alpha_vx * v[:, 2]
-    result[:, 0, 2] += alpha_vx * v[:, 1]
-    result[:, 2, 0] -= alpha_vx * v[:, 1]
-    result[:, 1, 2] -= alpha_vx * v[:, 0]
-    result[:, 2, 1] += alpha_vx * v[:, 0]
-    for k in range(3):
-        result[:, k, k] += ct
-    return result
-
-
-_OBJECT_PATHS: list[tuple[Any, np.ndarray, np.ndarray, np.ndarray]] = []
-"""The last object path of ``object_path_arrays`` (weakref to the trajectory, s, R, p)."""
-
-
-def object_path_arrays(trajectory: Any, s_values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Object rotations (N, 3, 3) and positions (N, 3) [m] in the base frame at the path
-    parameters, vectorised; the last result is kept, as every grasp of a ranking needs it."""
-    s = np.asarray(s_values, dtype=float)
-    if _OBJECT_PATHS:
-        reference, cached_s, rotations, translations = _OBJECT_PATHS[0]
-        if reference() is trajectory and np.array_equal(cached_s, s):
-            return rotations, translations
-    start = trajectory.transform_object_to_base_start
-    goal = trajectory.transform_object_to_base_goal
-    log = np.asarray(trajectory.rotation_log_in_object, dtype=float)
-    rotations = np.matmul(start.rotation, exp3_batch(s[:, None] * log))
-    translations = (1.0 - s)[:, None] * start.translation + s[:, None] * goal.translation
-    for array in (rotations, translations):
-        array.setflags(write=False)
-    _OBJECT_PATHS[:] = [(weakref.ref(trajectory), s.copy(), rotations, translations)]
-    return rotations, translations
-
-
-def tip_path_arrays(
-    trajectory: Any, transform_tip_to_object: pin.SE3, s_values: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """ObjectTrajectory.tip_path as arrays, vectorised over the samples.
-
-    Args:
-        trajectory: An ObjectTrajectory.
-        transform_tip_to_object: The grasp.
-        s_values: Path parameters in [0, 1].
-
-    Returns:
-        Tip rotations (N, 3, 3) and positions (N, 3) [m] in the base frame, and the path
-        tangents d p_tip / ds (N, 3) [m], base axes; equal to ``tip_path`` up to rounding.
-    """
-    object_rotations, object_translations = object_path_arrays(trajectory, s_values)
-    count = len(object_translations)
-    stacked = object_rotations.reshape(3 * count, 3)  # one matrix product per quantity
-    grasp_p = np.asarray(transform_tip_to_object.translation, dtype=float)
-    w = np.asarray(trajectory.rotation_log_in_object, dtype=float)
-    lever_in_object = np.array(  # w x p (np.cross is slow on one vector)
-        [
-            w[1] * grasp_p[2] - w[2] * grasp_p[1],
-            w[2] * grasp_p[0] - w[0] * grasp_p[2],
-            w[0] * grasp_p[1] - w[1] * grasp_p[0],
-        ]
-    )
-    rotations = (stacked @ np.asarray(transform_tip_to_object.rotation)).reshape(count, 3, 3)
-    translations = (stacked @ grasp_p).reshape(count, 3) + object_translations
-    linear = (
-        trajectory.transform_object_to_base_goal.translation
-        - trajectory.transform_object_to_base_start.translation
-    )
-    tangents = (stacked @ lever_in_object).reshape(count, 3) + linear
-    return rotations, translations, tangents
 
 
 class IKSolver:

@@ -12,7 +12,7 @@ import pinocchio as pin
 from ..exceptions import InvalidInputError
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
-from ..model.trajectory import ObjectTrajectory
+from ..model.trajectory import Trajectory
 from .compiled import evaluate_grasp_compiled
 from .effective_mass import (
     STATIONARY_TANGENT_M,
@@ -20,7 +20,8 @@ from .effective_mass import (
     translational_mobilities_in_base,
     worst_direction,
 )
-from .ik import IKConfig, IKSolver, check_backend, tip_path_arrays
+from .ik import IKConfig, IKSolver, check_backend
+from .joint_trajectory import JointSpaceTrajectory, PlannedJointTrajectory
 from .pool import evaluate_jobs, executor_for
 
 if TYPE_CHECKING:
@@ -37,10 +38,13 @@ class Grasp:
     Attributes:
         transform_tip_to_object: Pose of the tip frame in the object frame.
         name: Optional label.
+        joint_trajectory: A planned arm joint trajectory to evaluate instead of following
+            the object trajectory by IK (see ``joint_trajectory``); None: IK.
     """
 
     transform_tip_to_object: pin.SE3
     name: str = ""
+    joint_trajectory: PlannedJointTrajectory | None = None
 
 
 @dataclass(frozen=True)
@@ -183,17 +187,27 @@ class GraspSafetyEvaluator:
             self.robot.check_positions(seed_positions, "robot.seed")
         )
 
+    def trajectory_for(self, grasp: Grasp, trajectory: Trajectory) -> Trajectory:
+        """The motion a grasp is evaluated along: its planned joint trajectory if it has one
+        (validated against the chain: names and limits), else ``trajectory``."""
+        if grasp.joint_trajectory is None:
+            return trajectory
+        return JointSpaceTrajectory(
+            self.robot, grasp.joint_trajectory, grasp.transform_tip_to_object
+        )
+
     def evaluate(
         self,
         grasp: Grasp,
         object_inertia: ObjectInertia,
-        trajectory: ObjectTrajectory,
+        trajectory: Trajectory,
         index: int = 0,
         seed_positions: Sequence[float] | np.ndarray | None = None,
         metric: str | None = None,
     ) -> GraspEvaluation:
         """Evaluate one grasp: IK along its tip trajectory, then effective mass per sample."""
         metric = check_metric(metric or self.config.metric)
+        trajectory = _as_quintic(trajectory)
         times = trajectory.times_s()
         s_values, s_rate, _ = trajectory.path_parameter(times)
         return self._evaluate_sampled(
@@ -213,7 +227,7 @@ class GraspSafetyEvaluator:
         index: int,
         grasp: Grasp,
         object_inertia: ObjectInertia,
-        trajectory: ObjectTrajectory,
+        trajectory: Trajectory,
         metric: str,
         times: np.ndarray,
         s_values: np.ndarray,
@@ -222,33 +236,43 @@ class GraspSafetyEvaluator:
     ) -> GraspEvaluation:
         """``evaluate`` with the sample times, path parameters and IK seed already computed."""
         robot = self.robot
-        tip_path = tip_path_arrays(trajectory, grasp.transform_tip_to_object, s_values)
-        if self.ik.compiled:  # IK and effective mass in one compiled call
-            fused = evaluate_grasp_compiled(
-                self.ik, object_inertia, grasp.transform_tip_to_object, tip_path, times, seed_q
-            )
-            if fused.reason:
-                return _infeasible(index, grasp.name, fused.reason, robot.num_joints)
-            q_all, iterations, mobilities = fused.q, fused.iterations, fused.mobilities
-            masses, directions, worst = fused.effective_masses, fused.directions, fused.worst
-            tangent_norms = fused.tangent_norms
-        else:
-            rotations, translations, tangents = tip_path
-            ik = self.ik.solve_trajectory_arrays(rotations, translations, times, s_values, seed_q)
-            if not ik.feasible:
-                return _infeasible(index, grasp.name, ik.reason, robot.num_joints)
-            q_all, iterations = ik.q, ik.iterations
+        sampled = self.trajectory_for(grasp, trajectory)
+        if isinstance(sampled, JointSpaceTrajectory):  # the planner's joint positions, no IK
+            times = sampled.times_s()
+            tip = sampled.tip_motion(grasp.transform_tip_to_object, times)
+            q_all = np.array([robot.q_from_positions(p) for p in sampled.joint_positions])
+            iterations = np.zeros(len(times), dtype=np.int64)
             mobilities = translational_mobilities_in_base(
                 robot, object_inertia, grasp.transform_tip_to_object, q_all
             )
-            count = len(times)
-            masses = np.empty(count)
-            directions = np.empty((count, 3))
-            tangent_norms = np.linalg.norm(tangents, axis=1)
-            worst = tangent_norms < STATIONARY_TANGENT_M
-            moving = ~worst
-            directions[moving] = tangents[moving] / tangent_norms[moving, None]
-            masses[moving] = effective_masses_along(mobilities[moving], directions[moving])
+            masses, directions, worst = _masses_along(mobilities, tip.tangents)
+        else:  # every trajectory type: its tip path, then IK and effective mass
+            tip = trajectory.tip_motion(grasp.transform_tip_to_object, times)
+            if self.ik.compiled:  # in one compiled call
+                fused = evaluate_grasp_compiled(
+                    self.ik,
+                    object_inertia,
+                    grasp.transform_tip_to_object,
+                    (tip.rotations, tip.positions, tip.tangents),
+                    times,
+                    seed_q,
+                )
+                if fused.reason:
+                    return _infeasible(index, grasp.name, fused.reason, robot.num_joints)
+                q_all, iterations, mobilities = fused.q, fused.iterations, fused.mobilities
+                masses, directions, worst = fused.effective_masses, fused.directions, fused.worst
+            else:
+                ik = self.ik.solve_trajectory_arrays(
+                    tip.rotations, tip.positions, times, s_values, seed_q
+                )
+                if not ik.feasible:
+                    return _infeasible(index, grasp.name, ik.reason, robot.num_joints)
+                q_all, iterations = ik.q, ik.iterations
+                mobilities = translational_mobilities_in_base(
+                    robot, object_inertia, grasp.transform_tip_to_object, q_all
+                )
+                masses, directions, worst = _masses_along(mobilities, tip.tangents)
+        tip_speeds = tip.speeds
         for i in np.flatnonzero(worst):
             directions[i], masses[i] = worst_direction(mobilities[i])
         positions = positions_along(robot, q_all)
@@ -263,7 +287,7 @@ class GraspSafetyEvaluator:
             directions_in_base=directions,
             effective_mass_kg=masses,
             direction_is_worst_case=worst,
-            tip_speed_m_s=tangent_norms * s_rate,
+            tip_speed_m_s=tip_speeds,
             ik_iterations=iterations,
         )
 
@@ -271,7 +295,7 @@ class GraspSafetyEvaluator:
         self,
         grasps: Sequence[Grasp],
         object_inertia: ObjectInertia,
-        trajectory: ObjectTrajectory,
+        trajectory: Trajectory,
         seed_positions: Sequence[float] | np.ndarray | None = None,
         metric: str | None = None,
         progress: Callable[[int, int], None] | None = None,
@@ -284,6 +308,10 @@ class GraspSafetyEvaluator:
         metric = check_metric(metric or self.config.metric)
         seed_q = self.seed_q(seed_positions)  # validate once, before any work
         grasps = list(grasps)
+        trajectory = _as_quintic(trajectory)
+        for grasp in grasps:
+            self.trajectory_for(grasp, trajectory)  # planned joint trajectories: validate
+
         times = trajectory.times_s()
         s_values, s_rate, _ = trajectory.path_parameter(times)
         executor = executor_for(self, len(grasps) * len(times))
@@ -331,6 +359,27 @@ def positions_along(robot: RobotModel, q_all: np.ndarray) -> np.ndarray:
         else:
             columns.append(q_all[:, index])
     return np.stack(columns, axis=1)
+
+
+def _as_quintic(trajectory: Trajectory) -> Trajectory:
+    """A two-waypoint trajectory as its identical quintic (so it takes the same code path)."""
+    return getattr(trajectory, "quintic", None) or trajectory
+
+
+def _masses_along(
+    mobilities: np.ndarray, tangents: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Effective masses along the unit tangents, the directions, and the samples where the tip
+    does not translate (their direction and mass are left for ``worst_direction``)."""
+    count = len(tangents)
+    masses = np.empty(count)
+    directions = np.empty((count, 3))
+    tangent_norms = np.linalg.norm(tangents, axis=1)
+    worst = tangent_norms < STATIONARY_TANGENT_M
+    moving = ~worst
+    directions[moving] = tangents[moving] / tangent_norms[moving, None]
+    masses[moving] = effective_masses_along(mobilities[moving], directions[moving])
+    return masses, directions, worst
 
 
 def _infeasible(index: int, name: str, reason: str, num_joints: int) -> GraspEvaluation:

@@ -2,15 +2,21 @@
 
 from __future__ import annotations
 
+import contextlib
 import importlib.metadata
 import os
-from collections.abc import Mapping, Sequence
+import sys
+import tempfile
+import threading
+import xml.etree.ElementTree as ElementTree
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 
-from ..exceptions import FrameNotFoundError, InvalidInputError, RobotModelError
+from ..exceptions import FrameNotFoundError, InvalidInputError
 from ..input_checks import finite_array
 
 EXAMPLE_ROBOT_DATA_PREFIX = "example-robot-data:"
@@ -27,6 +33,15 @@ EXAMPLE_ROBOT_DATA_URDFS: Mapping[str, str] = {
     "so100": "so_arm_description/urdf/so100.urdf",
 }
 """Bundled robot names and their URDF paths inside example-robot-data's ``robots/`` folder."""
+
+MAX_URDF_BYTES = 16_000_000
+"""Largest robot description accepted (file or XML text) [bytes]."""
+
+FRAME_TYPES: Mapping[str, pin.FrameType] = dict(pin.FrameType.names)
+"""Frame types a frame name can be qualified with: ``name@TYPE``, e.g. ``gripper@JOINT``."""
+
+MASS_MATRIX_RELATIVE_TOLERANCE = 1e-12
+"""Smallest accepted eigenvalue ratio of the chain's mass matrix with an object at the tip."""
 
 
 def example_robot_data_dirs() -> list[Path]:
@@ -55,6 +70,10 @@ def resolve_urdf(source: str, relative_to: Path | None = None) -> tuple[str, boo
         The XML text or the file path, and whether it is XML text.
     """
     text = source.strip()
+    if len(text) > MAX_URDF_BYTES:
+        raise InvalidInputError(
+            "robot.urdf", f"has {len(text)} characters; at most {MAX_URDF_BYTES} are allowed"
+        )
     if text.startswith("<"):
         return text, True
     if text.startswith(EXAMPLE_ROBOT_DATA_PREFIX):
@@ -72,24 +91,225 @@ def resolve_urdf(source: str, relative_to: Path | None = None) -> tuple[str, boo
     path = Path(text).expanduser()
     if relative_to is not None and not path.is_absolute():
         path = relative_to / path
-    if not path.is_file():
+    try:
+        is_file = path.is_file()
+    except (OSError, ValueError):  # a name too long, or with a NUL byte
+        is_file = False
+    if not is_file:
+        shown = str(path) if len(str(path)) <= 200 else f"{str(path)[:197]}..."
         raise InvalidInputError(
             "robot.urdf",
-            f"no URDF file at '{path}'; give a file path, URDF XML or "
+            f"no URDF file at {shown!r}; give a file path, URDF XML or "
             f"'{EXAMPLE_ROBOT_DATA_PREFIX}<name>'",
+        )
+    if path.stat().st_size > MAX_URDF_BYTES:
+        raise InvalidInputError(
+            "robot.urdf",
+            f"'{path}' has {path.stat().st_size} bytes; at most {MAX_URDF_BYTES} are allowed",
         )
     return str(path), False
 
 
+_NATIVE_STDERR_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def _native_stderr_captured(captured: list[str]) -> Iterator[None]:
+    """Capture what native code (urdfdom's console_bridge) writes to file descriptor 2; the
+    text is appended to ``captured`` on exit."""
+    with _NATIVE_STDERR_LOCK, tempfile.TemporaryFile() as sink:
+        sys.stderr.flush()
+        saved = os.dup(2)
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            sink.seek(0)
+            captured.append(sink.read().decode("utf-8", errors="replace"))
+
+
+def _urdf_parser_errors(output: str) -> tuple[list[str], str]:
+    """Split urdfdom's output into its error messages and the other lines (kept as text)."""
+    errors, other = [], []
+    lines = output.splitlines()
+    for k, line in enumerate(lines):
+        if line.startswith("Error:"):
+            errors.append(" ".join(line[len("Error:") :].split()))
+        elif not (
+            line.startswith("         at line ") and k and lines[k - 1].startswith("Error:")
+        ):
+            other.append(line)
+    return errors, "".join(f"{line}\n" for line in other)
+
+
 def load_urdf_model(source: str, relative_to: Path | None = None) -> pin.Model:
-    """Build the full Pinocchio model (fixed base) of a URDF given as in resolve_urdf."""
+    """Build the full Pinocchio model (fixed base) of a URDF given as in resolve_urdf.
+
+    A description the URDF parser reports errors for is refused even when Pinocchio builds a
+    model from it (a malformed ``<inertial>`` would otherwise become a massless link).
+    """
+    text, is_xml = resolve_urdf(source, relative_to)
+    where = "URDF XML" if is_xml else f"'{text}'"
+    captured: list[str] = []
+    try:
+        with _native_stderr_captured(captured):
+            model = pin.buildModelFromXML(text) if is_xml else pin.buildModelFromUrdf(text)
+    except (RuntimeError, ValueError) as error:
+        parser_errors, other = _urdf_parser_errors("".join(captured))
+        sys.stderr.write(other)
+        message = " ".join(str(error).split()) or "parse error"
+        details = f" ({'; '.join(parser_errors)})" if parser_errors else ""
+        raise InvalidInputError("robot.urdf", f"cannot read {where}: {message}{details}") from None
+    parser_errors, other = _urdf_parser_errors("".join(captured))
+    sys.stderr.write(other)
+    if parser_errors:
+        raise InvalidInputError("robot.urdf", f"cannot read {where}: {'; '.join(parser_errors)}")
+    return model
+
+
+@dataclass(frozen=True)
+class MimicJoint:
+    """A URDF ``<mimic>``: the joint's position is ``multiplier * leader + offset``."""
+
+    leader: str
+    multiplier: float = 1.0
+    offset: float = 0.0
+
+
+def load_urdf_mimic_joints(source: str, relative_to: Path | None = None) -> dict[str, MimicJoint]:
+    """The ``<mimic>`` joints of a URDF given as in resolve_urdf, by follower joint name."""
     text, is_xml = resolve_urdf(source, relative_to)
     try:
-        return pin.buildModelFromXML(text) if is_xml else pin.buildModelFromUrdf(text)
-    except (RuntimeError, ValueError) as error:
+        root = ElementTree.fromstring(text) if is_xml else ElementTree.parse(text).getroot()
+    except (ElementTree.ParseError, OSError) as error:
         where = "URDF XML" if is_xml else f"'{text}'"
-        message = str(error).strip().splitlines()[0] if str(error).strip() else "parse error"
-        raise InvalidInputError("robot.urdf", f"cannot read {where}: {message}") from None
+        raise InvalidInputError("robot.urdf", f"cannot read {where}: {error}") from None
+    mimic_joints = {}
+    for joint in root.findall("joint"):
+        mimic = joint.find("mimic")
+        if mimic is None:
+            continue
+        try:
+            mimic_joints[joint.get("name", "")] = MimicJoint(
+                mimic.get("joint", ""),
+                float(mimic.get("multiplier", 1.0)),
+                float(mimic.get("offset", 0.0)),
+            )
+        except ValueError:
+            raise InvalidInputError(
+                "robot.urdf",
+                f"joint '{joint.get('name')}': <mimic> multiplier and offset must be numbers",
+            ) from None
+    return mimic_joints
+
+
+def _describe_frame(model: pin.Model, frame_id: int) -> str:
+    frame = model.frames[frame_id]
+    return f"{frame.name}@{frame.type.name} (on joint '{model.names[frame.parentJoint]}')"
+
+
+def find_frame(model: pin.Model, name: str, field: str) -> int:
+    """Id of the frame ``name`` or ``name@TYPE`` (TYPE one of FRAME_TYPES).
+
+    A name shared by several frames (a link and a joint of the same name) picks the BODY (link)
+    frame when exactly one matches; otherwise ``name@TYPE`` must say which.
+
+    Raises:
+        FrameNotFoundError: no frame of that name.
+        InvalidInputError: the name is ambiguous, or has no frame of the given type.
+    """
+    base_name, at, type_name = name.rpartition("@")
+    if not at or type_name.upper() not in FRAME_TYPES or model.existFrame(name):
+        base_name, type_name = name, ""
+    matches = [i for i, frame in enumerate(model.frames) if frame.name == base_name]
+    if not matches:
+        raise FrameNotFoundError(field, base_name, [frame.name for frame in model.frames])
+    listed = ", ".join(_describe_frame(model, i) for i in matches)
+    if type_name:
+        wanted = FRAME_TYPES[type_name.upper()]
+        matches = [i for i in matches if model.frames[i].type == wanted]
+        if not matches:
+            raise InvalidInputError(
+                field, f"frame '{base_name}' has no {type_name.upper()} frame; frames: {listed}"
+            )
+    elif len(matches) > 1:
+        bodies = [i for i in matches if model.frames[i].type == pin.FrameType.BODY]
+        matches = bodies if len(bodies) == 1 else matches
+    if len(matches) > 1:
+        raise InvalidInputError(
+            field,
+            f"'{name}' names {len(matches)} frames: {listed}; pick one as '{base_name}@TYPE' "
+            f"(TYPE: {', '.join(FRAME_TYPES)})",
+        )
+    return matches[0]
+
+
+def _reduced_model(
+    full_model: pin.Model, to_lock: Sequence[int], reference: np.ndarray, frame_ids: Sequence[int]
+) -> tuple[pin.Model, list[int]]:
+    """buildReducedModel, and the ids in it of the frames ``frame_ids`` of ``full_model``.
+
+    Pinocchio's reduction looks frames up by name, which fails for a name shared by several
+    frames: such frames (but a joint's own frame) are renamed for the reduction, then back.
+    """
+    names = [frame.name for frame in full_model.frames]
+    shared = {
+        i
+        for i, name in enumerate(names)
+        if names.count(name) > 1 and full_model.frames[i].type != pin.FrameType.JOINT
+    }  # a joint's frame keeps the joint's name: the reduction finds it by that name
+    model = full_model.copy()
+    for i in shared:
+        model.frames[i].name = f"{names[i]}@{model.frames[i].type.name}#{i}"
+    renamed = {model.frames[i].name: names[i] for i in shared}
+    wanted = [model.frames[i].name for i in frame_ids]
+    if to_lock:
+        model = pin.buildReducedModel(model, list(to_lock), reference)
+    ids = [model.getFrameId(name) for name in wanted]
+    for frame in model.frames:
+        frame.name = renamed.get(frame.name, frame.name)
+    return model, ids
+
+
+def _apply_mimic_joints(
+    full_model: pin.Model,
+    chain: Sequence[int],
+    mimic_joints: Mapping[str, MimicJoint],
+    reference: np.ndarray,
+    locked_positions: Mapping[str, float],
+    tip_frame: str,
+) -> None:
+    """Refuse a chain holding a mimic joint or its leader (the chain would be a different
+    robot); set each locked mimic joint from its locked leader in ``reference``."""
+    names = list(full_model.names)
+    for follower, mimic in mimic_joints.items():
+        if follower not in names or mimic.leader not in names:
+            continue
+        follower_id, leader_id = names.index(follower), names.index(mimic.leader)
+        if follower_id in chain or leader_id in chain:
+            relation = (
+                f"joint '{follower}' on the chain to '{tip_frame}' mimics joint '{mimic.leader}'"
+                if follower_id in chain
+                else f"joint '{mimic.leader}' on the chain to '{tip_frame}' is mimicked by joint "
+                f"'{follower}'"
+            )
+            raise InvalidInputError(
+                "robot.tip_frame",
+                f"{relation} (URDF <mimic>); chains with mimic joints are not supported: "
+                "choose a tip frame upstream of both",
+            )
+        if follower in locked_positions:
+            raise InvalidInputError(
+                "robot.locked_joints",
+                f"joint '{follower}' mimics joint '{mimic.leader}'; lock '{mimic.leader}' instead",
+            )
+        follower_joint, leader_joint = full_model.joints[follower_id], full_model.joints[leader_id]
+        if follower_joint.nq == 1 and leader_joint.nq == 1:
+            reference[follower_joint.idx_q] = (
+                mimic.multiplier * reference[leader_joint.idx_q] + mimic.offset
+            )
 
 
 class RobotModel:
@@ -114,13 +334,13 @@ class RobotModel:
         base_frame: str,
         tip_frame: str,
         locked_positions: Mapping[str, float] | None = None,
+        mimic_joints: Mapping[str, MimicJoint] | None = None,
     ) -> None:
-        frame_names = [frame.name for frame in full_model.frames]
-        for field, name in (("robot.base_frame", base_frame), ("robot.tip_frame", tip_frame)):
-            if not full_model.existFrame(name):
-                raise FrameNotFoundError(field, name, frame_names)
-        base_joint = full_model.frames[full_model.getFrameId(base_frame)].parentJoint
-        tip_joint = full_model.frames[full_model.getFrameId(tip_frame)].parentJoint
+        base_id = find_frame(full_model, base_frame, "robot.base_frame")
+        tip_id = find_frame(full_model, tip_frame, "robot.tip_frame")
+        base_frame, tip_frame = full_model.frames[base_id].name, full_model.frames[tip_id].name
+        base_joint = full_model.frames[base_id].parentJoint
+        tip_joint = full_model.frames[tip_id].parentJoint
         upstream_of_base = set(full_model.supports[base_joint])
         chain = [j for j in full_model.supports[tip_joint] if j not in upstream_of_base]
         if base_joint not in full_model.supports[tip_joint]:
@@ -133,10 +353,13 @@ class RobotModel:
                 "robot.tip_frame", f"no joint between '{base_frame}' and '{tip_frame}'"
             )
         for joint_id in chain:
-            if full_model.joints[joint_id].nv != 1:
-                raise RobotModelError(
-                    f"joint '{full_model.names[joint_id]}' on the chain has "
-                    f"{full_model.joints[joint_id].nv} DOF; only 1-DOF joints are supported"
+            joint = full_model.joints[joint_id]
+            if joint.nv != 1:
+                raise InvalidInputError(
+                    "robot.tip_frame",
+                    f"joint '{full_model.names[joint_id]}' ({joint.shortname()}) on the chain "
+                    f"'{base_frame}' -> '{tip_frame}' has {joint.nv} DOF; only 1-DOF joints "
+                    "(revolute, continuous, prismatic) are supported",
                 )
         reference = pin.neutral(full_model)
         locked_positions = dict(locked_positions or {})
@@ -151,15 +374,23 @@ class RobotModel:
                 raise InvalidInputError(
                     "robot.locked_joints", f"joint '{name}' has nq={joint.nq}; only nq=1 joints"
                 )
+            lower = full_model.lowerPositionLimit[joint.idx_q]
+            upper = full_model.upperPositionLimit[joint.idx_q]
+            if not lower - 1e-9 <= float(value) <= upper + 1e-9:
+                raise InvalidInputError(
+                    f"robot.locked_joints.{name}",
+                    f"{float(value):g} is outside the joint's limits [{lower:g}, {upper:g}]",
+                )
             reference[joint.idx_q] = float(value)
+        _apply_mimic_joints(
+            full_model, chain, mimic_joints or {}, reference, locked_positions, tip_frame
+        )
         to_lock = [j for j in range(1, full_model.njoints) if j not in chain]
-        self.model = (
-            pin.buildReducedModel(full_model, to_lock, reference) if to_lock else full_model.copy()
+        self.model, (self.tip_frame_id, self.base_frame_id) = _reduced_model(
+            full_model, to_lock, reference, (tip_id, base_id)
         )
         self.base_frame = base_frame
         self.tip_frame = tip_frame
-        self.tip_frame_id = self.model.getFrameId(tip_frame)
-        self.base_frame_id = self.model.getFrameId(base_frame)
         data = self.model.createData()
         pin.framesForwardKinematics(self.model, data, pin.neutral(self.model))
         self.transform_base_to_world = pin.SE3(data.oMf[self.base_frame_id])
@@ -172,6 +403,38 @@ class RobotModel:
         self.velocity_limits = np.array(self.model.velocityLimit)
         for array in (self.lower_limits, self.upper_limits, self.velocity_limits):
             array.setflags(write=False)
+        self._check_mass_matrix()
+
+    def _check_mass_matrix(self) -> None:
+        """Refuse a chain whose joint-space mass matrix is singular even with an object (1 kg,
+        inertia 1e-3 kg m^2 about each axis) at the tip: joints moving no mass or inertia."""
+        model = self.model.copy()
+        tip = model.frames[self.tip_frame_id]
+        model.inertias[tip.parentJoint] = model.inertias[tip.parentJoint] + tip.placement.act(
+            pin.Inertia(1.0, np.zeros(3), 1e-3 * np.eye(3))
+        )
+        data = model.createData()
+        rng = np.random.default_rng(0)
+        lower = np.where(np.isfinite(self.lower_limits), self.lower_limits, -np.pi)
+        upper = np.where(np.isfinite(self.upper_limits), self.upper_limits, np.pi)
+        for _ in range(3):  # singular at one generic configuration is singular everywhere
+            mass_matrix = pin.crba(model, data, self.q_from_positions(rng.uniform(lower, upper)))
+            mass_matrix = np.triu(mass_matrix) + np.triu(mass_matrix, 1).T
+            eigenvalues = np.linalg.eigvalsh(mass_matrix)
+            if eigenvalues[0] > MASS_MATRIX_RELATIVE_TOLERANCE * abs(eigenvalues[-1]):
+                return
+        massless = [
+            name
+            for name, inertia in zip(self.joint_names, self.model.inertias[1:], strict=True)
+            if inertia.mass <= 0.0
+        ]
+        raise InvalidInputError(
+            "robot.urdf",
+            f"the mass matrix of the chain '{self.base_frame}' -> '{self.tip_frame}' is not "
+            "positive definite even with an object at the tip (links moved by "
+            f"{', '.join(massless) or 'the chain joints'} have no mass); give the chain's "
+            "links a positive <inertial> mass and inertia",
+        )
 
     @classmethod
     def from_urdf(
@@ -183,7 +446,9 @@ class RobotModel:
         relative_to: Path | None = None,
     ) -> RobotModel:
         """Load from a URDF path, URDF XML or ``example-robot-data:<name>``."""
-        return cls(load_urdf_model(source, relative_to), base_frame, tip_frame, locked_positions)
+        full_model = load_urdf_model(source, relative_to)
+        mimic_joints = load_urdf_mimic_joints(source, relative_to)
+        return cls(full_model, base_frame, tip_frame, locked_positions, mimic_joints)
 
     @property
     def num_joints(self) -> int:

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass, field
+from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 import pinocchio as pin
@@ -11,8 +13,45 @@ import pinocchio as pin
 from ..exceptions import InvalidInputError
 from ..input_checks import finite_float
 
+_EPS = float(np.finfo(float).eps)
+_PREC3 = _EPS ** (1.0 / 4.0)  # Pinocchio's TaylorSeriesExpansion<double>::precision<3>()
+
 MAX_SAMPLES = 1_000_000
 """Upper bound on the number of samples of one trajectory."""
+
+
+class TipMotion(NamedTuple):
+    """The tip path a grasp induces, sampled (the common interface of object trajectories).
+
+    Every trajectory type (``ObjectTrajectory``, ``WaypointTrajectory``,
+    ``JointSpaceTrajectory``) offers ``times_s()``, ``duration_s``, ``path_parameter(times)``,
+    ``object_poses(times)``, ``tip_motion(grasp, times)`` and ``tip_twists(grasp, times)``;
+    the evaluator (compiled or not) and the analyses use only these.
+    """
+
+    rotations: np.ndarray  # (N, 3, 3) tip frame in the base frame
+    positions: np.ndarray  # (N, 3) [m] tip origin in the base frame
+    tangents: np.ndarray  # (N, 3) [m] direction of tip motion, base axes (see each type)
+    speeds: np.ndarray  # (N,) [m/s] tip speed
+
+
+class Trajectory(Protocol):
+    """What the evaluator and the analyses need of an object trajectory (see TipMotion)."""
+
+    @property
+    def duration_s(self) -> float: ...
+
+    def times_s(self) -> np.ndarray: ...
+
+    def path_parameter(self, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+
+    def object_poses(self, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def tip_motion(self, transform_tip_to_object: pin.SE3, times_s: np.ndarray) -> TipMotion: ...
+
+    def tip_twists(
+        self, transform_tip_to_object: pin.SE3, times_s: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]: ...
 
 
 def quintic_time_scaling(tau: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -118,3 +157,128 @@ class ObjectTrajectory:
             poses.append(object_pose * grasp)
             tangents[i] = linear + object_pose.rotation @ lever_in_object
         return poses, tangents
+
+    def object_poses(self, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Object rotations (N, 3, 3) and positions (N, 3) [m] in the base frame at the times."""
+        motion = self.tip_motion(pin.SE3.Identity(), times_s)
+        return motion.rotations, motion.positions
+
+    def tip_motion(self, transform_tip_to_object: pin.SE3, times_s: np.ndarray) -> TipMotion:
+        """Tip poses, path tangents d p_tip/ds [m] and speeds |d p_tip/ds|·ds/dt [m/s].
+
+        Equal to ``tip_path_arrays`` at s(t) (the Python evaluation path's tip path).
+        """
+        s_values, s_rate, _ = self.path_parameter(times_s)
+        rotations, positions, tangents = tip_path_arrays(self, transform_tip_to_object, s_values)
+        return TipMotion(rotations, positions, tangents, np.linalg.norm(tangents, axis=1) * s_rate)
+
+    def tip_twists(
+        self, transform_tip_to_object: pin.SE3, times_s: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Tip twist (N, 6) [m/s, rad/s] and its time derivative (N, 6), base axes.
+
+        Linear part: velocity / classical acceleration of the tip origin; angular part: angular
+        velocity / acceleration of the object (= of the tip).
+        """
+        grasp = pin.SE3(transform_tip_to_object)
+        times = np.asarray(times_s, dtype=float)
+        s_values, s_rate, s_accel = self.path_parameter(times)
+        _, tangents = self.tip_path(grasp, s_values)
+        omega = self.rotation_log_in_object  # object angular velocity per unit s, object axes
+        curvature_in_object = np.cross(omega, np.cross(omega, grasp.translation))
+        twist = np.empty((len(times), 6))
+        twist_rate = np.empty((len(times), 6))
+        for i, s in enumerate(s_values):
+            rotation = self.transform_object_to_base(float(s)).rotation
+            angular = rotation @ omega
+            second = rotation @ curvature_in_object  # d² p_tip / ds²
+            twist[i, :3] = tangents[i] * s_rate[i]
+            twist[i, 3:] = angular * s_rate[i]
+            twist_rate[i, :3] = second * s_rate[i] ** 2 + tangents[i] * s_accel[i]
+            twist_rate[i, 3:] = angular * s_accel[i]
+        return twist, twist_rate
+
+
+def exp3_batch(rotation_vectors: np.ndarray) -> np.ndarray:
+    """Pinocchio's exp3 (same formula and Taylor branch) for an (N, 3) array of vectors."""
+    v = np.asarray(rotation_vectors, dtype=float)
+    t2 = np.einsum("ij,ij->i", v, v) + _EPS * _EPS
+    t = np.sqrt(t2)
+    ct, st = np.cos(t), np.sin(t)
+    large = t > _PREC3
+    with np.errstate(divide="ignore", invalid="ignore"):
+        alpha_vxvx = np.where(large, (1.0 - ct) / t2, 0.5 - t2 / 24.0)
+        alpha_vx = np.where(large, st / t, 1.0 - t2 / 6.0)
+    ct = np.where(large, ct, 1.0 - t2 / 2.0)
+    result = alpha_vxvx[:, None, None] * v[:, :, None] * v[:, None, :]
+    result[:, 0, 1] -= alpha_vx * v[:, 2]
+    result[:, 1, 0] += alpha_vx * v[:, 2]
+    result[:, 0, 2] += alpha_vx * v[:, 1]
+    result[:, 2, 0] -= alpha_vx * v[:, 1]
+    result[:, 1, 2] -= alpha_vx * v[:, 0]
+    result[:, 2, 1] += alpha_vx * v[:, 0]
+    for k in range(3):
+        result[:, k, k] += ct
+    return result
+
+
+_OBJECT_PATHS: list[tuple[Any, np.ndarray, np.ndarray, np.ndarray]] = []
+"""The last result of ``object_path_arrays`` (weakref to the trajectory, s, R, p)."""
+
+
+def object_path_arrays(
+    trajectory: ObjectTrajectory, s_values: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Object rotations (N, 3, 3) and positions (N, 3) [m] in the base frame at the path
+    parameters, vectorised (read-only); the last result is kept, as every grasp of a ranking
+    needs the same."""
+    s = np.asarray(s_values, dtype=float)
+    if _OBJECT_PATHS:
+        reference, cached_s, rotations, translations = _OBJECT_PATHS[0]
+        if reference() is trajectory and np.array_equal(cached_s, s):
+            return rotations, translations
+    start = trajectory.transform_object_to_base_start
+    goal = trajectory.transform_object_to_base_goal
+    log = np.asarray(trajectory.rotation_log_in_object, dtype=float)
+    rotations = np.matmul(start.rotation, exp3_batch(s[:, None] * log))
+    translations = (1.0 - s)[:, None] * start.translation + s[:, None] * goal.translation
+    for array in (rotations, translations):
+        array.setflags(write=False)
+    _OBJECT_PATHS[:] = [(weakref.ref(trajectory), s.copy(), rotations, translations)]
+    return rotations, translations
+
+
+def tip_path_arrays(
+    trajectory: ObjectTrajectory, transform_tip_to_object: pin.SE3, s_values: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """ObjectTrajectory.tip_path as arrays, vectorised over the samples.
+
+    Args:
+        trajectory: An ObjectTrajectory.
+        transform_tip_to_object: The grasp.
+        s_values: Path parameters in [0, 1].
+
+    Returns:
+        Tip rotations (N, 3, 3) and positions (N, 3) [m] in the base frame, and the path
+        tangents d p_tip / ds (N, 3) [m], base axes; equal to ``tip_path`` up to rounding.
+    """
+    object_rotations, object_translations = object_path_arrays(trajectory, s_values)
+    count = len(object_translations)
+    stacked = object_rotations.reshape(3 * count, 3)  # one matrix product per quantity
+    grasp_p = np.asarray(transform_tip_to_object.translation, dtype=float)
+    w = np.asarray(trajectory.rotation_log_in_object, dtype=float)
+    lever_in_object = np.array(  # w x p (np.cross is slow on one vector)
+        [
+            w[1] * grasp_p[2] - w[2] * grasp_p[1],
+            w[2] * grasp_p[0] - w[0] * grasp_p[2],
+            w[0] * grasp_p[1] - w[1] * grasp_p[0],
+        ]
+    )
+    rotations = (stacked @ np.asarray(transform_tip_to_object.rotation)).reshape(count, 3, 3)
+    translations = (stacked @ grasp_p).reshape(count, 3) + object_translations
+    linear = (
+        trajectory.transform_object_to_base_goal.translation
+        - trajectory.transform_object_to_base_start.translation
+    )
+    tangents = (stacked @ lever_in_object).reshape(count, 3) + linear
+    return rotations, translations, tangents
