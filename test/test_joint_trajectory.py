@@ -158,3 +158,22 @@ def test_missing_chain_joint_and_limits_are_refused_before_any_work(baxter) -> N
     with pytest.raises(InvalidInputError, match="right_s1") as error:
         evaluator.rank([Grasp(GRASP, joint_trajectory=planned)], BOOK, trajectory)
     assert error.value.field == "grasps[1].joint_trajectory.points[2].positions"
+
+
+def test_posture_selection_keeps_a_planned_motion_as_given(baxter) -> None:
+    from grasp_safety_ros.core.method.posture import PostureConfig, select_postures
+
+    evaluator, trajectory, evaluation = ik_route(baxter)
+    # The IK route given as a planned motion: posture selection must leave it as planned.
+    positions = evaluation.joint_positions.copy()
+    planned = PlannedJointTrajectory(tuple(baxter.joint_names), evaluation.times_s, positions)
+    grasps = [Grasp(GRASP, joint_trajectory=planned), Grasp(GRASP)]
+    ranking = evaluator.rank(grasps, BOOK, trajectory, seed_positions=BAXTER_SEED)
+    selected = select_postures(
+        evaluator, grasps, BOOK, trajectory, ranking, PostureConfig(restarts=4)
+    )
+    planned_result = selected.evaluations[0]
+    assert planned_result is ranking.evaluations[0]  # never replaced by an IK posture
+    assert selected.postures[0].postures_tried == 1
+    np.testing.assert_array_equal(planned_result.joint_positions, positions)
+    assert selected.postures[1].postures_tried >= 1

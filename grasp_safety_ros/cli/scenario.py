@@ -502,11 +502,12 @@ def parse_scenario(data: Any, base_dir: Path) -> Scenario:
     object_inertia, points = parse_object(_required(root, "object", ""))
     grasps, quality = parse_grasps(_required(root, "grasps", ""))
     trajectory = parse_trajectory(_required(root, "trajectory", ""))
-    if len(grasps) * trajectory.num_samples > MAX_GRASP_SAMPLES:
+    samples = trajectory.num_samples
+    if len(grasps) * samples > MAX_GRASP_SAMPLES:
         raise InvalidInputError(
             "grasps",
-            f"{len(grasps)} grasps x {trajectory.num_samples} trajectory samples = "
-            f"{len(grasps) * trajectory.num_samples} IK solves; at most {MAX_GRASP_SAMPLES} "
+            f"{len(grasps)} grasps x {samples} trajectory samples = "
+            f"{len(grasps) * samples} IK solves; at most {MAX_GRASP_SAMPLES} "
             "(fewer grasps or a larger trajectory.dt_s)",
         )
     return Scenario(

@@ -249,9 +249,19 @@ def select_postures(
     evaluations: list[GraspEvaluation] = []
     selections: list[PostureSelection] = []
     for k, (grasp, single_ik) in enumerate(zip(grasps, ranking.evaluations, strict=True)):
-        evaluation, selection = select_posture(
-            evaluator, grasp, object_inertia, trajectory, single_ik, config, ranking.metric, seeds
-        )
+        if grasp.joint_trajectory is not None:  # a planned motion: its posture is given
+            evaluation, selection = single_ik, single_posture(single_ik)
+        else:
+            evaluation, selection = select_posture(
+                evaluator,
+                grasp,
+                object_inertia,
+                trajectory,
+                single_ik,
+                config,
+                ranking.metric,
+                seeds,
+            )
         evaluations.append(evaluation)
         selections.append(selection)
         if progress is not None:

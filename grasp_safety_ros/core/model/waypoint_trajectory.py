@@ -185,6 +185,11 @@ class WaypointTrajectory:
         """Object pose at the first waypoint."""
         return self.transforms_object_to_base[0]
 
+    @property
+    def num_samples(self) -> int:
+        """Number of sample times (``len(times_s())``)."""
+        return len(self.times_s())
+
     def times_s(self) -> np.ndarray:
         """Sample times [s]: every dt from t_0 and every waypoint time, sorted."""
         start = self.waypoint_times_s[0]
