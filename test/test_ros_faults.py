@@ -205,7 +205,7 @@ def test_bug_in_a_topic_callback_is_reported_not_fatal(
     def broken(*args: Any, **kwargs: Any) -> None:
         raise RuntimeError("simulated bug")
 
-    monkeypatch.setattr(node_module, "trajectory_from_path", broken)
+    monkeypatch.setattr(node_module, "trajectory_from_msg", broken)
     publisher = ros.client.create_publisher(PathMsg, "/grasp_safety/object_trajectory", 10)
     try:
         assert ros.spin_until(lambda: publisher.get_subscription_count() > 0)
