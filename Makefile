@@ -8,6 +8,8 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 IFACE_STAMP := $(VENV)/.interfaces
+KERNELS_STAMP := $(VENV)/.kernels
+KERNELS := grasp_safety_ros/core/kernels
 IFACE_SRC := $(shell find msg_defs -type f 2>/dev/null) scripts/build_interfaces.sh
 AMENT_STAMP := $(VENV)/.ament
 ROS2CLI_INSTALL := $(wildcard ../shared/tools/ros2cli/install)
@@ -19,12 +21,17 @@ PIP_QUIET := sed -e '/is ignored: it is neither a file nor a directory/d'
 
 all: setup
 
-setup: $(IFACE_STAMP) $(AMENT_STAMP) $(ROS2CLI_STAMP)
+setup: $(IFACE_STAMP) $(AMENT_STAMP) $(ROS2CLI_STAMP) $(KERNELS_STAMP)
 
 $(STAMP): requirements.txt setup.py
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	set -o pipefail; $(PY) -m pip install -q -r requirements.txt 2>&1 | $(PIP_QUIET)
 	set -o pipefail; $(PY) -m pip install -q --no-deps -e . 2>&1 | $(PIP_QUIET)
+	touch $@
+
+# numba's cache goes stale across kernel files (see core/kernels/__init__.py): recompile here.
+$(KERNELS_STAMP): $(STAMP) $(wildcard $(KERNELS)/*.py)
+	rm -f $(KERNELS)/__pycache__/*.nbi $(KERNELS)/__pycache__/*.nbc
 	$(PY) -c "from grasp_safety_ros.core.method.warm_up import warm_up; print(f'compiled kernels ready ({warm_up():.1f} s)')"
 	touch $@
 

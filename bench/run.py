@@ -3,6 +3,8 @@
 
 Workload per arm (Panda and Baxter's right arm, example-robot-data): a box, 100 grasps
 around it, a 2 s quintic object trajectory sampled every 0.01 s (201 samples), metric mean.
+The same on a chain with continuous joints (Kinova Jaco2, ``--continuous-arm``): ours only,
+serial, and its CPU time per sample relative to the slowest revolute arm's.
 Measured in one process, interleaved, repeated (median and spread):
 
 - ours, serial (one core): ``GraspSafetyEvaluator.rank`` with the compiled kernels; µs per
@@ -396,6 +398,62 @@ def bench_arm(arm: ArmWorkload, args: argparse.Namespace, kdl: Any) -> dict[str,
     return out
 
 
+# ----------------------------------------------------------------------------- continuous joints
+def bench_continuous(arm: ArmWorkload, repeats: int) -> dict[str, Any]:
+    """The compiled path on a chain with continuous joints ((cos, sin) in q): µs per (grasp,
+    sample) with IK, serial, as for the revolute arms; compiled vs Python identity."""
+    robot = arm.robot()
+    trajectory = arm.trajectory(2.0, 0.01)
+    obj = box_object()
+    grasps = grasps_around_box(np.array(arm.approach_from), 100)
+    seed = np.array(arm.seed_positions)
+    serial = GraspSafetyEvaluator(robot, EvaluationConfig(workers=1))
+    fallback = GraspSafetyEvaluator(robot, EvaluationConfig(backend="python", workers=1))
+
+    def rank(evaluator: GraspSafetyEvaluator) -> Ranking:
+        return evaluator.rank(grasps, obj, trajectory, seed_positions=seed)
+
+    print(f"[{arm.name}] continuous joints: warm-up, then {repeats} repeats", file=sys.stderr)
+    ranking = rank(serial)
+    total = len(grasps) * trajectory.num_samples
+    wall, cpu = [], []
+    for _ in range(repeats):
+        cpu_start = time.process_time()
+        wall.append(timed(lambda: rank(serial))[0])
+        cpu.append(time.process_time() - cpu_start)
+    python_s, python = timed(lambda: rank(fallback))
+    pairs = list(zip(python.evaluations, ranking.evaluations, strict=True))
+    model = robot.model
+    return {
+        "robot": f"{arm.urdf} {arm.base_frame} -> {arm.tip_frame}",
+        "continuous_joints": [
+            name
+            for name, joint in zip(robot.joint_names, list(model.joints)[1:], strict=True)
+            if joint.nq == 2
+        ],
+        "nq_nv": [model.nq, model.nv],
+        "backend": "compiled" if serial.ik.compiled else "python",
+        "grasps": len(grasps),
+        "samples_per_grasp": trajectory.num_samples,
+        "feasible_grasps": sum(e.feasible for e in ranking.evaluations),
+        "us_per_sample_with_ik": summary([t / total * 1e6 for t in wall]),
+        "cpu_us_per_sample_with_ik": summary([t / total * 1e6 for t in cpu]),
+        "python_backend_us_per_sample_with_ik": python_s / total * 1e6,
+        "python_backend_max_rel_diff": max(
+            (
+                rel_diff(a.effective_mass_kg, b.effective_mass_kg)
+                for a, b in pairs
+                if a.feasible and b.feasible
+            ),
+            default=0.0,
+        ),
+        "python_backend_same_feasibility": all(a.feasible == b.feasible for a, b in pairs),
+        "python_backend_same_ik_iterations": all(
+            np.array_equal(a.ik_iterations, b.ik_iterations) for a, b in pairs
+        ),
+    }
+
+
 # ----------------------------------------------------------------------------- service
 def service_latency(arm: ArmWorkload, repeats: int) -> dict[str, Any]:
     """The node's service cost (bench/service.py): 10 grasps x 101 samples (latency, the
@@ -423,6 +481,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--peer-repeats", type=int, default=3)
     parser.add_argument("--peer-grasps", type=int, default=100)
     parser.add_argument("--service-repeats", type=int, default=30)
+    parser.add_argument(
+        "--continuous-arm", default="kinova", help="arm with continuous joints, or 'none'"
+    )
     parser.add_argument("--no-peer", action="store_true", help="skip PyKDL")
     parser.add_argument("--no-service", action="store_true", help="skip the node latency")
     parser.add_argument(
@@ -447,6 +508,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     arms = {}
     for name in args.arms.split(","):
         arms[name] = bench_arm(ARMS[name], args, kdl)
+    continuous = (
+        None
+        if args.continuous_arm == "none"
+        else bench_continuous(ARMS[args.continuous_arm], args.repeats)
+    )
     print("[postures] cost and gain of posture selection", file=sys.stderr)
     posture_selection = bench_postures(args.posture_grasps)
     if args.no_service:
@@ -471,6 +537,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         "wall_s_100x201_serial": worst("wall_s_serial"),
         "wall_s_100x201_parallel": worst("wall_s_parallel"),
         "ik_iterations_per_sample": worst("ik_iterations_per_sample"),
+        "us_per_sample_with_ik_continuous": (
+            continuous["us_per_sample_with_ik"]["median"] if continuous else None
+        ),
+        "continuous_vs_revolute_cpu": (
+            continuous["cpu_us_per_sample_with_ik"]["median"] / worst("cpu_us_per_sample_with_ik")
+            if continuous
+            else None
+        ),
+        "continuous_arm": continuous,
         "pykdl_us_per_sample_with_ik": max(
             (a["pykdl"]["us_per_sample_with_ik"]["median"] for a in arms.values() if "pykdl" in a),
             default=None,
@@ -584,6 +659,27 @@ def print_table(results: dict[str, Any]) -> None:
         print(
             f"  floor ~{fmt(arm['floor_us_per_sample'])} us/sample; ours is "
             f"x{fmt(arm['distance_to_floor'], '.1f')} from it"
+        )
+    continuous = results["continuous_arm"]
+    if continuous is not None:
+        w = continuous["us_per_sample_with_ik"]
+        same = (
+            continuous["python_backend_same_feasibility"]
+            and continuous["python_backend_same_ik_iterations"]
+        )
+        joints = ", ".join(continuous["continuous_joints"])
+        print(
+            f"continuous joints ({continuous['robot']}; {joints}"
+            f"; nq, nv = {continuous['nq_nv']}): {continuous['feasible_grasps']} feasible, "
+            f"backend {continuous['backend']}"
+        )
+        print(
+            f"  ours, 1 core : {fmt(w['median'])} us/sample with IK [{fmt(w['min'])}.."
+            f"{fmt(w['max'])}]; CPU time {fmt(continuous['cpu_us_per_sample_with_ik']['median'])}"
+            f" us/sample = x{fmt(results['continuous_vs_revolute_cpu'])} the slowest revolute "
+            f"arm's; python backend {fmt(continuous['python_backend_us_per_sample_with_ik'])} "
+            f"us/sample, max rel diff {fmt(continuous['python_backend_max_rel_diff'], '.1e')}, "
+            f"{'same' if same else 'DIFFERENT'} feasibility and IK iterations"
         )
     service = results["service"]
     if service.get("median_ms") is None:

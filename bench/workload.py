@@ -1,4 +1,5 @@
-"""Benchmark workloads: a 7-DOF arm, a box, 100 grasps around it, a 2 s quintic trajectory."""
+"""Benchmark workloads: an arm (Panda, Baxter; Kinova with continuous joints), a box, 100 grasps
+around it, a 2 s quintic trajectory."""
 
 from __future__ import annotations
 
@@ -69,6 +70,21 @@ ARMS: dict[str, ArmWorkload] = {
         start_quat_xyzw=(0.0, 0.0, 0.0, 1.0),
         goal_quat_xyzw=_YAW_10,
         approach_from=(-0.4, 0.0, 1.0),
+    ),
+    # Continuous joints 1, 4 and 6 (Pinocchio's (cos, sin)): the compiled path must not fall
+    # back for them. The box starts 6 cm ahead of the tip at the seed, the tip z axis
+    # pointing into it.
+    "kinova": ArmWorkload(
+        name="kinova",
+        urdf="example-robot-data:kinova",
+        base_frame="j2s6s200_link_base",
+        tip_frame="j2s6s200_end_effector",
+        seed_positions=(0.0, 2.9, 1.3, -2.07, 1.4, 0.0),
+        start_position_m=(-0.105, 0.209, 0.548),
+        goal_position_m=(-0.105, 0.159, 0.588),
+        start_quat_xyzw=(0.0, 0.0, 0.0, 1.0),
+        goal_quat_xyzw=_YAW_10,
+        approach_from=(-0.983, 0.149, -0.11),
     ),
 }
 

@@ -75,9 +75,19 @@ def test_python_on_request_is_reported_without_a_reason(
 
 
 @needs_numba
-def test_fallback_for_a_continuous_joint_names_the_joint(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_continuous_joints_run_compiled(monkeypatch: pytest.MonkeyPatch) -> None:
     backend, calls = rank_counting_paths(GraspSafetyEvaluator(arm("j3")), monkeypatch)
-    assert backend == "python (continuous joint j3 not supported by the compiled kernels)"
+    assert backend == "compiled"
+    assert calls == {"compiled": 2, "python": 0}
+
+
+@needs_numba
+def test_fallback_names_the_reason(monkeypatch: pytest.MonkeyPatch) -> None:
+    # Every chain RobotModel accepts (1-DOF joints) is compiled: a refusal is simulated.
+    reason = "branched chain not supported by the compiled kernels"
+    monkeypatch.setattr(ik_module, "chain_arrays_or_reason", lambda robot: reason)
+    backend, calls = rank_counting_paths(GraspSafetyEvaluator(arm()), monkeypatch)
+    assert backend == f"python ({reason})"
     assert calls == {"compiled": 0, "python": 2}
 
 

@@ -109,8 +109,26 @@ def mixed_arm_urdf() -> str:
     return "\n".join(lines)
 
 
+def continuous_arm_urdf() -> str:
+    """The 6-DOF test arm whose first and fourth joints are continuous (nq = 8, nv = 6)."""
+    return (
+        serial_arm_urdf(ARM6_AXES)
+        .replace('<joint name="j1" type="revolute">', '<joint name="j1" type="continuous">')
+        .replace('<joint name="j4" type="revolute">', '<joint name="j4" type="continuous">')
+    )
+
+
+def kinova() -> RobotModel:
+    """Kinova Jaco2 j2s6s200 of example-robot-data: joints 1, 4 and 6 continuous."""
+    return RobotModel.from_urdf(
+        "example-robot-data:kinova", "j2s6s200_link_base", "j2s6s200_end_effector"
+    )
+
+
 ROBOTS = {
     "arm6": lambda: RobotModel.from_urdf(serial_arm_urdf(ARM6_AXES), "base_link", "tool"),
+    "continuous": lambda: RobotModel.from_urdf(continuous_arm_urdf(), "base_link", "tool"),
+    "kinova": kinova,
     "arm7": lambda: RobotModel.from_urdf(serial_arm_urdf(ARM7_AXES, seed=1), "base_link", "tool"),
     "arm4": lambda: RobotModel.from_urdf(
         serial_arm_urdf(("z", "y", "y", "x"), seed=2), "base_link", "tool"
@@ -147,16 +165,41 @@ def test_tip_path_arrays_equal_tip_path() -> None:
         np.testing.assert_allclose(tangents_v, tangents, atol=1e-15)
 
 
-def test_chain_arrays_reject_continuous_joints() -> None:
-    urdf = serial_arm_urdf(ARM6_AXES).replace(
-        '<joint name="j2" type="revolute">', '<joint name="j2" type="continuous">'
-    )
-    robot = RobotModel.from_urdf(urdf, "base_link", "tool")
-    assert chain_arrays(robot) is None
-    assert not IKSolver(robot).compiled  # auto falls back to the Python path
-    if compiled_available():
-        with pytest.raises(InvalidInputError, match="revolute and prismatic joints only"):
-            IKSolver(robot, backend="compiled")
+def test_chain_arrays_take_continuous_joints() -> None:
+    robot = ROBOTS["continuous"]()
+    assert (robot.model.nq, robot.model.nv) == (8, 6)
+    chain = chain_arrays(robot)
+    assert chain is not None
+    np.testing.assert_array_equal(chain.continuous, [True, False, False, True, False, False])
+    np.testing.assert_array_equal(chain.q_index, [0, 2, 3, 4, 6, 7])
+    assert np.isinf(chain.lower_q[[0, 1, 4, 5]]).all() and np.isfinite(chain.lower_q[2])
+    assert IKSolver(robot).compiled == compiled_available()  # auto: no fallback
+
+
+@needs_numba
+def test_integrate_and_difference_of_continuous_joints_equal_pinocchio() -> None:
+    from grasp_safety_ros.core.kernels.kinematics import _integrate, _joint_difference
+
+    robot = ROBOTS["continuous"]()
+    model, chain = robot.model, chain_arrays(robot)
+    assert chain is not None
+    index = (chain.q_index, chain.continuous)
+    rng = np.random.default_rng(12)
+    out = np.empty(model.nq)
+    for scale in (1.0, 1.0 + 1e-7):  # (cos, sin) slightly off the unit circle, as iterates
+        for _ in range(20):
+            q = robot.q_from_positions(random_positions(robot, rng)) * scale
+            step = rng.uniform(-1.0, 1.0, model.nv)
+            _integrate(chain, q, step, out, False)
+            np.testing.assert_array_equal(out, pin.integrate(model, q, step))
+            q_to = pin.integrate(model, q, rng.uniform(-3.0, 3.0, model.nv))
+            expected = pin.difference(model, q, q_to)
+            for k in range(model.nv):
+                assert _joint_difference(*index, q, q_to, k) == expected[k]
+    q = robot.q_from_positions(np.zeros(6))
+    for angle in (1e-3, 0.5, 3.0, np.pi):  # every branch of Pinocchio's SO(2) log
+        q_to = pin.integrate(model, q, np.full(6, angle))
+        assert _joint_difference(*index, q, q_to, 0) == pin.difference(model, q, q_to)[0]
 
 
 def test_configuration_is_validated() -> None:
@@ -240,7 +283,9 @@ def evaluators(robot: RobotModel, **config: object) -> tuple[GraspSafetyEvaluato
 
 
 @needs_numba
-@pytest.mark.parametrize("name", ["arm6", "arm7", "mixed"])  # arm4 cannot follow 6-D paths
+@pytest.mark.parametrize(  # arm4 cannot follow 6-D paths
+    "name", ["arm6", "arm7", "mixed", "continuous", "kinova"]
+)
 def test_compiled_ranking_equals_python_ranking(name: str) -> None:
     robot = ROBOTS[name]()
     rng = np.random.default_rng(7)
@@ -280,6 +325,20 @@ def test_failures_are_the_same_in_both_backends(arm6: RobotModel) -> None:
     b = compiled.rank(grasps[1:], BOX, fast, seed_positions=seed)
     assert "needs speed" in a.evaluations[0].reason
     assert a.evaluations[0].reason == b.evaluations[0].reason
+
+
+@needs_numba
+def test_joint_jumps_of_continuous_joints_are_the_same_in_both_backends() -> None:
+    robot = ROBOTS["continuous"]()
+    rng = np.random.default_rng(8)
+    seed = random_positions(robot, rng)
+    trajectory = reach_trajectory(robot, seed)
+    python, compiled = evaluators(robot, ik=IKConfig(max_joint_step=2e-3))
+    grasps = grasps_near_identity(3)
+    a = python.rank(grasps, BOX, trajectory, seed_positions=seed)
+    b = compiled.rank(grasps, BOX, trajectory, seed_positions=seed)
+    assert [e.reason for e in a.evaluations] == [e.reason for e in b.evaluations]
+    assert any("jumps by" in e.reason for e in a.evaluations)
 
 
 @needs_numba
@@ -485,3 +544,35 @@ def test_progress_that_raises_abandons_a_pooled_ranking(arm7: RobotModel) -> Non
     assert_identical_ranking(
         pooled.rank(grasps, BOX, trajectory, seed), serial.rank(grasps, BOX, trajectory, seed)
     )
+
+
+@needs_numba
+def test_waypoint_trajectories_run_the_compiled_kernel(
+    arm7: RobotModel, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from grasp_safety_ros.core.method import ranking as ranking_module
+    from grasp_safety_ros.core.model.waypoint_trajectory import WaypointTrajectory
+
+    rng = np.random.default_rng(14)
+    seed = random_positions(arm7, rng)
+    quintic = reach_trajectory(arm7, seed)
+    start, goal = quintic.transform_object_to_base_start, quintic.transform_object_to_base_goal
+    middle = pin.SE3(
+        start.rotation @ pin.exp3(np.array([0.05, 0.0, 0.05])),
+        0.5 * (start.translation + goal.translation) + np.array([0.0, 0.02, 0.0]),
+    )
+    waypoints = WaypointTrajectory((0.0, 0.6, 1.0), (start, middle, goal), 0.02)
+    calls = []
+    fused = ranking_module.evaluate_grasp_compiled
+    monkeypatch.setattr(
+        ranking_module,
+        "evaluate_grasp_compiled",
+        lambda *args, **kwargs: calls.append(1) or fused(*args, **kwargs),
+    )
+    python, compiled = evaluators(arm7)
+    grasps = grasps_near_identity(4)
+    expected = python.rank(grasps, BOX, waypoints, seed_positions=seed)
+    assert not calls
+    assert len(expected.order) >= 2
+    assert_same_ranking(compiled.rank(grasps, BOX, waypoints, seed_positions=seed), expected)
+    assert len(calls) == len(grasps)

@@ -230,8 +230,8 @@ def test_non_finite_pose_is_refused() -> None:
 
 
 def test_evaluation_and_analyses_accept_waypoints(baxter) -> None:
-    """Compiled and Python evaluators agree on a waypoint path (both take the Python path
-    for it), and every analysis runs on it."""
+    """Compiled and Python evaluators agree on a waypoint path (the compiled kernel takes its
+    tip path from ``tip_motion``), and every analysis runs on it."""
     trajectory = three_waypoints(dt=0.05)
     seed = (0.0, -0.55, 0.0, 0.75, 0.0, 1.26, 0.0)
     evaluator = GraspSafetyEvaluator(baxter)
@@ -243,6 +243,7 @@ def test_evaluation_and_analyses_accept_waypoints(baxter) -> None:
         assert a.feasible, a.reason
         np.testing.assert_array_equal(a.times_s, trajectory.times_s())
         np.testing.assert_allclose(a.effective_mass_kg, b.effective_mass_kg, rtol=1e-9)
+        np.testing.assert_array_equal(a.ik_iterations, b.ik_iterations)
         # At rest at both ends, moving in between.
         assert abs(a.tip_speed_m_s[0]) < 1e-12 and abs(a.tip_speed_m_s[-1]) < 1e-12
         assert np.all(a.tip_speed_m_s[1:-1] > 0)

@@ -1,12 +1,23 @@
 """The compiled path of the method: numba kernels on plain arrays, split by concern.
 
-``kinematics`` (forward kinematics, tip Jacobian), ``lie_group`` (Pinocchio's log3 / log6 /
-Jlog6 / exp3), ``linalg`` (LU solve, damped least-squares step), ``ik`` (pose and trajectory
-IK), ``effective_mass`` (translational mobility) and ``grasp`` (the fused per-grasp kernel).
-They mirror the Pinocchio-based Python loops of ``core.method`` operation for operation, so
-per-sample results equal the Python path's to rounding; they are compiled on first use and
-cached on disk by numba (``cache=True``) and release the GIL (``nogil=True``). They import
-nothing from the package but ``_jit``; only ``core.method`` imports them. numba's disk cache is
-keyed by each kernel's own file: after editing a kernel that others call, clear
-``__pycache__`` (or touch the callers) so that no stale compiled caller is loaded.
+``kinematics`` (forward kinematics, tip Jacobian, integrate / difference of configurations),
+``lie_group`` (Pinocchio's log3 / log6 / Jlog6 / exp3), ``linalg`` (LU solve, damped
+least-squares step), ``ik`` (pose and trajectory IK), ``effective_mass`` (translational
+mobility) and ``grasp`` (the fused per-grasp kernel: IK and effective mass along a tip path
+computed by the caller, so every trajectory type runs compiled). They mirror the
+Pinocchio-based Python loops of ``core.method`` operation for operation, so per-sample results
+equal the Python path's to rounding, for serial chains of revolute, continuous ((cos, sin) in
+q, as Pinocchio) and prismatic joints. Their inputs come packed, one value each, as
+``core.method`` builds them: the chain (``ChainArrays``), the IK settings (``IKSettings``), the
+body inertias (``BodyInertias``) and the per-grasp buffers (``GraspBuffers``). They import
+nothing from the package but ``_jit``; only ``core.method`` imports them. They release the GIL
+(``nogil=True``).
+
+numba's disk cache (``cache=True``, in ``__pycache__``) is invalidated only when a function's
+own file changes, yet the kernels call each other across files. So ``_jit`` keeps a digest of
+all kernel sources in ``__pycache__/kernels.sources`` and, on import, deletes the cached
+``*.nbi`` / ``*.nbc`` files when any kernel file changed (``drop_stale_cache``); ``make setup``
+re-runs the warm-up when a kernel file changes, so the recompiling happens there, not at the
+first request. (A cache numba keeps elsewhere, e.g. ``NUMBA_CACHE_DIR``, is not covered: clear
+it after editing the kernels.)
 """

@@ -1,11 +1,14 @@
-"""The jit decorator of the kernels and Pinocchio's Taylor-branch thresholds.
+"""The jit decorator of the kernels, numba's disk cache kept consistent across kernel files,
+and Pinocchio's Taylor-branch thresholds.
 
 Without numba (an optional accelerator) the decorator returns the function unchanged.
 """
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -15,11 +18,55 @@ try:  # optional accelerator
 except ImportError:  # pragma: no cover - exercised on machines without numba
     numba = None
 
+SOURCES_STAMP = "kernels.sources"
+"""File in the kernels' ``__pycache__`` holding the digest of the sources it was built from."""
+
+
+def drop_stale_cache(folder: Path | None = None) -> bool:
+    """Delete numba's cached kernels (``*.nbi``, ``*.nbc``) in ``folder/__pycache__`` when any
+    ``folder/*.py`` changed since they were written; returns whether it deleted them.
+
+    numba invalidates a cached function only when its own file changes, but the kernels call
+    each other across files: an edit in one file must recompile its callers in the others.
+    """
+    folder = folder or Path(__file__).resolve().parent
+    digest = hashlib.sha256()
+    for source in sorted(folder.glob("*.py")):
+        digest.update(source.name.encode() + b"\0" + source.read_bytes())
+    cache = folder / "__pycache__"
+    stamp = cache / SOURCES_STAMP
+    try:
+        if stamp.read_text() == digest.hexdigest():
+            return False
+    except OSError:
+        pass
+    try:
+        for pattern in ("*.nbi", "*.nbc"):
+            for path in cache.glob(pattern):
+                path.unlink(missing_ok=True)
+        cache.mkdir(exist_ok=True)
+        stamp.write_text(digest.hexdigest())
+    except OSError:  # pragma: no cover - read-only install: numba caches elsewhere
+        return False
+    return True
+
+
+if numba is not None:
+    drop_stale_cache()
+
 
 def _jit(function: Callable[..., Any]) -> Callable[..., Any]:
     if numba is None:  # pragma: no cover
         return function
     return numba.njit(cache=True, nogil=True, error_model="numpy")(function)
+
+
+def _jit_inline(function: Callable[..., Any]) -> Callable[..., Any]:
+    """``_jit`` for small helpers called per joint: inlined into the caller by numba, so the
+    named tuples they take are not passed through a call each time."""
+    if numba is None:  # pragma: no cover
+        return function
+    return numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")(function)
 
 
 _EPS = float(np.finfo(np.float64).eps)

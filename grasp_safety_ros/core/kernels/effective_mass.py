@@ -1,34 +1,32 @@
 """Translational mobility J M^-1 J^T at the tip (composite-rigid-body mass matrix and a
-Cholesky factor), compiled."""
+Cholesky factor), compiled.
+
+``bodies`` is ``method.effective_mass.BodyInertias`` (mass, centre of mass and rotational inertia
+of each body, the object merged into the last), one value passed as a whole."""
 
 import math
 
-from ._jit import _jit
+from ._jit import _jit, _jit_inline
 from .ik import _workspace
-from .kinematics import _forward_kinematics
+from .kinematics import _forward_kinematics, _joint_axis_in_world
 
 
-@_jit
-def _mobility_from_frames(
-    axes, prismatic, base_rotation, masses, levers, rotational_inertias, ws, out
-):
+@_jit_inline
+def _mobility_from_frames(chain, bodies, ws, out):
     """[J M^-1 J^T]_3x3 at the tip origin, base axes [1/kg], from the joint and tip poses in ws.
 
     M: joint-space inertia of the chain whose body k has mass masses[k], centre of mass
     levers[k] and rotational inertia about it rotational_inertias[k] (joint-k frame), by the
     composite-rigid-body algorithm in world axes; M^-1 through its Cholesky factor.
     """
+    base_rotation, axes, prismatic = chain.base_rotation, chain.axes, chain.prismatic
+    masses, levers = bodies.masses, bodies.levers
+    rotational_inertias = bodies.rotational_inertias
     jr, jp, ft = ws[0], ws[1], ws[3]
     mass_matrix, sv, sw, jt, io, tmp = ws[15], ws[16], ws[17], ws[18], ws[19], ws[20]
     n = axes.shape[0]
     for k in range(n):
-        ax, ay, az = axes[k, 0], axes[k, 1], axes[k, 2]
-        u0 = jr[k, 0, 0] * ax + jr[k, 0, 1] * ay + jr[k, 0, 2] * az
-        u1 = jr[k, 1, 0] * ax + jr[k, 1, 1] * ay + jr[k, 1, 2] * az
-        u2 = jr[k, 2, 0] * ax + jr[k, 2, 1] * ay + jr[k, 2, 2] * az
-        turn = 1.0 - prismatic[k]
-        slide = prismatic[k]
-        w0, w1, w2 = u0 * turn, u1 * turn, u2 * turn
+        u0, u1, u2, w0, w1, w2, slide = _joint_axis_in_world(axes, prismatic, jr, k)
         p0, p1, p2 = jp[k, 0], jp[k, 1], jp[k, 2]
         sw[k, 0], sw[k, 1], sw[k, 2] = w0, w1, w2
         sv[k, 0] = (p1 * w2 - p2 * w1) + slide * u0
@@ -123,36 +121,9 @@ def _mobility_from_frames(
 
 
 @_jit
-def translational_mobilities(
-    placement_rotations,
-    placement_translations,
-    axes,
-    prismatic,
-    tip_rotation,
-    tip_translation,
-    base_rotation,
-    masses,
-    levers,
-    rotational_inertias,
-    q_all,
-    out,
-):
+def translational_mobilities(chain, bodies, q_all, out):
     """_mobility_from_frames for each row of q_all, into out (N, 3, 3)."""
-    ws = _workspace(axes.shape[0])
+    ws = _workspace(chain.axes.shape[0])
     for sample in range(q_all.shape[0]):
-        _forward_kinematics(
-            placement_rotations,
-            placement_translations,
-            axes,
-            prismatic,
-            tip_rotation,
-            tip_translation,
-            q_all[sample],
-            ws[0],
-            ws[1],
-            ws[2],
-            ws[3],
-        )
-        _mobility_from_frames(
-            axes, prismatic, base_rotation, masses, levers, rotational_inertias, ws, out[sample]
-        )
+        _forward_kinematics(chain, q_all[sample], ws)
+        _mobility_from_frames(chain, bodies, ws, out[sample])

@@ -1,58 +1,22 @@
 """IK of the tip pose, compiled: one pose (``solve_pose``) and a whole trajectory
-(``solve_trajectory``), with the predictor warm start between samples (as ``IKSolver``)."""
+(``solve_trajectory``), with the predictor warm start between samples (as ``IKSolver``).
+
+``settings`` is ``method.compiled.IKSettings`` (tolerances, iteration and step limits, the
+velocity check), one value passed as a whole."""
 
 import math
 
 import numpy as np
 
-from ._jit import _jit
-from .kinematics import _forward_kinematics, _local_jacobian
+from ._jit import _jit, _jit_inline
+from .kinematics import _forward_kinematics, _integrate, _joint_difference, _local_jacobian
 from .lie_group import _jlog6, _log6, _relative_pose
 from .linalg import _damped_step
 
 
 @_jit
-def _predict(
-    axes,
-    prismatic,
-    joint_rotations,
-    joint_translations,
-    fr,
-    ft,
-    rotation_previous,
-    translation_previous,
-    rotation_next,
-    translation_next,
-    max_iteration_step,
-    q_previous,
-    guess,
-    er,
-    et,
-    error,
-    jac,
-    system,
-    rhs,
-    step,
-):
-    """IKSolver._predict, compiled: guess = q_previous + J^+ log6(T_{i-1}^-1 T_i).
-
-    joint_*, fr, ft: the joint and tip poses at q_previous (as the solve that returned it
-    leaves them), so the tip-frame Jacobian there costs no forward kinematics; er, et, error,
-    jac, system, rhs, step: scratch.
-    """
-    _local_jacobian(axes, prismatic, joint_rotations, joint_translations, fr, ft, jac)
-    _relative_pose(
-        rotation_previous, translation_previous, rotation_next, translation_next, er, et
-    )
-    _log6(er, et, error)
-    _damped_step(jac, error, max_iteration_step, system, rhs, step)
-    for k in range(step.shape[0]):
-        guess[k] = q_previous[k] + step[k]
-
-
-@_jit
 def _workspace(n):
-    """Buffers of one IK / effective-mass evaluation for an n-joint chain."""
+    """Buffers of one IK / effective-mass evaluation for a chain of n joints."""
     m = 6 if n >= 6 else n
     return (
         np.empty((n, 3, 3)),  # 0 joint rotations
@@ -79,59 +43,61 @@ def _workspace(n):
     )
 
 
-@_jit
-def _solve_pose_into(
-    placement_rotations,
-    placement_translations,
-    axes,
-    prismatic,
-    tip_rotation,
-    tip_translation,
-    lower_q,
-    upper_q,
-    target_rotation,
-    target_translation,
-    q_init,
-    position_tolerance,
-    orientation_tolerance,
-    max_iterations,
-    max_iteration_step,
-    q,
+@_jit_inline
+def _predict(
+    chain,
+    rotation_previous,
+    translation_previous,
+    rotation_next,
+    translation_next,
+    settings,
+    q_previous,
+    guess,
     ws,
 ):
+    """IKSolver._predict, compiled: guess = q_previous (+) J^+ log6(T_{i-1}^-1 T_i).
+
+    ws must hold the joint and tip poses at q_previous (as the solve that returned it leaves
+    them), so the tip-frame Jacobian there costs no forward kinematics.
+    """
+    jac, er, et, error, step = ws[9], ws[4], ws[5], ws[8], ws[14]
+    _local_jacobian(chain, ws, jac)
+    _relative_pose(
+        rotation_previous, translation_previous, rotation_next, translation_next, er, et
+    )
+    _log6(er, et, error)
+    _damped_step(jac, error, settings.max_iteration_step, ws[12], ws[13], step)
+    _integrate(chain, q_previous, step, guess, False)
+
+
+@_jit_inline
+def _solve_pose_into(chain, settings, target_rotation, target_translation, q_init, q, ws):
     """IKSolver._solve_python, compiled: q is overwritten; returns (converged, iterations).
 
     On return, ws holds the joint and tip poses at the returned q.
     """
-    joint_rotations, joint_translations, fr, ft = ws[0], ws[1], ws[2], ws[3]
+    fr, ft = ws[2], ws[3]
     er, et, ir, it, error, jac, jlog, jk = ws[4], ws[5], ws[6], ws[7], ws[8], ws[9], ws[10], ws[11]
-    system, rhs, step = ws[12], ws[13], ws[14]
-    n = q.shape[0]
-    for k in range(n):
+    step = ws[14]
+    n = chain.axes.shape[0]
+    lower_q, upper_q = chain.lower_q, chain.upper_q
+    for k in range(q.shape[0]):
         q[k] = min(max(q_init[k], lower_q[k]), upper_q[k])
+    max_iterations = settings.max_iterations
     for iteration in range(max_iterations + 1):
-        _forward_kinematics(
-            placement_rotations,
-            placement_translations,
-            axes,
-            prismatic,
-            tip_rotation,
-            tip_translation,
-            q,
-            joint_rotations,
-            joint_translations,
-            fr,
-            ft,
-        )
+        _forward_kinematics(chain, q, ws)
         _relative_pose(fr, ft, target_rotation, target_translation, er, et)  # current^-1 target
         _log6(er, et, error)
         position_error = math.sqrt(et[0] * et[0] + et[1] * et[1] + et[2] * et[2])
         angle_error = math.sqrt(error[3] * error[3] + error[4] * error[4] + error[5] * error[5])
-        if position_error <= position_tolerance and angle_error <= orientation_tolerance:
+        if (
+            position_error <= settings.position_tolerance
+            and angle_error <= settings.orientation_tolerance
+        ):
             return True, iteration
         if iteration == max_iterations:
             break
-        _local_jacobian(axes, prismatic, joint_rotations, joint_translations, fr, ft, jac)
+        _local_jacobian(chain, ws, jac)
         for i in range(3):  # inverse error transform
             it[i] = -(er[0, i] * et[0] + er[1, i] * et[1] + er[2, i] * et[2])
             for j in range(3):
@@ -153,236 +119,91 @@ def _solve_pose_into(
             jk[3, k] = a00 * w0 + a01 * w1 + a02 * w2
             jk[4, k] = a10 * w0 + a11 * w1 + a12 * w2
             jk[5, k] = a20 * w0 + a21 * w1 + a22 * w2
-        _damped_step(jk, error, max_iteration_step, system, rhs, step)
-        for k in range(n):
-            q[k] = min(max(q[k] + step[k], lower_q[k]), upper_q[k])
+        _damped_step(jk, error, settings.max_iteration_step, ws[12], ws[13], step)
+        _integrate(chain, q, step, q, True)
     return False, max_iterations
 
 
 @_jit
-def solve_pose(
-    placement_rotations,
-    placement_translations,
-    axes,
-    prismatic,
-    tip_rotation,
-    tip_translation,
-    base_rotation,
-    lower_q,
-    upper_q,
-    target_rotation,
-    target_translation,
-    q_init,
-    position_tolerance,
-    orientation_tolerance,
-    max_iterations,
-    max_iteration_step,
-):
+def solve_pose(chain, settings, target_rotation, target_translation, q_init):
     """One tip pose (world frame) from q_init: (q, converged, iterations)."""
-    n = axes.shape[0]
-    q = np.empty(n)
+    q = np.empty(chain.lower_q.shape[0])
     converged, iterations = _solve_pose_into(
-        placement_rotations,
-        placement_translations,
-        axes,
-        prismatic,
-        tip_rotation,
-        tip_translation,
-        lower_q,
-        upper_q,
+        chain,
+        settings,
         target_rotation,
         target_translation,
         q_init,
-        position_tolerance,
-        orientation_tolerance,
-        max_iterations,
-        max_iteration_step,
         q,
-        _workspace(n),
+        _workspace(chain.axes.shape[0]),
     )
     return q, converged, iterations
 
 
-@_jit
-def _trajectory_step(
-    placement_rotations,
-    placement_translations,
-    axes,
-    prismatic,
-    tip_rotation,
-    tip_translation,
-    lower_q,
-    upper_q,
-    target_rotations,
-    target_translations,
-    times,
-    i,
-    position_tolerance,
-    orientation_tolerance,
-    max_iterations,
-    max_iteration_step,
-    max_joint_step,
-    check_velocity,
-    any_velocity_check,
-    velocity_limits,
-    q_all,
-    iterations,
-    q_fail,
-    guess,
-    q,
-    ws,
-):
+@_jit_inline
+def _trajectory_step(chain, settings, target_rotations, target_translations, times, i, out, ws):
     """Sample i >= 1 of IKSolver._trajectory_python: (status, joint, value); status 0 is OK.
 
-    ws must hold the joint and tip poses at q_all[i - 1] (for the predictor); on return it
-    holds those at q.
+    out: ``method.compiled.GraspBuffers`` (q_all, iterations, q_fail, guess are used). ws
+    must hold the joint and tip poses at q_all[i - 1] (for the predictor); on return it holds
+    those at q_all[i] (or at q_fail).
     """
-    n = q.shape[0]
+    q_all, q = out.q_all, out.q_fail
+    q_index, continuous = chain.q_index, chain.continuous
+    check_velocity, velocity_limits = settings.check_velocity, settings.velocity_limits
     _predict(
-        axes,
-        prismatic,
-        ws[0],
-        ws[1],
-        ws[2],
-        ws[3],
+        chain,
         target_rotations[i - 1],
         target_translations[i - 1],
         target_rotations[i],
         target_translations[i],
-        max_iteration_step,
+        settings,
         q_all[i - 1],
-        guess,
-        ws[4],
-        ws[5],
-        ws[8],
-        ws[9],
-        ws[12],
-        ws[13],
-        ws[14],
-    )
-    converged, iterations[i] = _solve_pose_into(
-        placement_rotations,
-        placement_translations,
-        axes,
-        prismatic,
-        tip_rotation,
-        tip_translation,
-        lower_q,
-        upper_q,
-        target_rotations[i],
-        target_translations[i],
-        guess,
-        position_tolerance,
-        orientation_tolerance,
-        max_iterations,
-        max_iteration_step,
-        q,
+        out.guess,
         ws,
     )
+    converged, out.iterations[i] = _solve_pose_into(
+        chain, settings, target_rotations[i], target_translations[i], out.guess, q, ws
+    )
     if not converged:
-        for k in range(n):
-            q_fail[k] = q[k]
         return 1, 0, 0.0
+    for k in range(q.shape[0]):
+        q_all[i, k] = q[k]
+    n = chain.axes.shape[0]
+    deltas = ws[14]  # the step is scratch again
     worst = 0
     largest = -1.0
     for k in range(n):
-        q_all[i, k] = q[k]
-        delta = abs(q[k] - q_all[i - 1, k])
+        delta = abs(_joint_difference(q_index, continuous, q_all[i - 1], q, k))
+        deltas[k] = delta
         if delta > largest:
             largest = delta
             worst = k
-    if largest > max_joint_step:
+    if largest > settings.max_joint_step:
         return 2, worst, largest
     elapsed = times[i] - times[i - 1]
-    if any_velocity_check and elapsed > 0:
+    if settings.any_velocity_check and elapsed > 0:
         for k in range(n):
-            speed = abs(q[k] - q_all[i - 1, k]) / elapsed
+            speed = deltas[k] / elapsed
             if check_velocity[k] and speed > velocity_limits[k] * (1 + 1e-9):
                 return 3, k, speed
     return 0, 0, 0.0
 
 
 @_jit
-def solve_trajectory(
-    placement_rotations,
-    placement_translations,
-    axes,
-    prismatic,
-    tip_rotation,
-    tip_translation,
-    base_rotation,
-    lower_q,
-    upper_q,
-    target_rotations,
-    target_translations,
-    times,
-    q0,
-    position_tolerance,
-    orientation_tolerance,
-    max_iterations,
-    max_iteration_step,
-    max_joint_step,
-    check_velocity,
-    velocity_limits,
-    q_all,
-    iterations,
-    q_fail,
-):
-    """IKSolver._trajectory_python, compiled: samples 1.. from the solution q0 of sample 0.
+def solve_trajectory(chain, settings, target_rotations, target_translations, times, out):
+    """IKSolver._trajectory_python, compiled: samples 1.. from the solution out.q_all[0] of
+    sample 0 (world-frame targets).
 
-    Fills q_all and iterations; returns (status, sample, joint, value) as the Python path.
+    Fills out.q_all and out.iterations (``GraspBuffers``); returns (status, sample, joint,
+    value) as the Python path; on failure out.q_fail holds the last iterate.
     """
     count = target_rotations.shape[0]
-    n = axes.shape[0]
-    ws = _workspace(n)
-    guess = np.empty(n)
-    q = np.empty(n)
-    any_velocity_check = False
-    for k in range(n):
-        q_all[0, k] = q0[k]
-        if check_velocity[k]:
-            any_velocity_check = True
-    _forward_kinematics(  # the predictor of sample 1 needs the poses at q0
-        placement_rotations,
-        placement_translations,
-        axes,
-        prismatic,
-        tip_rotation,
-        tip_translation,
-        q_all[0],
-        ws[0],
-        ws[1],
-        ws[2],
-        ws[3],
-    )
+    ws = _workspace(chain.axes.shape[0])
+    _forward_kinematics(chain, out.q_all[0], ws)  # the predictor of sample 1 needs these poses
     for i in range(1, count):
         status, joint, value = _trajectory_step(
-            placement_rotations,
-            placement_translations,
-            axes,
-            prismatic,
-            tip_rotation,
-            tip_translation,
-            lower_q,
-            upper_q,
-            target_rotations,
-            target_translations,
-            times,
-            i,
-            position_tolerance,
-            orientation_tolerance,
-            max_iterations,
-            max_iteration_step,
-            max_joint_step,
-            check_velocity,
-            any_velocity_check,
-            velocity_limits,
-            q_all,
-            iterations,
-            q_fail,
-            guess,
-            q,
-            ws,
+            chain, settings, target_rotations, target_translations, times, i, out, ws
         )
         if status != 0:
             return status, i, joint, value

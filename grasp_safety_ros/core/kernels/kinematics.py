@@ -1,41 +1,31 @@
-"""Forward kinematics of a serial chain and its tip-frame (LOCAL) Jacobian, compiled."""
+"""Forward kinematics of a serial chain, its tip-frame (LOCAL) Jacobian and Pinocchio's
+integrate / difference of its configurations, compiled."""
 
 import math
 
-from ._jit import _jit
+from ._jit import _jit_inline
 
 # ----------------------------------------------------------------------------- kinematics
-# Conventions: a chain is (placement_rotations (n,3,3), placement_translations (n,3), axes (n,3),
-# prismatic (n,)); poses are (rotation, translation) pairs in the world (= model root) frame.
-# Inner functions allocate nothing: callers pass every buffer.
+# Conventions: a chain is ``method.compiled.ChainArrays`` (one value, passed as a whole): n
+# joints of one degree of freedom each, joint k at q[q_index[k]]; a continuous joint holds
+# (cos, sin) of its angle in q[q_index[k]], q[q_index[k] + 1] (Pinocchio's nq = 2, nv = 1).
+# Poses are (rotation, translation) pairs in the world (= model root) frame. ws is the
+# workspace tuple of ``ik._workspace``: ws[0], ws[1] the joint rotations and translations,
+# ws[2], ws[3] the tip rotation and translation. Inner functions allocate nothing.
 
 
-@_jit
-def _forward_kinematics(
-    placement_rotations,
-    placement_translations,
-    axes,
-    prismatic,
-    tip_rotation,
-    tip_translation,
-    q,
-    joint_rotations,
-    joint_translations,
-    fr,
-    ft,
-):
-    """World poses of every joint frame (joint_*) and of the tip frame (fr, ft) at q.
+@_jit_inline
+def _forward_kinematics(chain, q, ws):
+    """World poses of every joint frame (ws[0], ws[1]) and of the tip frame (ws[2], ws[3]).
 
     prismatic[k] is 1.0 for a prismatic joint, 0.0 for a revolute one: the joint turns by
     q (1 - prismatic) and slides by q prismatic (exactly the identity / zero otherwise).
     """
-    pr, pt, jr, jt = (
-        placement_rotations,
-        placement_translations,
-        joint_rotations,
-        joint_translations,
-    )
-    n = q.shape[0]
+    # Fields are read into locals once: reading them inside loops costs a reference count each.
+    pr, pt, axes = chain.placement_rotations, chain.placement_translations, chain.axes
+    prismatic, continuous, q_index = chain.prismatic, chain.continuous, chain.q_index
+    jr, jt, fr, ft = ws[0], ws[1], ws[2], ws[3]
+    n = axes.shape[0]
     for k in range(n):
         # fr, ft: scratch for the pose of joint k's parent frame composed with its placement.
         if k == 0:
@@ -51,10 +41,16 @@ def _forward_kinematics(
                 fr[i, 1] = r0 * pr[k, 0, 1] + r1 * pr[k, 1, 1] + r2 * pr[k, 2, 1]
                 fr[i, 2] = r0 * pr[k, 0, 2] + r1 * pr[k, 1, 2] + r2 * pr[k, 2, 2]
         ax, ay, az = axes[k, 0], axes[k, 1], axes[k, 2]
-        slide = q[k] * prismatic[k]
-        angle = q[k] - slide
-        c = math.cos(angle)
-        s = math.sin(angle)
+        index = q_index[k]
+        if continuous[k]:  # (cos, sin) as given, as Pinocchio (no renormalisation)
+            slide = 0.0
+            c = q[index]
+            s = q[index + 1]
+        else:
+            slide = q[index] * prismatic[k]
+            angle = q[index] - slide
+            c = math.cos(angle)
+            s = math.sin(angle)
         v = 1.0 - c
         m00, m01, m02 = c + v * ax * ax, v * ax * ay - s * az, v * ax * az + s * ay
         m10, m11, m12 = v * ay * ax + s * az, c + v * ay * ay, v * ay * az - s * ax
@@ -65,6 +61,7 @@ def _forward_kinematics(
             jr[k, i, 0] = a0 * m00 + a1 * m10 + a2 * m20
             jr[k, i, 1] = a0 * m01 + a1 * m11 + a2 * m21
             jr[k, i, 2] = a0 * m02 + a1 * m12 + a2 * m22
+    tip_rotation, tip_translation = chain.tip_rotation, chain.tip_translation
     for i in range(3):
         r0, r1, r2 = jr[n - 1, i, 0], jr[n - 1, i, 1], jr[n - 1, i, 2]
         ft[i] = (
@@ -77,19 +74,29 @@ def _forward_kinematics(
             fr[i, j] = r0 * tip_rotation[0, j] + r1 * tip_rotation[1, j] + r2 * tip_rotation[2, j]
 
 
-@_jit
-def _local_jacobian(axes, prismatic, joint_rotations, joint_translations, fr, ft, out):
-    """Tip-frame Jacobian (6 x n, LOCAL: [linear; angular] in tip axes), as Pinocchio's."""
-    jr, jt = joint_rotations, joint_translations
-    n = axes.shape[0]
-    for k in range(n):
-        ax, ay, az = axes[k, 0], axes[k, 1], axes[k, 2]
-        u0 = jr[k, 0, 0] * ax + jr[k, 0, 1] * ay + jr[k, 0, 2] * az
-        u1 = jr[k, 1, 0] * ax + jr[k, 1, 1] * ay + jr[k, 1, 2] * az
-        u2 = jr[k, 2, 0] * ax + jr[k, 2, 1] * ay + jr[k, 2, 2] * az
-        turn = 1.0 - prismatic[k]
-        w0, w1, w2 = u0 * turn, u1 * turn, u2 * turn
-        slide = prismatic[k]
+@_jit_inline
+def _joint_axis_in_world(axes, prismatic, joint_rotations, k):
+    """Joint k's unit axis in world axes (u) and the joint's angular part w = u (revolute)
+    or 0 (prismatic): (u0, u1, u2, w0, w1, w2, slide), slide = 1.0 for prismatic (the
+    chain's axes and prismatic arrays)."""
+    ax, ay, az = axes[k, 0], axes[k, 1], axes[k, 2]
+    jr = joint_rotations
+    u0 = jr[k, 0, 0] * ax + jr[k, 0, 1] * ay + jr[k, 0, 2] * az
+    u1 = jr[k, 1, 0] * ax + jr[k, 1, 1] * ay + jr[k, 1, 2] * az
+    u2 = jr[k, 2, 0] * ax + jr[k, 2, 1] * ay + jr[k, 2, 2] * az
+    slide = prismatic[k]
+    turn = 1.0 - slide
+    return u0, u1, u2, u0 * turn, u1 * turn, u2 * turn, slide
+
+
+@_jit_inline
+def _local_jacobian(chain, ws, out):
+    """Tip-frame Jacobian (6 x n, LOCAL: [linear; angular] in tip axes), as Pinocchio's, at
+    the poses in ws."""
+    jr, jt, fr, ft = ws[0], ws[1], ws[2], ws[3]
+    axes, prismatic = chain.axes, chain.prismatic
+    for k in range(axes.shape[0]):
+        u0, u1, u2, w0, w1, w2, slide = _joint_axis_in_world(axes, prismatic, jr, k)
         dx, dy, dz = jt[k, 0] - ft[0], jt[k, 1] - ft[1], jt[k, 2] - ft[2]
         l0 = (dy * w2 - dz * w1) + slide * u0
         l1 = (dz * w0 - dx * w2) + slide * u1
@@ -97,3 +104,47 @@ def _local_jacobian(axes, prismatic, joint_rotations, joint_translations, fr, ft
         for i in range(3):
             out[i, k] = fr[0, i] * l0 + fr[1, i] * l1 + fr[2, i] * l2
             out[3 + i, k] = fr[0, i] * w0 + fr[1, i] * w1 + fr[2, i] * w2
+
+
+@_jit_inline
+def _integrate(chain, q, step, out, clamp):
+    """Pinocchio's integrate(q, step) into out (may be q); clamp: then clip to the chain's
+    position limits (continuous joints have none)."""
+    q_index, continuous = chain.q_index, chain.continuous
+    lower_q, upper_q = chain.lower_q, chain.upper_q
+    for k in range(step.shape[0]):
+        index = q_index[k]
+        if continuous[k]:  # SO(2): rotate (cos, sin), first-order renormalisation
+            ca, sa = q[index], q[index + 1]
+            co, so = math.cos(step[k]), math.sin(step[k])
+            r0 = co * ca - so * sa
+            r1 = so * ca + co * sa
+            scale = (3.0 - (r0 * r0 + r1 * r1)) / 2.0
+            out[index] = r0 * scale
+            out[index + 1] = r1 * scale
+        elif clamp:
+            out[index] = min(max(q[index] + step[k], lower_q[index]), upper_q[index])
+        else:
+            out[index] = q[index] + step[k]
+
+
+@_jit_inline
+def _joint_difference(q_index, continuous, q_from, q_to, k):
+    """Pinocchio's difference(q_from, q_to) for joint k [rad or m] (the chain's q_index and
+    continuous arrays)."""
+    index = q_index[k]
+    if not continuous[k]:
+        return q_to[index] - q_from[index]
+    ca0, sa0 = q_from[index], q_from[index + 1]
+    ca1, sa1 = q_to[index], q_to[index + 1]
+    cos_value = ca0 * ca1 + sa0 * sa1  # SO(2) log of R0^T R1, Pinocchio's branches
+    sin_value = ca0 * sa1 - sa0 * ca1
+    trace = 2.0 * cos_value
+    if trace > 2.0:
+        return 0.0
+    if trace < -2.0:
+        return math.pi if sin_value >= 0.0 else -math.pi
+    if trace > 2.0 - 1e-2:
+        return math.asin(sin_value)
+    angle = math.acos(cos_value)
+    return angle if sin_value >= 0.0 else -angle

@@ -13,37 +13,100 @@ import numpy as np
 import pinocchio as pin
 
 from ..model.robot import RobotModel
-from .effective_mass import STATIONARY_TANGENT_M, augmented_inertia_arrays, robot_inertia_arrays
+from .effective_mass import (
+    STATIONARY_TANGENT_M,
+    BodyInertias,
+    augmented_inertia_arrays,
+    robot_inertia_arrays,
+)
 
 if TYPE_CHECKING:
     from ..model.inertia import ObjectInertia
-    from ..model.trajectory import ObjectTrajectory
-    from .ik import IKSolver
+    from .ik import IKConfig, IKSolver
 
 
 class ChainArrays(NamedTuple):
-    """A serial chain of 1-DOF joints as flat arrays, for the compiled kernels.
+    """A serial chain of one-degree-of-freedom joints as flat arrays, for the compiled kernels
+    (one value, passed to them as a whole).
 
     Joint k (chain order) moves in the frame ``placement_k`` of joint k-1 (of the world for
-    k = 0): rotation about, or translation along, the unit ``axis_k`` (joint frame).
+    k = 0): rotation about, or translation along, the unit ``axis_k`` (joint frame). Its
+    position is q[q_index[k]]; a continuous joint holds (cos, sin) of its angle in
+    q[q_index[k]], q[q_index[k] + 1] (Pinocchio's representation, nq = 2, nv = 1).
     """
 
     placement_rotations: np.ndarray  # (n, 3, 3)
     placement_translations: np.ndarray  # (n, 3) [m]
     axes: np.ndarray  # (n, 3), unit
     prismatic: np.ndarray  # (n,) 1.0 for prismatic joints, 0.0 for revolute ones
+    continuous: np.ndarray  # (n,) bool: revolute without limits, (cos, sin) in q
+    q_index: np.ndarray  # (n,) int64: first entry of joint k in q
     tip_rotation: np.ndarray  # (3, 3): tip frame in the last joint's frame
     tip_translation: np.ndarray  # (3,) [m]
     base_rotation: np.ndarray  # (3, 3): base frame in the world frame
-    lower_q: np.ndarray  # (n,)
-    upper_q: np.ndarray  # (n,)
+    base_translation: np.ndarray  # (3,) [m]
+    lower_q: np.ndarray  # (nq,) -inf for continuous joints
+    upper_q: np.ndarray  # (nq,) +inf for continuous joints
+
+
+class IKSettings(NamedTuple):
+    """IKConfig and the velocity limits as the compiled IK reads them (one value)."""
+
+    position_tolerance: float  # [m]
+    orientation_tolerance: float  # [rad]
+    max_iterations: int
+    max_iteration_step: float
+    max_joint_step: float
+    any_velocity_check: bool
+    check_velocity: np.ndarray  # (n,) bool: joint speed checked against velocity_limits
+    velocity_limits: np.ndarray  # (n,) [rad/s or m/s]
+
+
+class GraspBuffers(NamedTuple):
+    """Outputs and scratch of the fused kernel for one grasp of N samples (one value)."""
+
+    target_rotations: np.ndarray  # (N, 3, 3) tip targets, world frame
+    target_translations: np.ndarray  # (N, 3) [m]
+    tangent_norms: np.ndarray  # (N,) |d p_tip / ds| [m]
+    q_all: np.ndarray  # (N, nq)
+    iterations: np.ndarray  # (N,) int64
+    q_fail: np.ndarray  # (nq,) last iterate of a failed sample
+    guess: np.ndarray  # (nq,) predictor scratch
+    mobilities: np.ndarray  # (N, 3, 3) [1/kg], base axes
+    effective_masses: np.ndarray  # (N,) [kg]
+    directions: np.ndarray  # (N, 3) unit, base axes
+    worst: np.ndarray  # (N,) bool: tip not translating
+
+
+def grasp_buffers(count: int, nq: int) -> GraspBuffers:
+    """Fresh GraspBuffers for count samples of a chain with nq configuration entries."""
+    return GraspBuffers(
+        np.empty((count, 3, 3)),
+        np.empty((count, 3)),
+        np.empty(count),
+        np.empty((count, nq)),
+        np.zeros(count, dtype=np.int64),
+        np.empty(nq),
+        np.empty(nq),
+        np.empty((count, 3, 3)),
+        np.empty(count),
+        np.empty((count, 3)),
+        np.zeros(count, dtype=np.bool_),
+    )
+
+
+def _is_continuous(joint: Any) -> bool:
+    """Whether a Pinocchio joint model is a continuous (unbounded revolute) joint."""
+    name = joint.shortname()
+    return name.startswith("JointModelRUB") or name == "JointModelRevoluteUnboundedUnaligned"
 
 
 def chain_arrays(robot: RobotModel) -> ChainArrays | None:
     """The chain of ``robot`` as arrays, or None when the compiled kernels cannot handle it.
 
-    Supported: a serial chain of revolute and prismatic joints (Pinocchio's RX/RY/RZ,
-    PX/PY/PZ and their unaligned variants; not continuous joints), the tip frame on the last.
+    Supported: a serial chain of revolute, continuous and prismatic joints (Pinocchio's
+    RX/RY/RZ, RUBX/RUBY/RUBZ, PX/PY/PZ and their unaligned variants), the tip frame on the
+    last.
     """
     arrays = chain_arrays_or_reason(robot)
     return arrays if isinstance(arrays, ChainArrays) else None
@@ -54,15 +117,15 @@ _NOT_COMPILED = "not supported by the compiled kernels"
 
 def chain_arrays_or_reason(robot: RobotModel) -> ChainArrays | str:
     """``chain_arrays``, or the reason the compiled kernels cannot handle the chain (e.g.
-    ``continuous joint j3 not supported by the compiled kernels``)."""
+    ``JointModelPlanar joint j3 (3 DOF) not supported by the compiled kernels``)."""
     model = robot.model
     n = model.nv
-    for k in range(1, model.njoints):
-        joint = model.joints[k]
-        if joint.nq != joint.nv:
-            return f"continuous joint {model.names[k]} {_NOT_COMPILED}"
-        if joint.nv != 1:
-            return f"{joint.shortname()} joint {model.names[k]} ({joint.nv} DOF) {_NOT_COMPILED}"
+    joints = list(model.joints)[1:]
+    continuous = np.array([_is_continuous(joint) for joint in joints], dtype=np.bool_)
+    for k, (joint, unbounded) in enumerate(zip(joints, continuous, strict=True)):
+        if joint.nv != 1 or joint.nq != (2 if unbounded else 1):
+            name = model.names[k + 1]
+            return f"{joint.shortname()} joint {name} ({joint.nv} DOF) {_NOT_COMPILED}"
     if model.njoints != n + 1 or any(model.parents[k] != k - 1 for k in range(1, n + 1)):
         return f"branched chain {_NOT_COMPILED}"
     if model.frames[robot.tip_frame_id].parentJoint != n:
@@ -80,21 +143,29 @@ def chain_arrays_or_reason(robot: RobotModel) -> ChainArrays | str:
                 return f"joint {model.names[k + 1]} (screw motion) {_NOT_COMPILED}"
             axes[k] = angular
         else:
-            if abs(np.linalg.norm(linear) - 1.0) > 1e-12:
+            if continuous[k] or abs(np.linalg.norm(linear) - 1.0) > 1e-12:
                 return f"joint {model.names[k + 1]} (non-unit axis) {_NOT_COMPILED}"
             axes[k], prismatic[k] = linear, 1.0
     placements = [model.jointPlacements[k] for k in range(1, n + 1)]
     tip = model.frames[robot.tip_frame_id].placement
     lower = np.array(model.lowerPositionLimit, dtype=float)
     upper = np.array(model.upperPositionLimit, dtype=float)
+    for joint, unbounded in zip(joints, continuous, strict=True):
+        if unbounded:  # (cos, sin): no limit, as IKSolver
+            lower[joint.idx_q : joint.idx_q + 2] = -np.inf
+            upper[joint.idx_q : joint.idx_q + 2] = np.inf
+    base = robot.transform_base_to_world
     arrays = ChainArrays(
         placement_rotations=np.array([p.rotation for p in placements]),
         placement_translations=np.array([p.translation for p in placements]),
         axes=axes,
         prismatic=prismatic,
+        continuous=continuous,
+        q_index=np.array([joint.idx_q for joint in joints], dtype=np.int64),
         tip_rotation=np.array(tip.rotation),
         tip_translation=np.array(tip.translation),
-        base_rotation=np.array(robot.transform_base_to_world.rotation),
+        base_rotation=np.array(base.rotation),
+        base_translation=np.array(base.translation),
         lower_q=lower,
         upper_q=upper,
     )
@@ -103,9 +174,26 @@ def chain_arrays_or_reason(robot: RobotModel) -> ChainArrays | str:
     return arrays
 
 
-_ROBOT_INERTIAS: weakref.WeakKeyDictionary[Any, tuple[np.ndarray, ...]] = (
-    weakref.WeakKeyDictionary()
-)
+def ik_settings(config: IKConfig, velocity_limits: np.ndarray) -> IKSettings:
+    """IKSettings of an IKConfig and the chain's velocity limits (per joint)."""
+    velocity_limits = np.array(velocity_limits, dtype=float)
+    check_velocity = np.array(
+        config.check_velocity_limits & np.isfinite(velocity_limits) & (velocity_limits > 0),
+        dtype=np.bool_,
+    )
+    return IKSettings(
+        float(config.position_tolerance_m),
+        float(config.orientation_tolerance_rad),
+        int(config.max_iterations),
+        float(config.max_iteration_step),
+        float(config.max_joint_step),
+        bool(check_velocity.any()),
+        check_velocity,
+        velocity_limits,
+    )
+
+
+_ROBOT_INERTIAS: weakref.WeakKeyDictionary[Any, BodyInertias] = weakref.WeakKeyDictionary()
 """robot_inertia_arrays of each RobotModel in use."""
 
 
@@ -122,16 +210,49 @@ class CompiledGraspResult(NamedTuple):
     tangent_norms: np.ndarray
 
 
+_ENTRY_POINTS: dict[Any, Any] = {}
+"""The compiled overload of each kernel called through ``call_kernel``."""
+
+
+def call_kernel(kernel: Any, *args: Any) -> Any:
+    """kernel(*args), bypassing numba's dispatcher after the first call.
+
+    The dispatcher types every argument on each call, in Python for tuples (tens of µs for
+    the named tuples of arrays here, as much as the IK of a few samples). The arguments built
+    in this module always have the same types (C-contiguous, writable float64 arrays except
+    the read-only ChainArrays), so the overload the first call selected is reused.
+    """
+    entry = _ENTRY_POINTS.get(kernel)
+    if entry is not None:
+        return entry(*args)
+    result = kernel(*args)
+    from numba import typeof
+
+    compiled = kernel.overloads.get(tuple(typeof(arg) for arg in args))
+    if compiled is not None:
+        _ENTRY_POINTS[kernel] = compiled.entry_point
+    return result
+
+
+def plain_array(array: Any) -> np.ndarray:
+    """A C-contiguous, writable float64 array of ``array`` (copied only when needed)."""
+    array = np.ascontiguousarray(array, dtype=float)
+    return array if array.flags.writeable else array.copy()
+
+
 def evaluate_grasp_compiled(
     solver: IKSolver,
     object_inertia: ObjectInertia,
-    trajectory: ObjectTrajectory,
     transform_tip_to_object: Any,
+    tip_path: tuple[np.ndarray, np.ndarray, np.ndarray],
     times_s: np.ndarray,
-    s_values: np.ndarray,
     seed_q: np.ndarray,
 ) -> CompiledGraspResult:
     """One grasp with the fused kernel ``evaluate_grasp`` (solver.compiled must be true).
+
+    Args:
+        tip_path: Tip rotations (N, 3, 3), positions (N, 3) [m] and path tangents
+            d p_tip / ds (N, 3) [m], base frame (``tip_motion`` of any trajectory type).
 
     Directions and effective masses of samples where the tip does not translate (``worst``)
     are left for the caller. Random restarts of sample 0 run here, as in ``solve_first``.
@@ -139,86 +260,40 @@ def evaluate_grasp_compiled(
     from ..kernels.grasp import evaluate_grasp  # imports numba: only when first needed
     from ..kernels.ik import solve_pose
 
-    chain, config, robot = solver.chain, solver.config, solver.robot
-    assert chain is not None
-    count = len(s_values)
-    n = robot.model.nq
+    chain, settings, robot = solver.chain, solver.settings, solver.robot
+    assert chain is not None and settings is not None
     robot_arrays = _ROBOT_INERTIAS.get(robot)
     if robot_arrays is None:
         robot_arrays = _ROBOT_INERTIAS.setdefault(robot, robot_inertia_arrays(robot))
-    masses, levers, rotational = augmented_inertia_arrays(
-        robot, object_inertia, transform_tip_to_object, robot_arrays
-    )
-    velocity_limits = np.asarray(robot.velocity_limits, dtype=float)
-    check_velocity = (
-        config.check_velocity_limits & np.isfinite(velocity_limits) & (velocity_limits > 0)
-    )
-    start = trajectory.transform_object_to_base_start
-    base = robot.transform_base_to_world
-    times_s = np.ascontiguousarray(times_s, dtype=float)
-    s_values = np.ascontiguousarray(s_values, dtype=float)
-    target_rotations = np.empty((count, 3, 3))
-    target_translations = np.empty((count, 3))
-    tangents = np.empty((count, 3))
-    tangent_norms = np.empty(count)
-    q_all = np.empty((count, n))
-    iterations = np.zeros(count, dtype=np.int64)
-    q_fail = np.empty(n)
-    mobilities = np.empty((count, 3, 3))
-    effective_masses = np.empty(count)
-    directions = np.empty((count, 3))
-    worst = np.zeros(count, dtype=np.bool_)
-    fixed = (
-        np.ascontiguousarray(base.translation),
-        np.ascontiguousarray(start.rotation),
-        np.ascontiguousarray(start.translation),
-        np.ascontiguousarray(trajectory.transform_object_to_base_goal.translation),
-        np.ascontiguousarray(trajectory.rotation_log_in_object, dtype=float),
-        np.ascontiguousarray(transform_tip_to_object.rotation),
-        np.ascontiguousarray(transform_tip_to_object.translation),
-        times_s,
-        s_values,
-    )
-    limits = (
-        config.position_tolerance_m,
-        config.orientation_tolerance_rad,
-        config.max_iterations,
-        config.max_iteration_step,
-        config.max_joint_step,
-        check_velocity,
-        velocity_limits,
-        masses,
-        levers,
-        rotational,
+    bodies = augmented_inertia_arrays(robot, object_inertia, transform_tip_to_object, robot_arrays)
+    rotations, positions, tangents = (plain_array(array) for array in tip_path)
+    times_s = plain_array(times_s)
+    nq = robot.model.nq
+    out = grasp_buffers(len(times_s), nq)
+    path = (rotations, positions, tangents, times_s)
+    status, index, joint, value = call_kernel(
+        evaluate_grasp,
+        chain,
+        settings,
+        bodies,
+        *path,
+        plain_array(seed_q),
+        False,
         STATIONARY_TANGENT_M,
-        target_rotations,
-        target_translations,
-        tangents,
-        tangent_norms,
-        q_all,
-        iterations,
-        q_fail,
-        mobilities,
-        effective_masses,
-        directions,
-        worst,
-    )
-    status, index, joint, value = evaluate_grasp(
-        *chain, *fixed, np.asarray(seed_q, dtype=float), False, *limits
+        out,
     )
     if status == 4:  # sample 0 failed from the seed: deterministic random restarts
-        total = int(iterations[0])
+        total = int(out.iterations[0])
         converged = False
+        q_fail = out.q_fail
         for restart in solver.restarts():
-            q0, converged, restart_iterations = solve_pose(
-                *chain,
-                target_rotations[0],
-                target_translations[0],
-                restart,
-                config.position_tolerance_m,
-                config.orientation_tolerance_rad,
-                config.max_iterations,
-                config.max_iteration_step,
+            q0, converged, restart_iterations = call_kernel(
+                solve_pose,
+                chain,
+                settings,
+                out.target_rotations[0],
+                out.target_translations[0],
+                plain_array(restart),
             )
             total += int(restart_iterations)
             if converged:
@@ -228,7 +303,7 @@ def evaluate_grasp_compiled(
             empty = np.empty(0)
             return CompiledGraspResult(
                 solver.first_sample_reason(q_fail, times_s),
-                np.empty((0, n)),
+                np.empty((0, nq)),
                 np.zeros(0, dtype=np.int64),
                 np.empty((0, 3, 3)),
                 empty,
@@ -236,20 +311,37 @@ def evaluate_grasp_compiled(
                 np.zeros(0, dtype=bool),
                 empty,
             )
-        status, index, joint, value = evaluate_grasp(*chain, *fixed, q0, True, *limits)
-        iterations[0] = total
+        status, index, joint, value = call_kernel(
+            evaluate_grasp,
+            chain,
+            settings,
+            bodies,
+            *path,
+            plain_array(q0),
+            True,
+            STATIONARY_TANGENT_M,
+            out,
+        )
+        out.iterations[0] = total
     if status != 0:
-        reason = solver.failure_reason(status, index, joint, value, q_fail, times_s)
+        reason = solver.failure_reason(status, index, joint, value, out.q_fail, times_s)
         return CompiledGraspResult(
             reason,
-            q_all[:index],
-            iterations[:index],
-            mobilities[:index],
-            effective_masses[:index],
-            directions[:index],
-            worst[:index],
-            tangent_norms[:index],
+            out.q_all[:index],
+            out.iterations[:index],
+            out.mobilities[:index],
+            out.effective_masses[:index],
+            out.directions[:index],
+            out.worst[:index],
+            out.tangent_norms[:index],
         )
     return CompiledGraspResult(
-        "", q_all, iterations, mobilities, effective_masses, directions, worst, tangent_norms
+        "",
+        out.q_all,
+        out.iterations,
+        out.mobilities,
+        out.effective_masses,
+        out.directions,
+        out.worst,
+        out.tangent_norms,
     )

@@ -13,7 +13,7 @@ rounding.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 import pinocchio as pin
@@ -46,22 +46,30 @@ def augmented_model(
     return model
 
 
-def robot_inertia_arrays(robot: RobotModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+class BodyInertias(NamedTuple):
+    """The bodies of a chain as arrays (one value, as the compiled kernels take it)."""
+
+    masses: np.ndarray  # (n,) [kg]
+    levers: np.ndarray  # (n, 3) centre of mass in the joint frame [m]
+    rotational_inertias: np.ndarray  # (n, 3, 3) about the centre of mass, joint axes [kg m^2]
+
+
+def robot_inertia_arrays(robot: RobotModel) -> BodyInertias:
     """The chain's body inertias as arrays: mass [kg] (n,), centre of mass in the joint frame
     [m] (n, 3), rotational inertia about it, joint axes [kg m^2] (n, 3, 3)."""
     inertias = [robot.model.inertias[j] for j in range(1, robot.model.njoints)]
     masses = np.array([inertia.mass for inertia in inertias])
     levers = np.array([inertia.lever for inertia in inertias]).reshape(-1, 3)
     rotational = np.array([inertia.inertia for inertia in inertias]).reshape(-1, 3, 3)
-    return masses, levers, rotational
+    return BodyInertias(masses, levers, rotational)
 
 
 def augmented_inertia_arrays(
     robot: RobotModel,
     object_inertia: ObjectInertia,
     transform_tip_to_object: pin.SE3,
-    robot_arrays: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    robot_arrays: BodyInertias | None = None,
+) -> BodyInertias:
     """Body inertias of ``augmented_model`` as arrays (as ``robot_inertia_arrays``), without
     copying the model; ``robot_arrays`` (``robot_inertia_arrays(robot)``) saves recomputing."""
     model = robot.model
@@ -76,7 +84,7 @@ def augmented_inertia_arrays(
     body = model.inertias[tip.parentJoint] + inertia_in_joint
     k = tip.parentJoint - 1
     masses[k], levers[k], rotational[k] = body.mass, body.lever, body.inertia
-    return masses, levers, rotational
+    return BodyInertias(masses, levers, rotational)
 
 
 def translational_mobilities_in_base(
@@ -103,23 +111,8 @@ def translational_mobilities_in_base(
     if chain is not None:
         from ..kernels.effective_mass import translational_mobilities
 
-        masses, levers, rotational = augmented_inertia_arrays(
-            robot, object_inertia, transform_tip_to_object
-        )
-        translational_mobilities(
-            chain.placement_rotations,
-            chain.placement_translations,
-            chain.axes,
-            chain.prismatic,
-            chain.tip_rotation,
-            chain.tip_translation,
-            chain.base_rotation,
-            masses,
-            levers,
-            rotational,
-            q_all,
-            out,
-        )
+        bodies = augmented_inertia_arrays(robot, object_inertia, transform_tip_to_object)
+        translational_mobilities(chain, bodies, q_all, out)
         return out
     model = augmented_model(robot, object_inertia, transform_tip_to_object)
     data = model.createData()

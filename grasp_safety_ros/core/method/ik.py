@@ -11,9 +11,10 @@ self-motion manifold (as extrapolating the previous joint step would).
 Two implementations of the same algorithm (same warm start, steps, tolerances and checks):
 
 - ``python``: a loop over Pinocchio's Python bindings; works for every chain.
-- ``compiled``: the whole trajectory in one numba kernel (``pip install numba``), for chains of
-  revolute and prismatic joints. Its per-sample results equal the Python loop's to rounding
-  (the test suite checks 1e-9); it releases the GIL, so grasps can run on threads.
+- ``compiled``: the whole trajectory in one numba kernel (``pip install numba``), for serial
+  chains of revolute, continuous and prismatic joints. Its per-sample results equal the Python
+  loop's to rounding (the test suite checks 1e-9); it releases the GIL, so grasps can run on
+  threads.
 
 ``backend="auto"`` picks ``compiled`` when numba is importable and the chain is supported.
 """
@@ -31,7 +32,14 @@ import pinocchio as pin
 
 from ..exceptions import InvalidInputError
 from ..model.robot import RobotModel
-from .compiled import ChainArrays, chain_arrays_or_reason
+from .compiled import (
+    ChainArrays,
+    call_kernel,
+    chain_arrays_or_reason,
+    grasp_buffers,
+    ik_settings,
+    plain_array,
+)
 
 
 def _numba_installed() -> bool:
@@ -149,10 +157,14 @@ class IKSolver:
         self._lower_q, self._upper_q = lower, upper
         chain = chain_arrays_or_reason(robot) if backend != "python" else "requested"
         self.chain = chain if isinstance(chain, ChainArrays) else None
+        self.settings = (
+            ik_settings(self.config, robot.velocity_limits) if self.chain is not None else None
+        )
         if backend == "compiled" and self.chain is None:
             raise InvalidInputError(
                 "ik.backend",
-                "'compiled' supports serial chains of revolute and prismatic joints only; "
+                "'compiled' supports serial chains of revolute, continuous and prismatic "
+                "joints only; "
                 f"joints here: {', '.join(j.shortname() for j in model.joints[1:])}",
             )
         self.compiled = NUMBA_AVAILABLE and self.chain is not None
@@ -178,17 +190,13 @@ class IKSolver:
         """
         target_in_world = self.robot.transform_base_to_world * transform_tip_to_base
         if self.compiled:
-            assert self.chain is not None
-            config = self.config
-            q, converged, iterations = _kernels().solve_pose(
-                *self.chain,
-                np.array(target_in_world.rotation),
-                np.array(target_in_world.translation),
-                np.asarray(q_init, dtype=float),
-                config.position_tolerance_m,
-                config.orientation_tolerance_rad,
-                config.max_iterations,
-                config.max_iteration_step,
+            q, converged, iterations = call_kernel(
+                _kernels().solve_pose,
+                self.chain,
+                self.settings,
+                plain_array(target_in_world.rotation),
+                plain_array(target_in_world.translation),
+                plain_array(q_init),
             )
             return q, bool(converged), int(iterations)
         return self._solve_python(target_in_world, q_init)
@@ -328,17 +336,17 @@ class IKSolver:
             return IKTrajectoryResult(
                 np.empty((0, self.robot.model.nq)), np.zeros(0, dtype=int), reason
             )
-        velocity_limits = self.robot.velocity_limits
-        check_velocity = (
-            self.config.check_velocity_limits
-            & np.isfinite(velocity_limits)
-            & (velocity_limits > 0)
-        )
         if self.compiled:
             status, index, joint, value, q_all, iterations, q_fail = self._trajectory_compiled(
-                rotations_world, translations_world, times_s, q0, check_velocity
+                rotations_world, translations_world, times_s, q0
             )
         else:
+            velocity_limits = self.robot.velocity_limits
+            check_velocity = (
+                self.config.check_velocity_limits
+                & np.isfinite(velocity_limits)
+                & (velocity_limits > 0)
+            )
             status, index, joint, value, q_all, iterations, q_fail = self._trajectory_python(
                 rotations_world, translations_world, times_s, q0, check_velocity
             )
@@ -397,32 +405,27 @@ class IKSolver:
         translations_world: np.ndarray,
         times_s: np.ndarray,
         q0: np.ndarray,
-        check_velocity: np.ndarray,
     ) -> tuple[int, int, int, float, np.ndarray, np.ndarray, np.ndarray]:
-        assert self.chain is not None
-        config = self.config
-        count = len(rotations_world)
-        q_all = np.empty((count, self.robot.model.nq))
-        iterations = np.zeros(count, dtype=np.int64)
-        q_fail = np.empty(self.robot.model.nq)
-        status, index, joint, value = _kernels().solve_trajectory(
-            *self.chain,
-            np.ascontiguousarray(rotations_world),
-            np.ascontiguousarray(translations_world),
-            np.ascontiguousarray(times_s, dtype=float),
-            np.asarray(q0, dtype=float),
-            config.position_tolerance_m,
-            config.orientation_tolerance_rad,
-            config.max_iterations,
-            config.max_iteration_step,
-            config.max_joint_step,
-            np.ascontiguousarray(check_velocity),
-            np.asarray(self.robot.velocity_limits, dtype=float),
-            q_all,
-            iterations,
-            q_fail,
+        out = grasp_buffers(len(rotations_world), self.robot.model.nq)
+        out.q_all[0] = q0
+        status, index, joint, value = call_kernel(
+            _kernels().solve_trajectory,
+            self.chain,
+            self.settings,
+            plain_array(rotations_world),
+            plain_array(translations_world),
+            plain_array(times_s),
+            out,
         )
-        return int(status), int(index), int(joint), float(value), q_all, iterations, q_fail
+        return (
+            int(status),
+            int(index),
+            int(joint),
+            float(value),
+            out.q_all,
+            out.iterations,
+            (out.q_fail),
+        )
 
     def _trajectory_python(
         self,

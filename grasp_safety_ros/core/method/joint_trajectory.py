@@ -133,9 +133,6 @@ class JointSpaceTrajectory:
     joint_positions: np.ndarray = field(init=False, repr=False)
     _spline: Any = field(init=False, repr=False, compare=False)
 
-    supports_compiled = False
-    """The samples come from the given joint positions, not from IK."""
-
     def __post_init__(self) -> None:
         from scipy.interpolate import CubicHermiteSpline, CubicSpline
 

@@ -246,43 +246,36 @@ class GraspSafetyEvaluator:
                 robot, object_inertia, grasp.transform_tip_to_object, q_all
             )
             masses, directions, worst = _masses_along(mobilities, tip.tangents)
-            tip_speeds = tip.speeds
-        # Until the kernel takes precomputed tip paths, only the quintic (whose tip path the
-        # kernel computes itself) runs compiled; every other trajectory type runs below.
-        elif self.ik.compiled and trajectory.supports_compiled:  # one compiled call
-            fused = evaluate_grasp_compiled(
-                self.ik,
-                object_inertia,
-                trajectory,
-                grasp.transform_tip_to_object,
-                times,
-                s_values,
-                seed_q,
-            )
-            if fused.reason:
-                return _infeasible(index, grasp.name, fused.reason, robot.num_joints)
-            q_all, iterations, mobilities = fused.q, fused.iterations, fused.mobilities
-            masses, directions, worst = fused.effective_masses, fused.directions, fused.worst
-            tip_speeds = fused.tangent_norms * s_rate
-        else:
+        else:  # every trajectory type: its tip path, then IK and effective mass
             tip = trajectory.tip_motion(grasp.transform_tip_to_object, times)
-            ik = self.ik.solve_trajectory_arrays(
-                tip.rotations, tip.positions, times, s_values, seed_q
-            )
-            if not ik.feasible:
-                return _infeasible(index, grasp.name, ik.reason, robot.num_joints)
-            q_all, iterations = ik.q, ik.iterations
-            mobilities = translational_mobilities_in_base(
-                robot, object_inertia, grasp.transform_tip_to_object, q_all
-            )
-            masses, directions, worst = _masses_along(mobilities, tip.tangents)
-            tip_speeds = tip.speeds
+            if self.ik.compiled:  # in one compiled call
+                fused = evaluate_grasp_compiled(
+                    self.ik,
+                    object_inertia,
+                    grasp.transform_tip_to_object,
+                    (tip.rotations, tip.positions, tip.tangents),
+                    times,
+                    seed_q,
+                )
+                if fused.reason:
+                    return _infeasible(index, grasp.name, fused.reason, robot.num_joints)
+                q_all, iterations, mobilities = fused.q, fused.iterations, fused.mobilities
+                masses, directions, worst = fused.effective_masses, fused.directions, fused.worst
+            else:
+                ik = self.ik.solve_trajectory_arrays(
+                    tip.rotations, tip.positions, times, s_values, seed_q
+                )
+                if not ik.feasible:
+                    return _infeasible(index, grasp.name, ik.reason, robot.num_joints)
+                q_all, iterations = ik.q, ik.iterations
+                mobilities = translational_mobilities_in_base(
+                    robot, object_inertia, grasp.transform_tip_to_object, q_all
+                )
+                masses, directions, worst = _masses_along(mobilities, tip.tangents)
+        tip_speeds = tip.speeds
         for i in np.flatnonzero(worst):
             directions[i], masses[i] = worst_direction(mobilities[i])
-        if robot.model.nq == robot.model.nv:  # no continuous joint: positions are q
-            positions = np.array(q_all)
-        else:
-            positions = np.array([robot.positions_from_q(q) for q in q_all])
+        positions = positions_along(robot, q_all)
         return GraspEvaluation(
             index=index,
             name=grasp.name,
@@ -347,6 +340,25 @@ class GraspSafetyEvaluator:
             evaluations=tuple(evaluations),
             backend=self.ik.backend_used,
         )
+
+
+def positions_along(robot: RobotModel, q_all: np.ndarray) -> np.ndarray:
+    """``robot.positions_from_q`` of every row of q_all (N, nq), vectorised: (N, joints)."""
+    model = robot.model
+    if model.nq == model.nv:  # no continuous joint: positions are q
+        return np.array(q_all)
+    joints = list(model.joints)[1:]
+    if len(joints) != robot.num_joints:  # not one model joint per chain joint
+        return np.array([robot.positions_from_q(q) for q in q_all]).reshape(-1, robot.num_joints)
+    q_all = np.asarray(q_all, dtype=float).reshape(-1, model.nq)
+    columns = []
+    for joint in joints:
+        index = joint.idx_q
+        if joint.nq == 2:  # continuous: (cos, sin)
+            columns.append(np.arctan2(q_all[:, index + 1], q_all[:, index]))
+        else:
+            columns.append(q_all[:, index])
+    return np.stack(columns, axis=1)
 
 
 def _as_quintic(trajectory: Trajectory) -> Trajectory:

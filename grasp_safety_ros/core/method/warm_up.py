@@ -10,6 +10,7 @@ import pinocchio as pin
 from ..model.inertia import solid_box
 from ..model.robot import RobotModel
 from ..model.trajectory import ObjectTrajectory
+from .effective_mass import translational_mobilities_in_base
 from .ranking import Grasp, GraspSafetyEvaluator
 
 _WARM_UP_URDF = """<robot name="warm_up"><link name="base"/>
@@ -46,5 +47,14 @@ def warm_up(evaluator: GraspSafetyEvaluator | None = None) -> float:
     with np.errstate(all="ignore"):  # the pose may be singular: only the compiling matters
         box = solid_box(1.0, (0.1, 0.1, 0.1))
         evaluator.evaluate(Grasp(pin.SE3.Identity()), box, trajectory)
-    evaluator.ik.solve(pose, robot.q_from_positions(robot.default_seed_positions()))
+        seed_q = robot.q_from_positions(robot.default_seed_positions())
+        evaluator.ik.solve(pose, seed_q)
+        rotations = np.array([pose.rotation, pose.rotation])
+        translations = np.array([pose.translation, pose.translation])
+        evaluator.ik.solve_trajectory_arrays(  # the analyses' IK and mobility kernels
+            rotations, translations, np.array([0.0, 0.01]), np.array([0.0, 1.0]), seed_q
+        )
+        translational_mobilities_in_base(
+            robot, box, pin.SE3.Identity(), np.array([seed_q]), evaluator.ik.chain
+        )
     return time.perf_counter() - start

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass, field
-from typing import NamedTuple, Protocol
+from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 import pinocchio as pin
@@ -24,8 +25,8 @@ class TipMotion(NamedTuple):
 
     Every trajectory type (``ObjectTrajectory``, ``WaypointTrajectory``,
     ``JointSpaceTrajectory``) offers ``times_s()``, ``duration_s``, ``path_parameter(times)``,
-    ``object_poses(times)``, ``tip_motion(grasp, times)``, ``tip_twists(grasp, times)`` and
-    ``supports_compiled``; the evaluator and the analyses use only these.
+    ``object_poses(times)``, ``tip_motion(grasp, times)`` and ``tip_twists(grasp, times)``;
+    the evaluator (compiled or not) and the analyses use only these.
     """
 
     rotations: np.ndarray  # (N, 3, 3) tip frame in the base frame
@@ -36,8 +37,6 @@ class TipMotion(NamedTuple):
 
 class Trajectory(Protocol):
     """What the evaluator and the analyses need of an object trajectory (see TipMotion)."""
-
-    supports_compiled: bool
 
     @property
     def duration_s(self) -> float: ...
@@ -84,9 +83,6 @@ class ObjectTrajectory:
     duration_s: float
     dt_s: float
     rotation_log_in_object: np.ndarray = field(init=False, repr=False)
-
-    supports_compiled = True
-    """The compiled fused kernel computes this trajectory's tip path itself."""
 
     def __post_init__(self) -> None:
         duration = finite_float(
@@ -226,6 +222,32 @@ def exp3_batch(rotation_vectors: np.ndarray) -> np.ndarray:
     return result
 
 
+_OBJECT_PATHS: list[tuple[Any, np.ndarray, np.ndarray, np.ndarray]] = []
+"""The last result of ``object_path_arrays`` (weakref to the trajectory, s, R, p)."""
+
+
+def object_path_arrays(
+    trajectory: ObjectTrajectory, s_values: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Object rotations (N, 3, 3) and positions (N, 3) [m] in the base frame at the path
+    parameters, vectorised (read-only); the last result is kept, as every grasp of a ranking
+    needs the same."""
+    s = np.asarray(s_values, dtype=float)
+    if _OBJECT_PATHS:
+        reference, cached_s, rotations, translations = _OBJECT_PATHS[0]
+        if reference() is trajectory and np.array_equal(cached_s, s):
+            return rotations, translations
+    start = trajectory.transform_object_to_base_start
+    goal = trajectory.transform_object_to_base_goal
+    log = np.asarray(trajectory.rotation_log_in_object, dtype=float)
+    rotations = np.matmul(start.rotation, exp3_batch(s[:, None] * log))
+    translations = (1.0 - s)[:, None] * start.translation + s[:, None] * goal.translation
+    for array in (rotations, translations):
+        array.setflags(write=False)
+    _OBJECT_PATHS[:] = [(weakref.ref(trajectory), s.copy(), rotations, translations)]
+    return rotations, translations
+
+
 def tip_path_arrays(
     trajectory: ObjectTrajectory, transform_tip_to_object: pin.SE3, s_values: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -240,18 +262,23 @@ def tip_path_arrays(
         Tip rotations (N, 3, 3) and positions (N, 3) [m] in the base frame, and the path
         tangents d p_tip / ds (N, 3) [m], base axes; equal to ``tip_path`` up to rounding.
     """
-    s = np.asarray(s_values, dtype=float)
-    grasp = pin.SE3(transform_tip_to_object)
-    start = trajectory.transform_object_to_base_start
-    goal = trajectory.transform_object_to_base_goal
-    log = np.asarray(trajectory.rotation_log_in_object, dtype=float)
-    object_rotations = np.matmul(start.rotation, exp3_batch(s[:, None] * log))
-    start_p, goal_p = start.translation, goal.translation
-    object_translations = (1.0 - s)[:, None] * start_p + s[:, None] * goal_p
-    rotations = np.matmul(object_rotations, grasp.rotation)
-    translations = np.einsum("nij,j->ni", object_rotations, grasp.translation) + (
-        object_translations
+    object_rotations, object_translations = object_path_arrays(trajectory, s_values)
+    count = len(object_translations)
+    stacked = object_rotations.reshape(3 * count, 3)  # one matrix product per quantity
+    grasp_p = np.asarray(transform_tip_to_object.translation, dtype=float)
+    w = np.asarray(trajectory.rotation_log_in_object, dtype=float)
+    lever_in_object = np.array(  # w x p (np.cross is slow on one vector)
+        [
+            w[1] * grasp_p[2] - w[2] * grasp_p[1],
+            w[2] * grasp_p[0] - w[0] * grasp_p[2],
+            w[0] * grasp_p[1] - w[1] * grasp_p[0],
+        ]
     )
-    lever_in_object = np.cross(log, grasp.translation)
-    tangents = (goal_p - start_p) + np.einsum("nij,j->ni", object_rotations, lever_in_object)
+    rotations = (stacked @ np.asarray(transform_tip_to_object.rotation)).reshape(count, 3, 3)
+    translations = (stacked @ grasp_p).reshape(count, 3) + object_translations
+    linear = (
+        trajectory.transform_object_to_base_goal.translation
+        - trajectory.transform_object_to_base_start.translation
+    )
+    tangents = (stacked @ lever_in_object).reshape(count, 3) + linear
     return rotations, translations, tangents

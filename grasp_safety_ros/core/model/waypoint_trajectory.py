@@ -111,9 +111,6 @@ class WaypointTrajectory:
     _position_spline: Any = field(init=False, repr=False, compare=False)
     _rotation_spline: Any = field(init=False, repr=False, compare=False)
 
-    supports_compiled = False
-    """The compiled fused kernel computes only the quintic's tip path itself."""
-
     def __post_init__(self) -> None:
         times = tuple(float(t) for t in self.waypoint_times_s)
         poses = tuple(pin.SE3(pose) for pose in self.transforms_object_to_base)
