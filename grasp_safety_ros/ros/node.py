@@ -925,10 +925,25 @@ def main(args: list[str] | None = None) -> int:
             node.abandon_rankings()
         if executor is not None:
             executor.shutdown()
+            _join_callbacks(executor)
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
     return status
+
+
+def _join_callbacks(executor: MultiThreadedExecutor) -> None:
+    """Wait until every callback the executor started has returned (its response sent).
+
+    Jazzy's ``Executor.shutdown`` is documented to wait for outstanding callbacks but does not
+    (its wait is skipped once the shut-down flag is set), so a service callback abandoned at
+    shut-down could still be sending its response while the node is destroyed, which crashed
+    the process. The callbacks run on the executor's thread pool; joining it waits for them
+    (an abandoned ranking stops within one grasp).
+    """
+    pool = getattr(executor, "_executor", None)  # rclpy's ThreadPoolExecutor of callbacks
+    if pool is not None:
+        pool.shutdown(wait=True)
 
 
 if __name__ == "__main__":
