@@ -25,7 +25,7 @@ import pinocchio as pin
 
 from ..exceptions import InvalidInputError
 from ..input_checks import finite_array, finite_float
-from ..method.effective_mass import augmented_model
+from ..method.effective_mass import STATIONARY_TANGENT_M, augmented_model
 from ..method.ranking import Grasp, GraspEvaluation, aggregate, check_metric
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
@@ -33,9 +33,6 @@ from ..model.trajectory import Trajectory
 
 METRIC_POINTS = ("tip", "leading_point", "worst_point")
 """Which point's effective mass a score uses: the tip, the leading point, the worst point."""
-
-STATIONARY_TANGENT_M = 1e-9
-"""Below this |d p/ds| [m] a point does not translate (same threshold as for the tip)."""
 
 
 def check_metric_point(metric_point: str, field: str = "metric_point") -> str:
