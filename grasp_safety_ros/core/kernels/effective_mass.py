@@ -7,7 +7,6 @@ of each body, the object merged into the last), one value passed as a whole."""
 import math
 
 from ._jit import _jit, _jit_inline
-from .ik import _workspace
 from .kinematics import _forward_kinematics, _joint_axis_in_world
 
 
@@ -121,9 +120,9 @@ def _mobility_from_frames(chain, bodies, ws, out):
 
 
 @_jit
-def translational_mobilities(chain, bodies, q_all, out):
-    """_mobility_from_frames for each row of q_all, into out (N, 3, 3)."""
-    ws = _workspace(chain.axes.shape[0])
+def translational_mobilities(chain, bodies, q_all, out, ws):
+    """_mobility_from_frames for each row of q_all, into out (N, 3, 3); ws:
+    ``ik.workspace(n)``."""
     for sample in range(q_all.shape[0]):
         _forward_kinematics(chain, q_all[sample], ws)
         _mobility_from_frames(chain, bodies, ws, out[sample])

@@ -6,7 +6,7 @@ import math
 
 from ._jit import _jit
 from .effective_mass import _mobility_from_frames
-from .ik import _solve_pose_into, _trajectory_step, _workspace
+from .ik import _solve_pose_into, _trajectory_step
 from .kinematics import _forward_kinematics
 
 
@@ -23,6 +23,7 @@ def evaluate_grasp(
     q0_given,
     stationary_tangent,
     out,
+    ws,
 ):
     """One grasp along its tip path: IK and effective mass, sample by sample.
 
@@ -30,7 +31,8 @@ def evaluate_grasp(
     + effective_mass_along. Inputs: tip rotations (N, 3, 3), positions (N, 3) [m] and path
     tangents d p_tip / ds (N, 3) [m], base frame; sample times [s]. Sample 0 is solved from
     seed_q unless q0_given (then seed_q is its solution, found by the caller's restarts).
-    out: ``method.compiled.GraspBuffers``; the world-frame targets are written first.
+    out: ``method.compiled.GraspBuffers``; the world-frame targets are written first. ws:
+    ``ik.workspace(n)``.
 
     Returns:
         (status, sample, joint, value): status 0 OK, 1 IK not converged, 2 joint jump,
@@ -39,8 +41,6 @@ def evaluate_grasp(
         fills directions and effective masses from out.mobilities[i].
     """
     count = times.shape[0]
-    n = chain.axes.shape[0]
-    ws = _workspace(n)
     base_rotation, base_translation = chain.base_rotation, chain.base_translation
     target_rotations, target_translations = out.target_rotations, out.target_translations
     for i in range(count):

@@ -14,9 +14,9 @@ from .lie_group import _jlog6, _log6, _relative_pose
 from .linalg import _damped_step
 
 
-@_jit
-def _workspace(n):
-    """Buffers of one IK / effective-mass evaluation for a chain of n joints."""
+def workspace(n):
+    """Scratch of one IK / effective-mass evaluation for a chain of n joints (plain Python:
+    the kernels allocate nothing). One per thread: kernels running at once need their own."""
     m = 6 if n >= 6 else n
     return (
         np.empty((n, 3, 3)),  # 0 joint rotations
@@ -125,19 +125,10 @@ def _solve_pose_into(chain, settings, target_rotation, target_translation, q_ini
 
 
 @_jit
-def solve_pose(chain, settings, target_rotation, target_translation, q_init):
-    """One tip pose (world frame) from q_init: (q, converged, iterations)."""
-    q = np.empty(chain.lower_q.shape[0])
-    converged, iterations = _solve_pose_into(
-        chain,
-        settings,
-        target_rotation,
-        target_translation,
-        q_init,
-        q,
-        _workspace(chain.axes.shape[0]),
-    )
-    return q, converged, iterations
+def solve_pose(chain, settings, target_rotation, target_translation, q_init, q, ws):
+    """One tip pose (world frame) from q_init into q (nq,): (converged, iterations); ws:
+    ``workspace(n)``."""
+    return _solve_pose_into(chain, settings, target_rotation, target_translation, q_init, q, ws)
 
 
 @_jit_inline
@@ -191,15 +182,15 @@ def _trajectory_step(chain, settings, target_rotations, target_translations, tim
 
 
 @_jit
-def solve_trajectory(chain, settings, target_rotations, target_translations, times, out):
+def solve_trajectory(chain, settings, target_rotations, target_translations, times, out, ws):
     """IKSolver._trajectory_python, compiled: samples 1.. from the solution out.q_all[0] of
     sample 0 (world-frame targets).
 
     Fills out.q_all and out.iterations (``GraspBuffers``); returns (status, sample, joint,
-    value) as the Python path; on failure out.q_fail holds the last iterate.
+    value) as the Python path; on failure out.q_fail holds the last iterate. ws:
+    ``workspace(n)``.
     """
     count = target_rotations.shape[0]
-    ws = _workspace(chain.axes.shape[0])
     _forward_kinematics(chain, out.q_all[0], ws)  # the predictor of sample 1 needs these poses
     for i in range(1, count):
         status, joint, value = _trajectory_step(

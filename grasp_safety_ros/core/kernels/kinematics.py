@@ -10,7 +10,7 @@ from ._jit import _jit_inline
 # joints of one degree of freedom each, joint k at q[q_index[k]]; a continuous joint holds
 # (cos, sin) of its angle in q[q_index[k]], q[q_index[k] + 1] (Pinocchio's nq = 2, nv = 1).
 # Poses are (rotation, translation) pairs in the world (= model root) frame. ws is the
-# workspace tuple of ``ik._workspace``: ws[0], ws[1] the joint rotations and translations,
+# workspace tuple of ``ik.workspace``: ws[0], ws[1] the joint rotations and translations,
 # ws[2], ws[3] the tip rotation and translation. Inner functions allocate nothing.
 
 

@@ -3,27 +3,32 @@ and the relative pose of two frames."""
 
 import math
 
-import numpy as np
-
 from ._jit import _EPS, _PREC2, _PREC3, _jit
 
 
 @_jit
-def _compute_theta_axis(i0, val, rn, axis):
-    """Pinocchio's internal::compute_theta_axis (log3 near pi); returns the angle."""
+def _compute_theta_axis(i0, val, a00, a01, a02, a10, a11, a12, a20, a21, a22):
+    """Pinocchio's internal::compute_theta_axis (log3 near pi) on the rotation's entries:
+    (angle, axis0, axis1, axis2)."""
     i1 = (i0 + 1) % 3
     i2 = (i0 + 2) % 3
-    sign = 1.0 if rn[i2, i1] >= rn[i1, i2] else -1.0
+    m = (a00, a01, a02, a10, a11, a12, a20, a21, a22)
+    r21 = m[3 * i2 + i1]
+    r12 = m[3 * i1 + i2]
+    sign = 1.0 if r21 >= r12 else -1.0
     s = math.sqrt(val + _EPS + _EPS * _EPS) * sign
-    axis[i0] = s / 2.0
-    axis[i1] = 1.0 / (2.0 * s) * (rn[i1, i0] + rn[i0, i1])
-    axis[i2] = 1.0 / (2.0 * s) * (rn[i2, i0] + rn[i0, i2])
-    w = 1.0 / (2.0 * s) * (rn[i2, i1] - rn[i1, i2])
-    norm = math.sqrt(axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2])
+    x0 = s / 2.0
+    x1 = 1.0 / (2.0 * s) * (m[3 * i1 + i0] + m[3 * i0 + i1])
+    x2 = 1.0 / (2.0 * s) * (m[3 * i2 + i0] + m[3 * i0 + i2])
+    w = 1.0 / (2.0 * s) * (r21 - r12)
+    norm = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
     angle = 2.0 * math.atan2(norm, w)
-    for k in range(3):
-        axis[k] /= norm
-    return angle
+    x0, x1, x2 = x0 / norm, x1 / norm, x2 / norm
+    if i0 == 0:
+        return angle, x0, x1, x2
+    if i0 == 1:
+        return angle, x2, x0, x1
+    return angle, x1, x2, x0
 
 
 @_jit
@@ -56,20 +61,15 @@ def _log3(rot):
             t = 1.0 + nrm2 / 6.0 + nrm2 * nrm2 * 3.0 / 40.0
         return theta, t * u0, t * u1, t * u2
     # Near pi (rare: far-off IK guesses): the axis from the largest diagonal entry.
-    rn = np.empty((3, 3))
-    rn[0, 0], rn[0, 1], rn[0, 2] = a00, a01, a02
-    rn[1, 0], rn[1, 1], rn[1, 2] = a10, a11, a12
-    rn[2, 0], rn[2, 1], rn[2, 2] = a20, a21, a22
     v0 = 2.0 * a00 - tr + 1.0
     v1 = 2.0 * a11 - tr + 1.0
     v2 = 2.0 * a22 - tr + 1.0
-    axis = np.empty(3)
     if v0 >= v1:
         i0, val = (0, v0) if v0 >= v2 else (2, v2)
     else:
         i0, val = (1, v1) if v1 >= v2 else (2, v2)
-    theta = _compute_theta_axis(i0, val, rn, axis)
-    return theta, theta * axis[0], theta * axis[1], theta * axis[2]
+    theta, x0, x1, x2 = _compute_theta_axis(i0, val, a00, a01, a02, a10, a11, a12, a20, a21, a22)
+    return theta, theta * x0, theta * x1, theta * x2
 
 
 @_jit

@@ -6,6 +6,7 @@ The kernels (``core.kernels``, numba) are imported only when first called.
 
 from __future__ import annotations
 
+import threading
 import weakref
 from typing import TYPE_CHECKING, Any, NamedTuple
 
@@ -234,6 +235,23 @@ def call_kernel(kernel: Any, *args: Any) -> Any:
     return result
 
 
+_THREAD_SCRATCH = threading.local()
+
+
+def kernel_workspace(n: int) -> tuple[np.ndarray, ...]:
+    """This thread's ``kernels.ik.workspace(n)`` (the kernels allocate nothing; kernels running
+    at once in the pool's threads must not share scratch)."""
+    workspaces = getattr(_THREAD_SCRATCH, "workspaces", None)
+    if workspaces is None:
+        workspaces = _THREAD_SCRATCH.workspaces = {}
+    ws = workspaces.get(n)
+    if ws is None:
+        from ..kernels.ik import workspace
+
+        ws = workspaces[n] = workspace(n)
+    return ws
+
+
 def plain_array(array: Any) -> np.ndarray:
     """A C-contiguous, writable float64 array of ``array`` (copied only when needed)."""
     array = np.ascontiguousarray(array, dtype=float)
@@ -270,6 +288,7 @@ def evaluate_grasp_compiled(
     times_s = plain_array(times_s)
     nq = robot.model.nq
     out = grasp_buffers(len(times_s), nq)
+    ws = kernel_workspace(robot.model.nv)
     path = (rotations, positions, tangents, times_s)
     status, index, joint, value = call_kernel(
         evaluate_grasp,
@@ -281,19 +300,23 @@ def evaluate_grasp_compiled(
         False,
         STATIONARY_TANGENT_M,
         out,
+        ws,
     )
     if status == 4:  # sample 0 failed from the seed: deterministic random restarts
         total = int(out.iterations[0])
         converged = False
         q_fail = out.q_fail
         for restart in solver.restarts():
-            q0, converged, restart_iterations = call_kernel(
+            q0 = np.empty(nq)
+            converged, restart_iterations = call_kernel(
                 solve_pose,
                 chain,
                 settings,
                 out.target_rotations[0],
                 out.target_translations[0],
                 plain_array(restart),
+                q0,
+                ws,
             )
             total += int(restart_iterations)
             if converged:
@@ -321,6 +344,7 @@ def evaluate_grasp_compiled(
             True,
             STATIONARY_TANGENT_M,
             out,
+            ws,
         )
         out.iterations[0] = total
     if status != 0:

@@ -110,9 +110,10 @@ def translational_mobilities_in_base(
     out = np.empty((len(q_all), 3, 3))
     if chain is not None:
         from ..kernels.effective_mass import translational_mobilities
+        from ..kernels.ik import workspace
 
         bodies = augmented_inertia_arrays(robot, object_inertia, transform_tip_to_object)
-        translational_mobilities(chain, bodies, q_all, out)
+        translational_mobilities(chain, bodies, q_all, out, workspace(robot.model.nv))
         return out
     model = augmented_model(robot, object_inertia, transform_tip_to_object)
     data = model.createData()

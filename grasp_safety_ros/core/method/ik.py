@@ -38,6 +38,7 @@ from .compiled import (
     chain_arrays_or_reason,
     grasp_buffers,
     ik_settings,
+    kernel_workspace,
     plain_array,
 )
 
@@ -190,13 +191,16 @@ class IKSolver:
         """
         target_in_world = self.robot.transform_base_to_world * transform_tip_to_base
         if self.compiled:
-            q, converged, iterations = call_kernel(
+            q = np.empty(self.robot.model.nq)
+            converged, iterations = call_kernel(
                 _kernels().solve_pose,
                 self.chain,
                 self.settings,
                 plain_array(target_in_world.rotation),
                 plain_array(target_in_world.translation),
                 plain_array(q_init),
+                q,
+                kernel_workspace(self.robot.model.nv),
             )
             return q, bool(converged), int(iterations)
         return self._solve_python(target_in_world, q_init)
@@ -416,6 +420,7 @@ class IKSolver:
             plain_array(translations_world),
             plain_array(times_s),
             out,
+            kernel_workspace(self.robot.model.nv),
         )
         return (
             int(status),
