@@ -37,7 +37,7 @@ from grasp_safety_ros.core.method.effective_mass import (
 )
 from grasp_safety_ros.core.method.ik import IKSolver, compiled_available
 from grasp_safety_ros.core.method.ranking import Ranking
-from grasp_safety_ros.core.model.trajectory import exp3_batch, tip_path_arrays
+from grasp_safety_ros.core.model.trajectory import exp3_batch
 
 needs_numba = pytest.mark.skipif(not compiled_available(), reason="numba is not installed")
 RTOL = 1e-9
@@ -147,22 +147,26 @@ def test_exp3_batch_equals_pinocchio() -> None:
         np.testing.assert_allclose(rotation, pin.exp3(vector), rtol=0, atol=1e-15)
 
 
-def test_tip_path_arrays_equal_tip_path() -> None:
+def test_tip_motion_equals_tip_path() -> None:
+    """The vectorised tip motion (ObjectMotion composed with the grasp) against Pinocchio's
+    pose products and the tangent formula, sample by sample; speeds are |tangent| ds/dt."""
     trajectory = ObjectTrajectory(
         pose_from_position_quat([1.0, 0.0, 0.03], [0.5, 0.5, 0.5, 0.5], "start"),
         pose_from_position_quat([1.1, -0.38, 0.16], [0.0, 0.0, 0.2, 0.98], "goal"),
         2.0,
         0.05,
     )
-    s_values, _, _ = trajectory.path_parameter(trajectory.times_s())
+    times = trajectory.times_s()
+    s_values, s_rate, _ = trajectory.path_parameter(times)
     for grasp in grasps_near_identity(4):
         poses, tangents = trajectory.tip_path(grasp.transform_tip_to_object, s_values)
-        rotations, translations, tangents_v = tip_path_arrays(
-            trajectory, grasp.transform_tip_to_object, s_values
+        motion = trajectory.tip_motion(grasp.transform_tip_to_object, times)
+        np.testing.assert_allclose(motion.rotations, [p.rotation for p in poses], atol=1e-15)
+        np.testing.assert_allclose(motion.positions, [p.translation for p in poses], atol=1e-15)
+        np.testing.assert_allclose(motion.tangents, tangents, atol=1e-15)
+        np.testing.assert_allclose(
+            motion.speeds, np.linalg.norm(tangents, axis=1) * s_rate, rtol=1e-15, atol=1e-15
         )
-        np.testing.assert_allclose(rotations, [p.rotation for p in poses], atol=1e-15)
-        np.testing.assert_allclose(translations, [p.translation for p in poses], atol=1e-15)
-        np.testing.assert_allclose(tangents_v, tangents, atol=1e-15)
 
 
 def test_chain_arrays_take_continuous_joints() -> None:

@@ -1,6 +1,6 @@
 """The fused per-grasp kernel: IK and effective mass of one grasp along its tip path, in one
-call. The tip path (poses and tangents in the base frame) is computed by the caller, so every
-trajectory type runs here."""
+call. The object's motion (poses and tangents in the base frame) is sampled once by the caller
+for every grasp, so every trajectory type runs here; the kernel composes it with the grasp."""
 
 import math
 
@@ -15,9 +15,9 @@ def evaluate_grasp(
     chain,
     settings,
     bodies,
-    rotations_tip_in_base,
-    positions_tip_in_base,
-    tangents_in_base,
+    motion,
+    grasp_rotation,
+    grasp_translation,
     times,
     seed_q,
     q0_given,
@@ -25,14 +25,16 @@ def evaluate_grasp(
     out,
     ws,
 ):
-    """One grasp along its tip path: IK and effective mass, sample by sample.
+    """One grasp along the object's motion: IK and effective mass, sample by sample.
 
-    The same computation as IKSolver.solve_trajectory_arrays + translational_mobility_in_base
-    + effective_mass_along. Inputs: tip rotations (N, 3, 3), positions (N, 3) [m] and path
-    tangents d p_tip / ds (N, 3) [m], base frame; sample times [s]. Sample 0 is solved from
-    seed_q unless q0_given (then seed_q is its solution, found by the caller's restarts).
-    out: ``method.compiled.GraspBuffers``; the world-frame targets are written first. ws:
-    ``ik.workspace(n)``.
+    The same computation as ObjectMotion.tip_motion + IKSolver.solve_trajectory_arrays +
+    translational_mobility_in_base + effective_mass_along. Inputs: ``motion`` as
+    ``model.trajectory.ObjectMotion`` (object rotations (N, 3, 3), positions (N, 3) [m],
+    linear (N, 3) [m] and angular (N, 3) [rad] tangents, base frame; its speed_per_tangent is
+    not read); the grasp: tip frame in the object frame (rotation, translation [m]); sample
+    times [s]. Sample 0 is solved from seed_q unless q0_given (then seed_q is its solution,
+    found by the caller's restarts). out: ``method.compiled.GraspBuffers``; the world-frame
+    targets and the tip tangents are written first. ws: ``ik.workspace(n)``.
 
     Returns:
         (status, sample, joint, value): status 0 OK, 1 IK not converged, 2 joint jump,
@@ -43,19 +45,37 @@ def evaluate_grasp(
     count = times.shape[0]
     base_rotation, base_translation = chain.base_rotation, chain.base_translation
     target_rotations, target_translations = out.target_rotations, out.target_translations
+    object_rotations, object_positions = motion.rotations, motion.positions
+    linear_tangents, angular_tangents = motion.linear_tangents, motion.angular_tangents
+    tip_rotation, tangents = ws[20], out.tangents  # ws[20]: scratch 3x3
+    g0, g1, g2 = grasp_translation[0], grasp_translation[1], grasp_translation[2]
     for i in range(count):
+        # Tip in the base frame: object pose * grasp; lever = object origin -> tip.
+        o = object_rotations[i]
+        l0 = o[0, 0] * g0 + o[0, 1] * g1 + o[0, 2] * g2
+        l1 = o[1, 0] * g0 + o[1, 1] * g1 + o[1, 2] * g2
+        l2 = o[2, 0] * g0 + o[2, 1] * g1 + o[2, 2] * g2
+        p0 = object_positions[i, 0] + l0
+        p1 = object_positions[i, 1] + l1
+        p2 = object_positions[i, 2] + l2
+        for a in range(3):
+            for b in range(3):
+                tip_rotation[a, b] = (
+                    o[a, 0] * grasp_rotation[0, b]
+                    + o[a, 1] * grasp_rotation[1, b]
+                    + o[a, 2] * grasp_rotation[2, b]
+                )
+        w0, w1, w2 = angular_tangents[i, 0], angular_tangents[i, 1], angular_tangents[i, 2]
+        tangents[i, 0] = linear_tangents[i, 0] + (w1 * l2 - w2 * l1)
+        tangents[i, 1] = linear_tangents[i, 1] + (w2 * l0 - w0 * l2)
+        tangents[i, 2] = linear_tangents[i, 2] + (w0 * l1 - w1 * l0)
+        # World-frame target: base placement * tip.
         for a in range(3):
             r0, r1, r2 = base_rotation[a, 0], base_rotation[a, 1], base_rotation[a, 2]
-            target_translations[i, a] = base_translation[a] + (
-                r0 * positions_tip_in_base[i, 0]
-                + r1 * positions_tip_in_base[i, 1]
-                + r2 * positions_tip_in_base[i, 2]
-            )
+            target_translations[i, a] = base_translation[a] + (r0 * p0 + r1 * p1 + r2 * p2)
             for b in range(3):
                 target_rotations[i, a, b] = (
-                    r0 * rotations_tip_in_base[i, 0, b]
-                    + r1 * rotations_tip_in_base[i, 1, b]
-                    + r2 * rotations_tip_in_base[i, 2, b]
+                    r0 * tip_rotation[0, b] + r1 * tip_rotation[1, b] + r2 * tip_rotation[2, b]
                 )
     q_all, mobilities, tangent_norms = out.q_all, out.mobilities, out.tangent_norms
     worst, directions, effective_masses = out.worst, out.directions, out.effective_masses
@@ -81,7 +101,7 @@ def evaluate_grasp(
         # ws holds the joint poses at q_all[i] (the IK's last forward kinematics).
         mobility = mobilities[i]
         _mobility_from_frames(chain, bodies, ws, mobility)
-        t0, t1, t2 = tangents_in_base[i, 0], tangents_in_base[i, 1], tangents_in_base[i, 2]
+        t0, t1, t2 = tangents[i, 0], tangents[i, 1], tangents[i, 2]
         norm = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
         tangent_norms[i] = norm
         if norm < stationary_tangent:

@@ -14,6 +14,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..model.robot import RobotModel
+from ..model.trajectory import ObjectMotion
 from .effective_mass import (
     STATIONARY_TANGENT_M,
     BodyInertias,
@@ -68,7 +69,8 @@ class GraspBuffers(NamedTuple):
 
     target_rotations: np.ndarray  # (N, 3, 3) tip targets, world frame
     target_translations: np.ndarray  # (N, 3) [m]
-    tangent_norms: np.ndarray  # (N,) |d p_tip / ds| [m]
+    tangents: np.ndarray  # (N, 3) [m] tip tangents, base axes (ObjectMotion's scale)
+    tangent_norms: np.ndarray  # (N,) their norms [m]
     q_all: np.ndarray  # (N, nq)
     iterations: np.ndarray  # (N,) int64
     q_fail: np.ndarray  # (nq,) last iterate of a failed sample
@@ -83,6 +85,7 @@ def grasp_buffers(count: int, nq: int) -> GraspBuffers:
     """Fresh GraspBuffers for count samples of a chain with nq configuration entries."""
     return GraspBuffers(
         np.empty((count, 3, 3)),
+        np.empty((count, 3)),
         np.empty((count, 3)),
         np.empty(count),
         np.empty((count, nq)),
@@ -262,15 +265,18 @@ def evaluate_grasp_compiled(
     solver: IKSolver,
     object_inertia: ObjectInertia,
     transform_tip_to_object: Any,
-    tip_path: tuple[np.ndarray, np.ndarray, np.ndarray],
+    motion: ObjectMotion,
     times_s: np.ndarray,
     seed_q: np.ndarray,
+    motion_is_tip: bool = False,
 ) -> CompiledGraspResult:
     """One grasp with the fused kernel ``evaluate_grasp`` (solver.compiled must be true).
 
     Args:
-        tip_path: Tip rotations (N, 3, 3), positions (N, 3) [m] and path tangents
-            d p_tip / ds (N, 3) [m], base frame (``tip_motion`` of any trajectory type).
+        transform_tip_to_object: The grasp (its object inertia moves with the tip).
+        motion: The object's motion at the sample times (``object_motion`` of the
+            trajectory), which the kernel composes with the grasp; with ``motion_is_tip``,
+            the tip's own motion (composed with the identity).
 
     Directions and effective masses of samples where the tip does not translate (``worst``)
     are left for the caller. Random restarts of sample 0 run here, as in ``solve_first``.
@@ -284,12 +290,17 @@ def evaluate_grasp_compiled(
     if robot_arrays is None:
         robot_arrays = _ROBOT_INERTIAS.setdefault(robot, robot_inertia_arrays(robot))
     bodies = augmented_inertia_arrays(robot, object_inertia, transform_tip_to_object, robot_arrays)
-    rotations, positions, tangents = (plain_array(array) for array in tip_path)
+    grasp = pin.SE3.Identity() if motion_is_tip else pin.SE3(transform_tip_to_object)
     times_s = plain_array(times_s)
     nq = robot.model.nq
     out = grasp_buffers(len(times_s), nq)
     ws = kernel_workspace(robot.model.nv)
-    path = (rotations, positions, tangents, times_s)
+    path = (
+        ObjectMotion(*(plain_array(array) for array in motion)),
+        plain_array(grasp.rotation),
+        plain_array(grasp.translation),
+        times_s,
+    )
     status, index, joint, value = call_kernel(
         evaluate_grasp,
         chain,

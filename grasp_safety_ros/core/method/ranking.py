@@ -12,7 +12,7 @@ import pinocchio as pin
 from ..exceptions import InvalidInputError
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
-from ..model.trajectory import Trajectory
+from ..model.trajectory import ObjectMotion, ObjectPath, TipMotion, Trajectory
 from .compiled import evaluate_grasp_compiled
 from .effective_mass import (
     STATIONARY_TANGENT_M,
@@ -209,7 +209,7 @@ class GraspSafetyEvaluator:
         metric = check_metric(metric or self.config.metric)
         trajectory = _as_quintic(trajectory)
         times = trajectory.times_s()
-        s_values, s_rate, _ = trajectory.path_parameter(times)
+        s_values, _, _ = trajectory.path_parameter(times)
         return self._evaluate_sampled(
             index,
             grasp,
@@ -218,7 +218,7 @@ class GraspSafetyEvaluator:
             metric,
             times,
             s_values,
-            s_rate,
+            _object_motion(trajectory, times),
             self.seed_q(seed_positions),
         )
 
@@ -231,10 +231,11 @@ class GraspSafetyEvaluator:
         metric: str,
         times: np.ndarray,
         s_values: np.ndarray,
-        s_rate: np.ndarray,
+        object_motion: ObjectMotion | None,
         seed_q: np.ndarray,
     ) -> GraspEvaluation:
-        """``evaluate`` with the sample times, path parameters and IK seed already computed."""
+        """``evaluate`` with the sample times, path parameters, the object's motion (None: the
+        trajectory gives each tip motion) and IK seed already computed."""
         robot = self.robot
         sampled = self.trajectory_for(grasp, trajectory)
         if isinstance(sampled, JointSpaceTrajectory):  # the planner's joint positions, no IK
@@ -246,22 +247,33 @@ class GraspSafetyEvaluator:
                 robot, object_inertia, grasp.transform_tip_to_object, q_all
             )
             masses, directions, worst = _masses_along(mobilities, tip.tangents)
+            tip_speeds = tip.speeds
         else:  # every trajectory type: its tip path, then IK and effective mass
-            tip = trajectory.tip_motion(grasp.transform_tip_to_object, times)
-            if self.ik.compiled:  # in one compiled call
+            motion_is_tip = object_motion is None
+            motion = (
+                _tip_as_object_motion(trajectory.tip_motion(grasp.transform_tip_to_object, times))
+                if object_motion is None
+                else object_motion
+            )
+            if self.ik.compiled:  # in one compiled call, the grasp composed there
                 fused = evaluate_grasp_compiled(
                     self.ik,
                     object_inertia,
                     grasp.transform_tip_to_object,
-                    (tip.rotations, tip.positions, tip.tangents),
+                    motion,
                     times,
                     seed_q,
+                    motion_is_tip,
                 )
                 if fused.reason:
                     return _infeasible(index, grasp.name, fused.reason, robot.num_joints)
                 q_all, iterations, mobilities = fused.q, fused.iterations, fused.mobilities
                 masses, directions, worst = fused.effective_masses, fused.directions, fused.worst
+                tip_speeds = fused.tangent_norms * motion.speed_per_tangent
             else:
+                tip = motion.tip_motion(
+                    pin.SE3.Identity() if motion_is_tip else grasp.transform_tip_to_object
+                )
                 ik = self.ik.solve_trajectory_arrays(
                     tip.rotations, tip.positions, times, s_values, seed_q
                 )
@@ -272,7 +284,7 @@ class GraspSafetyEvaluator:
                     robot, object_inertia, grasp.transform_tip_to_object, q_all
                 )
                 masses, directions, worst = _masses_along(mobilities, tip.tangents)
-        tip_speeds = tip.speeds
+                tip_speeds = tip.speeds
         for i in np.flatnonzero(worst):
             directions[i], masses[i] = worst_direction(mobilities[i])
         positions = positions_along(robot, q_all)
@@ -313,10 +325,11 @@ class GraspSafetyEvaluator:
             self.trajectory_for(grasp, trajectory)  # planned joint trajectories: validate
 
         times = trajectory.times_s()
-        s_values, s_rate, _ = trajectory.path_parameter(times)
+        s_values, _, _ = trajectory.path_parameter(times)
+        motion = _object_motion(trajectory, times)  # sampled once for every grasp
         executor = executor_for(self, len(grasps) * len(times))
         jobs = [
-            (index, grasp, object_inertia, trajectory, metric, times, s_values, s_rate, seed_q)
+            (index, grasp, object_inertia, trajectory, metric, times, s_values, motion, seed_q)
             for index, grasp in enumerate(grasps)
         ]
         if executor is None:
@@ -359,6 +372,21 @@ def positions_along(robot: RobotModel, q_all: np.ndarray) -> np.ndarray:
         else:
             columns.append(q_all[:, index])
     return np.stack(columns, axis=1)
+
+
+def _object_motion(trajectory: Trajectory, times_s: np.ndarray) -> ObjectMotion | None:
+    """The trajectory's ObjectMotion at the times, when it has one (an ObjectPath)."""
+    return trajectory.object_motion(times_s) if isinstance(trajectory, ObjectPath) else None
+
+
+def _tip_as_object_motion(tip: TipMotion) -> ObjectMotion:
+    """A tip motion as the ObjectMotion whose identity grasp gives it back."""
+    norms = np.linalg.norm(tip.tangents, axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        speed_per_tangent = np.where(norms > 0.0, tip.speeds / norms, 0.0)
+    return ObjectMotion(
+        tip.rotations, tip.positions, tip.tangents, np.zeros_like(tip.tangents), speed_per_tangent
+    )
 
 
 def _as_quintic(trajectory: Trajectory) -> Trajectory:

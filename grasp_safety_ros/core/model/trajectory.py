@@ -3,9 +3,8 @@
 from __future__ import annotations
 
 import math
-import weakref
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple, Protocol
+from typing import NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 import pinocchio as pin
@@ -35,6 +34,42 @@ class TipMotion(NamedTuple):
     speeds: np.ndarray  # (N,) [m/s] tip speed
 
 
+class ObjectMotion(NamedTuple):
+    """An object trajectory sampled once, from which the tip motion of any grasp follows.
+
+    A point at ``lever`` from the object origin (base axes) moves along the tangent
+    ``linear_tangents + angular_tangents x lever``; its speed is |tangent| ``speed_per_tangent``.
+    Each trajectory type chooses the tangent's scale (``ObjectTrajectory``: d/ds;
+    ``WaypointTrajectory``: T d/dt, and the limit direction at its rest ends).
+    """
+
+    rotations: np.ndarray  # (N, 3, 3) object frame in the base frame
+    positions: np.ndarray  # (N, 3) [m] object origin in the base frame
+    linear_tangents: np.ndarray  # (N, 3) [m] tangent of the object origin, base axes
+    angular_tangents: np.ndarray  # (N, 3) [rad] angular tangent of the object, base axes
+    speed_per_tangent: np.ndarray  # (N,) [1/s] speed / |tangent|; 0 where at rest
+
+    def tip_motion(self, transform_tip_to_object: pin.SE3) -> TipMotion:
+        """The motion of the tip frame at ``transform_tip_to_object`` (object frame)."""
+        grasp = pin.SE3(transform_tip_to_object)
+        count = len(self.positions)
+        stacked = self.rotations.reshape(3 * count, 3)  # one matrix product per quantity
+        lever = (stacked @ grasp.translation).reshape(count, 3)  # object origin -> tip, base
+        w, r = self.angular_tangents, lever
+        tangents = np.empty_like(r)  # w x r (np.cross is slower on short rows)
+        tangents[:, 0] = w[:, 1] * r[:, 2] - w[:, 2] * r[:, 1]
+        tangents[:, 1] = w[:, 2] * r[:, 0] - w[:, 0] * r[:, 2]
+        tangents[:, 2] = w[:, 0] * r[:, 1] - w[:, 1] * r[:, 0]
+        tangents += self.linear_tangents
+        norms = np.sqrt(np.einsum("ij,ij->i", tangents, tangents))
+        return TipMotion(
+            rotations=(stacked @ grasp.rotation).reshape(count, 3, 3),
+            positions=self.positions + lever,
+            tangents=tangents,
+            speeds=norms * self.speed_per_tangent,
+        )
+
+
 class Trajectory(Protocol):
     """What the evaluator and the analyses need of an object trajectory (see TipMotion)."""
 
@@ -52,6 +87,14 @@ class Trajectory(Protocol):
     def tip_twists(
         self, transform_tip_to_object: pin.SE3, times_s: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]: ...
+
+
+@runtime_checkable
+class ObjectPath(Trajectory, Protocol):
+    """An object trajectory that can be sampled once for every grasp (``ObjectTrajectory``,
+    ``WaypointTrajectory``): ``tip_motion(grasp, t)`` is ``object_motion(t).tip_motion(grasp)``."""
+
+    def object_motion(self, times_s: np.ndarray) -> ObjectMotion: ...
 
 
 def quintic_time_scaling(tau: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -164,13 +207,23 @@ class ObjectTrajectory:
         return motion.rotations, motion.positions
 
     def tip_motion(self, transform_tip_to_object: pin.SE3, times_s: np.ndarray) -> TipMotion:
-        """Tip poses, path tangents d p_tip/ds [m] and speeds |d p_tip/ds|·ds/dt [m/s].
+        """Tip poses, path tangents d p_tip/ds [m] and speeds |d p_tip/ds|·ds/dt [m/s]; equal
+        to ``tip_path`` at s(t) up to rounding."""
+        return self.object_motion(times_s).tip_motion(transform_tip_to_object)
 
-        Equal to ``tip_path_arrays`` at s(t) (the Python evaluation path's tip path).
-        """
+    def object_motion(self, times_s: np.ndarray) -> ObjectMotion:
+        """The object's motion at the times: tangents d/ds (linear p_f − p_0 [m], angular
+        R(s) log(R0ᵀ Rf) [rad]), speed per tangent ds/dt [1/s]."""
         s_values, s_rate, _ = self.path_parameter(times_s)
-        rotations, positions, tangents = tip_path_arrays(self, transform_tip_to_object, s_values)
-        return TipMotion(rotations, positions, tangents, np.linalg.norm(tangents, axis=1) * s_rate)
+        start = self.transform_object_to_base_start
+        goal = self.transform_object_to_base_goal
+        log = np.asarray(self.rotation_log_in_object, dtype=float)
+        rotations = np.matmul(start.rotation, exp3_batch(s_values[:, None] * log))
+        translations = (1.0 - s_values)[:, None] * start.translation + s_values[
+            :, None
+        ] * goal.translation
+        linear = np.tile(goal.translation - start.translation, (len(s_values), 1))
+        return ObjectMotion(rotations, translations, linear, rotations @ log, s_rate)
 
     def tip_twists(
         self, transform_tip_to_object: pin.SE3, times_s: np.ndarray
@@ -220,65 +273,3 @@ def exp3_batch(rotation_vectors: np.ndarray) -> np.ndarray:
     for k in range(3):
         result[:, k, k] += ct
     return result
-
-
-_OBJECT_PATHS: list[tuple[Any, np.ndarray, np.ndarray, np.ndarray]] = []
-"""The last result of ``object_path_arrays`` (weakref to the trajectory, s, R, p)."""
-
-
-def object_path_arrays(
-    trajectory: ObjectTrajectory, s_values: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Object rotations (N, 3, 3) and positions (N, 3) [m] in the base frame at the path
-    parameters, vectorised (read-only); the last result is kept, as every grasp of a ranking
-    needs the same."""
-    s = np.asarray(s_values, dtype=float)
-    if _OBJECT_PATHS:
-        reference, cached_s, rotations, translations = _OBJECT_PATHS[0]
-        if reference() is trajectory and np.array_equal(cached_s, s):
-            return rotations, translations
-    start = trajectory.transform_object_to_base_start
-    goal = trajectory.transform_object_to_base_goal
-    log = np.asarray(trajectory.rotation_log_in_object, dtype=float)
-    rotations = np.matmul(start.rotation, exp3_batch(s[:, None] * log))
-    translations = (1.0 - s)[:, None] * start.translation + s[:, None] * goal.translation
-    for array in (rotations, translations):
-        array.setflags(write=False)
-    _OBJECT_PATHS[:] = [(weakref.ref(trajectory), s.copy(), rotations, translations)]
-    return rotations, translations
-
-
-def tip_path_arrays(
-    trajectory: ObjectTrajectory, transform_tip_to_object: pin.SE3, s_values: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """ObjectTrajectory.tip_path as arrays, vectorised over the samples.
-
-    Args:
-        trajectory: An ObjectTrajectory.
-        transform_tip_to_object: The grasp.
-        s_values: Path parameters in [0, 1].
-
-    Returns:
-        Tip rotations (N, 3, 3) and positions (N, 3) [m] in the base frame, and the path
-        tangents d p_tip / ds (N, 3) [m], base axes; equal to ``tip_path`` up to rounding.
-    """
-    object_rotations, object_translations = object_path_arrays(trajectory, s_values)
-    count = len(object_translations)
-    stacked = object_rotations.reshape(3 * count, 3)  # one matrix product per quantity
-    grasp_p = np.asarray(transform_tip_to_object.translation, dtype=float)
-    w = np.asarray(trajectory.rotation_log_in_object, dtype=float)
-    lever_in_object = np.array(  # w x p (np.cross is slow on one vector)
-        [
-            w[1] * grasp_p[2] - w[2] * grasp_p[1],
-            w[2] * grasp_p[0] - w[0] * grasp_p[2],
-            w[0] * grasp_p[1] - w[1] * grasp_p[0],
-        ]
-    )
-    rotations = (stacked @ np.asarray(transform_tip_to_object.rotation)).reshape(count, 3, 3)
-    translations = (stacked @ grasp_p).reshape(count, 3) + object_translations
-    linear = (
-        trajectory.transform_object_to_base_goal.translation
-        - trajectory.transform_object_to_base_start.translation
-    )
-    tangents = (stacked @ lever_in_object).reshape(count, 3) + linear
-    return rotations, translations, tangents

@@ -32,6 +32,7 @@ from ..exceptions import InvalidInputError
 from ..input_checks import finite_float
 from .trajectory import (
     MAX_SAMPLES,
+    ObjectMotion,
     ObjectTrajectory,
     TipMotion,
     exp3_batch,
@@ -226,36 +227,34 @@ class WaypointTrajectory:
         Tangents: T·v_tip [m]; at the rest ends (first and last waypoint), where v = 0, the
         limit direction T³/60 · d³p_tip/dt³ (with the quintic's scaling, = d p/ds there).
         """
+        return self.object_motion(times_s).tip_motion(transform_tip_to_object)
+
+    def object_motion(self, times_s: np.ndarray) -> ObjectMotion:
+        """The object's motion at the times (see ``trajectory.ObjectMotion``): tangents T·v
+        (linear [m], angular [rad]); at the rest ends the limit T³/60 · (d³/dt³), speed 0."""
         if self._quintic is not None:
-            return self._quintic.tip_motion(transform_tip_to_object, self._relative(times_s))
-        grasp = pin.SE3(transform_tip_to_object)
+            return self._quintic.object_motion(self._relative(times_s))
         times = self._clipped(times_s)
         rotations, positions = self.object_poses(times)
-        lever = rotations @ grasp.translation  # object origin -> tip, base axes
-        phi = self._rotation_spline(times)
-        jr = right_jacobian_so3(phi)
+        jr = right_jacobian_so3(self._rotation_spline(times))
         omega = np.einsum(
             "nij,nj->ni", rotations, np.einsum("nij,nj->ni", jr, self._rotation_spline(times, 1))
         )
-        velocity = self._position_spline(times, 1) + np.cross(omega, lever)
-        tangents = velocity * self.duration_s
+        linear = self._position_spline(times, 1) * self.duration_s
+        angular = omega * self.duration_s
+        speed_per_tangent = np.full(len(times), 1.0 / self.duration_s)
         rest = (times <= self.waypoint_times_s[0]) | (times >= self.waypoint_times_s[-1])
         if rest.any():
+            scale = self.duration_s**3 * _REST_SCALE
             third_angular = np.einsum(
                 "nij,nj->ni",
                 rotations[rest],
                 np.einsum("nij,nj->ni", jr[rest], self._rotation_spline(times[rest], 3)),
             )
-            third = self._position_spline(times[rest], 3) + np.cross(third_angular, lever[rest])
-            tangents[rest] = third * self.duration_s**3 * _REST_SCALE
-        speeds = np.linalg.norm(velocity, axis=1)
-        speeds[rest] = 0.0  # exactly at rest (the spline's derivative there is rounding)
-        return TipMotion(
-            rotations=np.matmul(rotations, grasp.rotation),
-            positions=positions + lever,
-            tangents=tangents,
-            speeds=speeds,
-        )
+            linear[rest] = self._position_spline(times[rest], 3) * scale
+            angular[rest] = third_angular * scale
+            speed_per_tangent[rest] = 0.0  # exactly at rest
+        return ObjectMotion(rotations, positions, linear, angular, speed_per_tangent)
 
     def tip_twists(
         self, transform_tip_to_object: pin.SE3, times_s: np.ndarray
