@@ -31,7 +31,16 @@ from scipy.stats import qmc
 from ..exceptions import InvalidInputError
 from ..model.inertia import ObjectInertia
 from ..model.trajectory import ObjectTrajectory
-from .ranking import Grasp, GraspEvaluation, GraspSafetyEvaluator, Ranking, order_by_score
+from .pool import evaluate_jobs, executor_for
+from .ranking import (
+    Grasp,
+    GraspEvaluation,
+    GraspSafetyEvaluator,
+    Ranking,
+    SampledTrajectory,
+    order_by_score,
+    sample_trajectory,
+)
 
 MAX_RESTARTS = 1000
 """Largest number of posture restarts accepted per grasp."""
@@ -142,6 +151,7 @@ def select_posture(
     config: PostureConfig,
     metric: str,
     seeds: np.ndarray | None = None,
+    sampled: SampledTrajectory | None = None,
 ) -> tuple[GraspEvaluation, PostureSelection]:
     """The lowest-score posture of one grasp (module docstring).
 
@@ -149,12 +159,15 @@ def select_posture(
         single_ik: The grasp's evaluation from the configured seed (the paper's single IK).
         metric: The score's aggregate (the single IK's).
         seeds: ``restart_seeds(evaluator, config)``, when already computed.
+        sampled: ``sample_trajectory(trajectory)``, when already computed.
 
     Returns:
         The kept evaluation (``single_ik`` itself when nothing scores lower) and the record.
     """
     if seeds is None:
         seeds = restart_seeds(evaluator, config)
+    if sampled is None:
+        sampled = sample_trajectory(trajectory)
     robot, solver = evaluator.robot, evaluator.ik
     start_tip_in_base = trajectory.transform_object_to_base_start * pin.SE3(
         grasp.transform_tip_to_object
@@ -175,13 +188,13 @@ def select_posture(
             continue
         found.append(positions)
         candidates.append(
-            evaluator.evaluate(
+            evaluator.evaluate_sampled(
+                single_ik.index,
                 grasp,
                 object_inertia,
-                trajectory,
-                index=single_ik.index,
-                seed_positions=positions,
-                metric=metric,
+                sampled,
+                metric,
+                robot.q_from_positions(positions),
             )
         )
     feasible = [k for k, e in enumerate(candidates) if e.feasible]
@@ -246,29 +259,50 @@ def select_postures(
         postures = tuple(single_posture(e) for e in ranking.evaluations)
         return replace(ranking, postures=postures)
     seeds = restart_seeds(evaluator, config)
+    sampled = sample_trajectory(trajectory)  # once for every grasp and posture
+    jobs = [
+        (grasp, object_inertia, trajectory, single_ik, config, ranking.metric, seeds, sampled)
+        for grasp, single_ik in zip(grasps, ranking.evaluations, strict=True)
+    ]
+    # Work estimate: every grasp followed from up to restarts + 1 postures.
+    executor = executor_for(evaluator, len(grasps) * len(sampled.times_s) * (len(seeds) + 1))
+    results = (
+        (_select_for_grasp(evaluator, *job) for job in jobs)
+        if executor is None
+        else evaluate_jobs(evaluator, executor, jobs, _select_for_grasp)
+    )
     evaluations: list[GraspEvaluation] = []
     selections: list[PostureSelection] = []
-    for k, (grasp, single_ik) in enumerate(zip(grasps, ranking.evaluations, strict=True)):
-        if grasp.joint_trajectory is not None:  # a planned motion: its posture is given
-            evaluation, selection = single_ik, single_posture(single_ik)
-        else:
-            evaluation, selection = select_posture(
-                evaluator,
-                grasp,
-                object_inertia,
-                trajectory,
-                single_ik,
-                config,
-                ranking.metric,
-                seeds,
-            )
-        evaluations.append(evaluation)
-        selections.append(selection)
-        if progress is not None:
-            progress(k + 1, len(grasps))
+    try:
+        for evaluation, selection in results:
+            evaluations.append(evaluation)
+            selections.append(selection)
+            if progress is not None:
+                progress(len(evaluations), len(grasps))
+    finally:
+        results.close()  # progress raised: stop the work still queued
     return replace(
         ranking,
         order=order_by_score(evaluations),
         evaluations=tuple(evaluations),
         postures=tuple(selections),
+    )
+
+
+def _select_for_grasp(
+    evaluator: GraspSafetyEvaluator,
+    grasp: Grasp,
+    object_inertia: ObjectInertia,
+    trajectory: ObjectTrajectory,
+    single_ik: GraspEvaluation,
+    config: PostureConfig,
+    metric: str,
+    seeds: np.ndarray,
+    sampled: SampledTrajectory,
+) -> tuple[GraspEvaluation, PostureSelection]:
+    """``select_posture`` of one grasp, as a pool job (a planned motion keeps its posture)."""
+    if grasp.joint_trajectory is not None:
+        return single_ik, single_posture(single_ik)
+    return select_posture(
+        evaluator, grasp, object_inertia, trajectory, single_ik, config, metric, seeds, sampled
     )

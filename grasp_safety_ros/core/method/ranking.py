@@ -171,6 +171,33 @@ def order_by_score(evaluations: Sequence[GraspEvaluation]) -> tuple[int, ...]:
     return tuple(e.index for e in sorted(feasible, key=lambda e: e.score))
 
 
+@dataclass(frozen=True)
+class SampledTrajectory:
+    """An object trajectory sampled once for every grasp evaluated along it.
+
+    Attributes:
+        trajectory: The trajectory (a two-waypoint one as its identical quintic).
+        times_s: Sample times [s].
+        s_values: Path parameters at the times.
+        object_motion: The object's motion at the times; None when the trajectory type does
+            not give one (then each grasp's ``tip_motion`` is asked for).
+    """
+
+    trajectory: Trajectory
+    times_s: np.ndarray
+    s_values: np.ndarray
+    object_motion: ObjectMotion | None
+
+
+def sample_trajectory(trajectory: Trajectory) -> SampledTrajectory:
+    """``trajectory`` sampled at its ``times_s()``, for evaluating many grasps along it."""
+    trajectory = _as_quintic(trajectory)
+    times = trajectory.times_s()
+    s_values, _, _ = trajectory.path_parameter(times)
+    motion = trajectory.object_motion(times) if isinstance(trajectory, ObjectPath) else None
+    return SampledTrajectory(trajectory, times, s_values, motion)
+
+
 class GraspSafetyEvaluator:
     """Computes the effective mass of robot + object along each grasp's tip trajectory."""
 
@@ -207,36 +234,29 @@ class GraspSafetyEvaluator:
     ) -> GraspEvaluation:
         """Evaluate one grasp: IK along its tip trajectory, then effective mass per sample."""
         metric = check_metric(metric or self.config.metric)
-        trajectory = _as_quintic(trajectory)
-        times = trajectory.times_s()
-        s_values, _, _ = trajectory.path_parameter(times)
-        return self._evaluate_sampled(
+        return self.evaluate_sampled(
             index,
             grasp,
             object_inertia,
-            trajectory,
+            sample_trajectory(trajectory),
             metric,
-            times,
-            s_values,
-            _object_motion(trajectory, times),
             self.seed_q(seed_positions),
         )
 
-    def _evaluate_sampled(
+    def evaluate_sampled(
         self,
         index: int,
         grasp: Grasp,
         object_inertia: ObjectInertia,
-        trajectory: Trajectory,
+        sampled_trajectory: SampledTrajectory,
         metric: str,
-        times: np.ndarray,
-        s_values: np.ndarray,
-        object_motion: ObjectMotion | None,
         seed_q: np.ndarray,
     ) -> GraspEvaluation:
-        """``evaluate`` with the sample times, path parameters, the object's motion (None: the
-        trajectory gives each tip motion) and IK seed already computed."""
+        """``evaluate`` along a trajectory sampled once (``sample_trajectory``), with a checked
+        metric and the IK seed as a Pinocchio configuration (``seed_q``)."""
         robot = self.robot
+        trajectory, times = sampled_trajectory.trajectory, sampled_trajectory.times_s
+        s_values, object_motion = sampled_trajectory.s_values, sampled_trajectory.object_motion
         sampled = self.trajectory_for(grasp, trajectory)
         if isinstance(sampled, JointSpaceTrajectory):  # the planner's joint positions, no IK
             times = sampled.times_s()
@@ -320,24 +340,20 @@ class GraspSafetyEvaluator:
         metric = check_metric(metric or self.config.metric)
         seed_q = self.seed_q(seed_positions)  # validate once, before any work
         grasps = list(grasps)
-        trajectory = _as_quintic(trajectory)
+        sampled = sample_trajectory(trajectory)  # once for every grasp
         for grasp in grasps:
-            self.trajectory_for(grasp, trajectory)  # planned joint trajectories: validate
-
-        times = trajectory.times_s()
-        s_values, _, _ = trajectory.path_parameter(times)
-        motion = _object_motion(trajectory, times)  # sampled once for every grasp
-        executor = executor_for(self, len(grasps) * len(times))
+            self.trajectory_for(grasp, sampled.trajectory)  # planned trajectories: validate
+        executor = executor_for(self, len(grasps) * len(sampled.times_s))
         jobs = [
-            (index, grasp, object_inertia, trajectory, metric, times, s_values, motion, seed_q)
+            (index, grasp, object_inertia, sampled, metric, seed_q)
             for index, grasp in enumerate(grasps)
         ]
         if executor is None:
             results: Generator[GraspEvaluation, None, None] = (
-                self._evaluate_sampled(*job) for job in jobs
+                self.evaluate_sampled(*job) for job in jobs
             )
         else:
-            results = evaluate_jobs(self, executor, jobs, GraspSafetyEvaluator._evaluate_sampled)
+            results = evaluate_jobs(self, executor, jobs, GraspSafetyEvaluator.evaluate_sampled)
         evaluations = []
         try:
             for evaluation in results:
@@ -372,11 +388,6 @@ def positions_along(robot: RobotModel, q_all: np.ndarray) -> np.ndarray:
         else:
             columns.append(q_all[:, index])
     return np.stack(columns, axis=1)
-
-
-def _object_motion(trajectory: Trajectory, times_s: np.ndarray) -> ObjectMotion | None:
-    """The trajectory's ObjectMotion at the times, when it has one (an ObjectPath)."""
-    return trajectory.object_motion(times_s) if isinstance(trajectory, ObjectPath) else None
 
 
 def _tip_as_object_motion(tip: TipMotion) -> ObjectMotion:
