@@ -22,7 +22,7 @@ def _mobility_from_frames(chain, bodies, ws, out):
     masses, levers = bodies.masses, bodies.levers
     rotational_inertias = bodies.rotational_inertias
     jr, jp, ft = ws[0], ws[1], ws[3]
-    mass_matrix, sv, sw, jt, io, tmp = ws[15], ws[16], ws[17], ws[18], ws[19], ws[20]
+    mass_matrix, sv, sw, jt = ws[15], ws[16], ws[17], ws[18]
     n = axes.shape[0]
     for k in range(n):
         u0, u1, u2, w0, w1, w2, slide = _joint_axis_in_world(axes, prismatic, jr, k)
@@ -39,35 +39,42 @@ def _mobility_from_frames(chain, bodies, ws, out):
             jt[k, i] = (
                 base_rotation[0, i] * l0 + base_rotation[1, i] * l1 + base_rotation[2, i] * l2
             )
-    # Composite inertia of bodies k..n-1 about the world origin: mass, first moment h, io.
+    # Composite inertia of bodies k..n-1 about the world origin: mass, first moment h and
+    # rotational inertia io (symmetric: its six entries).
     total_mass = 0.0
     h0 = h1 = h2 = 0.0
-    for i in range(3):
-        for j in range(3):
-            io[i, j] = 0.0
+    i00 = i01 = i02 = i11 = i12 = i22 = 0.0
     for k in range(n - 1, -1, -1):
         m = masses[k]
+        r = jr[k]
         lx, ly, lz = levers[k, 0], levers[k, 1], levers[k, 2]
-        c0 = jp[k, 0] + jr[k, 0, 0] * lx + jr[k, 0, 1] * ly + jr[k, 0, 2] * lz
-        c1 = jp[k, 1] + jr[k, 1, 0] * lx + jr[k, 1, 1] * ly + jr[k, 1, 2] * lz
-        c2 = jp[k, 2] + jr[k, 2, 0] * lx + jr[k, 2, 1] * ly + jr[k, 2, 2] * lz
-        for i in range(3):
-            r0, r1, r2 = jr[k, i, 0], jr[k, i, 1], jr[k, i, 2]
-            for j in range(3):
-                tmp[i, j] = (
-                    r0 * rotational_inertias[k, 0, j]
-                    + r1 * rotational_inertias[k, 1, j]
-                    + r2 * rotational_inertias[k, 2, j]
-                )
+        c0 = jp[k, 0] + r[0, 0] * lx + r[0, 1] * ly + r[0, 2] * lz
+        c1 = jp[k, 1] + r[1, 0] * lx + r[1, 1] * ly + r[1, 2] * lz
+        c2 = jp[k, 2] + r[2, 0] * lx + r[2, 1] * ly + r[2, 2] * lz
+        inertia = rotational_inertias[k]
+        # R I R^T (upper triangle), with t = R I row by row.
         cc = c0 * c0 + c1 * c1 + c2 * c2
         mc0, mc1, mc2 = m * c0, m * c1, m * c2
-        for i in range(3):
-            t0, t1, t2 = tmp[i, 0], tmp[i, 1], tmp[i, 2]
-            mci = mc0 if i == 0 else (mc1 if i == 1 else mc2)
-            io[i, 0] += (t0 * jr[k, 0, 0] + t1 * jr[k, 0, 1] + t2 * jr[k, 0, 2]) - mci * c0
-            io[i, 1] += (t0 * jr[k, 1, 0] + t1 * jr[k, 1, 1] + t2 * jr[k, 1, 2]) - mci * c1
-            io[i, 2] += (t0 * jr[k, 2, 0] + t1 * jr[k, 2, 1] + t2 * jr[k, 2, 2]) - mci * c2
-            io[i, i] += m * cc
+        r00, r01, r02 = r[0, 0], r[0, 1], r[0, 2]
+        r10, r11, r12 = r[1, 0], r[1, 1], r[1, 2]
+        r20, r21, r22 = r[2, 0], r[2, 1], r[2, 2]
+        j00, j01, j02 = inertia[0, 0], inertia[0, 1], inertia[0, 2]
+        j11, j12, j22 = inertia[1, 1], inertia[1, 2], inertia[2, 2]
+        t0 = r00 * j00 + r01 * j01 + r02 * j02
+        t1 = r00 * j01 + r01 * j11 + r02 * j12
+        t2 = r00 * j02 + r01 * j12 + r02 * j22
+        i00 += t0 * r00 + t1 * r01 + t2 * r02 + m * cc - mc0 * c0
+        i01 += t0 * r10 + t1 * r11 + t2 * r12 - mc0 * c1
+        i02 += t0 * r20 + t1 * r21 + t2 * r22 - mc0 * c2
+        t0 = r10 * j00 + r11 * j01 + r12 * j02
+        t1 = r10 * j01 + r11 * j11 + r12 * j12
+        t2 = r10 * j02 + r11 * j12 + r12 * j22
+        i11 += t0 * r10 + t1 * r11 + t2 * r12 + m * cc - mc1 * c1
+        i12 += t0 * r20 + t1 * r21 + t2 * r22 - mc1 * c2
+        t0 = r20 * j00 + r21 * j01 + r22 * j02
+        t1 = r20 * j01 + r21 * j11 + r22 * j12
+        t2 = r20 * j02 + r21 * j12 + r22 * j22
+        i22 += t0 * r20 + t1 * r21 + t2 * r22 + m * cc - mc2 * c2
         h0 += mc0
         h1 += mc1
         h2 += mc2
@@ -78,9 +85,9 @@ def _mobility_from_frames(chain, bodies, ws, out):
         f0 = total_mass * v0 - (h1 * w2 - h2 * w1)
         f1 = total_mass * v1 - (h2 * w0 - h0 * w2)
         f2 = total_mass * v2 - (h0 * w1 - h1 * w0)
-        n0 = (h1 * v2 - h2 * v1) + io[0, 0] * w0 + io[0, 1] * w1 + io[0, 2] * w2
-        n1 = (h2 * v0 - h0 * v2) + io[1, 0] * w0 + io[1, 1] * w1 + io[1, 2] * w2
-        n2 = (h0 * v1 - h1 * v0) + io[2, 0] * w0 + io[2, 1] * w1 + io[2, 2] * w2
+        n0 = (h1 * v2 - h2 * v1) + i00 * w0 + i01 * w1 + i02 * w2
+        n1 = (h2 * v0 - h0 * v2) + i01 * w0 + i11 * w1 + i12 * w2
+        n2 = (h0 * v1 - h1 * v0) + i02 * w0 + i12 * w1 + i22 * w2
         for i in range(k + 1):
             value = (
                 sv[i, 0] * f0
@@ -90,33 +97,41 @@ def _mobility_from_frames(chain, bodies, ws, out):
                 + sw[i, 1] * n1
                 + sw[i, 2] * n2
             )
-            mass_matrix[i, k] = value
-            mass_matrix[k, i] = value
-    # Cholesky M = L L^T (lower triangle), X = L^-1 J^T (in jt), A = X^T X.
+            mass_matrix[k, i] = value  # the lower triangle: all the factorisation reads
+    # Cholesky M = L L^T (lower triangle; 1/L_jj in inverse_diagonal), X = L^-1 J^T (in jt),
+    # A = X^T X: the three columns of X in one pass, the six sums of A in another.
+    inverse_diagonal = ws[14]  # the IK's step: scratch here
     for j in range(n):
         total = mass_matrix[j, j]
         for k in range(j):
             total -= mass_matrix[j, k] * mass_matrix[j, k]
-        diagonal = math.sqrt(total)
-        mass_matrix[j, j] = diagonal
+        inverse = 1.0 / math.sqrt(total)
+        inverse_diagonal[j] = inverse
         for i in range(j + 1, n):
             total = mass_matrix[i, j]
             for k in range(j):
                 total -= mass_matrix[i, k] * mass_matrix[j, k]
-            mass_matrix[i, j] = total / diagonal
-    for c in range(3):
-        for i in range(n):
-            total = jt[i, c]
-            for k in range(i):
-                total -= mass_matrix[i, k] * jt[k, c]
-            jt[i, c] = total / mass_matrix[i, i]
-    for a in range(3):
-        for b in range(a, 3):
-            total = 0.0
-            for i in range(n):
-                total += jt[i, a] * jt[i, b]
-            out[a, b] = total
-            out[b, a] = total
+            mass_matrix[i, j] = total * inverse
+    a00 = a01 = a02 = a11 = a12 = a22 = 0.0
+    for i in range(n):
+        x0, x1, x2 = jt[i, 0], jt[i, 1], jt[i, 2]
+        for k in range(i):
+            factor = mass_matrix[i, k]
+            x0 -= factor * jt[k, 0]
+            x1 -= factor * jt[k, 1]
+            x2 -= factor * jt[k, 2]
+        inverse = inverse_diagonal[i]
+        x0, x1, x2 = x0 * inverse, x1 * inverse, x2 * inverse
+        jt[i, 0], jt[i, 1], jt[i, 2] = x0, x1, x2
+        a00 += x0 * x0
+        a01 += x0 * x1
+        a02 += x0 * x2
+        a11 += x1 * x1
+        a12 += x1 * x2
+        a22 += x2 * x2
+    out[0, 0], out[0, 1], out[0, 2] = a00, a01, a02
+    out[1, 0], out[1, 1], out[1, 2] = a01, a11, a12
+    out[2, 0], out[2, 1], out[2, 2] = a02, a12, a22
 
 
 @_jit

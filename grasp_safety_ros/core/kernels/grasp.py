@@ -6,7 +6,7 @@ import math
 
 from ._jit import _jit
 from .effective_mass import _mobility_from_frames
-from .ik import _solve_pose_into, _trajectory_step
+from .ik import _reset_predictor, _solve_pose_into, _trajectory_step
 from .kinematics import _forward_kinematics
 
 
@@ -47,7 +47,7 @@ def evaluate_grasp(
     target_rotations, target_translations = out.target_rotations, out.target_translations
     object_rotations, object_positions = motion.rotations, motion.positions
     linear_tangents, angular_tangents = motion.linear_tangents, motion.angular_tangents
-    tip_rotation, tangents = ws[20], out.tangents  # ws[20]: scratch 3x3
+    tip_rotation, tangents = ws[19], out.tangents  # ws[19]: scratch 3x3
     g0, g1, g2 = grasp_translation[0], grasp_translation[1], grasp_translation[2]
     for i in range(count):
         # Tip in the base frame: object pose * grasp; lever = object origin -> tip.
@@ -91,6 +91,7 @@ def evaluate_grasp(
             for k in range(seed_q.shape[0]):
                 out.q_fail[k] = q_all[0, k]
             return 4, 0, 0, 0.0
+    _reset_predictor(ws)
     for i in range(count):
         if i > 0:
             status, joint, value = _trajectory_step(

@@ -38,8 +38,8 @@ def workspace(n):
         np.empty((n, 3)),  # 16 motion subspaces, linear (world origin)
         np.empty((n, 3)),  # 17 ... angular
         np.empty((n, 3)),  # 18 tip linear Jacobian, transposed, base axes
-        np.empty((3, 3)),  # 19 composite rotational inertia about the world origin
-        np.empty((3, 3)),  # 20 scratch 3x3
+        np.empty((3, 3)),  # 19 scratch 3x3
+        np.zeros(7),  # 20 predictor: its defect D (6) and the previous |xi|^2
     )
 
 
@@ -55,7 +55,9 @@ def _predict(
     guess,
     ws,
 ):
-    """IKSolver._predict, compiled: guess = q_previous (+) J^+ log6(T_{i-1}^-1 T_i).
+    """IKSolver._predict, compiled: guess = q_previous (+) J^+ (xi + c), xi = log6(T_{i-1}^-1
+    T_i), c = r D (``method.ik``'s docstring); ws[20] holds D (overwritten with c) and the
+    previous |xi|^2 (overwritten with this one).
 
     ws must hold the joint and tip poses at q_previous (as the solve that returned it leaves
     them), so the tip-frame Jacobian there costs no forward kinematics.
@@ -66,6 +68,16 @@ def _predict(
         rotation_previous, translation_previous, rotation_next, translation_next, er, et
     )
     _log6(er, et, error)
+    defect = ws[20]
+    xi2 = 0.0
+    for j in range(6):
+        xi2 += error[j] * error[j]
+    previous_xi2 = defect[6]
+    ratio = min(xi2 / previous_xi2, settings.predictor_max_ratio) if previous_xi2 > 0.0 else 0.0
+    for j in range(6):
+        defect[j] *= ratio
+        error[j] += defect[j]
+    defect[6] = xi2
     _damped_step(jac, error, settings.max_iteration_step, ws[12], ws[13], step)
     _integrate(chain, q_previous, step, guess, False)
 
@@ -74,7 +86,8 @@ def _predict(
 def _solve_pose_into(chain, settings, target_rotation, target_translation, q_init, q, ws):
     """IKSolver._solve_python, compiled: q is overwritten; returns (converged, iterations).
 
-    On return, ws holds the joint and tip poses at the returned q.
+    The error at q_init is added to the predictor's D (ws[20]); on return, ws holds the joint
+    and tip poses at the returned q.
     """
     fr, ft = ws[2], ws[3]
     er, et, ir, it, error, jac, jlog, jk = ws[4], ws[5], ws[6], ws[7], ws[8], ws[9], ws[10], ws[11]
@@ -90,6 +103,9 @@ def _solve_pose_into(chain, settings, target_rotation, target_translation, q_ini
         _log6(er, et, error)
         position_error = math.sqrt(et[0] * et[0] + et[1] * et[1] + et[2] * et[2])
         angle_error = math.sqrt(error[3] * error[3] + error[4] * error[4] + error[5] * error[5])
+        if iteration == 0:
+            for j in range(6):
+                ws[20][j] += error[j]
         if (
             position_error <= settings.position_tolerance
             and angle_error <= settings.orientation_tolerance
@@ -129,6 +145,13 @@ def solve_pose(chain, settings, target_rotation, target_translation, q_init, q, 
     """One tip pose (world frame) from q_init into q (nq,): (converged, iterations); ws:
     ``workspace(n)``."""
     return _solve_pose_into(chain, settings, target_rotation, target_translation, q_init, q, ws)
+
+
+@_jit_inline
+def _reset_predictor(ws):
+    """No defect to extrapolate into sample 1 (ws[20], see ``_predict``)."""
+    for j in range(7):
+        ws[20][j] = 0.0
 
 
 @_jit_inline
@@ -192,6 +215,7 @@ def solve_trajectory(chain, settings, target_rotations, target_translations, tim
     """
     count = target_rotations.shape[0]
     _forward_kinematics(chain, out.q_all[0], ws)  # the predictor of sample 1 needs these poses
+    _reset_predictor(ws)
     for i in range(1, count):
         status, joint, value = _trajectory_step(
             chain, settings, target_rotations, target_translations, times, i, out, ws

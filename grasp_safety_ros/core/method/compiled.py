@@ -59,6 +59,7 @@ class IKSettings(NamedTuple):
     max_iterations: int
     max_iteration_step: float
     max_joint_step: float
+    predictor_max_ratio: float  # ik.PREDICTOR_MAX_RATIO
     any_velocity_check: bool
     check_velocity: np.ndarray  # (n,) bool: joint speed checked against velocity_limits
     velocity_limits: np.ndarray  # (n,) [rad/s or m/s]
@@ -180,6 +181,8 @@ def chain_arrays_or_reason(robot: RobotModel) -> ChainArrays | str:
 
 def ik_settings(config: IKConfig, velocity_limits: np.ndarray) -> IKSettings:
     """IKSettings of an IKConfig and the chain's velocity limits (per joint)."""
+    from .ik import PREDICTOR_MAX_RATIO  # ik imports this module
+
     velocity_limits = np.array(velocity_limits, dtype=float)
     check_velocity = np.array(
         config.check_velocity_limits & np.isfinite(velocity_limits) & (velocity_limits > 0),
@@ -191,6 +194,7 @@ def ik_settings(config: IKConfig, velocity_limits: np.ndarray) -> IKSettings:
         int(config.max_iterations),
         float(config.max_iteration_step),
         float(config.max_joint_step),
+        PREDICTOR_MAX_RATIO,
         bool(check_velocity.any()),
         check_velocity,
         velocity_limits,

@@ -1,12 +1,17 @@
 """Inverse kinematics of the tip frame along a trajectory (damped Gauss-Newton on SE(3)).
 
-Along a trajectory each sample is warm-started by a first-order predictor from the previous
-solution, q_guess = q_{i-1} (+) J^+(q_{i-1}) xi_i: xi_i = log6(T_{i-1}^-1 T_i) is the tip twist
+Along a trajectory each sample is warm-started by a predictor from the previous solution,
+q_guess = q_{i-1} (+) J^+(q_{i-1}) (xi_i + c_i): xi_i = log6(T_{i-1}^-1 T_i) is the tip twist
 between consecutive targets (tip frame) and J^+ the damped minimum-norm pseudo-inverse of the
 tip-frame (LOCAL) Jacobian at q_{i-1} (the same damping and step limit as the Gauss-Newton
-correction). Neither the predictor nor the correction steps have a null-space component, so on
-redundant arms the path follows the minimum-norm solution and does not drift along the
-self-motion manifold (as extrapolating the previous joint step would).
+correction). The first-order step J^+ xi_i misses a second-order defect, which grows as
+|xi_i|^2 and changes little from one sample to the next; c_i extrapolates it from the previous
+sample: c_i = r_i D_{i-1}, where D_{i-1} = c_{i-1} + (the error left at sample i-1's guess,
+Gauss-Newton's first residual) and r_i = min(|xi_i|^2 / |xi_{i-1}|^2, PREDICTOR_MAX_RATIO)
+(c_1 = 0). Most samples then converge at the guess, without a Gauss-Newton iteration.
+Neither the predictor nor the correction steps have a null-space component, so on redundant
+arms the path follows the minimum-norm solution and does not drift along the self-motion
+manifold (as extrapolating the previous joint step would).
 
 Two implementations of the same algorithm (same warm start, steps, tolerances and checks):
 
@@ -206,8 +211,13 @@ class IKSolver:
         return self._solve_python(target_in_world, q_init)
 
     def _solve_python(
-        self, target_in_world: pin.SE3, q_init: np.ndarray
+        self,
+        target_in_world: pin.SE3,
+        q_init: np.ndarray,
+        first_residual: np.ndarray | None = None,
     ) -> tuple[np.ndarray, bool, int]:
+        """Gauss-Newton from q_init: (q, converged, iterations); the error at q_init (tip frame)
+        is added to ``first_residual`` when given (the predictor's D)."""
         model, data, config = self.robot.model, self.data, self.config
         frame_id = self.robot.tip_frame_id
         lower, upper = self._lower_q, self._upper_q
@@ -221,6 +231,8 @@ class IKSolver:
             error_transform = current.actInv(target_in_world)
             error = pin.log6(error_transform).vector
             translation = error_transform.translation
+            if iteration == 0 and first_residual is not None:
+                first_residual += error
             if (
                 math.sqrt(translation.dot(translation)) <= position_tolerance
                 and math.sqrt(error[3:].dot(error[3:])) <= orientation_tolerance
@@ -260,18 +272,27 @@ class IKSolver:
             step *= self.config.max_iteration_step / largest
         return step
 
-    def _predict(self, q_previous: np.ndarray, motion_tip: pin.SE3) -> np.ndarray:
-        """The warm start q_previous (+) J^+ log6(motion_tip) of the next sample.
+    def _predict(
+        self, q_previous: np.ndarray, motion_tip: pin.SE3, defect: np.ndarray, previous_xi2: float
+    ) -> tuple[np.ndarray, float]:
+        """The warm start q_previous (+) J^+ (xi + c) of the next sample (module docstring) and
+        |xi|^2, for the next call.
 
         ``self.data`` must hold the joint Jacobians at q_previous (computeJointJacobians, as
-        left by the solve that returned it); motion_tip: previous target^-1 * next target.
+        left by the solve that returned it); motion_tip: previous target^-1 * next target;
+        defect: D of the previous sample, overwritten with c (``_solve_python`` then adds its
+        first residual); previous_xi2: |xi|^2 of the previous sample (0: no correction).
         """
         model = self.robot.model
         frame_jacobian = pin.getFrameJacobian(
             model, self.data, self.robot.tip_frame_id, pin.ReferenceFrame.LOCAL
         ).reshape(6, model.nv)
         twist_in_tip = pin.log6(motion_tip).vector
-        return pin.integrate(model, q_previous, self._damped_step(frame_jacobian, twist_in_tip))
+        xi2 = float(np.sum(twist_in_tip * twist_in_tip))
+        ratio = min(xi2 / previous_xi2, PREDICTOR_MAX_RATIO) if previous_xi2 > 0.0 else 0.0
+        defect *= ratio
+        step = self._damped_step(frame_jacobian, twist_in_tip + defect)
+        return pin.integrate(model, q_previous, step), xi2
 
     def solve_first(
         self, transform_tip_to_base: pin.SE3, seed_q: np.ndarray
@@ -449,11 +470,12 @@ class IKSolver:
         any_velocity_check = bool(check_velocity.any())
         pin.computeJointJacobians(model, self.data, q0)  # _predict's Jacobian at q_all[0]
         previous = pin.SE3(rotations_world[0], translations_world[0])
+        defect, xi2 = np.zeros(6), 0.0
         for i in range(1, count):
             target = pin.SE3(rotations_world[i], translations_world[i])
-            guess = self._predict(q_all[i - 1], previous.actInv(target))
+            guess, xi2 = self._predict(q_all[i - 1], previous.actInv(target), defect, xi2)
             previous = target
-            q, converged, iterations[i] = self._solve_python(target, guess)
+            q, converged, iterations[i] = self._solve_python(target, guess, defect)
             if not converged:
                 return _NOT_CONVERGED, i, 0, 0.0, q_all, iterations, q
             q_all[i] = q
@@ -480,6 +502,10 @@ class IKSolver:
         names = ", ".join(self.robot.joint_names[k] for k in np.flatnonzero(at_limit))
         return f" (joint limits reached: {names})"
 
+
+PREDICTOR_MAX_RATIO = 4.0
+"""Largest growth r_i of the predictor's defect from one sample to the next (module docstring):
+bounds the correction where a short step is followed by a long one (irregular sample times)."""
 
 _OK, _NOT_CONVERGED, _JUMP, _TOO_FAST = 0, 1, 2, 3
 """Status codes of a trajectory solve."""
