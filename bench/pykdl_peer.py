@@ -5,13 +5,13 @@ xml.etree: joints base -> tip, origins rpy/xyz, axes, link inertials). Kinematic
 joint-space inertia come from KDL (ChainFkSolverPos_recursive, ChainJntToJacSolver,
 ChainDynParam.JntToMass). The IK is the same damped Gauss-Newton loop as the core's (error
 log6 of current^-1 * target in the tip frame, Jlog6, same damping, step limit, tolerances
-1e-6 m / 1e-6 rad, the same first-order warm start q_{i-1} + J^+ log6(T_{i-1}^-1 T_i),
-deterministic restarts, jump and speed checks), with its SE(3) log written in numpy. The
-effective mass is computed as the paper would have: Lambda = (J M^-1 J^T)^-1 (numpy
-inverses), Lambda_tot = Lambda + Lambda_obj (Khatib's augmented object, T^T Lambda_com T),
-then [Lambda_tot^-1]_3x3 and 1 / (u^T A u).
+1e-6 m / 1e-6 rad, the same warm start q_{i-1} + J^+ (log6(T_{i-1}^-1 T_i) + c_i) with the
+core's extrapolated second-order defect c_i, deterministic restarts, jump and speed checks),
+with its SE(3) log written in numpy. The effective mass is computed as the paper would have:
+Lambda = (J M^-1 J^T)^-1 (numpy inverses), Lambda_tot = Lambda + Lambda_obj (Khatib's augmented
+object, T^T Lambda_com T), then [Lambda_tot^-1]_3x3 and 1 / (u^T A u).
 
-Nothing here uses Pinocchio: only the URDF file location comes from the core.
+Nothing here uses Pinocchio: only the URDF file location and the IK settings come from the core.
 """
 
 from __future__ import annotations
@@ -28,6 +28,8 @@ from types import ModuleType
 from typing import Any
 
 import numpy as np
+
+from grasp_safety_ros.core.method.ik import PREDICTOR_MAX_RATIO
 
 DIST_PACKAGES = Path("/usr/lib/python3/dist-packages")
 _EPS = float(np.finfo(float).eps)
@@ -390,8 +392,13 @@ class PyKDLPipeline:
 
     # --- IK
     def solve(
-        self, target_r: np.ndarray, target_p: np.ndarray, q_init: np.ndarray
+        self,
+        target_r: np.ndarray,
+        target_p: np.ndarray,
+        q_init: np.ndarray,
+        first_residual: np.ndarray | None = None,
     ) -> tuple[np.ndarray, bool, int]:
+        """Gauss-Newton from q_init; the error at q_init is added to ``first_residual``."""
         config = self.config
         q = np.clip(np.array(q_init, dtype=float), self.chain.lower, self.chain.upper)
         for iteration in range(config.max_iterations + 1):
@@ -400,6 +407,8 @@ class PyKDLPipeline:
             error_r = rotation.T @ target_r
             error_p = rotation.T @ (target_p - position)
             error = log6(error_r, error_p)
+            if iteration == 0 and first_residual is not None:
+                first_residual += error
             if (
                 np.linalg.norm(error_p) <= config.position_tolerance_m
                 and np.linalg.norm(error[3:]) <= config.orientation_tolerance_rad
@@ -434,17 +443,24 @@ class PyKDLPipeline:
         position_previous: np.ndarray,
         rotation: np.ndarray,
         position: np.ndarray,
-    ) -> np.ndarray:
-        """Warm start of the next sample (the core's predictor): q_previous + J^+ xi, xi the
-        tip twist from the previous target to the next (tip axes), J the tip-frame Jacobian
-        at q_previous, where the tip rotation is ``tip_rotation`` (base axes; as the core,
-        this reuses the solve's last forward kinematics)."""
+        defect: np.ndarray,
+        previous_xi2: float,
+    ) -> tuple[np.ndarray, float]:
+        """Warm start of the next sample (the core's predictor): q_previous + J^+ (xi + c), xi
+        the tip twist from the previous target to the next (tip axes), J the tip-frame
+        Jacobian at q_previous, where the tip rotation is ``tip_rotation`` (base axes; as the
+        core, this reuses the solve's last forward kinematics); c = r D, D in ``defect``
+        (overwritten with c), r = min(|xi|^2 / previous_xi2, PREDICTOR_MAX_RATIO). Returns the
+        guess and |xi|^2."""
         jacobian_base = self.jacobian(q_previous)
         local = np.vstack([tip_rotation.T @ jacobian_base[:3], tip_rotation.T @ jacobian_base[3:]])
         twist = log6(
             rotation_previous.T @ rotation, rotation_previous.T @ (position - position_previous)
         )
-        return q_previous + self._damped_step(local, twist)
+        xi2 = float(twist @ twist)
+        ratio = min(xi2 / previous_xi2, PREDICTOR_MAX_RATIO) if previous_xi2 > 0.0 else 0.0
+        defect *= ratio
+        return q_previous + self._damped_step(local, twist + defect), xi2
 
     def solve_first(
         self, target_r: np.ndarray, target_p: np.ndarray, seed: np.ndarray
@@ -511,19 +527,22 @@ class PyKDLPipeline:
         q_all = np.empty((count, self.n))
         iterations = np.zeros(count, dtype=int)
         check = config.check_velocity_limits & (self.chain.velocity > 0)
+        defect, xi2 = np.zeros(6), 0.0
         for i in range(count):
             if i == 0:
                 q, converged, iterations[i] = self.solve_first(rotations[0], positions[0], seed)
             else:
-                guess = self.predict(
+                guess, xi2 = self.predict(
                     q_all[i - 1],
                     self.last_tip_rotation,
                     rotations[i - 1],
                     positions[i - 1],
                     rotations[i],
                     positions[i],
+                    defect,
+                    xi2,
                 )
-                q, converged, iterations[i] = self.solve(rotations[i], positions[i], guess)
+                q, converged, iterations[i] = self.solve(rotations[i], positions[i], guess, defect)
             if not converged:
                 return f"IK did not converge at sample {i}", np.empty(0), q_all[:i], iterations
             q_all[i] = q

@@ -4,8 +4,8 @@
 computeFrameJacobian, one SE3 per sample) and computeMinverse + numpy per sample.
 
 Its IK warm-starts each sample by extrapolating the two previous solutions (secant); the core
-now uses a minimum-norm first-order predictor instead (no drift along the self-motion
-manifold of redundant arms), so on 7-DOF arms the joint paths, hence the effective masses and
+now uses a minimum-norm predictor instead (no drift along the self-motion manifold of
+redundant arms), so on 7-DOF arms the joint paths, hence the effective masses and
 iteration counts, differ from the reference's by design. What is still compared exactly is
 the effective-mass half: ``reference_effective_masses`` (the original code, unchanged) on the
 core's own joint path must give the core's effective masses to 1e-9 relative.
