@@ -40,17 +40,17 @@ def rank_counting_paths(
 ) -> tuple[str, dict[str, int]]:
     """Rank two grasps; return the reported backend and how often each path really ran."""
     calls = {"compiled": 0, "python": 0}
-    compiled, python = ranking_module.evaluate_grasp_compiled, IKSolver.solve_trajectory_arrays
+    compiled, python = ranking_module.evaluate_grasps_compiled, IKSolver.solve_trajectory_arrays
 
     def count_compiled(*args: Any, **kwargs: Any) -> Any:
-        calls["compiled"] += 1
+        calls["compiled"] += len(args[2])  # the grasps of the batch
         return compiled(*args, **kwargs)
 
     def count_python(self: IKSolver, *args: Any, **kwargs: Any) -> Any:
         calls["python"] += 1
         return python(self, *args, **kwargs)
 
-    monkeypatch.setattr(ranking_module, "evaluate_grasp_compiled", count_compiled)
+    monkeypatch.setattr(ranking_module, "evaluate_grasps_compiled", count_compiled)
     monkeypatch.setattr(IKSolver, "solve_trajectory_arrays", count_python)
     grasps = [Grasp(pin.SE3(np.eye(3), np.array([0.0, 0.0, z])), f"g{z}") for z in (0.0, 0.02)]
     trajectory = book_trajectory(dt_s=0.25)

@@ -566,12 +566,12 @@ def test_waypoint_trajectories_run_the_compiled_kernel(
         0.5 * (start.translation + goal.translation) + np.array([0.0, 0.02, 0.0]),
     )
     waypoints = WaypointTrajectory((0.0, 0.6, 1.0), (start, middle, goal), 0.02)
-    calls = []
-    fused = ranking_module.evaluate_grasp_compiled
+    calls: list[int] = []  # grasps evaluated by the fused kernel
+    fused = ranking_module.evaluate_grasps_compiled
     monkeypatch.setattr(
         ranking_module,
-        "evaluate_grasp_compiled",
-        lambda *args, **kwargs: calls.append(1) or fused(*args, **kwargs),
+        "evaluate_grasps_compiled",
+        lambda *args, **kwargs: calls.extend([1] * len(args[2])) or fused(*args, **kwargs),
     )
     python, compiled = evaluators(arm7)
     grasps = grasps_near_identity(4)

@@ -11,16 +11,17 @@ from .kinematics import _forward_kinematics, _joint_axis_in_world
 
 
 @_jit_inline
-def _mobility_from_frames(chain, bodies, ws, out):
+def _mobility_from_frames(chain, bodies, g, ws, out):
     """[J M^-1 J^T]_3x3 at the tip origin, base axes [1/kg], from the joint and tip poses in ws.
 
-    M: joint-space inertia of the chain whose body k has mass masses[k], centre of mass
-    levers[k] and rotational inertia about it rotational_inertias[k] (joint-k frame), by the
-    composite-rigid-body algorithm in world axes; M^-1 through its Cholesky factor.
+    M: joint-space inertia of the chain whose body k has mass masses[g, k], centre of mass
+    levers[g, k] and rotational inertia about it rotational_inertias[g, k] (joint-k frame,
+    symmetric), by the composite-rigid-body algorithm in world axes; M^-1 through its
+    Cholesky factor. ``bodies``: BodyInertias of one or more grasps (axis 0), g the grasp.
     """
     base_rotation, axes, prismatic = chain.base_rotation, chain.axes, chain.prismatic
-    masses, levers = bodies.masses, bodies.levers
-    rotational_inertias = bodies.rotational_inertias
+    masses, levers = bodies.masses[g], bodies.levers[g]
+    rotational_inertias = bodies.rotational_inertias[g]
     jr, jp, ft = ws[0], ws[1], ws[3]
     mass_matrix, sv, sw, jt = ws[15], ws[16], ws[17], ws[18]
     n = axes.shape[0]
@@ -136,8 +137,8 @@ def _mobility_from_frames(chain, bodies, ws, out):
 
 @_jit
 def translational_mobilities(chain, bodies, q_all, out, ws):
-    """_mobility_from_frames for each row of q_all, into out (N, 3, 3); ws:
-    ``ik.workspace(n)``."""
+    """_mobility_from_frames of the first grasp of ``bodies`` for each row of q_all, into out
+    (N, 3, 3); ws: ``ik.workspace(n)``."""
     for sample in range(q_all.shape[0]):
         _forward_kinematics(chain, q_all[sample], ws)
-        _mobility_from_frames(chain, bodies, ws, out[sample])
+        _mobility_from_frames(chain, bodies, 0, ws, out[sample])

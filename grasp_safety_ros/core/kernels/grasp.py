@@ -1,17 +1,56 @@
-"""The fused per-grasp kernel: IK and effective mass of one grasp along its tip path, in one
+"""The fused kernel: IK and effective mass of a batch of grasps along their tip paths, in one
 call. The object's motion (poses and tangents in the base frame) is sampled once by the caller
-for every grasp, so every trajectory type runs here; the kernel composes it with the grasp."""
+for every grasp, so every trajectory type runs here; the kernel composes it with each grasp."""
 
 import math
 
-from ._jit import _jit
+from ._jit import _jit, _jit_inline
 from .effective_mass import _mobility_from_frames
 from .ik import _reset_predictor, _solve_pose_into, _trajectory_step
 from .kinematics import _forward_kinematics
 
 
 @_jit
-def evaluate_grasp(
+def evaluate_grasps(
+    chain,
+    settings,
+    bodies,
+    motion,
+    grasp_rotations,
+    grasp_translations,
+    times,
+    seeds_q,
+    q0_given,
+    stationary_tangent,
+    out,
+    ws,
+):
+    """``_evaluate_grasp`` of each grasp g: its rows of ``bodies`` (BodyInertias), of the grasp
+    rotations (G, 3, 3) and translations (G, 3) [m], seeds_q (G, nq), q0_given (G,) and of
+    ``out`` (GraspBuffers); its outcome (status, sample, joint) in out.outcomes[g] and the
+    value in out.outcome_values[g]."""
+    for g in range(grasp_rotations.shape[0]):
+        status, sample, joint, value = _evaluate_grasp(
+            chain,
+            settings,
+            bodies,
+            motion,
+            grasp_rotations[g],
+            grasp_translations[g],
+            times,
+            seeds_q[g],
+            q0_given[g],
+            stationary_tangent,
+            out,
+            g,
+            ws,
+        )
+        out.outcomes[g, 0], out.outcomes[g, 1], out.outcomes[g, 2] = status, sample, joint
+        out.outcome_values[g] = value
+
+
+@_jit_inline
+def _evaluate_grasp(
     chain,
     settings,
     bodies,
@@ -23,9 +62,11 @@ def evaluate_grasp(
     q0_given,
     stationary_tangent,
     out,
+    g,
     ws,
 ):
-    """One grasp along the object's motion: IK and effective mass, sample by sample.
+    """One grasp (row g of ``bodies`` and ``out``) along the object's motion: IK and effective
+    mass, sample by sample.
 
     The same computation as ObjectMotion.tip_motion + IKSolver.solve_trajectory_arrays +
     translational_mobility_in_base + effective_mass_along. Inputs: ``motion`` as
@@ -38,16 +79,16 @@ def evaluate_grasp(
 
     Returns:
         (status, sample, joint, value): status 0 OK, 1 IK not converged, 2 joint jump,
-        3 joint speed over its limit, 4 sample 0 not converged from the seed (out.q_fail
-        holds the last iterate); for out.worst[i] samples (tip not translating) the caller
-        fills directions and effective masses from out.mobilities[i].
+        3 joint speed over its limit, 4 sample 0 not converged from the seed (out.q_fail[g]
+        holds the last iterate); for out.worst[g, i] samples (tip not translating) the caller
+        fills directions and effective masses from out.mobilities[g, i].
     """
     count = times.shape[0]
     base_rotation, base_translation = chain.base_rotation, chain.base_translation
-    target_rotations, target_translations = out.target_rotations, out.target_translations
+    target_rotations, target_translations = out.target_rotations[g], out.target_translations[g]
     object_rotations, object_positions = motion.rotations, motion.positions
     linear_tangents, angular_tangents = motion.linear_tangents, motion.angular_tangents
-    tip_rotation, tangents = ws[19], out.tangents  # ws[19]: scratch 3x3
+    tip_rotation, tangents = ws[19], out.tangents[g]  # ws[19]: scratch 3x3
     g0, g1, g2 = grasp_translation[0], grasp_translation[1], grasp_translation[2]
     for i in range(count):
         # Tip in the base frame: object pose * grasp; lever = object origin -> tip.
@@ -77,31 +118,43 @@ def evaluate_grasp(
                 target_rotations[i, a, b] = (
                     r0 * tip_rotation[0, b] + r1 * tip_rotation[1, b] + r2 * tip_rotation[2, b]
                 )
-    q_all, mobilities, tangent_norms = out.q_all, out.mobilities, out.tangent_norms
-    worst, directions, effective_masses = out.worst, out.directions, out.effective_masses
+    q_all, mobilities, tangent_norms = out.q_all[g], out.mobilities[g], out.tangent_norms[g]
+    worst, directions = out.worst[g], out.directions[g]
+    effective_masses, iterations = out.effective_masses[g], out.iterations[g]
+    q_fail, guess = out.q_fail[g], out.guess[g]
     if q0_given:
         for k in range(seed_q.shape[0]):
             q_all[0, k] = seed_q[k]
         _forward_kinematics(chain, q_all[0], ws)
     else:
-        converged, out.iterations[0] = _solve_pose_into(
+        converged, iterations[0] = _solve_pose_into(
             chain, settings, target_rotations[0], target_translations[0], seed_q, q_all[0], ws
         )
         if not converged:
             for k in range(seed_q.shape[0]):
-                out.q_fail[k] = q_all[0, k]
+                q_fail[k] = q_all[0, k]
             return 4, 0, 0, 0.0
     _reset_predictor(ws)
     for i in range(count):
         if i > 0:
             status, joint, value = _trajectory_step(
-                chain, settings, target_rotations, target_translations, times, i, out, ws
+                chain,
+                settings,
+                target_rotations,
+                target_translations,
+                times,
+                i,
+                q_all,
+                iterations,
+                q_fail,
+                guess,
+                ws,
             )
             if status != 0:
                 return status, i, joint, value
         # ws holds the joint poses at q_all[i] (the IK's last forward kinematics).
         mobility = mobilities[i]
-        _mobility_from_frames(chain, bodies, ws, mobility)
+        _mobility_from_frames(chain, bodies, g, ws, mobility)
         t0, t1, t2 = tangents[i, 0], tangents[i, 1], tangents[i, 2]
         norm = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
         tangent_norms[i] = norm

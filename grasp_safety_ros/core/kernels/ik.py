@@ -155,14 +155,27 @@ def _reset_predictor(ws):
 
 
 @_jit_inline
-def _trajectory_step(chain, settings, target_rotations, target_translations, times, i, out, ws):
+def _trajectory_step(
+    chain,
+    settings,
+    target_rotations,
+    target_translations,
+    times,
+    i,
+    q_all,
+    iterations,
+    q_fail,
+    guess,
+    ws,
+):
     """Sample i >= 1 of IKSolver._trajectory_python: (status, joint, value); status 0 is OK.
 
-    out: ``method.compiled.GraspBuffers`` (q_all, iterations, q_fail, guess are used). ws
-    must hold the joint and tip poses at q_all[i - 1] (for the predictor); on return it holds
-    those at q_all[i] (or at q_fail).
+    One grasp's rows of ``method.compiled.GraspBuffers``: q_all (N, nq), iterations (N,),
+    q_fail (nq,) (the iterate, kept when it fails) and guess (nq,) (scratch). ws must hold the
+    joint and tip poses at q_all[i - 1] (for the predictor); on return it holds those at
+    q_all[i] (or at q_fail).
     """
-    q_all, q = out.q_all, out.q_fail
+    q = q_fail
     q_index, continuous = chain.q_index, chain.continuous
     check_velocity, velocity_limits = settings.check_velocity, settings.velocity_limits
     _predict(
@@ -173,11 +186,11 @@ def _trajectory_step(chain, settings, target_rotations, target_translations, tim
         target_translations[i],
         settings,
         q_all[i - 1],
-        out.guess,
+        guess,
         ws,
     )
-    converged, out.iterations[i] = _solve_pose_into(
-        chain, settings, target_rotations[i], target_translations[i], out.guess, q, ws
+    converged, iterations[i] = _solve_pose_into(
+        chain, settings, target_rotations[i], target_translations[i], guess, q, ws
     )
     if not converged:
         return 1, 0, 0.0
@@ -206,19 +219,30 @@ def _trajectory_step(chain, settings, target_rotations, target_translations, tim
 
 @_jit
 def solve_trajectory(chain, settings, target_rotations, target_translations, times, out, ws):
-    """IKSolver._trajectory_python, compiled: samples 1.. from the solution out.q_all[0] of
+    """IKSolver._trajectory_python, compiled: samples 1.. from the solution out.q_all[0, 0] of
     sample 0 (world-frame targets).
 
-    Fills out.q_all and out.iterations (``GraspBuffers``); returns (status, sample, joint,
-    value) as the Python path; on failure out.q_fail holds the last iterate. ws:
-    ``workspace(n)``.
+    Fills out.q_all[0] and out.iterations[0] (``GraspBuffers`` of one grasp); returns
+    (status, sample, joint, value) as the Python path; on failure out.q_fail[0] holds the last
+    iterate. ws: ``workspace(n)``.
     """
     count = target_rotations.shape[0]
-    _forward_kinematics(chain, out.q_all[0], ws)  # the predictor of sample 1 needs these poses
+    q_all, iterations, q_fail, guess = out.q_all[0], out.iterations[0], out.q_fail[0], out.guess[0]
+    _forward_kinematics(chain, q_all[0], ws)  # the predictor of sample 1 needs these poses
     _reset_predictor(ws)
     for i in range(1, count):
         status, joint, value = _trajectory_step(
-            chain, settings, target_rotations, target_translations, times, i, out, ws
+            chain,
+            settings,
+            target_rotations,
+            target_translations,
+            times,
+            i,
+            q_all,
+            iterations,
+            q_fail,
+            guess,
+            ws,
         )
         if status != 0:
             return status, i, joint, value

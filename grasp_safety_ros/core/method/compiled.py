@@ -1,5 +1,6 @@
 """Bridge between the method and the compiled kernels: the chain as flat arrays
-(``chain_arrays``) and one grasp through the fused kernel (``evaluate_grasp_compiled``).
+(``chain_arrays``) and batches of grasps through the fused kernel
+(``evaluate_grasps_compiled``).
 
 The kernels (``core.kernels``, numba) are imported only when first called.
 """
@@ -8,11 +9,13 @@ from __future__ import annotations
 
 import threading
 import weakref
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 import pinocchio as pin
 
+from ..exceptions import GraspSafetyError
 from ..model.robot import RobotModel
 from ..model.trajectory import ObjectMotion
 from .effective_mass import (
@@ -66,37 +69,43 @@ class IKSettings(NamedTuple):
 
 
 class GraspBuffers(NamedTuple):
-    """Outputs and scratch of the fused kernel for one grasp of N samples (one value)."""
+    """Outputs and scratch of the fused kernel for G grasps of N samples (one value; axis 0
+    is the grasp)."""
 
-    target_rotations: np.ndarray  # (N, 3, 3) tip targets, world frame
-    target_translations: np.ndarray  # (N, 3) [m]
-    tangents: np.ndarray  # (N, 3) [m] tip tangents, base axes (ObjectMotion's scale)
-    tangent_norms: np.ndarray  # (N,) their norms [m]
-    q_all: np.ndarray  # (N, nq)
-    iterations: np.ndarray  # (N,) int64
-    q_fail: np.ndarray  # (nq,) last iterate of a failed sample
-    guess: np.ndarray  # (nq,) predictor scratch
-    mobilities: np.ndarray  # (N, 3, 3) [1/kg], base axes
-    effective_masses: np.ndarray  # (N,) [kg]
-    directions: np.ndarray  # (N, 3) unit, base axes
-    worst: np.ndarray  # (N,) bool: tip not translating
+    target_rotations: np.ndarray  # (G, N, 3, 3) tip targets, world frame
+    target_translations: np.ndarray  # (G, N, 3) [m]
+    tangents: np.ndarray  # (G, N, 3) [m] tip tangents, base axes (ObjectMotion's scale)
+    tangent_norms: np.ndarray  # (G, N) their norms [m]
+    q_all: np.ndarray  # (G, N, nq)
+    iterations: np.ndarray  # (G, N) int64
+    q_fail: np.ndarray  # (G, nq) last iterate of a failed sample
+    guess: np.ndarray  # (G, nq) predictor scratch
+    mobilities: np.ndarray  # (G, N, 3, 3) [1/kg], base axes
+    effective_masses: np.ndarray  # (G, N) [kg]
+    directions: np.ndarray  # (G, N, 3) unit, base axes
+    worst: np.ndarray  # (G, N) bool: tip not translating
+    outcomes: np.ndarray  # (G, 3) int64: status, sample, joint (kernels.grasp)
+    outcome_values: np.ndarray  # (G,) the value of a failed check (jump [rad], speed [rad/s])
 
 
-def grasp_buffers(count: int, nq: int) -> GraspBuffers:
-    """Fresh GraspBuffers for count samples of a chain with nq configuration entries."""
+def grasp_buffers(grasps: int, count: int, nq: int) -> GraspBuffers:
+    """Fresh GraspBuffers for ``grasps`` grasps of count samples of a chain with nq
+    configuration entries."""
     return GraspBuffers(
-        np.empty((count, 3, 3)),
-        np.empty((count, 3)),
-        np.empty((count, 3)),
-        np.empty(count),
-        np.empty((count, nq)),
-        np.zeros(count, dtype=np.int64),
-        np.empty(nq),
-        np.empty(nq),
-        np.empty((count, 3, 3)),
-        np.empty(count),
-        np.empty((count, 3)),
-        np.zeros(count, dtype=np.bool_),
+        np.empty((grasps, count, 3, 3)),
+        np.empty((grasps, count, 3)),
+        np.empty((grasps, count, 3)),
+        np.empty((grasps, count)),
+        np.empty((grasps, count, nq)),
+        np.zeros((grasps, count), dtype=np.int64),
+        np.empty((grasps, nq)),
+        np.empty((grasps, nq)),
+        np.empty((grasps, count, 3, 3)),
+        np.empty((grasps, count)),
+        np.empty((grasps, count, 3)),
+        np.zeros((grasps, count), dtype=np.bool_),
+        np.zeros((grasps, 3), dtype=np.int64),
+        np.zeros(grasps),
     )
 
 
@@ -206,7 +215,8 @@ _ROBOT_INERTIAS: weakref.WeakKeyDictionary[Any, BodyInertias] = weakref.WeakKeyD
 
 
 class CompiledGraspResult(NamedTuple):
-    """What ``evaluate_grasp_compiled`` returns; arrays have one row per sample if feasible."""
+    """One grasp's result of ``evaluate_grasps_compiled``: arrays have one row per sample if
+    feasible (up to the failing sample otherwise)."""
 
     reason: str
     q: np.ndarray
@@ -265,70 +275,75 @@ def plain_array(array: Any) -> np.ndarray:
     return array if array.flags.writeable else array.copy()
 
 
-def evaluate_grasp_compiled(
+def evaluate_grasps_compiled(
     solver: IKSolver,
     object_inertia: ObjectInertia,
-    transform_tip_to_object: Any,
+    transforms_tip_to_object: Sequence[Any],
     motion: ObjectMotion,
     times_s: np.ndarray,
     seed_q: np.ndarray,
     motion_is_tip: bool = False,
-) -> CompiledGraspResult:
-    """One grasp with the fused kernel ``evaluate_grasp`` (solver.compiled must be true).
+) -> list[CompiledGraspResult]:
+    """Grasps with the fused kernel ``evaluate_grasps``, in one call (solver.compiled must be
+    true); one result per grasp, in order.
 
     Args:
-        transform_tip_to_object: The grasp (its object inertia moves with the tip).
+        transforms_tip_to_object: The grasps (the object's inertia moves with the tip).
         motion: The object's motion at the sample times (``object_motion`` of the
-            trajectory), which the kernel composes with the grasp; with ``motion_is_tip``,
-            the tip's own motion (composed with the identity).
+            trajectory), which the kernel composes with each grasp; with ``motion_is_tip``,
+            the tip's own motion (composed with the identity; then one grasp).
 
     Directions and effective masses of samples where the tip does not translate (``worst``)
     are left for the caller. Random restarts of sample 0 run here, as in ``solve_first``.
     """
-    from ..kernels.grasp import evaluate_grasp  # imports numba: only when first needed
+    from ..kernels.grasp import evaluate_grasps  # imports numba: only when first needed
     from ..kernels.ik import solve_pose
 
     chain, settings, robot = solver.chain, solver.settings, solver.robot
-    assert chain is not None and settings is not None
+    if chain is None or settings is None:
+        raise GraspSafetyError("the compiled kernels do not support this chain")
     robot_arrays = _ROBOT_INERTIAS.get(robot)
     if robot_arrays is None:
         robot_arrays = _ROBOT_INERTIAS.setdefault(robot, robot_inertia_arrays(robot))
-    bodies = augmented_inertia_arrays(robot, object_inertia, transform_tip_to_object, robot_arrays)
-    grasp = pin.SE3.Identity() if motion_is_tip else pin.SE3(transform_tip_to_object)
+    grasps = [pin.SE3(transform) for transform in transforms_tip_to_object]
+    rotations = np.array([grasp.rotation for grasp in grasps]).reshape(-1, 3, 3)
+    translations = np.array([grasp.translation for grasp in grasps]).reshape(-1, 3)
+    bodies = augmented_inertia_arrays(robot, object_inertia, rotations, translations, robot_arrays)
+    if motion_is_tip:
+        rotations = np.repeat(np.eye(3)[None], len(grasps), axis=0)
+        translations = np.zeros((len(grasps), 3))
+    count = len(grasps)
     times_s = plain_array(times_s)
     nq = robot.model.nq
-    out = grasp_buffers(len(times_s), nq)
+    out = grasp_buffers(count, len(times_s), nq)
     ws = kernel_workspace(robot.model.nv)
-    path = (
-        ObjectMotion(*(plain_array(array) for array in motion)),
-        plain_array(grasp.rotation),
-        plain_array(grasp.translation),
-        times_s,
-    )
-    status, index, joint, value = call_kernel(
-        evaluate_grasp,
-        chain,
-        settings,
+    motion = ObjectMotion(*(plain_array(array) for array in motion))
+    seeds = np.repeat(plain_array(seed_q)[None], count, axis=0)
+    fixed = (chain, settings)
+    shared = (motion, rotations, translations, times_s)
+    call_kernel(
+        evaluate_grasps,
+        *fixed,
         bodies,
-        *path,
-        plain_array(seed_q),
-        False,
+        *shared,
+        seeds,
+        np.zeros(count, dtype=np.bool_),
         STATIONARY_TANGENT_M,
         out,
         ws,
     )
-    if status == 4:  # sample 0 failed from the seed: deterministic random restarts
-        total = int(out.iterations[0])
+    reasons = [""] * count
+    for g in np.flatnonzero(out.outcomes[:, 0] == 4):  # sample 0 failed from the seed
+        total = int(out.iterations[g, 0])
         converged = False
-        q_fail = out.q_fail
-        for restart in solver.restarts():
+        q_fail = out.q_fail[g]
+        for restart in solver.restarts():  # deterministic random restarts
             q0 = np.empty(nq)
             converged, restart_iterations = call_kernel(
                 solve_pose,
-                chain,
-                settings,
-                out.target_rotations[0],
-                out.target_translations[0],
+                *fixed,
+                out.target_rotations[g, 0],
+                out.target_translations[g, 0],
                 plain_array(restart),
                 q0,
                 ws,
@@ -338,49 +353,60 @@ def evaluate_grasp_compiled(
                 break
             q_fail = q0
         if not converged:
-            empty = np.empty(0)
-            return CompiledGraspResult(
-                solver.first_sample_reason(q_fail, times_s),
-                np.empty((0, nq)),
-                np.zeros(0, dtype=np.int64),
-                np.empty((0, 3, 3)),
-                empty,
-                np.empty((0, 3)),
-                np.zeros(0, dtype=bool),
-                empty,
-            )
-        status, index, joint, value = call_kernel(
-            evaluate_grasp,
-            chain,
-            settings,
-            bodies,
-            *path,
-            plain_array(q0),
-            True,
+            reasons[g] = solver.first_sample_reason(q_fail, times_s)
+            continue
+        row = slice(g, g + 1)
+        call_kernel(
+            evaluate_grasps,
+            *fixed,
+            BodyInertias(*(array[row] for array in bodies)),
+            motion,
+            rotations[row],
+            translations[row],
+            times_s,
+            q0[None],
+            np.ones(1, dtype=np.bool_),
             STATIONARY_TANGENT_M,
-            out,
+            GraspBuffers(*(array[row] for array in out)),
             ws,
         )
-        out.iterations[0] = total
-    if status != 0:
-        reason = solver.failure_reason(status, index, joint, value, out.q_fail, times_s)
-        return CompiledGraspResult(
-            reason,
-            out.q_all[:index],
-            out.iterations[:index],
-            out.mobilities[:index],
-            out.effective_masses[:index],
-            out.directions[:index],
-            out.worst[:index],
-            out.tangent_norms[:index],
+        out.iterations[g, 0] = total
+    results = []
+    for g in range(count):
+        status, index, joint = (int(value) for value in out.outcomes[g])
+        if reasons[g]:
+            results.append(_no_samples(reasons[g], nq))
+            continue
+        if status != 0:
+            value = float(out.outcome_values[g])
+            reasons[g] = solver.failure_reason(status, index, joint, value, out.q_fail[g], times_s)
+        else:
+            index = len(times_s)
+        results.append(
+            CompiledGraspResult(
+                reasons[g],
+                out.q_all[g, :index],
+                out.iterations[g, :index],
+                out.mobilities[g, :index],
+                out.effective_masses[g, :index],
+                out.directions[g, :index],
+                out.worst[g, :index],
+                out.tangent_norms[g, :index],
+            )
         )
+    return results
+
+
+def _no_samples(reason: str, nq: int) -> CompiledGraspResult:
+    """The result of a grasp whose first sample has no IK solution."""
+    empty = np.empty(0)
     return CompiledGraspResult(
-        "",
-        out.q_all,
-        out.iterations,
-        out.mobilities,
-        out.effective_masses,
-        out.directions,
-        out.worst,
-        out.tangent_norms,
+        reason,
+        np.empty((0, nq)),
+        np.zeros(0, dtype=np.int64),
+        np.empty((0, 3, 3)),
+        empty,
+        np.empty((0, 3)),
+        np.zeros(0, dtype=bool),
+        empty,
     )

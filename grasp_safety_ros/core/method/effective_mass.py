@@ -67,24 +67,55 @@ def robot_inertia_arrays(robot: RobotModel) -> BodyInertias:
 def augmented_inertia_arrays(
     robot: RobotModel,
     object_inertia: ObjectInertia,
-    transform_tip_to_object: pin.SE3,
+    grasp_rotations: np.ndarray,
+    grasp_translations: np.ndarray,
     robot_arrays: BodyInertias | None = None,
 ) -> BodyInertias:
-    """Body inertias of ``augmented_model`` as arrays (as ``robot_inertia_arrays``), without
-    copying the model; ``robot_arrays`` (``robot_inertia_arrays(robot)``) saves recomputing."""
+    """Body inertias of ``augmented_model`` for G grasps at once (the arrays of
+    ``robot_inertia_arrays`` with a leading grasp axis), without copying the model.
+
+    Args:
+        grasp_rotations: (G, 3, 3) rotations of the tip frame in the object frame.
+        grasp_translations: (G, 3) its origin in the object frame [m].
+        robot_arrays: ``robot_inertia_arrays(robot)``, when already computed.
+
+    The object's inertia moves to the tip body's joint frame and is added to the body's as
+    Pinocchio adds inertias (parallel-axis term m_a m_b / (m_a + m_b) of their lever arms).
+    """
     model = robot.model
     tip = model.frames[robot.tip_frame_id]
-    transform_object_to_joint = tip.placement * pin.SE3(transform_tip_to_object).inverse()
-    inertia_in_joint = transform_object_to_joint.act(object_inertia.spatial_inertia_in_object())
+    spatial = object_inertia.spatial_inertia_in_object()  # Pinocchio's symmetric tensor
+    rotations = np.asarray(grasp_rotations, dtype=float).reshape(-1, 3, 3)
+    translations = np.asarray(grasp_translations, dtype=float).reshape(-1, 3)
+    # Object frame in the joint frame: tip placement * grasp^-1.
+    tip_rotation, tip_translation = tip.placement.rotation, tip.placement.translation
+    rotation = np.einsum("ij,gkj->gik", tip_rotation, rotations)
+    translation = tip_translation - np.einsum("gij,gj->gi", rotation, translations)
+    object_mass = spatial.mass
+    object_com = np.einsum("gij,j->gi", rotation, spatial.lever) + translation
+    object_tensor = np.einsum("gij,jk,glk->gil", rotation, spatial.inertia, rotation)
+    body = model.inertias[tip.parentJoint]
+    mass = body.mass + object_mass
+    mass_inverse = 1.0 / max(mass, float(np.finfo(float).eps))
+    arm = body.lever - object_com  # (G, 3)
+    skew_square = np.einsum("gi,gj->gij", arm, arm) - np.einsum("gi,gi->g", arm, arm)[
+        :, None, None
+    ] * np.eye(3)
+    tensor = body.inertia + object_tensor - (body.mass * object_mass * mass_inverse) * skew_square
+    lever = (body.mass * mass_inverse) * body.lever + (object_mass * mass_inverse) * object_com
     masses, levers, rotational = (
-        tuple(np.array(a) for a in robot_arrays)
-        if robot_arrays is not None
-        else robot_inertia_arrays(robot)
+        robot_arrays if robot_arrays is not None else robot_inertia_arrays(robot)
     )
-    body = model.inertias[tip.parentJoint] + inertia_in_joint
-    k = tip.parentJoint - 1
-    masses[k], levers[k], rotational[k] = body.mass, body.lever, body.inertia
-    return BodyInertias(masses, levers, rotational)
+    count, k = len(rotations), tip.parentJoint - 1
+    batch = BodyInertias(
+        np.repeat(masses[None], count, axis=0),
+        np.repeat(levers[None], count, axis=0),
+        np.repeat(rotational[None], count, axis=0),
+    )
+    batch.masses[:, k] = mass
+    batch.levers[:, k] = lever
+    batch.rotational_inertias[:, k] = tensor
+    return batch
 
 
 def translational_mobilities_in_base(
@@ -112,7 +143,10 @@ def translational_mobilities_in_base(
         from ..kernels.effective_mass import translational_mobilities
         from ..kernels.ik import workspace
 
-        bodies = augmented_inertia_arrays(robot, object_inertia, transform_tip_to_object)
+        grasp = pin.SE3(transform_tip_to_object)
+        bodies = augmented_inertia_arrays(
+            robot, object_inertia, grasp.rotation[None], grasp.translation[None]
+        )
         translational_mobilities(chain, bodies, q_all, out, workspace(robot.model.nv))
         return out
     model = augmented_model(robot, object_inertia, transform_tip_to_object)

@@ -431,8 +431,8 @@ class IKSolver:
         times_s: np.ndarray,
         q0: np.ndarray,
     ) -> tuple[int, int, int, float, np.ndarray, np.ndarray, np.ndarray]:
-        out = grasp_buffers(len(rotations_world), self.robot.model.nq)
-        out.q_all[0] = q0
+        out = grasp_buffers(1, len(rotations_world), self.robot.model.nq)
+        out.q_all[0, 0] = q0
         status, index, joint, value = call_kernel(
             _kernels().solve_trajectory,
             self.chain,
@@ -448,9 +448,9 @@ class IKSolver:
             int(index),
             int(joint),
             float(value),
-            out.q_all,
-            out.iterations,
-            (out.q_fail),
+            out.q_all[0],
+            out.iterations[0],
+            out.q_fail[0],
         )
 
     def _trajectory_python(

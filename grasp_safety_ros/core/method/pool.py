@@ -76,7 +76,7 @@ def evaluate_jobs(
     """``evaluate(evaluator, *job)`` of each job on the pool, yielded in job order.
 
     ``evaluate`` must be picklable for a process pool (a module-level function or a method
-    of a module-level class, e.g. ``GraspSafetyEvaluator.evaluate_sampled``); the workers
+    of a module-level class, e.g. ``GraspSafetyEvaluator.evaluate_batch``); the workers
     call it on their own copy of the evaluator. On processes, jobs go out in contiguous chunks
     (about four per worker), which keeps the pool's per-task overhead small and the load
     balanced; on threads one job is one task (the overhead is small), so the caller sees each

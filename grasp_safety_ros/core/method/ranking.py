@@ -13,7 +13,7 @@ from ..exceptions import InvalidInputError
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
 from ..model.trajectory import ObjectMotion, ObjectPath, TipMotion, Trajectory
-from .compiled import evaluate_grasp_compiled
+from .compiled import CompiledGraspResult, evaluate_grasps_compiled
 from .effective_mass import (
     STATIONARY_TANGENT_M,
     effective_masses_along,
@@ -26,6 +26,10 @@ from .pool import evaluate_jobs, executor_for
 
 if TYPE_CHECKING:
     from .posture import PostureSelection
+
+BATCH_GRASPS = 16
+"""Grasps per call of the fused kernel in ``rank``: one job of the worker pool (its results,
+and the ``progress`` calls, come together)."""
 
 METRICS = ("mean", "max", "integral")
 """Aggregates of the per-sample effective mass: mean [kg], max [kg], integral [kg s]."""
@@ -254,60 +258,161 @@ class GraspSafetyEvaluator:
     ) -> GraspEvaluation:
         """``evaluate`` along a trajectory sampled once (``sample_trajectory``), with a checked
         metric and the IK seed as a Pinocchio configuration (``seed_q``)."""
+        return self.evaluate_batch(
+            (index,), (grasp,), object_inertia, sampled_trajectory, metric, seed_q
+        )[0]
+
+    def evaluate_batch(
+        self,
+        indices: Sequence[int],
+        grasps: Sequence[Grasp],
+        object_inertia: ObjectInertia,
+        sampled_trajectory: SampledTrajectory,
+        metric: str,
+        seed_q: np.ndarray,
+    ) -> list[GraspEvaluation]:
+        """``evaluate_sampled`` of several grasps (``indices``: their positions in the
+        candidate list). With the compiled kernels, the grasps that follow the object's
+        motion by IK run in one kernel call."""
+        motion = sampled_trajectory.object_motion
+        fused_rows = [
+            k
+            for k, grasp in enumerate(grasps)
+            if self.ik.compiled and motion is not None and grasp.joint_trajectory is None
+        ]
+        evaluations: list[GraspEvaluation | None] = [None] * len(grasps)
+        if fused_rows and motion is not None:
+            results = evaluate_grasps_compiled(
+                self.ik,
+                object_inertia,
+                [grasps[k].transform_tip_to_object for k in fused_rows],
+                motion,
+                sampled_trajectory.times_s,
+                seed_q,
+            )
+            for k, result in zip(fused_rows, results, strict=True):
+                evaluations[k] = self._from_compiled(
+                    indices[k], grasps[k], result, motion, sampled_trajectory.times_s, metric
+                )
+        for k, grasp in enumerate(grasps):
+            if evaluations[k] is None:
+                evaluations[k] = self._evaluate_one(
+                    indices[k], grasp, object_inertia, sampled_trajectory, metric, seed_q
+                )
+        return [evaluation for evaluation in evaluations if evaluation is not None]
+
+    def _from_compiled(
+        self,
+        index: int,
+        grasp: Grasp,
+        result: CompiledGraspResult,
+        motion: ObjectMotion,
+        times: np.ndarray,
+        metric: str,
+    ) -> GraspEvaluation:
+        """The GraspEvaluation of one grasp's ``evaluate_grasps_compiled`` result."""
+        if result.reason:
+            return _infeasible(index, grasp.name, result.reason, self.robot.num_joints)
+        return self._feasible(
+            index,
+            grasp,
+            times,
+            metric,
+            result.q,
+            result.iterations,
+            result.mobilities,
+            (result.effective_masses, result.directions, result.worst),
+            result.tangent_norms * motion.speed_per_tangent,
+        )
+
+    def _evaluate_one(
+        self,
+        index: int,
+        grasp: Grasp,
+        object_inertia: ObjectInertia,
+        sampled_trajectory: SampledTrajectory,
+        metric: str,
+        seed_q: np.ndarray,
+    ) -> GraspEvaluation:
+        """One grasp outside the batched kernel: a planned joint trajectory, the Python
+        backend, or a trajectory type without an ObjectMotion."""
         robot = self.robot
         trajectory, times = sampled_trajectory.trajectory, sampled_trajectory.times_s
-        s_values, object_motion = sampled_trajectory.s_values, sampled_trajectory.object_motion
+        object_motion = sampled_trajectory.object_motion
         sampled = self.trajectory_for(grasp, trajectory)
         if isinstance(sampled, JointSpaceTrajectory):  # the planner's joint positions, no IK
             times = sampled.times_s()
             tip = sampled.tip_motion(grasp.transform_tip_to_object, times)
             q_all = np.array([robot.q_from_positions(p) for p in sampled.joint_positions])
-            iterations = np.zeros(len(times), dtype=np.int64)
             mobilities = translational_mobilities_in_base(
                 robot, object_inertia, grasp.transform_tip_to_object, q_all
             )
-            masses, directions, worst = _masses_along(mobilities, tip.tangents)
-            tip_speeds = tip.speeds
-        else:  # every trajectory type: its tip path, then IK and effective mass
-            motion_is_tip = object_motion is None
-            motion = (
-                _tip_as_object_motion(trajectory.tip_motion(grasp.transform_tip_to_object, times))
-                if object_motion is None
-                else object_motion
+            return self._feasible(
+                index,
+                grasp,
+                times,
+                metric,
+                q_all,
+                np.zeros(len(times), dtype=np.int64),
+                mobilities,
+                _masses_along(mobilities, tip.tangents),
+                tip.speeds,
             )
-            if self.ik.compiled:  # in one compiled call, the grasp composed there
-                fused = evaluate_grasp_compiled(
+        if object_motion is None:  # the tip's own motion, composed with the identity
+            motion = _tip_as_object_motion(
+                trajectory.tip_motion(grasp.transform_tip_to_object, times)
+            )
+            if self.ik.compiled:
+                (result,) = evaluate_grasps_compiled(
                     self.ik,
                     object_inertia,
-                    grasp.transform_tip_to_object,
+                    [grasp.transform_tip_to_object],
                     motion,
                     times,
                     seed_q,
-                    motion_is_tip,
+                    motion_is_tip=True,
                 )
-                if fused.reason:
-                    return _infeasible(index, grasp.name, fused.reason, robot.num_joints)
-                q_all, iterations, mobilities = fused.q, fused.iterations, fused.mobilities
-                masses, directions, worst = fused.effective_masses, fused.directions, fused.worst
-                tip_speeds = fused.tangent_norms * motion.speed_per_tangent
-            else:
-                tip = motion.tip_motion(
-                    pin.SE3.Identity() if motion_is_tip else grasp.transform_tip_to_object
-                )
-                ik = self.ik.solve_trajectory_arrays(
-                    tip.rotations, tip.positions, times, s_values, seed_q
-                )
-                if not ik.feasible:
-                    return _infeasible(index, grasp.name, ik.reason, robot.num_joints)
-                q_all, iterations = ik.q, ik.iterations
-                mobilities = translational_mobilities_in_base(
-                    robot, object_inertia, grasp.transform_tip_to_object, q_all
-                )
-                masses, directions, worst = _masses_along(mobilities, tip.tangents)
-                tip_speeds = tip.speeds
+                return self._from_compiled(index, grasp, result, motion, times, metric)
+            tip = motion.tip_motion(pin.SE3.Identity())
+        else:
+            tip = object_motion.tip_motion(grasp.transform_tip_to_object)
+        ik = self.ik.solve_trajectory_arrays(
+            tip.rotations, tip.positions, times, sampled_trajectory.s_values, seed_q
+        )
+        if not ik.feasible:
+            return _infeasible(index, grasp.name, ik.reason, robot.num_joints)
+        mobilities = translational_mobilities_in_base(
+            robot, object_inertia, grasp.transform_tip_to_object, ik.q
+        )
+        return self._feasible(
+            index,
+            grasp,
+            times,
+            metric,
+            ik.q,
+            ik.iterations,
+            mobilities,
+            _masses_along(mobilities, tip.tangents),
+            tip.speeds,
+        )
+
+    def _feasible(
+        self,
+        index: int,
+        grasp: Grasp,
+        times: np.ndarray,
+        metric: str,
+        q_all: np.ndarray,
+        iterations: np.ndarray,
+        mobilities: np.ndarray,
+        masses_directions_worst: tuple[np.ndarray, np.ndarray, np.ndarray],
+        tip_speeds: np.ndarray,
+    ) -> GraspEvaluation:
+        """The GraspEvaluation of a feasible grasp: where the tip does not translate
+        (``worst``), the direction of largest effective mass and its mass are filled in."""
+        masses, directions, worst = masses_directions_worst
         for i in np.flatnonzero(worst):
             directions[i], masses[i] = worst_direction(mobilities[i])
-        positions = positions_along(robot, q_all)
         return GraspEvaluation(
             index=index,
             name=grasp.name,
@@ -315,7 +420,7 @@ class GraspSafetyEvaluator:
             reason="",
             score=aggregate(masses, times, metric),
             times_s=times,
-            joint_positions=positions,
+            joint_positions=positions_along(self.robot, q_all),
             directions_in_base=directions,
             effective_mass_kg=masses,
             direction_is_worst_case=worst,
@@ -334,6 +439,9 @@ class GraspSafetyEvaluator:
     ) -> Ranking:
         """Evaluate every grasp and rank the feasible ones, safest first.
 
+        The grasps go to the kernels in batches of at most BATCH_GRASPS (on the worker pool
+        for large requests).
+
         Args:
             progress: Called as ``progress(done, total)`` after each grasp.
         """
@@ -345,23 +453,31 @@ class GraspSafetyEvaluator:
             self.trajectory_for(grasp, sampled.trajectory)  # planned trajectories: validate
         executor = executor_for(self, len(grasps) * len(sampled.times_s))
         jobs = [
-            (index, grasp, object_inertia, sampled, metric, seed_q)
-            for index, grasp in enumerate(grasps)
+            (
+                range(start, min(start + BATCH_GRASPS, len(grasps))),
+                grasps[start : start + BATCH_GRASPS],
+                object_inertia,
+                sampled,
+                metric,
+                seed_q,
+            )
+            for start in range(0, len(grasps), BATCH_GRASPS)
         ]
         if executor is None:
-            results: Generator[GraspEvaluation, None, None] = (
-                self.evaluate_sampled(*job) for job in jobs
+            batches: Generator[list[GraspEvaluation], None, None] = (
+                self.evaluate_batch(*job) for job in jobs
             )
         else:
-            results = evaluate_jobs(self, executor, jobs, GraspSafetyEvaluator.evaluate_sampled)
-        evaluations = []
+            batches = evaluate_jobs(self, executor, jobs, GraspSafetyEvaluator.evaluate_batch)
+        evaluations: list[GraspEvaluation] = []
         try:
-            for evaluation in results:
-                evaluations.append(evaluation)
-                if progress is not None:
-                    progress(len(evaluations), len(grasps))
+            for batch in batches:
+                for evaluation in batch:
+                    evaluations.append(evaluation)
+                    if progress is not None:
+                        progress(len(evaluations), len(grasps))
         finally:
-            results.close()  # progress raised: stop the work still queued
+            batches.close()  # progress raised: stop the work still queued
         return Ranking(
             joint_names=self.robot.joint_names,
             metric=metric,
