@@ -150,3 +150,51 @@ def test_progress_counts_every_unit_and_can_abandon(tmp_path: Path) -> None:
             ranking=ranking,
             progress=abandon,
         )
+
+
+def test_analyses_share_one_augmented_model_per_grasp(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Exposed points, redundancy and effort all need the robot + object model of a grasp:
+    it is built once per feasible grasp, not once per analysis, and the shared one gives the
+    same report as each analysis building its own."""
+    from grasp_safety_ros.core import EvaluationConfig, GraspSafetyEvaluator
+    from grasp_safety_ros.core.analyses import effort, exposed_points, redundancy, safety_report
+    from grasp_safety_ros.core.method.effective_mass import augmented_model
+
+    scenario = parse_scenario(coarse(EXTENDED, redundancy=True), tmp_path)
+    evaluator = GraspSafetyEvaluator(scenario.robot.load(), EvaluationConfig())
+    ranking = evaluator.rank(
+        scenario.grasps, scenario.object_inertia, scenario.trajectory, scenario.robot.seed
+    )
+    options = scenario.options
+    assert options.points_in_object_m is not None and options.redundancy and options.effort
+
+    def run() -> safety_report.SafetyReport:
+        return safety_report.analyse(
+            evaluator,
+            scenario.grasps,
+            scenario.object_inertia,
+            scenario.trajectory,
+            options,
+            ranking=ranking,
+        )
+
+    built: list[int] = []
+
+    def counting(*args: object) -> object:
+        built.append(1)
+        return augmented_model(*args)  # type: ignore[arg-type]
+
+    for module in (safety_report, exposed_points, redundancy, effort):
+        monkeypatch.setattr(module, "augmented_model", counting)
+    shared = run()
+    feasible = sum(e.feasible for e in ranking.evaluations)
+    assert feasible >= 2
+    assert len(built) == feasible
+    monkeypatch.setattr(safety_report, "augmented_model", lambda *args: None)  # each its own
+    separate = run()
+    assert len(built) == 4 * feasible  # 3 more per grasp: exposed points, redundancy, effort
+    np.testing.assert_array_equal(shared.scores, separate.scores)
+    for a, b in zip(shared.effort, separate.effort, strict=True):
+        np.testing.assert_array_equal(a.joint_torques, b.joint_torques)

@@ -134,12 +134,15 @@ def evaluate_effort(
     grasp: Grasp,
     trajectory: Trajectory,
     joint_positions: np.ndarray | None = None,
+    model: pin.Model | None = None,
 ) -> EffortEvaluation:
     """Joint velocities, accelerations and torques with the object, per sample, and summaries.
 
     Args:
         joint_positions: (N, n) positions to use instead of the evaluation's (e.g.
             RedundancyResolution.joint_positions); same samples and tip poses.
+        model: The ``augmented_model`` of robot, object and grasp, when already built
+            (shared across analyses).
     """
     n = robot.num_joints
     limits = effort_limits(robot)
@@ -171,7 +174,8 @@ def evaluate_effort(
         )
     kinematic_model = robot.model
     kinematics = kinematic_model.createData()
-    model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
+    if model is None:
+        model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
     data = model.createData()
     q_all = [robot.q_from_positions(p) for p in positions]
     # The IK makes q a function of the path parameter s only: null-space rates from

@@ -29,7 +29,7 @@ from ..method.effective_mass import STATIONARY_TANGENT_M, augmented_model
 from ..method.ranking import Grasp, GraspEvaluation, aggregate, check_metric
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
-from ..model.trajectory import Trajectory
+from ..model.trajectory import ObjectPath, Trajectory
 
 METRIC_POINTS = ("tip", "leading_point", "worst_point")
 """Which point's effective mass a score uses: the tip, the leading point, the worst point."""
@@ -218,11 +218,13 @@ def evaluate_exposed_points(
     grasp: Grasp,
     trajectory: Trajectory,
     points_in_object_m: Any,
+    model: pin.Model | None = None,
 ) -> ExposedPointsEvaluation:
     """Effective mass, speed and direction of motion at each object point, per sample.
 
     Reuses the evaluation's joint positions (no IK). ``grasp`` and ``trajectory`` must be the
-    ones the evaluation was computed with.
+    ones the evaluation was computed with; ``model``: their ``augmented_model``, when already
+    built (shared across analyses).
     """
     points = check_points_in_object(points_in_object_m)
     count_points = len(points)
@@ -252,12 +254,21 @@ def evaluate_exposed_points(
     positions = np.empty((count, count_points, 3))
     tangents = np.empty((count, count_points, 3))
     speeds = np.empty((count, count_points))
+    object_motion = (  # sampled once for every point
+        trajectory.object_motion(times) if isinstance(trajectory, ObjectPath) else None
+    )
     for k, point in enumerate(points):
-        motion = trajectory.tip_motion(pin.SE3(np.eye(3), point), times)
+        frame = pin.SE3(np.eye(3), point)
+        motion = (
+            trajectory.tip_motion(frame, times)
+            if object_motion is None
+            else object_motion.tip_motion(frame)
+        )
         positions[:, k] = motion.positions
         tangents[:, k] = motion.tangents
         speeds[:, k] = motion.speeds
-    model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
+    if model is None:
+        model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
     data = model.createData()
     mobilities = np.empty((count, count_points, 3, 3))
     for i, positions_i in enumerate(evaluation.joint_positions):

@@ -434,10 +434,12 @@ def resolve_redundancy(
     grasp: Grasp,
     trajectory: Trajectory,
     config: RedundancyConfig | None = None,
+    model: pin.Model | None = None,
 ) -> RedundancyResolution:
     """Lower the effective mass of one evaluated grasp through a smooth null-space motion.
 
-    ``grasp`` and ``trajectory`` must be the ones the evaluation was computed with.
+    ``grasp`` and ``trajectory`` must be the ones the evaluation was computed with;
+    ``model``: their ``augmented_model``, when already built (shared across analyses).
     """
     config = config or RedundancyConfig()
     original = np.asarray(evaluation.joint_positions, dtype=float)
@@ -452,7 +454,8 @@ def resolve_redundancy(
             config,
             f"no redundancy: {robot.model.nv} joints for a {TASK_DIMENSION}-D tip pose",
         )
-    model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
+    if model is None:
+        model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
     problem = _SampleProblem(robot, model, config)
     times = np.asarray(evaluation.times_s, dtype=float)
     s_values, s_rate, s_accel = trajectory.path_parameter(times)

@@ -12,8 +12,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import pinocchio as pin
 
 from ..exceptions import InvalidInputError
+from ..method.effective_mass import augmented_model
 from ..method.ranking import Grasp, GraspSafetyEvaluator, Ranking, aggregate
 from ..model.inertia import ObjectInertia
 from ..model.trajectory import Trajectory
@@ -27,7 +29,12 @@ from .exposed_points import (
 )
 from .iso15066 import PowerForceLimitAssessment, assess_grasp, assess_motion, select_regions
 from .multi_objective import QualityRanking, rank_with_quality
-from .redundancy import RedundancyConfig, RedundancyResolution, resolve_redundancy
+from .redundancy import (
+    TASK_DIMENSION,
+    RedundancyConfig,
+    RedundancyResolution,
+    resolve_redundancy,
+)
 from .uncertainty import InertiaUncertainty, UncertaintyAnalysis, analyse_inertia_uncertainty
 
 RANK_BY = ("safety", "effort")
@@ -160,18 +167,28 @@ def analyse(
         if progress is not None:
             progress(done, per_grasp)
 
+    # Shared by every analysis: each grasp's motion, and its augmented model when one needs it.
+    motions = [evaluator.trajectory_for(g, trajectory) for g in grasps]
+    models: dict[int, pin.Model] = {}
+
+    def model_of(k: int) -> pin.Model:
+        if k not in models:
+            models[k] = augmented_model(robot, object_inertia, grasps[k].transform_tip_to_object)
+        return models[k]
+
     exposed: tuple[ExposedPointsEvaluation, ...] = ()
     if options.points_in_object_m is not None:
         exposed_list = []
-        for e, g in zip(evaluations, grasps, strict=True):
+        for k, (e, g) in enumerate(zip(evaluations, grasps, strict=True)):
             exposed_list.append(
                 evaluate_exposed_points(
                     robot,
                     e,
                     object_inertia,
                     g,
-                    evaluator.trajectory_for(g, trajectory),
+                    motions[k],
                     options.points_in_object_m,
+                    model_of(k) if e.feasible else None,
                 )
             )
             step()
@@ -180,9 +197,11 @@ def analyse(
     if options.redundancy:
         config = RedundancyConfig(metric=metric, max_joint_step=evaluator.config.ik.max_joint_step)
         resolutions = []
-        for e, g in zip(evaluations, grasps, strict=True):
-            motion = evaluator.trajectory_for(g, trajectory)
-            resolutions.append(resolve_redundancy(robot, e, object_inertia, g, motion, config))
+        for k, (e, g) in enumerate(zip(evaluations, grasps, strict=True)):
+            model = model_of(k) if e.feasible and robot.model.nv > TASK_DIMENSION else None
+            resolutions.append(
+                resolve_redundancy(robot, e, object_inertia, g, motions[k], config, model)
+            )
             step()
         redundancy = tuple(resolutions)
 
@@ -205,7 +224,7 @@ def analyse(
                 assess_motion(
                     speeds,
                     masses,
-                    evaluator.trajectory_for(grasps[k], trajectory).duration_s,
+                    motions[k].duration_s,
                     regions,
                     index=evaluation.index,
                     name=evaluation.name,
@@ -231,8 +250,10 @@ def analyse(
             resolved = (
                 redundancy[k].joint_positions if redundancy and redundancy[k].applied else None
             )
-            motion = evaluator.trajectory_for(g, trajectory)
-            efforts.append(evaluate_effort(robot, e, object_inertia, g, motion, resolved))
+            model = model_of(k) if e.feasible else None
+            efforts.append(
+                evaluate_effort(robot, e, object_inertia, g, motions[k], resolved, model)
+            )
             step()
         effort = tuple(efforts)
     if options.rank_by == "effort":

@@ -188,10 +188,11 @@ def chain_arrays_or_reason(robot: RobotModel) -> ChainArrays | str:
     return arrays
 
 
-def ik_settings(config: IKConfig, velocity_limits: np.ndarray) -> IKSettings:
-    """IKSettings of an IKConfig and the chain's velocity limits (per joint)."""
-    from .ik import PREDICTOR_MAX_RATIO  # ik imports this module
-
+def ik_settings(
+    config: IKConfig, velocity_limits: np.ndarray, predictor_max_ratio: float
+) -> IKSettings:
+    """IKSettings of an IKConfig, the chain's velocity limits (per joint) and the predictor's
+    largest defect growth (``ik.PREDICTOR_MAX_RATIO``)."""
     velocity_limits = np.array(velocity_limits, dtype=float)
     check_velocity = np.array(
         config.check_velocity_limits & np.isfinite(velocity_limits) & (velocity_limits > 0),
@@ -203,7 +204,7 @@ def ik_settings(config: IKConfig, velocity_limits: np.ndarray) -> IKSettings:
         int(config.max_iterations),
         float(config.max_iteration_step),
         float(config.max_joint_step),
-        PREDICTOR_MAX_RATIO,
+        float(predictor_max_ratio),
         bool(check_velocity.any()),
         check_velocity,
         velocity_limits,

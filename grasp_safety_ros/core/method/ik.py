@@ -164,7 +164,9 @@ class IKSolver:
         chain = chain_arrays_or_reason(robot) if backend != "python" else "requested"
         self.chain = chain if isinstance(chain, ChainArrays) else None
         self.settings = (
-            ik_settings(self.config, robot.velocity_limits) if self.chain is not None else None
+            ik_settings(self.config, robot.velocity_limits, PREDICTOR_MAX_RATIO)
+            if self.chain is not None
+            else None
         )
         if backend == "compiled" and self.chain is None:
             raise InvalidInputError(
