@@ -282,7 +282,7 @@ def evaluate_grasps_compiled(
     transforms_tip_to_object: Sequence[Any],
     motion: ObjectMotion,
     times_s: np.ndarray,
-    seed_q: np.ndarray,
+    seeds_q: np.ndarray,
     motion_is_tip: bool = False,
 ) -> list[CompiledGraspResult]:
     """Grasps with the fused kernel ``evaluate_grasps``, in one call (solver.compiled must be
@@ -290,6 +290,7 @@ def evaluate_grasps_compiled(
 
     Args:
         transforms_tip_to_object: The grasps (the object's inertia moves with the tip).
+        seeds_q: The IK seed of sample 0: (nq,) for every grasp, or (G, nq) one per grasp.
         motion: The object's motion at the sample times (``object_motion`` of the
             trajectory), which the kernel composes with each grasp; with ``motion_is_tip``,
             the tip's own motion (composed with the identity; then one grasp).
@@ -319,7 +320,7 @@ def evaluate_grasps_compiled(
     out = grasp_buffers(count, len(times_s), nq)
     ws = kernel_workspace(robot.model.nv)
     motion = ObjectMotion(*(plain_array(array) for array in motion))
-    seeds = np.repeat(plain_array(seed_q)[None], count, axis=0)
+    seeds = plain_array(np.broadcast_to(seeds_q, (count, nq)))
     fixed = (chain, settings)
     shared = (motion, rotations, translations, times_s)
     call_kernel(

@@ -176,7 +176,6 @@ def select_posture(
     found: list[np.ndarray] = []
     if single_ik.feasible:
         found.append(np.asarray(single_ik.joint_positions[0], dtype=float))
-    candidates = [single_ik]
     converged_any = single_ik.feasible
     for seed in seeds:
         q, converged, _ = solver.solve(start_tip_in_base, robot.q_from_positions(seed))
@@ -187,15 +186,16 @@ def select_posture(
         if any(np.max(np.abs(positions - other)) < tolerance for other in found):
             continue
         found.append(positions)
-        candidates.append(
-            evaluator.evaluate_sampled(
-                single_ik.index,
-                grasp,
-                object_inertia,
-                sampled,
-                metric,
-                robot.q_from_positions(positions),
-            )
+    starts = found[1:] if single_ik.feasible else found  # the single IK's is evaluated
+    candidates = [single_ik]
+    if starts:  # every new start posture followed in one batch
+        candidates += evaluator.evaluate_batch(
+            [single_ik.index] * len(starts),
+            [grasp] * len(starts),
+            object_inertia,
+            sampled,
+            metric,
+            np.array([robot.q_from_positions(positions) for positions in starts]),
         )
     feasible = [k for k, e in enumerate(candidates) if e.feasible]
     if not feasible:

@@ -273,8 +273,10 @@ class GraspSafetyEvaluator:
         seed_q: np.ndarray,
     ) -> list[GraspEvaluation]:
         """``evaluate_sampled`` of several grasps (``indices``: their positions in the
-        candidate list). With the compiled kernels, the grasps that follow the object's
-        motion by IK run in one kernel call."""
+        candidate list; ``seed_q``: one IK seed for all, (nq,), or one per grasp, (G, nq)).
+        With the compiled kernels, the grasps that follow the object's motion by IK run in
+        one kernel call."""
+        seeds = np.broadcast_to(seed_q, (len(grasps), seed_q.shape[-1]))
         motion = sampled_trajectory.object_motion
         fused_rows = [
             k
@@ -289,7 +291,7 @@ class GraspSafetyEvaluator:
                 [grasps[k].transform_tip_to_object for k in fused_rows],
                 motion,
                 sampled_trajectory.times_s,
-                seed_q,
+                seeds[fused_rows],
             )
             for k, result in zip(fused_rows, results, strict=True):
                 evaluations[k] = self._from_compiled(
@@ -298,7 +300,7 @@ class GraspSafetyEvaluator:
         for k, grasp in enumerate(grasps):
             if evaluations[k] is None:
                 evaluations[k] = self._evaluate_one(
-                    indices[k], grasp, object_inertia, sampled_trajectory, metric, seed_q
+                    indices[k], grasp, object_inertia, sampled_trajectory, metric, seeds[k]
                 )
         return [evaluation for evaluation in evaluations if evaluation is not None]
 
