@@ -3,14 +3,16 @@
 ``kinematics`` (forward kinematics, tip Jacobian, integrate / difference of configurations),
 ``lie_group`` (Pinocchio's log3 / log6 / Jlog6 / exp3), ``linalg`` (LU solve, damped
 least-squares step), ``ik`` (pose and trajectory IK), ``effective_mass`` (translational
-mobility) and ``grasp`` (the fused per-grasp kernel: IK and effective mass along a tip path
-computed by the caller, so every trajectory type runs compiled). They mirror the
-Pinocchio-based Python loops of ``core.method`` operation for operation, so per-sample results
-equal the Python path's to rounding, for serial chains of revolute, continuous ((cos, sin) in
-q, as Pinocchio) and prismatic joints. Their inputs come packed, one value each, as
+mobility) and ``grasp`` (the fused kernel: IK and effective mass of a batch of grasps along
+the object's motion, sampled once by the caller, so every trajectory type runs compiled). They
+mirror the Pinocchio-based Python loops of ``core.method`` operation for operation, so
+per-sample results equal the Python path's to rounding, for serial chains of revolute,
+continuous ((cos, sin) in q, as Pinocchio) and prismatic joints. Their inputs come packed, one value each, as
 ``core.method`` builds them: the chain (``ChainArrays``), the IK settings (``IKSettings``), the
-body inertias (``BodyInertias``) and the per-grasp buffers (``GraspBuffers``). They import
-nothing from the package but ``_jit``; only ``core.method`` imports them. They release the GIL
+body inertias (``BodyInertias``), the object's motion (``ObjectMotion``) and the buffers
+(``GraspBuffers``), with a workspace of scratch arrays (``ik.workspace``): they allocate
+nothing, so they run without numba's reference counting (``_jit``). They import nothing from
+the package but ``_jit``; only ``core.method`` imports them. They release the GIL
 (``nogil=True``).
 
 numba's disk cache (``cache=True``, in ``__pycache__``) is invalidated only when a function's

@@ -319,8 +319,8 @@ class IKSolver:
         s_values: np.ndarray,
         seed_q: np.ndarray,
     ) -> IKTrajectoryResult:
-        """Solve every sample, each warm-started by the first-order predictor from the previous
-        solution (module docstring): the joint path has no self-motion.
+        """Solve every sample, each warm-started by the predictor from the previous solution
+        (module docstring): the joint path has no self-motion.
 
         The result is infeasible (with a reason) when a sample does not converge, or joint
         positions jump by more than ``max_joint_step`` or exceed the velocity limits between
