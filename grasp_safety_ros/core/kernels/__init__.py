@@ -7,13 +7,13 @@ mobility) and ``grasp`` (the fused kernel: IK and effective mass of a batch of g
 the object's motion, sampled once by the caller, so every trajectory type runs compiled). They
 mirror the Pinocchio-based Python loops of ``core.method`` operation for operation, so
 per-sample results equal the Python path's to rounding, for serial chains of revolute,
-continuous ((cos, sin) in q, as Pinocchio) and prismatic joints. Their inputs come packed, one value each, as
-``core.method`` builds them: the chain (``ChainArrays``), the IK settings (``IKSettings``), the
-body inertias (``BodyInertias``), the object's motion (``ObjectMotion``) and the buffers
-(``GraspBuffers``), with a workspace of scratch arrays (``ik.workspace``): they allocate
-nothing, so they run without numba's reference counting (``_jit``). They import nothing from
-the package but ``_jit``; only ``core.method`` imports them. They release the GIL
-(``nogil=True``).
+continuous ((cos, sin) in q, as Pinocchio) and prismatic joints. Their inputs come packed,
+one value each, as ``core.method`` builds them: the chain (``ChainArrays``), the IK settings
+(``IKSettings``), the body inertias (``BodyInertias``), the object's motion
+(``ObjectMotion``) and the buffers (``GraspBuffers``), with a workspace of scratch arrays
+(``ik.workspace``): they allocate nothing, so they run without numba's reference counting
+(``_jit``). They import nothing from the package but ``_jit``; only ``core.method`` imports
+them. They release the GIL (``nogil=True``).
 
 numba's disk cache (``cache=True``, in ``__pycache__``) is invalidated only when a function's
 own file changes, yet the kernels call each other across files. So ``_jit`` keeps a digest of

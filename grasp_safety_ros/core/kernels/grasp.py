@@ -120,8 +120,11 @@ def _evaluate_grasp(
                 )
     q_all, mobilities, tangent_norms = out.q_all[g], out.mobilities[g], out.tangent_norms[g]
     worst, directions = out.worst[g], out.directions[g]
-    effective_masses, iterations = out.effective_masses[g], out.iterations[g]
-    q_fail, guess = out.q_fail[g], out.guess[g]
+    effective_masses, iterations, q_fail = (
+        out.effective_masses[g],
+        out.iterations[g],
+        out.q_fail[g],
+    )
     if q0_given:
         for k in range(seed_q.shape[0]):
             q_all[0, k] = seed_q[k]
@@ -138,17 +141,7 @@ def _evaluate_grasp(
     for i in range(count):
         if i > 0:
             status, joint, value = _trajectory_step(
-                chain,
-                settings,
-                target_rotations,
-                target_translations,
-                times,
-                i,
-                q_all,
-                iterations,
-                q_fail,
-                guess,
-                ws,
+                chain, settings, target_rotations, target_translations, times, i, out, g, ws
             )
             if status != 0:
                 return status, i, joint, value

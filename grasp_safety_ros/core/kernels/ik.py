@@ -155,27 +155,15 @@ def _reset_predictor(ws):
 
 
 @_jit_inline
-def _trajectory_step(
-    chain,
-    settings,
-    target_rotations,
-    target_translations,
-    times,
-    i,
-    q_all,
-    iterations,
-    q_fail,
-    guess,
-    ws,
-):
+def _trajectory_step(chain, settings, target_rotations, target_translations, times, i, out, g, ws):
     """Sample i >= 1 of IKSolver._trajectory_python: (status, joint, value); status 0 is OK.
 
-    One grasp's rows of ``method.compiled.GraspBuffers``: q_all (N, nq), iterations (N,),
-    q_fail (nq,) (the iterate, kept when it fails) and guess (nq,) (scratch). ws must hold the
-    joint and tip poses at q_all[i - 1] (for the predictor); on return it holds those at
-    q_all[i] (or at q_fail).
+    Grasp g's rows of ``out`` (``method.compiled.GraspBuffers``): q_all, iterations, q_fail
+    (the iterate, kept when it fails) and guess (scratch). ws must hold the joint and tip
+    poses at q_all[i - 1] (for the predictor); on return it holds those at q_all[i] (or at
+    q_fail).
     """
-    q = q_fail
+    q_all, iterations, q, guess = out.q_all[g], out.iterations[g], out.q_fail[g], out.guess[g]
     q_index, continuous = chain.q_index, chain.continuous
     check_velocity, velocity_limits = settings.check_velocity, settings.velocity_limits
     _predict(
@@ -227,22 +215,11 @@ def solve_trajectory(chain, settings, target_rotations, target_translations, tim
     iterate. ws: ``workspace(n)``.
     """
     count = target_rotations.shape[0]
-    q_all, iterations, q_fail, guess = out.q_all[0], out.iterations[0], out.q_fail[0], out.guess[0]
-    _forward_kinematics(chain, q_all[0], ws)  # the predictor of sample 1 needs these poses
+    _forward_kinematics(chain, out.q_all[0, 0], ws)  # the predictor of sample 1 needs these
     _reset_predictor(ws)
     for i in range(1, count):
         status, joint, value = _trajectory_step(
-            chain,
-            settings,
-            target_rotations,
-            target_translations,
-            times,
-            i,
-            q_all,
-            iterations,
-            q_fail,
-            guess,
-            ws,
+            chain, settings, target_rotations, target_translations, times, i, out, 0, ws
         )
         if status != 0:
             return status, i, joint, value

@@ -153,7 +153,8 @@ def select_posture(
     seeds: np.ndarray | None = None,
     sampled: SampledTrajectory | None = None,
 ) -> tuple[GraspEvaluation, PostureSelection]:
-    """The lowest-score posture of one grasp (module docstring).
+    """The lowest-score posture of one grasp (module docstring); a grasp with a planned joint
+    trajectory keeps its posture (``single_ik``).
 
     Args:
         single_ik: The grasp's evaluation from the configured seed (the paper's single IK).
@@ -164,6 +165,8 @@ def select_posture(
     Returns:
         The kept evaluation (``single_ik`` itself when nothing scores lower) and the record.
     """
+    if grasp.joint_trajectory is not None:  # a planned motion: its posture is given
+        return single_ik, single_posture(single_ik)
     if seeds is None:
         seeds = restart_seeds(evaluator, config)
     if sampled is None:
@@ -267,9 +270,9 @@ def select_postures(
     # Work estimate: every grasp followed from up to restarts + 1 postures.
     executor = executor_for(evaluator, len(grasps) * len(sampled.times_s) * (len(seeds) + 1))
     results = (
-        (_select_for_grasp(evaluator, *job) for job in jobs)
+        (select_posture(evaluator, *job) for job in jobs)
         if executor is None
-        else evaluate_jobs(evaluator, executor, jobs, _select_for_grasp)
+        else evaluate_jobs(evaluator, executor, jobs, select_posture)
     )
     evaluations: list[GraspEvaluation] = []
     selections: list[PostureSelection] = []
@@ -286,23 +289,4 @@ def select_postures(
         order=order_by_score(evaluations),
         evaluations=tuple(evaluations),
         postures=tuple(selections),
-    )
-
-
-def _select_for_grasp(
-    evaluator: GraspSafetyEvaluator,
-    grasp: Grasp,
-    object_inertia: ObjectInertia,
-    trajectory: ObjectTrajectory,
-    single_ik: GraspEvaluation,
-    config: PostureConfig,
-    metric: str,
-    seeds: np.ndarray,
-    sampled: SampledTrajectory,
-) -> tuple[GraspEvaluation, PostureSelection]:
-    """``select_posture`` of one grasp, as a pool job (a planned motion keeps its posture)."""
-    if grasp.joint_trajectory is not None:
-        return single_ik, single_posture(single_ik)
-    return select_posture(
-        evaluator, grasp, object_inertia, trajectory, single_ik, config, metric, seeds, sampled
     )

@@ -239,28 +239,13 @@ class GraspSafetyEvaluator:
     ) -> GraspEvaluation:
         """Evaluate one grasp: IK along its tip trajectory, then effective mass per sample."""
         metric = check_metric(metric or self.config.metric)
-        return self.evaluate_sampled(
-            index,
-            grasp,
+        return self.evaluate_batch(
+            (index,),
+            (grasp,),
             object_inertia,
             sample_trajectory(trajectory),
             metric,
             self.seed_q(seed_positions),
-        )
-
-    def evaluate_sampled(
-        self,
-        index: int,
-        grasp: Grasp,
-        object_inertia: ObjectInertia,
-        sampled_trajectory: SampledTrajectory,
-        metric: str,
-        seed_q: np.ndarray,
-    ) -> GraspEvaluation:
-        """``evaluate`` along a trajectory sampled once (``sample_trajectory``), with a checked
-        metric and the IK seed as a Pinocchio configuration (``seed_q``)."""
-        return self.evaluate_batch(
-            (index,), (grasp,), object_inertia, sampled_trajectory, metric, seed_q
         )[0]
 
     def evaluate_batch(
@@ -272,10 +257,11 @@ class GraspSafetyEvaluator:
         metric: str,
         seed_q: np.ndarray,
     ) -> list[GraspEvaluation]:
-        """``evaluate_sampled`` of several grasps (``indices``: their positions in the
-        candidate list; ``seed_q``: one IK seed for all, (nq,), or one per grasp, (G, nq)).
-        With the compiled kernels, the grasps that follow the object's motion by IK run in
-        one kernel call."""
+        """``evaluate`` of several grasps along a trajectory sampled once
+        (``sample_trajectory``), with a checked metric. ``indices``: their positions in the
+        candidate list; ``seed_q``: the IK seed as a Pinocchio configuration, one for all
+        (nq,) or one per grasp (G, nq). With the compiled kernels, the grasps that follow the
+        object's motion by IK run in one kernel call."""
         seeds = np.broadcast_to(seed_q, (len(grasps), seed_q.shape[-1]))
         motion = sampled_trajectory.object_motion
         fused_rows = [
