@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 
 from grasp_safety_ros.core import ObjectInertia, RobotModel, solid_box
 from grasp_safety_ros.core.method.effective_mass import (
+    augmented_inertia_arrays,
     augmented_model,
     effective_mass_along,
     translational_mobility_in_base,
@@ -183,3 +184,26 @@ def test_worst_direction_maximises_effective_mass(arm7: RobotModel) -> None:
     assert effective_mass_along(matrix, direction) == pytest.approx(worst, rel=1e-12)
     for _ in range(200):
         assert effective_mass_along(matrix, rng.normal(size=3)) <= worst * (1 + 1e-12)
+
+
+def test_augmented_inertia_arrays_equal_the_augmented_model(baxter: RobotModel) -> None:
+    """The batched body inertias the kernels take (numpy, one row per grasp) equal the bodies
+    of Pinocchio's augmented model, grasp by grasp; other bodies are the robot's own."""
+    rng = np.random.default_rng(21)
+    obj = random_object(rng)
+    grasps = [random_grasp(rng) for _ in range(5)]
+    batch = augmented_inertia_arrays(
+        baxter,
+        obj,
+        np.array([g.rotation for g in grasps]),
+        np.array([g.translation for g in grasps]),
+    )
+    for g, grasp in enumerate(grasps):
+        model = augmented_model(baxter, obj, grasp)
+        for k in range(baxter.model.nv):
+            body = model.inertias[k + 1]
+            assert batch.masses[g, k] == pytest.approx(body.mass, rel=1e-14)
+            np.testing.assert_allclose(batch.levers[g, k], body.lever, rtol=0, atol=1e-14)
+            np.testing.assert_allclose(
+                batch.rotational_inertias[g, k], body.inertia, rtol=0, atol=1e-14
+            )
