@@ -20,11 +20,16 @@ from geometry_msgs.msg import (
     Transform,
     Vector3,
 )
+from grasp_safety_msgs.msg import GraspEvaluation as GraspEvaluationMsg
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from nav_msgs.msg import Path
 from std_msgs.msg import Header
-from trajectory_msgs.msg import MultiDOFJointTrajectory, MultiDOFJointTrajectoryPoint
+from trajectory_msgs.msg import (
+    JointTrajectory,
+    MultiDOFJointTrajectory,
+    MultiDOFJointTrajectoryPoint,
+)
 from visualization_msgs.msg import Marker
 
 from grasp_safety_ros.core import (
@@ -61,6 +66,7 @@ from grasp_safety_ros.ros.conversions import (
     transforms_from_pose_msgs,
     vector3_msgs,
 )
+from grasp_safety_ros.ros.parameters import ResponseContent
 
 
 def pose(xyz: tuple[float, float, float], xyzw: tuple[float, float, float, float]) -> Pose:
@@ -483,6 +489,34 @@ def test_report_message_with_default_options_is_the_ranking_message(arm6: RobotM
         else:
             assert math.isnan(got.safety_score) and got.iso_ts_15066 == []
             assert not got.iso_admissible and math.isnan(got.iso_min_duration_s)
+
+
+def test_report_message_content_drops_only_what_it_is_told(arm6: RobotModel) -> None:
+    report, request = _report(arm6, points_in_object_m=box_corners_in_object([0.1, 0.1, 0.1]))
+    full = report_msg(report, request, "base_link", Time(sec=3), 0.5)
+    first = report.order[0]
+    for content, with_trajectory in (
+        (ResponseContent(1, per_sample=False), {first}),
+        (ResponseContent(0, per_sample=True), set()),
+    ):
+        message = report_msg(report, request, "base_link", Time(sec=3), 0.5, content)
+        expected = copy.deepcopy(full)
+        for item in expected.evaluations:
+            if item.index not in with_trajectory:
+                item.joint_trajectory = JointTrajectory()
+            if not content.per_sample:
+                for name in (
+                    "time_from_start_s",
+                    "effective_mass_kg",
+                    "direction",
+                    "direction_is_worst_case",
+                    "leading_point_effective_mass_kg",
+                    "worst_point_effective_mass_kg",
+                ):
+                    setattr(item, name, getattr(GraspEvaluationMsg(), name))  # empty
+        assert repr(message) == repr(expected)  # every field; NaN-safe, unlike ==
+        assert len(full.evaluations[first].leading_point_effective_mass_kg) > 0
+        assert len(full.evaluations[first].joint_trajectory.points) > 0
 
 
 def test_report_message_carries_every_analysis(arm6: RobotModel) -> None:
