@@ -244,8 +244,9 @@ def node_spans(node: Any, request: Any) -> dict[str, float]:
     return spans
 
 
-def _events_client(client_node: Any) -> tuple[Any, Any] | None:
-    """A second client of the service on rclpy's EventsExecutor, or None without it."""
+def _events_client(client_node: Any) -> tuple[Any, Any, Any] | None:
+    """(executor, client, node): a second client of the service on rclpy's EventsExecutor, or
+    None without it."""
     try:
         from grasp_safety_msgs.srv import RankGrasps
         from rclpy.experimental import EventsExecutor
@@ -258,8 +259,10 @@ def _events_client(client_node: Any) -> tuple[Any, Any] | None:
     executor.add_node(node)
     client = node.create_client(RankGrasps, "/grasp_safety/rank_grasps")
     if not client.wait_for_service(timeout_sec=20.0):
+        executor.shutdown()
+        node.destroy_node()
         return None
-    return executor, client
+    return executor, client, node
 
 
 def latency(arm: ArmWorkload, repeats: int, overrides: dict[str, Any]) -> dict[str, Any]:
@@ -289,7 +292,7 @@ def latency(arm: ArmWorkload, repeats: int, overrides: dict[str, Any]) -> dict[s
             empty_elapsed = time.perf_counter() - started
             if events is not None:
                 started = time.perf_counter()
-                call(*events, request)
+                call(events[0], events[1], request)
                 events_trips.append(time.perf_counter() - started)
             if k >= 3:  # the first calls warm caches up
                 round_trips.append(elapsed)
@@ -299,6 +302,7 @@ def latency(arm: ArmWorkload, repeats: int, overrides: dict[str, Any]) -> dict[s
                     spans.setdefault(name, []).append(value)
         if events is not None:
             events[0].shutdown()
+            events[2].destroy_node()
         evaluations = response.ranking.evaluations
     result = {
         "robot": arm.name,

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import copy
+import gc
 import math
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -47,6 +49,7 @@ from grasp_safety_ros.core.method.executable import joint_velocities_acceleratio
 from grasp_safety_ros.core.method.posture import PostureConfig, select_postures
 from grasp_safety_ros.core.method.ranking import GraspEvaluation, Ranking
 from grasp_safety_ros.core.model.waypoint_trajectory import WaypointTrajectory
+from grasp_safety_ros.ros import conversions
 from grasp_safety_ros.ros.conversions import (
     check_grasp_array,
     duration_msg,
@@ -517,6 +520,35 @@ def test_report_message_content_drops_only_what_it_is_told(arm6: RobotModel) -> 
         assert repr(message) == repr(expected)  # every field; NaN-safe, unlike ==
         assert len(full.evaluations[first].leading_point_effective_mass_kg) > 0
         assert len(full.evaluations[first].joint_trajectory.points) > 0
+
+
+def test_collector_is_paused_while_building_and_restored_after(arm6: RobotModel) -> None:
+    report, request = _report(arm6)
+    states: list[bool] = []
+    original = conversions._report_msg
+
+    def spying(*args: Any) -> Any:
+        states.append(gc.isenabled())
+        with conversions.collector_paused:  # nested (as a concurrent build): still paused
+            states.append(gc.isenabled())
+        states.append(gc.isenabled())
+        return original(*args)
+
+    assert gc.isenabled()
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(conversions, "_report_msg", spying)
+        report_msg(report, request, "base_link", Time(), 0.0)
+        assert states == [False, False, False] and gc.isenabled()
+        gc.disable()  # someone else's choice is kept
+        try:
+            report_msg(report, request, "base_link", Time(), 0.0)
+            assert not gc.isenabled()
+        finally:
+            gc.enable()
+        patch.setattr(conversions, "_report_msg", lambda *args: 1 / 0)
+        with pytest.raises(ZeroDivisionError):
+            report_msg(report, request, "base_link", Time(), 0.0)
+        assert gc.isenabled()
 
 
 def test_report_message_carries_every_analysis(arm6: RobotModel) -> None:

@@ -9,7 +9,9 @@ quaternion_msg_from_rotation. Each function raises InvalidInputError naming the 
 from __future__ import annotations
 
 import array
+import gc
 import math
+import threading
 from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import replace
 from typing import Any
@@ -484,6 +486,39 @@ def seed_from_joint_state(
 # --- Results ---------------------------------------------------------------------------------
 
 
+class _CollectorPause:
+    """Context manager: the cyclic garbage collector paused while a result message is built.
+
+    A response holds a Python object per sample (``direction`` vectors, trajectory points) and
+    per region; none of them forms a reference cycle, but their allocation triggers the
+    collector over and over (it walks every tracked object of the process): 40 % of the
+    building time of a 1,000 x 201 response. Reference counting still frees everything; the
+    collector resumes (if it was running) when the last of concurrent builds ends.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._depth = 0
+        self._resume = False
+
+    def __enter__(self) -> None:
+        with self._lock:
+            if self._depth == 0:
+                self._resume = gc.isenabled()
+                gc.disable()
+            self._depth += 1
+
+    def __exit__(self, *exc_info: object) -> None:
+        with self._lock:
+            self._depth -= 1
+            if self._depth == 0 and self._resume:
+                gc.enable()
+
+
+collector_paused = _CollectorPause()
+"""Pauses the garbage collector for ranking_msg and report_msg (re-entrant, thread-safe)."""
+
+
 def float64_array(values: Sequence[float] | np.ndarray) -> array.array:
     """``array('d')`` of ``values``: what a float64[] field holds; built from the bytes, so
     the message setter stores it as is instead of converting element by element."""
@@ -687,16 +722,17 @@ def ranking_msg(
     which grasps carry their ``joint_trajectory`` and whether the per-sample arrays are
     filled (default: all of them).
     """
-    message = _ranking_msg_without_trajectories(
-        ranking, grasps, base_frame, stamp, compute_time_s, order, content.per_sample
-    )
-    _set_joint_trajectories(
-        message,
-        ranking.joint_names,
-        {e.index: (e.times_s, e.joint_positions) for e in ranking.evaluations},
-        content.with_joint_trajectory(message.order, len(ranking.evaluations)),
-        base_frame,
-    )
+    with collector_paused:
+        message = _ranking_msg_without_trajectories(
+            ranking, grasps, base_frame, stamp, compute_time_s, order, content.per_sample
+        )
+        _set_joint_trajectories(
+            message,
+            ranking.joint_names,
+            {e.index: (e.times_s, e.joint_positions) for e in ranking.evaluations},
+            content.with_joint_trajectory(message.order, len(ranking.evaluations)),
+            base_frame,
+        )
     return message
 
 
@@ -811,6 +847,18 @@ def report_msg(
     there: the first grasps of the final order carry their joint trajectory (the
     redundancy-resolved one where it was applied), the per-sample arrays are filled or not.
     """
+    with collector_paused:
+        return _report_msg(report, grasps, base_frame, stamp, compute_time_s, content)
+
+
+def _report_msg(
+    report: SafetyReport,
+    grasps: PoseArray,
+    base_frame: str,
+    stamp: Time,
+    compute_time_s: float,
+    content: ResponseContent,
+) -> GraspRanking:
     options = report.options
     quality_given = options.grasp_quality is not None
     per_sample = content.per_sample
