@@ -458,25 +458,28 @@ def bench_continuous(arm: ArmWorkload, repeats: int) -> dict[str, Any]:
 def service_latency(arm: ArmWorkload, repeats: int) -> dict[str, Any]:
     """The node's service cost (bench/service.py), Baxter: 10 grasps x 101 samples (latency,
     the ranking's own time, spans) and 1,000 grasps x 201 samples end to end, for issue 12's
-    comparable configuration (``posture.restarts`` 0, default response: the top-level keys)
-    and for the node's defaults (``node_defaults``)."""
-    del arm  # bench/service.py's workload is Baxter's
+    comparable configuration (``posture.restarts`` 0, default response: the top-level keys),
+    the same with ``response.per_sample`` false (``per_sample_off``) and the node's defaults
+    (``node_defaults``)."""
     try:
         import service as service_bench
 
         results = service_bench.run(repeats, large_repeats=1)
     except (ImportError, RuntimeError) as error:
         return {"median_ms": None, "reason": f"node not measurable: {error}"}
-    comparable, defaults = results["issue_comparable"], results["node_defaults"]
+
+    def flat(name: str) -> dict[str, Any]:
+        measured = results[name]
+        return {
+            "configuration": measured["description"],
+            **measured["latency_10x101"],
+            "end_to_end_1000x201": measured.get("end_to_end_1000x201"),
+        }
+
     return {
-        "configuration": comparable["description"],
-        **comparable["latency_10x101"],
-        "end_to_end_1000x201": comparable.get("end_to_end_1000x201"),
-        "node_defaults": {
-            "configuration": defaults["description"],
-            **defaults["latency_10x101"],
-            "end_to_end_1000x201": defaults.get("end_to_end_1000x201"),
-        },
+        **flat("issue_comparable"),
+        "per_sample_off": flat("issue_comparable_per_sample_off"),
+        "node_defaults": flat("node_defaults"),
         "load_average_1min": results["load_average_1min"],
     }
 
@@ -697,6 +700,7 @@ def print_table(results: dict[str, Any]) -> None:
         return
     for label, measured in (
         ("posture.restarts 0", service),
+        ("posture.restarts 0, response.per_sample false", service["per_sample_off"]),
         ("node defaults", service["node_defaults"]),
     ):
         print(

@@ -8,6 +8,8 @@ example; also rclpy's EventsExecutor, whose own cost is smaller). Two node confi
 
 - ``issue_comparable``: ``posture.restarts`` 0 (the paper's single IK, what the node ran when
   issue 12's targets were written) and the default response;
+- ``issue_comparable_per_sample_off``: the same with ``response.per_sample`` false (scores
+  and aggregates only, the first grasp's joint trajectory);
 - ``node_defaults``: the node's default parameters (posture selection with 8 restarts).
 
 Each is measured for:
@@ -48,11 +50,13 @@ from workload import ARMS, ArmWorkload, box_object, grasps_around_box
 
 CONFIGURATIONS: dict[str, dict[str, Any]] = {
     "issue_comparable": {"posture.restarts": 0},
+    "issue_comparable_per_sample_off": {"posture.restarts": 0, "response.per_sample": False},
     "node_defaults": {},
 }
 """Node parameters of each measured configuration, on top of the benchmark's."""
 DESCRIPTIONS = {
     "issue_comparable": "posture.restarts 0 (the paper's single IK), default response",
+    "issue_comparable_per_sample_off": "posture.restarts 0, response.per_sample false",
     "node_defaults": "the node's defaults (posture.restarts 8, default response)",
 }
 SPANS = ("convert", "rank", "posture", "analyse", "response", "serialise", "deserialise")
@@ -152,6 +156,11 @@ def rank_request(arm: ArmWorkload, num_grasps: int) -> Any:
     request.object_inertia = inertia_msg_from_object(box_object())
     request.metric = "mean"
     return request
+
+
+def samples_per_grasp(dt_s: float) -> int:
+    """Samples of rank_request's 2 s trajectory at the node's ``trajectory.dt_s``."""
+    return round(2.0 / dt_s) + 1
 
 
 def call(client_executor: Any, client: Any, request: Any, timeout_s: float = 60.0) -> Any:
@@ -307,7 +316,7 @@ def latency(arm: ArmWorkload, repeats: int, overrides: dict[str, Any]) -> dict[s
     result = {
         "robot": arm.name,
         "grasps": len(evaluations),
-        "samples_per_grasp": len(evaluations[0].time_from_start_s),
+        "samples_per_grasp": samples_per_grasp(0.02),
         "feasible_grasps": sum(1 for e in evaluations if e.feasible),
         "joint_trajectories_sent": sum(1 for e in evaluations if e.joint_trajectory.points),
         "repeats": repeats,
@@ -344,7 +353,7 @@ def large(arm: ArmWorkload, repeats: int, overrides: dict[str, Any]) -> dict[str
     result = {
         "robot": arm.name,
         "grasps": len(evaluations),
-        "samples_per_grasp": max(len(e.time_from_start_s) for e in evaluations),
+        "samples_per_grasp": samples_per_grasp(0.01),
         "feasible_grasps": sum(1 for e in evaluations if e.feasible),
         "joint_trajectories_sent": sum(1 for e in evaluations if e.joint_trajectory.points),
         "repeats": repeats,
