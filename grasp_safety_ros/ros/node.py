@@ -13,8 +13,7 @@ that cannot get the lock within ``service_busy_timeout_s`` is answered busy, and
 longer than ``max_compute_time_s`` is abandoned, so a slow request never blocks the next one
 for ever (checked after every grasp of the ranking, also on the worker pool; the analyses
 after it run to the end). The GIL still makes a long ranking share the CPU with the other
-callbacks. The markers are built, and the ranking published (serialised), only when they have
-a subscriber (_OnDemandPublisher).
+callbacks. The markers are built only when they have a subscriber (_OnDemandPublisher).
 """
 
 from __future__ import annotations
@@ -240,7 +239,7 @@ class GraspSafetyNode(Node):
 
         self._service_group = ReentrantCallbackGroup()
         self._topic_group = MutuallyExclusiveCallbackGroup()
-        self._ranking_pub = _OnDemandPublisher(self, GraspRanking, "~/ranking")
+        self._ranking_pub = self.create_publisher(GraspRanking, "~/ranking", LATCHED)
         self._ranked_pub = self.create_publisher(PoseArray, "~/ranked_grasps", LATCHED)
         self._markers_pub = _OnDemandPublisher(self, MarkerArray, "~/markers")
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
@@ -748,7 +747,7 @@ class GraspSafetyNode(Node):
         result = report_msg(
             report, grasps_msg, settings.base_frame, stamp, compute_time_s, settings.response
         )
-        self._ranking_pub.publish(lambda: result)  # serialised only for a subscriber
+        self._ranking_pub.publish(result)
         self._ranked_pub.publish(result.ranked_grasps)
         self._markers_pub.publish(
             lambda: markers_msg(
