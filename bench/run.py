@@ -456,17 +456,30 @@ def bench_continuous(arm: ArmWorkload, repeats: int) -> dict[str, Any]:
 
 # ----------------------------------------------------------------------------- service
 def service_latency(arm: ArmWorkload, repeats: int) -> dict[str, Any]:
-    """The node's service cost (bench/service.py): 10 grasps x 101 samples (latency, the
-    ranking's own time, spans) and 1,000 grasps x 201 samples end to end (Baxter)."""
+    """The node's service cost (bench/service.py), Baxter: 10 grasps x 101 samples (latency,
+    the ranking's own time, spans) and 1,000 grasps x 201 samples end to end, for issue 12's
+    comparable configuration (``posture.restarts`` 0, default response: the top-level keys),
+    the same with ``response.per_sample`` false (``per_sample_off``) and the node's defaults
+    (``node_defaults``)."""
     try:
         import service as service_bench
 
         results = service_bench.run(repeats, large_repeats=1)
     except (ImportError, RuntimeError) as error:
         return {"median_ms": None, "reason": f"node not measurable: {error}"}
+
+    def flat(name: str) -> dict[str, Any]:
+        measured = results[name]
+        return {
+            "configuration": measured["description"],
+            **measured["latency_10x101"],
+            "end_to_end_1000x201": measured.get("end_to_end_1000x201"),
+        }
+
     return {
-        **results["latency_10x101"],
-        "end_to_end_1000x201": results.get("end_to_end_1000x201"),
+        **flat("issue_comparable"),
+        "per_sample_off": flat("issue_comparable_per_sample_off"),
+        "node_defaults": flat("node_defaults"),
         "load_average_1min": results["load_average_1min"],
     }
 
@@ -684,19 +697,24 @@ def print_table(results: dict[str, Any]) -> None:
     service = results["service"]
     if service.get("median_ms") is None:
         print(f"service latency: n/a ({service.get('reason')})")
-    else:
+        return
+    for label, measured in (
+        ("posture.restarts 0", service),
+        ("posture.restarts 0, response.per_sample false", service["per_sample_off"]),
+        ("node defaults", service["node_defaults"]),
+    ):
         print(
-            f"service latency (10 x 101, Baxter): median {fmt(service['median_ms'])} ms, p90 "
-            f"{fmt(service['latency_ms']['p90'])} ms "
-            f"[{fmt(service['latency_ms']['min'])}..{fmt(service['latency_ms']['max'])}], "
-            f"ranking alone {fmt(service['ranking_ms']['median'])} ms "
-            f"(x{fmt(service['latency_over_ranking'])})"
+            f"service latency (10 x 101, Baxter, {label}): median {fmt(measured['median_ms'])} "
+            f"ms, p90 {fmt(measured['latency_ms']['p90'])} ms "
+            f"[{fmt(measured['latency_ms']['min'])}..{fmt(measured['latency_ms']['max'])}], "
+            f"ranking alone {fmt(measured['ranking_ms']['median'])} ms "
+            f"(x{fmt(measured['latency_over_ranking'])})"
         )
-        large = service.get("end_to_end_1000x201")
+        large = measured.get("end_to_end_1000x201")
         if large:
             print(
-                f"service end to end (1000 x 201, Baxter): {fmt(large['wall_s'], '.3f')} s, "
-                f"response {large['response_bytes']} bytes"
+                f"service end to end (1000 x 201, Baxter, {label}): "
+                f"{fmt(large['wall_s'], '.3f')} s, response {large['response_bytes']} bytes"
             )
 
 

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import copy
+import gc
 import math
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -20,11 +22,16 @@ from geometry_msgs.msg import (
     Transform,
     Vector3,
 )
+from grasp_safety_msgs.msg import GraspEvaluation as GraspEvaluationMsg
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from nav_msgs.msg import Path
 from std_msgs.msg import Header
-from trajectory_msgs.msg import MultiDOFJointTrajectory, MultiDOFJointTrajectoryPoint
+from trajectory_msgs.msg import (
+    JointTrajectory,
+    MultiDOFJointTrajectory,
+    MultiDOFJointTrajectoryPoint,
+)
 from visualization_msgs.msg import Marker
 
 from grasp_safety_ros.core import (
@@ -42,6 +49,7 @@ from grasp_safety_ros.core.method.executable import joint_velocities_acceleratio
 from grasp_safety_ros.core.method.posture import PostureConfig, select_postures
 from grasp_safety_ros.core.method.ranking import GraspEvaluation, Ranking
 from grasp_safety_ros.core.model.waypoint_trajectory import WaypointTrajectory
+from grasp_safety_ros.ros import conversions
 from grasp_safety_ros.ros.conversions import (
     check_grasp_array,
     duration_msg,
@@ -61,6 +69,7 @@ from grasp_safety_ros.ros.conversions import (
     transforms_from_pose_msgs,
     vector3_msgs,
 )
+from grasp_safety_ros.ros.parameters import ResponseContent
 
 
 def pose(xyz: tuple[float, float, float], xyzw: tuple[float, float, float, float]) -> Pose:
@@ -483,6 +492,63 @@ def test_report_message_with_default_options_is_the_ranking_message(arm6: RobotM
         else:
             assert math.isnan(got.safety_score) and got.iso_ts_15066 == []
             assert not got.iso_admissible and math.isnan(got.iso_min_duration_s)
+
+
+def test_report_message_content_drops_only_what_it_is_told(arm6: RobotModel) -> None:
+    report, request = _report(arm6, points_in_object_m=box_corners_in_object([0.1, 0.1, 0.1]))
+    full = report_msg(report, request, "base_link", Time(sec=3), 0.5)
+    first = report.order[0]
+    for content, with_trajectory in (
+        (ResponseContent(1, per_sample=False), {first}),
+        (ResponseContent(0, per_sample=True), set()),
+    ):
+        message = report_msg(report, request, "base_link", Time(sec=3), 0.5, content)
+        expected = copy.deepcopy(full)
+        for item in expected.evaluations:
+            if item.index not in with_trajectory:
+                item.joint_trajectory = JointTrajectory()
+            if not content.per_sample:
+                for name in (
+                    "time_from_start_s",
+                    "effective_mass_kg",
+                    "direction",
+                    "direction_is_worst_case",
+                    "leading_point_effective_mass_kg",
+                    "worst_point_effective_mass_kg",
+                ):
+                    setattr(item, name, getattr(GraspEvaluationMsg(), name))  # empty
+        assert repr(message) == repr(expected)  # every field; NaN-safe, unlike ==
+        assert len(full.evaluations[first].leading_point_effective_mass_kg) > 0
+        assert len(full.evaluations[first].joint_trajectory.points) > 0
+
+
+def test_collector_is_paused_while_building_and_restored_after(arm6: RobotModel) -> None:
+    report, request = _report(arm6)
+    states: list[bool] = []
+    original = conversions._report_msg
+
+    def spying(*args: Any) -> Any:
+        states.append(gc.isenabled())
+        with conversions.collector_paused:  # nested (as a concurrent build): still paused
+            states.append(gc.isenabled())
+        states.append(gc.isenabled())
+        return original(*args)
+
+    assert gc.isenabled()
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(conversions, "_report_msg", spying)
+        report_msg(report, request, "base_link", Time(), 0.0)
+        assert states == [False, False, False] and gc.isenabled()
+        gc.disable()  # someone else's choice is kept
+        try:
+            report_msg(report, request, "base_link", Time(), 0.0)
+            assert not gc.isenabled()
+        finally:
+            gc.enable()
+        patch.setattr(conversions, "_report_msg", lambda *args: 1 / 0)
+        with pytest.raises(ZeroDivisionError):
+            report_msg(report, request, "base_link", Time(), 0.0)
+        assert gc.isenabled()
 
 
 def test_report_message_carries_every_analysis(arm6: RobotModel) -> None:

@@ -84,6 +84,7 @@ NODE_PARAMETERS = {
     "service_busy_timeout_s": 0.3,
     "diagnostics_period_s": 0.5,
     "posture.restarts": 0,  # the paper's single IK; posture selection: its own tests below
+    "response.joint_trajectories": MAX_GRASPS,  # every grasp's; the default (1): tests below
 }
 
 
@@ -1155,3 +1156,112 @@ def test_posture_restarts_parameter_is_typed_and_bounded(ros: NodeUnderTest) -> 
     assert descriptor.integer_range[0].from_value == 0
     assert descriptor.integer_range[0].to_value >= 100
     assert "restarts" in descriptor.description
+
+
+# --- What the response carries (parameters response.*) ----------------------------------------
+
+PER_SAMPLE_FIELDS = (
+    "time_from_start_s",
+    "effective_mass_kg",
+    "direction",
+    "direction_is_worst_case",
+    "leading_point_effective_mass_kg",
+    "worst_point_effective_mass_kg",
+)
+
+
+def _with_trajectory(ranking: GraspRanking) -> list[int]:
+    return [e.index for e in ranking.evaluations if e.joint_trajectory.points]
+
+
+def test_response_joint_trajectories_counts_grasps_of_the_final_order(ros: NodeUnderTest) -> None:
+    request = book_request()
+    request.grasp_quality = [0.9, 0.1, 0.5]  # a final order that is not the index order
+    full = ros.rank(request)
+    assert full.success, full.message
+    order = list(full.ranking.order)
+    assert len(order) == 3 and order != sorted(order)
+    assert _with_trajectory(full.ranking) == [0, 1, 2]  # the tests' setting: all
+    try:
+        for count, expected in ((1, order[:1]), (2, order[:2]), (0, []), (3, order)):
+            (result,) = ros.set_parameters(response__joint_trajectories=count)
+            assert result.successful, result.reason
+            response = ros.rank(request)
+            assert response.success, response.message
+            assert sorted(_with_trajectory(response.ranking)) == sorted(expected), count
+            assert list(response.ranking.order) == order
+            for got, want in zip(
+                response.ranking.evaluations, full.ranking.evaluations, strict=True
+            ):
+                if got.joint_trajectory.points:  # the same motion as in the full response
+                    assert got.joint_trajectory == want.joint_trajectory
+                else:
+                    assert got.joint_trajectory.points == []
+    finally:
+        (result,) = ros.set_parameters(response__joint_trajectories=MAX_GRASPS)
+        assert result.successful, result.reason
+
+
+def test_response_per_sample_false_leaves_the_arrays_empty_and_keeps_the_scores(
+    ros: NodeUnderTest,
+) -> None:
+    request = book_request()
+    request.metric_point = "leading_point"  # fills the exposed-point arrays too
+    full = ros.rank(request)
+    assert full.success, full.message
+    (result,) = ros.set_parameters(response__per_sample=False)
+    assert result.successful, result.reason
+    try:
+        response = ros.rank(request)
+    finally:
+        (result,) = ros.set_parameters(response__per_sample=True)
+        assert result.successful, result.reason
+    assert response.success, response.message
+    assert list(response.ranking.order) == list(full.ranking.order)
+    for got, want in zip(response.ranking.evaluations, full.ranking.evaluations, strict=True):
+        assert want.feasible and len(want.leading_point_effective_mass_kg) > 0
+        for field in PER_SAMPLE_FIELDS:
+            assert len(getattr(got, field)) == 0, field
+        for field in ("score", "safety_score", "peak_effective_mass_kg", "iso_min_duration_s"):
+            assert getattr(got, field) == getattr(want, field), field
+        assert got.mean_effective_mass_kg == pytest.approx(np.mean(want.effective_mass_kg))
+        assert repr(got.iso_ts_15066) == repr(want.iso_ts_15066)  # NaN where not permitted
+        assert got.joint_trajectory == want.joint_trajectory  # governed by the other parameter
+
+
+def test_response_parameters_are_typed_bounded_and_refused_by_name(ros: NodeUnderTest) -> None:
+    (result,) = ros.set_parameters(response__joint_trajectories=-1)
+    assert not result.successful
+    # rclpy checks the declared range first: "Parameter response.joint_trajectories out of
+    # range. Min: 0, Max: 1000000000, value: -1"
+    assert re.search(r"response\.joint_trajectories\b.*\b0\b.*\b1000000000\b.*-1", result.reason)
+    (result,) = ros.set_parameters(response__joint_trajectories=1.0)  # declared an integer
+    assert not result.successful
+    assert "expected 'Type.INTEGER' got 'Type.DOUBLE'" in result.reason
+    (result,) = ros.set_parameters(response__per_sample="no")  # declared a bool
+    assert not result.successful and "expected 'Type.BOOL'" in result.reason
+    names = ["response.joint_trajectories", "response.per_sample"]
+    values = ros.wait(ros.get_client.call_async(GetParameters.Request(names=names))).values
+    assert (values[0].integer_value, values[1].bool_value) == (MAX_GRASPS, True)
+    descriptor = ros.node.describe_parameter("response.joint_trajectories")
+    assert (descriptor.integer_range[0].from_value, descriptor.integer_range[0].to_value) == (
+        0,
+        1_000_000_000,
+    )
+    response = ros.rank(book_request())  # still serving, with the settings it had
+    assert response.success, response.message
+    assert _with_trajectory(response.ranking) == [0, 1, 2]
+
+
+def test_response_defaults_send_the_first_grasps_trajectory_and_every_sample() -> None:
+    parameters = {k: v for k, v in NODE_PARAMETERS.items() if k != "response.joint_trajectories"}
+    harness = NodeUnderTest(parameters)
+    try:
+        response = harness.rank(book_request())
+    finally:
+        harness.close()
+    assert response.success, response.message
+    ranking = response.ranking
+    assert _with_trajectory(ranking) == [ranking.order[0]]
+    for evaluation in ranking.evaluations:
+        assert len(evaluation.effective_mass_kg) == len(evaluation.direction) == 21  # 2 s / 0.1

@@ -19,6 +19,7 @@ from grasp_safety_ros.core.analyses.exposed_points import (
 from grasp_safety_ros.paths import config_file
 from grasp_safety_ros.ros.parameters import (
     PARAMETERS,
+    ResponseContent,
     build_robot,
     check_parameter,
     settings_from_parameters,
@@ -163,6 +164,13 @@ BAD: list[tuple[dict[str, Any], str]] = [
     ({"effort.enabled": "yes"}, r"^effort\.enabled: must be true or false"),
     ({"effort.criterion": "max"}, r"^effort\.criterion: must be one of peak_fraction, rms_fr"),
     ({"rank_by": "quality"}, r"^rank_by: must be one of safety, effort, got 'quality'"),
+    # what the result messages carry
+    (
+        {"response.joint_trajectories": -1},
+        r"^response\.joint_trajectories: must be in \[0, 1000000000\], got -1$",
+    ),
+    ({"response.joint_trajectories": 2.0}, r"^response\.joint_trajectories: must be an integer"),
+    ({"response.per_sample": "false"}, r"^response\.per_sample: must be true or false"),
 ]
 
 
@@ -170,6 +178,26 @@ BAD: list[tuple[dict[str, Any], str]] = [
 def test_bad_parameter_is_refused_naming_it(change: dict[str, Any], pattern: str) -> None:
     with pytest.raises(InvalidInputError, match=pattern):
         settings_from_parameters({**MINIMAL, **change})
+
+
+def test_response_defaults_and_values() -> None:
+    assert settings_from_parameters(MINIMAL).response == ResponseContent(1, True)
+    values = {**MINIMAL, "response.joint_trajectories": 0, "response.per_sample": False}
+    assert settings_from_parameters(values).response == ResponseContent(0, False)
+
+
+def test_response_joint_trajectories_takes_the_final_order_first() -> None:
+    order = (3, 1)  # grasps 0 and 2 are not in the final order
+    chosen = {n: ResponseContent(n).with_joint_trajectory(order, 4) for n in range(6)}
+    assert chosen == {
+        0: frozenset(),
+        1: {3},
+        2: {3, 1},
+        3: {3, 1, 0},
+        4: {0, 1, 2, 3},
+        5: {0, 1, 2, 3},
+    }
+    assert ResponseContent().with_joint_trajectory((), 3) == {0, 1, 2}  # default: all
 
 
 def test_default_analyses_are_the_paper() -> None:

@@ -9,8 +9,10 @@ quaternion_msg_from_rotation. Each function raises InvalidInputError naming the 
 from __future__ import annotations
 
 import array
+import gc
 import math
-from collections.abc import Callable, Collection, Sequence
+import threading
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import replace
 from typing import Any
 
@@ -43,7 +45,7 @@ from ..core.model.inertia import ObjectInertia
 from ..core.model.robot import RobotModel
 from ..core.model.trajectory import ObjectTrajectory
 from ..core.model.waypoint_trajectory import WaypointTrajectory
-from .parameters import inertia_tensor_from_components
+from .parameters import ResponseContent, inertia_tensor_from_components
 
 SCORE_UNITS = {"mean": "kg", "max": "kg", "integral": "kg*s"}
 ARROW_LENGTH_M = 0.08
@@ -51,6 +53,9 @@ ARROW_LENGTH_M = 0.08
 INFEASIBLE_RGBA = (0.5, 0.5, 0.5, 0.6)
 """Grasps outside the final order (infeasible, or without an effort score) are grey."""
 NAN = float("nan")
+FULL_RESPONSE = ResponseContent()
+"""Every joint trajectory and every per-sample array: what a message built without the node's
+``response.*`` parameters carries."""
 LABEL_OFFSET_M = np.array([0.0, 0.0, 0.03])
 """Labels float this far above the grasp point (base axes)."""
 MAX_ABS_POSITION_M = 1000.0
@@ -481,6 +486,39 @@ def seed_from_joint_state(
 # --- Results ---------------------------------------------------------------------------------
 
 
+class _CollectorPause:
+    """Context manager: the cyclic garbage collector paused while a result message is built.
+
+    A response holds a Python object per sample (``direction`` vectors, trajectory points) and
+    per region; none of them forms a reference cycle, but their allocation triggers the
+    collector over and over (it walks every tracked object of the process): 40 % of the
+    building time of a 1,000 x 201 response. Reference counting still frees everything; the
+    collector resumes (if it was running) when the last of concurrent builds ends.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._depth = 0
+        self._resume = False
+
+    def __enter__(self) -> None:
+        with self._lock:
+            if self._depth == 0:
+                self._resume = gc.isenabled()
+                gc.disable()
+            self._depth += 1
+
+    def __exit__(self, *exc_info: object) -> None:
+        with self._lock:
+            self._depth -= 1
+            if self._depth == 0 and self._resume:
+                gc.enable()
+
+
+collector_paused = _CollectorPause()
+"""Pauses the garbage collector for ranking_msg and report_msg (re-entrant, thread-safe)."""
+
+
 def float64_array(values: Sequence[float] | np.ndarray) -> array.array:
     """``array('d')`` of ``values``: what a float64[] field holds; built from the bytes, so
     the message setter stores it as is instead of converting element by element."""
@@ -513,13 +551,14 @@ def vector3_msgs(vectors: np.ndarray) -> list[Vector3]:
     return messages
 
 
-def evaluation_msg(evaluation: GraspEvaluation) -> GraspEvaluationMsg:
+def evaluation_msg(evaluation: GraspEvaluation, per_sample: bool = True) -> GraspEvaluationMsg:
     """grasp_safety_msgs/GraspEvaluation of a core evaluation (NaN scores when infeasible).
 
     The analysis fields say "not computed" (NaN, empty, false), except ``safety_score``: the
-    tip score, as with the default analysis options; report_msg fills them in.
+    tip score, as with the default analysis options; report_msg fills them in. Without
+    ``per_sample`` the per-sample arrays stay empty (the scores and aggregates are kept).
     """
-    return GraspEvaluationMsg(
+    message = GraspEvaluationMsg(
         index=int(evaluation.index),
         name=evaluation.name,
         feasible=bool(evaluation.feasible),
@@ -527,10 +566,6 @@ def evaluation_msg(evaluation: GraspEvaluation) -> GraspEvaluationMsg:
         score=float(evaluation.score),
         peak_effective_mass_kg=float(evaluation.peak_effective_mass_kg),
         mean_effective_mass_kg=float(evaluation.mean_effective_mass_kg),
-        time_from_start_s=float64_array(evaluation.times_s),
-        effective_mass_kg=float64_array(evaluation.effective_mass_kg),
-        direction=vector3_msgs(evaluation.directions_in_base),
-        direction_is_worst_case=np.asarray(evaluation.direction_is_worst_case, bool).tolist(),
         safety_score=float(evaluation.score),
         iso_min_duration_s=NAN,
         worst_case_score=NAN,
@@ -544,6 +579,14 @@ def evaluation_msg(evaluation: GraspEvaluation) -> GraspEvaluationMsg:
         score_range_min=NAN,
         score_range_max=NAN,
     )
+    if per_sample:
+        message.time_from_start_s = float64_array(evaluation.times_s)
+        message.effective_mass_kg = float64_array(evaluation.effective_mass_kg)
+        message.direction = vector3_msgs(evaluation.directions_in_base)
+        message.direction_is_worst_case = np.asarray(
+            evaluation.direction_is_worst_case, bool
+        ).tolist()
+    return message
 
 
 def duration_msg(seconds: float) -> Duration:
@@ -669,13 +712,40 @@ def ranking_msg(
     stamp: Time,
     compute_time_s: float,
     order: Sequence[int] | None = None,
+    content: ResponseContent = FULL_RESPONSE,
 ) -> GraspRanking:
     """grasp_safety_msgs/GraspRanking of a core ranking of the grasps in ``grasps``.
 
     The paper's ranking only: the analysis fields are those of the default options with
     nothing beyond the tip computed (see evaluation_msg); report_msg gives the full result.
-    ``order`` (default: the ranking's) sets ``order`` and ``ranked_grasps``.
+    ``order`` (default: the ranking's) sets ``order`` and ``ranked_grasps``; ``content``
+    which grasps carry their ``joint_trajectory`` and whether the per-sample arrays are
+    filled (default: all of them).
     """
+    with collector_paused:
+        message = _ranking_msg_without_trajectories(
+            ranking, grasps, base_frame, stamp, compute_time_s, order, content.per_sample
+        )
+        _set_joint_trajectories(
+            message,
+            ranking.joint_names,
+            {e.index: (e.times_s, e.joint_positions) for e in ranking.evaluations},
+            content.with_joint_trajectory(message.order, len(ranking.evaluations)),
+            base_frame,
+        )
+    return message
+
+
+def _ranking_msg_without_trajectories(
+    ranking: Ranking,
+    grasps: PoseArray,
+    base_frame: str,
+    stamp: Time,
+    compute_time_s: float,
+    order: Sequence[int] | None,
+    per_sample: bool,
+) -> GraspRanking:
+    """ranking_msg with every ``joint_trajectory`` left empty."""
     paper_order = [int(i) for i in ranking.order]
     final = paper_order if order is None else [int(i) for i in order]
     message = GraspRanking(
@@ -683,7 +753,7 @@ def ranking_msg(
         metric=ranking.metric,
         order=final,
         ranked_grasps=ranked_pose_array(grasps, final),
-        evaluations=[evaluation_msg(e) for e in ranking.evaluations],
+        evaluations=[evaluation_msg(e, per_sample) for e in ranking.evaluations],
         joint_names=list(ranking.joint_names),
         compute_time_s=float(compute_time_s),
         backend=ranking.backend,
@@ -696,17 +766,26 @@ def ranking_msg(
         order_stability=NAN,
     )
     postures = ranking.postures or tuple(single_posture(e) for e in ranking.evaluations)
-    for evaluation, item, posture in zip(
-        ranking.evaluations, message.evaluations, postures, strict=True
-    ):
+    for item, posture in zip(message.evaluations, postures, strict=True):
         _set_posture(item, posture)
-        item.joint_trajectory = joint_trajectory_msg(
-            ranking.joint_names,
-            evaluation.times_s,
-            evaluation.joint_positions,
-            Header(frame_id=base_frame),
-        )
     return message
+
+
+def _set_joint_trajectories(
+    message: GraspRanking,
+    joint_names: Sequence[str],
+    motions: Mapping[int, tuple[np.ndarray, np.ndarray]],
+    indices: Collection[int],
+    base_frame: str,
+) -> None:
+    """Fill ``joint_trajectory`` of the evaluations whose index is in ``indices`` from
+    ``motions`` (index: sample times [s], joint positions); the others keep an empty one."""
+    by_index = {item.index: item for item in message.evaluations}
+    for index in sorted(indices):
+        times_s, joint_positions = motions[index]
+        by_index[index].joint_trajectory = joint_trajectory_msg(
+            joint_names, times_s, joint_positions, Header(frame_id=base_frame)
+        )
 
 
 _body_region_assessment = _slot_constructor(
@@ -759,17 +838,34 @@ def report_msg(
     base_frame: str,
     stamp: Time,
     compute_time_s: float,
+    content: ResponseContent = FULL_RESPONSE,
 ) -> GraspRanking:
     """grasp_safety_msgs/GraspRanking of a core SafetyReport (the content of the CLI's JSON).
 
     ``order`` and ``ranked_grasps`` follow the report's final order; the paper's fields
-    (``score``, per-sample tip effective mass, ...) are those of ranking_msg.
+    (``score``, per-sample tip effective mass, ...) are those of ranking_msg. ``content`` as
+    there: the first grasps of the final order carry their joint trajectory (the
+    redundancy-resolved one where it was applied), the per-sample arrays are filled or not.
     """
+    with collector_paused:
+        return _report_msg(report, grasps, base_frame, stamp, compute_time_s, content)
+
+
+def _report_msg(
+    report: SafetyReport,
+    grasps: PoseArray,
+    base_frame: str,
+    stamp: Time,
+    compute_time_s: float,
+    content: ResponseContent,
+) -> GraspRanking:
     options = report.options
     quality_given = options.grasp_quality is not None
-    message = ranking_msg(
-        report.ranking, grasps, base_frame, stamp, compute_time_s, order=report.order
+    per_sample = content.per_sample
+    message = _ranking_msg_without_trajectories(
+        report.ranking, grasps, base_frame, stamp, compute_time_s, report.order, per_sample
     )
+    motions = {e.index: (e.times_s, e.joint_positions) for e in report.ranking.evaluations}
     message.metric_point = options.metric_point
     message.rank_by = options.rank_by
     message.safety_order = [int(i) for i in report.safety_order]
@@ -787,7 +883,7 @@ def report_msg(
         evaluation.safety_score = float(report.scores[k])
         if k in iso:
             _set_iso(evaluation, iso[k])
-        if report.exposed and report.exposed[k].feasible:
+        if per_sample and report.exposed and report.exposed[k].feasible:
             exposed = report.exposed[k]
             evaluation.leading_point_effective_mass_kg = float64_array(
                 exposed.leading_effective_mass_kg
@@ -809,21 +905,24 @@ def report_msg(
             evaluation.redundancy_applied = bool(resolution.applied)
             evaluation.score_without_redundancy = float(resolution.original_score)
             if resolution.applied:
-                evaluation.effective_mass_with_redundancy_kg = float64_array(
-                    resolution.effective_mass_kg
-                )
-                evaluation.joint_trajectory = joint_trajectory_msg(
-                    report.ranking.joint_names,
-                    resolution.times_s,
-                    resolution.joint_positions,
-                    Header(frame_id=base_frame),
-                )
+                motions[k] = (resolution.times_s, resolution.joint_positions)
+                if per_sample:
+                    evaluation.effective_mass_with_redundancy_kg = float64_array(
+                        resolution.effective_mass_kg
+                    )
         if report.effort:
             effort = report.effort[k]
             evaluation.effort_score = float(effort.score(options.effort_criterion))
             if effort.feasible:
                 evaluation.peak_abs_torque = float64_array(effort.peak_abs_torque)
                 evaluation.rms_torque = float64_array(effort.rms_torque)
+    _set_joint_trajectories(
+        message,
+        report.ranking.joint_names,
+        motions,
+        content.with_joint_trajectory(report.order, len(message.evaluations)),
+        base_frame,
+    )
     return message
 
 

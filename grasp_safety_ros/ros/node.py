@@ -744,7 +744,9 @@ class GraspSafetyNode(Node):
             self._compute_lock.release()
 
         stamp = self.get_clock().now().to_msg()
-        result = report_msg(report, grasps_msg, settings.base_frame, stamp, compute_time_s)
+        result = report_msg(
+            report, grasps_msg, settings.base_frame, stamp, compute_time_s, settings.response
+        )
         self._ranking_pub.publish(result)
         self._ranked_pub.publish(result.ranked_grasps)
         self._markers_pub.publish(

@@ -161,6 +161,17 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
         "IK restarts at the start pose per grasp besides the seed's; the lowest-score posture "
         "is kept; 0: the paper's single IK",
     ),
+    # --- What the result messages carry (the service's response and ~/ranking) ---
+    "response.joint_trajectories": ParameterSpec(
+        1,
+        "how many grasps carry their joint_trajectory: the first of the final order, then the "
+        "grasps outside it; 0: none; the number of grasps or more: all",
+    ),
+    "response.per_sample": ParameterSpec(
+        True,
+        "fill the per-sample arrays of every evaluation (time_from_start_s, effective_mass_kg, "
+        "direction, ...); false: leave them empty (the scores and aggregates stay)",
+    ),
 }
 """Every parameter of the node, by name."""
 
@@ -175,7 +186,7 @@ _CHOICES: Mapping[str, Sequence[str]] = {
     "effort.criterion": EFFORT_CRITERIA,
     "rank_by": RANK_BY,
 }
-_FLAGS = ("use_joint_states_seed", "redundancy.enabled", "effort.enabled")
+_FLAGS = ("use_joint_states_seed", "redundancy.enabled", "effort.enabled", "response.per_sample")
 _POSITIVE = ("trajectory.dt_s", "trajectory.duration_s", "max_mass_kg", "max_compute_time_s")
 _POSITIVE += ("service_busy_timeout_s", "diagnostics_period_s")
 _FRACTIONS = ("uncertainty.mass_fraction", "uncertainty.inertia_fraction")
@@ -185,6 +196,31 @@ _RANGES: Mapping[str, tuple[float, float]] = {
 }
 _MAX_COUNT = 1_000_000_000
 _MAX_POINTS = 10_000
+
+
+@dataclass(frozen=True)
+class ResponseContent:
+    """What a GraspRanking message carries beyond the scores (parameters ``response.*``).
+
+    Attributes:
+        joint_trajectories: How many grasps get their ``joint_trajectory``: the first of the
+            final order, then the grasps outside it in index order (infeasible grasps have
+            none to give); 0: none. The default, all, is what a message built without node
+            parameters carries.
+        per_sample: Whether each evaluation's per-sample arrays are filled; false leaves them
+            empty (scores, aggregates and per-grasp fields are kept).
+    """
+
+    joint_trajectories: int = _MAX_COUNT
+    per_sample: bool = True
+
+    def with_joint_trajectory(self, order: Sequence[int], count: int) -> frozenset[int]:
+        """The grasp indices (of ``count`` grasps) that carry their joint trajectory."""
+        if self.joint_trajectories >= count:
+            return frozenset(range(count))
+        ranked = set(order)
+        first = [*order, *(i for i in range(count) if i not in ranked)]
+        return frozenset(first[: self.joint_trajectories])
 
 
 @dataclass(frozen=True)
@@ -198,6 +234,7 @@ class NodeSettings:
             redundancy.*, effort.*, rank_by); a request may change metric_point and add grasp
             quality.
         posture: Posture selection (``posture.restarts``).
+        response: What the result messages carry (``response.*``).
         ik_seed: The seed parameter, or None when empty (length checked against the robot
             in build_robot).
     """
@@ -223,6 +260,9 @@ class NodeSettings:
     diagnostics_period_s: float
     analysis: AnalysisOptions = dataclasses.field(default_factory=AnalysisOptions)
     posture: PostureConfig = dataclasses.field(default_factory=PostureConfig)
+    response: ResponseContent = dataclasses.field(
+        default_factory=lambda: ResponseContent(joint_trajectories=1)
+    )
 
     @property
     def robot_source(self) -> str:
@@ -289,7 +329,7 @@ def check_parameter(name: str, value: Any) -> Any:
         return value
     if name in ("max_grasps", "max_samples", "max_total_samples"):
         return _integer(name, value, 1, _MAX_COUNT)
-    if name in ("uncertainty.samples", "uncertainty.seed"):
+    if name in ("uncertainty.samples", "uncertainty.seed", "response.joint_trajectories"):
         return _integer(name, value, 0, _MAX_COUNT)
     if name == "posture.restarts":
         return _integer(name, value, 0, MAX_RESTARTS)
@@ -381,7 +421,7 @@ def parameter_constraints(name: str) -> ParameterConstraints:
         text = f"one of: {', '.join(_CHOICES[name])}"
     elif name in ("max_grasps", "max_samples", "max_total_samples"):
         closed = (1, _MAX_COUNT)
-    elif name in ("uncertainty.samples", "uncertainty.seed"):
+    elif name in ("uncertainty.samples", "uncertainty.seed", "response.joint_trajectories"):
         closed = (0, _MAX_COUNT)
     elif name == "posture.restarts":
         closed = (0, MAX_RESTARTS)
@@ -552,6 +592,10 @@ def settings_from_parameters(values: Mapping[str, Any]) -> NodeSettings:
         diagnostics_period_s=v["diagnostics_period_s"],
         analysis=analysis_from_parameters(v),
         posture=PostureConfig(restarts=v["posture.restarts"]),
+        response=ResponseContent(
+            joint_trajectories=v["response.joint_trajectories"],
+            per_sample=v["response.per_sample"],
+        ),
     )
 
 
