@@ -16,7 +16,7 @@ import pinocchio as pin
 
 from ..exceptions import InvalidInputError
 from ..method.effective_mass import augmented_model
-from ..method.ranking import Grasp, GraspSafetyEvaluator, Ranking, aggregate
+from ..method.ranking import Grasp, GraspEvaluation, GraspSafetyEvaluator, Ranking, aggregate
 from ..model.inertia import ObjectInertia
 from ..model.trajectory import Trajectory
 from .effort import EffortEvaluation, check_effort_criterion, evaluate_effort, order_by_effort
@@ -27,7 +27,7 @@ from .exposed_points import (
     evaluate_exposed_points,
     metric_point_series,
 )
-from .iso15066 import PowerForceLimitAssessment, assess_grasp, assess_motion, select_regions
+from .iso15066 import PowerForceLimitAssessment, assess_grasp, assess_motions, select_regions
 from .multi_objective import QualityRanking, rank_with_quality
 from .redundancy import (
     TASK_DIMENSION,
@@ -206,12 +206,9 @@ def analyse(
         redundancy = tuple(resolutions)
 
     scores = np.full(len(evaluations), np.nan)
-    iso: list[PowerForceLimitAssessment] = []
-    regions = None if options.iso_regions is None else list(options.iso_regions)
+    series: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # the metric point's speeds, masses
     for k, evaluation in enumerate(evaluations):
         if not evaluation.feasible:
-            if options.iso_regions != ():
-                iso.append(assess_grasp(evaluation, regions))
             continue
         masses, speeds = metric_point_series(
             evaluation, exposed[k] if exposed else None, options.metric_point
@@ -219,17 +216,8 @@ def analyse(
         if redundancy and options.metric_point == "tip":
             masses = redundancy[k].effective_mass_kg
         scores[k] = aggregate(masses, evaluation.times_s, metric)
-        if options.iso_regions != ():
-            iso.append(
-                assess_motion(
-                    speeds,
-                    masses,
-                    motions[k].duration_s,
-                    regions,
-                    index=evaluation.index,
-                    name=evaluation.name,
-                )
-            )
+        series[k] = (speeds, masses)
+    iso = _assess_iso(options.iso_regions, evaluations, series, motions)
     feasible = np.flatnonzero(~np.isnan(scores))
     safety_order = tuple(int(k) for k in sorted(feasible, key=lambda k: (scores[k], k)))
     quality = rank_with_quality(
@@ -275,3 +263,35 @@ def analyse(
         redundancy=redundancy,
         effort=effort,
     )
+
+
+def _assess_iso(
+    iso_regions: Sequence[str] | None,
+    evaluations: Sequence[GraspEvaluation],
+    series: dict[int, tuple[np.ndarray, np.ndarray]],
+    motions: Sequence[Trajectory],
+) -> list[PowerForceLimitAssessment]:
+    """ISO/TS 15066 assessment of every grasp (none when ``iso_regions`` is empty): the
+    feasible ones on their metric point's speeds and masses (``series``), in one array pass
+    per motion duration."""
+    if iso_regions is not None and not iso_regions:
+        return []
+    regions = None if iso_regions is None else list(iso_regions)
+    assessed: dict[int, PowerForceLimitAssessment] = {}
+    by_duration: dict[float, list[int]] = {}
+    for k in series:
+        by_duration.setdefault(motions[k].duration_s, []).append(k)
+    for duration, group in by_duration.items():
+        results = assess_motions(
+            [series[k][0] for k in group],
+            [series[k][1] for k in group],
+            duration,
+            regions,
+            [evaluations[k].index for k in group],
+            [evaluations[k].name for k in group],
+        )
+        assessed.update(zip(group, results, strict=True))
+    return [
+        assessed[k] if k in assessed else assess_grasp(evaluation, regions)
+        for k, evaluation in enumerate(evaluations)
+    ]

@@ -5,6 +5,7 @@
 velocity check), one value passed as a whole."""
 
 import math
+import threading
 
 import numpy as np
 
@@ -41,6 +42,21 @@ def workspace(n):
         np.empty((3, 3)),  # 19 scratch 3x3
         np.zeros(7),  # 20 predictor: its defect D (6) and the previous |xi|^2
     )
+
+
+_THREAD_SCRATCH = threading.local()
+
+
+def thread_workspace(n):
+    """This thread's ``workspace(n)``, made once (kernels running at once in the pool's
+    threads must not share scratch)."""
+    workspaces = getattr(_THREAD_SCRATCH, "workspaces", None)
+    if workspaces is None:
+        workspaces = _THREAD_SCRATCH.workspaces = {}
+    ws = workspaces.get(n)
+    if ws is None:
+        ws = workspaces[n] = workspace(n)
+    return ws
 
 
 @_jit_inline

@@ -7,7 +7,6 @@ The kernels (``core.kernels``, numba) are imported only when first called.
 
 from __future__ import annotations
 
-import threading
 import weakref
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any, NamedTuple
@@ -253,21 +252,11 @@ def call_kernel(kernel: Any, *args: Any) -> Any:
     return result
 
 
-_THREAD_SCRATCH = threading.local()
-
-
 def kernel_workspace(n: int) -> tuple[np.ndarray, ...]:
-    """This thread's ``kernels.ik.workspace(n)`` (the kernels allocate nothing; kernels running
-    at once in the pool's threads must not share scratch)."""
-    workspaces = getattr(_THREAD_SCRATCH, "workspaces", None)
-    if workspaces is None:
-        workspaces = _THREAD_SCRATCH.workspaces = {}
-    ws = workspaces.get(n)
-    if ws is None:
-        from ..kernels.ik import workspace
+    """This thread's ``kernels.ik.workspace(n)`` (``kernels.ik.thread_workspace``)."""
+    from ..kernels.ik import thread_workspace  # imports numba: only when first needed
 
-        ws = workspaces[n] = workspace(n)
-    return ws
+    return thread_workspace(n)
 
 
 def plain_array(array: Any) -> np.ndarray:

@@ -141,13 +141,13 @@ def translational_mobilities_in_base(
     out = np.empty((len(q_all), 3, 3))
     if chain is not None:
         from ..kernels.effective_mass import translational_mobilities
-        from ..kernels.ik import workspace
+        from ..kernels.ik import thread_workspace
 
         grasp = pin.SE3(transform_tip_to_object)
         bodies = augmented_inertia_arrays(
             robot, object_inertia, grasp.rotation[None], grasp.translation[None]
         )
-        translational_mobilities(chain, bodies, q_all, out, workspace(robot.model.nv))
+        translational_mobilities(chain, bodies, q_all, out, thread_workspace(robot.model.nv))
         return out
     model = augmented_model(robot, object_inertia, transform_tip_to_object)
     data = model.createData()
