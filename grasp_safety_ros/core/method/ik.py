@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import importlib.util
 import math
+import threading
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -186,6 +187,8 @@ class IKSolver:
         self._dgesv: Any = None if self.compiled else _lapack_dgesv()
         self._identity6 = np.eye(6)
         self._identity_n = np.eye(model.nv)
+        self._restarts: tuple[np.ndarray, ...] | None = None  # see restarts()
+        self._restarts_lock = threading.Lock()
 
     # ----------------------------------------------------------------------------- one pose
     def solve(
@@ -419,12 +422,22 @@ class IKSolver:
         )
 
     def restarts(self) -> Iterator[np.ndarray]:
-        """The deterministic random restart configurations tried by ``solve_first``."""
-        rng = np.random.default_rng(self.config.random_seed)
-        lower = np.where(np.isfinite(self.robot.lower_limits), self.robot.lower_limits, -np.pi)
-        upper = np.where(np.isfinite(self.robot.upper_limits), self.robot.upper_limits, np.pi)
-        for _ in range(self.config.random_restarts):
-            yield self.robot.q_from_positions(rng.uniform(lower, upper))
+        """The deterministic random restart configurations tried by ``solve_first`` (drawn
+        once per solver, read-only)."""
+        with self._restarts_lock:
+            if self._restarts is None:
+                rng = np.random.default_rng(self.config.random_seed)
+                robot = self.robot
+                lower = np.where(np.isfinite(robot.lower_limits), robot.lower_limits, -np.pi)
+                upper = np.where(np.isfinite(robot.upper_limits), robot.upper_limits, np.pi)
+                restarts = tuple(
+                    robot.q_from_positions(rng.uniform(lower, upper))
+                    for _ in range(self.config.random_restarts)
+                )
+                for q in restarts:
+                    q.setflags(write=False)
+                self._restarts = restarts
+        yield from self._restarts
 
     def _trajectory_compiled(
         self,
