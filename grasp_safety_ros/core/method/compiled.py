@@ -7,7 +7,6 @@ The kernels (``core.kernels``, numba) are imported only when first called.
 
 from __future__ import annotations
 
-import weakref
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any, NamedTuple
 
@@ -21,7 +20,6 @@ from .effective_mass import (
     STATIONARY_TANGENT_M,
     BodyInertias,
     augmented_inertia_arrays,
-    robot_inertia_arrays,
 )
 
 if TYPE_CHECKING:
@@ -210,10 +208,6 @@ def ik_settings(
     )
 
 
-_ROBOT_INERTIAS: weakref.WeakKeyDictionary[Any, BodyInertias] = weakref.WeakKeyDictionary()
-"""robot_inertia_arrays of each RobotModel in use."""
-
-
 class CompiledGraspResult(NamedTuple):
     """One grasp's result of ``evaluate_grasps_compiled``: arrays have one row per sample if
     feasible (up to the failing sample otherwise)."""
@@ -293,13 +287,10 @@ def evaluate_grasps_compiled(
     chain, settings, robot = solver.chain, solver.settings, solver.robot
     if chain is None or settings is None:
         raise GraspSafetyError("the compiled kernels do not support this chain")
-    robot_arrays = _ROBOT_INERTIAS.get(robot)
-    if robot_arrays is None:
-        robot_arrays = _ROBOT_INERTIAS.setdefault(robot, robot_inertia_arrays(robot))
     grasps = [pin.SE3(transform) for transform in transforms_tip_to_object]
     rotations = np.array([grasp.rotation for grasp in grasps]).reshape(-1, 3, 3)
     translations = np.array([grasp.translation for grasp in grasps]).reshape(-1, 3)
-    bodies = augmented_inertia_arrays(robot, object_inertia, rotations, translations, robot_arrays)
+    bodies = augmented_inertia_arrays(robot, object_inertia, rotations, translations)
     if motion_is_tip:
         rotations = np.repeat(np.eye(3)[None], len(grasps), axis=0)
         translations = np.zeros((len(grasps), 3))

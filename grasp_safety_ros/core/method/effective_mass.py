@@ -13,6 +13,7 @@ rounding.
 
 from __future__ import annotations
 
+import weakref
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
@@ -54,14 +55,25 @@ class BodyInertias(NamedTuple):
     rotational_inertias: np.ndarray  # (n, 3, 3) about the centre of mass, joint axes [kg m^2]
 
 
+_ROBOT_INERTIAS: weakref.WeakKeyDictionary[RobotModel, BodyInertias] = weakref.WeakKeyDictionary()
+"""robot_inertia_arrays of each RobotModel in use."""
+
+
 def robot_inertia_arrays(robot: RobotModel) -> BodyInertias:
     """The chain's body inertias as arrays: mass [kg] (n,), centre of mass in the joint frame
-    [m] (n, 3), rotational inertia about it, joint axes [kg m^2] (n, 3, 3)."""
+    [m] (n, 3), rotational inertia about it, joint axes [kg m^2] (n, 3, 3); computed once per
+    robot (read-only)."""
+    cached = _ROBOT_INERTIAS.get(robot)
+    if cached is not None:
+        return cached
     inertias = [robot.model.inertias[j] for j in range(1, robot.model.njoints)]
     masses = np.array([inertia.mass for inertia in inertias])
     levers = np.array([inertia.lever for inertia in inertias]).reshape(-1, 3)
     rotational = np.array([inertia.inertia for inertia in inertias]).reshape(-1, 3, 3)
-    return BodyInertias(masses, levers, rotational)
+    arrays = BodyInertias(masses, levers, rotational)
+    for array in arrays:
+        array.setflags(write=False)
+    return _ROBOT_INERTIAS.setdefault(robot, arrays)
 
 
 def augmented_inertia_arrays(
@@ -69,7 +81,6 @@ def augmented_inertia_arrays(
     object_inertia: ObjectInertia,
     grasp_rotations: np.ndarray,
     grasp_translations: np.ndarray,
-    robot_arrays: BodyInertias | None = None,
 ) -> BodyInertias:
     """Body inertias of ``augmented_model`` for G grasps at once (the arrays of
     ``robot_inertia_arrays`` with a leading grasp axis), without copying the model.
@@ -77,7 +88,6 @@ def augmented_inertia_arrays(
     Args:
         grasp_rotations: (G, 3, 3) rotations of the tip frame in the object frame.
         grasp_translations: (G, 3) its origin in the object frame [m].
-        robot_arrays: ``robot_inertia_arrays(robot)``, when already computed.
 
     The object's inertia moves to the tip body's joint frame and is added to the body's as
     Pinocchio adds inertias (parallel-axis term m_a m_b / (m_a + m_b) of their lever arms).
@@ -87,25 +97,23 @@ def augmented_inertia_arrays(
     spatial = object_inertia.spatial_inertia_in_object()  # Pinocchio's symmetric tensor
     rotations = np.asarray(grasp_rotations, dtype=float).reshape(-1, 3, 3)
     translations = np.asarray(grasp_translations, dtype=float).reshape(-1, 3)
-    # Object frame in the joint frame: tip placement * grasp^-1.
-    tip_rotation, tip_translation = tip.placement.rotation, tip.placement.translation
-    rotation = np.einsum("ij,gkj->gik", tip_rotation, rotations)
-    translation = tip_translation - np.einsum("gij,gj->gi", rotation, translations)
+    # Object frame in the joint frame: tip placement * grasp^-1 (matmul: einsum's dispatch
+    # costs more than the arithmetic at these sizes).
+    rotation = tip.placement.rotation @ rotations.transpose(0, 2, 1)
+    translation = tip.placement.translation - (rotation @ translations[:, :, None])[:, :, 0]
     object_mass = spatial.mass
-    object_com = np.einsum("gij,j->gi", rotation, spatial.lever) + translation
-    object_tensor = np.einsum("gij,jk,glk->gil", rotation, spatial.inertia, rotation)
+    object_com = rotation @ spatial.lever + translation
+    object_tensor = rotation @ spatial.inertia @ rotation.transpose(0, 2, 1)
     body = model.inertias[tip.parentJoint]
     mass = body.mass + object_mass
     mass_inverse = 1.0 / max(mass, float(np.finfo(float).eps))
     arm = body.lever - object_com  # (G, 3)
-    skew_square = np.einsum("gi,gj->gij", arm, arm) - np.einsum("gi,gi->g", arm, arm)[
+    skew_square = arm[:, :, None] * arm[:, None, :] - (arm * arm).sum(axis=1)[
         :, None, None
     ] * np.eye(3)
     tensor = body.inertia + object_tensor - (body.mass * object_mass * mass_inverse) * skew_square
     lever = (body.mass * mass_inverse) * body.lever + (object_mass * mass_inverse) * object_com
-    masses, levers, rotational = (
-        robot_arrays if robot_arrays is not None else robot_inertia_arrays(robot)
-    )
+    masses, levers, rotational = robot_inertia_arrays(robot)
     count, k = len(rotations), tip.parentJoint - 1
     batch = BodyInertias(
         np.repeat(masses[None], count, axis=0),
