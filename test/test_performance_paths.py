@@ -37,7 +37,7 @@ from grasp_safety_ros.core.method.effective_mass import (
 )
 from grasp_safety_ros.core.method.ik import IKSolver, compiled_available
 from grasp_safety_ros.core.method.ranking import Ranking
-from grasp_safety_ros.core.model.trajectory import exp3_batch
+from grasp_safety_ros.core.model.trajectory import TipMotion, exp3_batch
 
 needs_numba = pytest.mark.skipif(not compiled_available(), reason="numba is not installed")
 RTOL = 1e-9
@@ -580,3 +580,48 @@ def test_waypoint_trajectories_run_the_compiled_kernel(
     assert len(expected.order) >= 2
     assert_same_ranking(compiled.rank(grasps, BOX, waypoints, seed_positions=seed), expected)
     assert len(calls) == len(grasps)
+
+
+class TipMotionOnly:
+    """An object trajectory that gives each grasp's ``tip_motion`` but no ``object_motion``
+    (as a third-party trajectory type may): the evaluator's fallback path."""
+
+    def __init__(self, trajectory: ObjectTrajectory) -> None:
+        self._trajectory = trajectory
+        self.duration_s = trajectory.duration_s
+
+    def times_s(self) -> np.ndarray:
+        return self._trajectory.times_s()
+
+    def path_parameter(self, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return self._trajectory.path_parameter(times_s)
+
+    def object_poses(self, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return self._trajectory.object_poses(times_s)
+
+    def tip_motion(self, transform_tip_to_object: pin.SE3, times_s: np.ndarray) -> TipMotion:
+        return self._trajectory.tip_motion(transform_tip_to_object, times_s)
+
+    def tip_twists(
+        self, transform_tip_to_object: pin.SE3, times_s: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        return self._trajectory.tip_twists(transform_tip_to_object, times_s)
+
+
+@needs_numba
+def test_trajectories_without_object_motion_rank_the_same(arm7: RobotModel) -> None:
+    """A trajectory type without ``object_motion`` goes grasp by grasp through its own
+    ``tip_motion`` (compiled: composed with the identity grasp); both backends rank it as the
+    built-in type they wrap."""
+    from grasp_safety_ros.core.model.trajectory import ObjectPath
+
+    rng = np.random.default_rng(15)
+    seed = random_positions(arm7, rng)
+    quintic = reach_trajectory(arm7, seed)
+    wrapped = TipMotionOnly(quintic)
+    assert not isinstance(wrapped, ObjectPath)
+    grasps = grasps_near_identity(4)
+    for evaluator in evaluators(arm7):
+        expected = evaluator.rank(grasps, BOX, quintic, seed_positions=seed)
+        assert len(expected.order) >= 2
+        assert_same_ranking(evaluator.rank(grasps, BOX, wrapped, seed_positions=seed), expected)

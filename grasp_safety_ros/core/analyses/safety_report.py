@@ -29,12 +29,7 @@ from .exposed_points import (
 )
 from .iso15066 import PowerForceLimitAssessment, assess_grasp, assess_motions, select_regions
 from .multi_objective import QualityRanking, rank_with_quality
-from .redundancy import (
-    TASK_DIMENSION,
-    RedundancyConfig,
-    RedundancyResolution,
-    resolve_redundancy,
-)
+from .redundancy import RedundancyConfig, RedundancyResolution, resolve_redundancy
 from .uncertainty import InertiaUncertainty, UncertaintyAnalysis, analyse_inertia_uncertainty
 
 RANK_BY = ("safety", "effort")
@@ -49,7 +44,7 @@ class AnalysisOptions:
         metric_point: ``tip`` (the paper), ``leading_point`` or ``worst_point`` of the object.
         points_in_object_m: (K, 3) exposed points of the object [m], object frame; needed for
             the point metrics (the CLI derives them from the object's primitive shape).
-        iso_regions: ISO/TS 15066 body regions to assess; None: all, empty tuple: none.
+        iso_regions: ISO/TS 15066 body regions to assess (a non-empty list); None: all.
         uncertainty: Bounds on the object-inertia error; None: no uncertainty analysis.
         grasp_quality: Quality per candidate (higher is better); None: pure safety ranking.
         safety_weight: w of the weighted sum w·safety + (1 − w)·quality, in [0, 1].
@@ -198,7 +193,7 @@ def analyse(
         config = RedundancyConfig(metric=metric, max_joint_step=evaluator.config.ik.max_joint_step)
         resolutions = []
         for k, (e, g) in enumerate(zip(evaluations, grasps, strict=True)):
-            model = model_of(k) if e.feasible and robot.model.nv > TASK_DIMENSION else None
+            model = model_of(k) if e.feasible else None
             resolutions.append(
                 resolve_redundancy(robot, e, object_inertia, g, motions[k], config, model)
             )
@@ -271,11 +266,8 @@ def _assess_iso(
     series: dict[int, tuple[np.ndarray, np.ndarray]],
     motions: Sequence[Trajectory],
 ) -> list[PowerForceLimitAssessment]:
-    """ISO/TS 15066 assessment of every grasp (none when ``iso_regions`` is empty): the
-    feasible ones on their metric point's speeds and masses (``series``), in one array pass
-    per motion duration."""
-    if iso_regions is not None and not iso_regions:
-        return []
+    """ISO/TS 15066 assessment of every grasp: the feasible ones on their metric point's speeds
+    and masses (``series``), in one array pass per motion duration."""
     regions = None if iso_regions is None else list(iso_regions)
     assessed: dict[int, PowerForceLimitAssessment] = {}
     by_duration: dict[float, list[int]] = {}

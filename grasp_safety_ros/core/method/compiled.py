@@ -246,13 +246,6 @@ def call_kernel(kernel: Any, *args: Any) -> Any:
     return result
 
 
-def kernel_workspace(n: int) -> tuple[np.ndarray, ...]:
-    """This thread's ``kernels.ik.workspace(n)`` (``kernels.ik.thread_workspace``)."""
-    from ..kernels.ik import thread_workspace  # imports numba: only when first needed
-
-    return thread_workspace(n)
-
-
 def plain_array(array: Any) -> np.ndarray:
     """A C-contiguous, writable float64 array of ``array`` (copied only when needed)."""
     array = np.ascontiguousarray(array, dtype=float)
@@ -282,7 +275,7 @@ def evaluate_grasps_compiled(
     are left for the caller. Random restarts of sample 0 run here, as in ``solve_first``.
     """
     from ..kernels.grasp import evaluate_grasps  # imports numba: only when first needed
-    from ..kernels.ik import solve_pose
+    from ..kernels.ik import solve_pose, thread_workspace
 
     chain, settings, robot = solver.chain, solver.settings, solver.robot
     if chain is None or settings is None:
@@ -298,7 +291,7 @@ def evaluate_grasps_compiled(
     times_s = plain_array(times_s)
     nq = robot.model.nq
     out = grasp_buffers(count, len(times_s), nq)
-    ws = kernel_workspace(robot.model.nv)
+    ws = thread_workspace(robot.model.nv)
     motion = ObjectMotion(*(plain_array(array) for array in motion))
     seeds = plain_array(np.broadcast_to(seeds_q, (count, nq)))
     fixed = (chain, settings)

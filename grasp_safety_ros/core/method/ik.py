@@ -44,7 +44,6 @@ from .compiled import (
     chain_arrays_or_reason,
     grasp_buffers,
     ik_settings,
-    kernel_workspace,
     plain_array,
 )
 
@@ -210,7 +209,7 @@ class IKSolver:
                 plain_array(target_in_world.translation),
                 plain_array(q_init),
                 q,
-                kernel_workspace(self.robot.model.nv),
+                _kernels().thread_workspace(self.robot.model.nv),
             )
             return q, bool(converged), int(iterations)
         return self._solve_python(target_in_world, q_init)
@@ -456,7 +455,7 @@ class IKSolver:
             plain_array(translations_world),
             plain_array(times_s),
             out,
-            kernel_workspace(self.robot.model.nv),
+            _kernels().thread_workspace(self.robot.model.nv),
         )
         return (
             int(status),

@@ -10,8 +10,8 @@ solutions, and the effective mass depends on which one the arm is in. The paper 
    ([-pi, pi] for unlimited joints). A start posture within ``duplicate_tolerance_rad``
    (inf-norm) of one already found is not followed again;
 3. each distinct start posture followed along the whole trajectory with the evaluator's own
-   warm start (``GraspSafetyEvaluator.evaluate`` seeded with it: sample 0 converges at once,
-   in 0 iterations, to that posture), and scored;
+   warm start (``GraspSafetyEvaluator.evaluate_batch`` seeded with it: sample 0 converges at
+   once, in 0 iterations, to that posture), and scored;
 4. the feasible one with the lowest score is kept (ties: the earliest, so the single IK).
 
 The null-space refinement (core.analyses.redundancy, when enabled) then starts from the kept
@@ -33,6 +33,7 @@ from ..model.inertia import ObjectInertia
 from ..model.trajectory import ObjectTrajectory
 from .pool import evaluate_jobs, executor_for
 from .ranking import (
+    BATCH_GRASPS,
     Grasp,
     GraspEvaluation,
     GraspSafetyEvaluator,
@@ -191,14 +192,15 @@ def select_posture(
         found.append(positions)
     starts = found[1:] if single_ik.feasible else found  # the single IK's is evaluated
     candidates = [single_ik]
-    if starts:  # every new start posture followed in one batch
+    for first in range(0, len(starts), BATCH_GRASPS):  # new start postures, in kernel batches
+        batch = starts[first : first + BATCH_GRASPS]
         candidates += evaluator.evaluate_batch(
-            [single_ik.index] * len(starts),
-            [grasp] * len(starts),
+            [single_ik.index] * len(batch),
+            [grasp] * len(batch),
             object_inertia,
             sampled,
             metric,
-            np.array([robot.q_from_positions(positions) for positions in starts]),
+            np.array([robot.q_from_positions(positions) for positions in batch]),
         )
     feasible = [k for k, e in enumerate(candidates) if e.feasible]
     if not feasible:
@@ -220,7 +222,7 @@ def select_posture(
         )
     scores = np.array([candidates[k].score for k in feasible])
     best = feasible[int(np.argmin(scores))]  # argmin keeps the first of equal scores
-    chosen = candidates[best]
+    chosen = candidates[best] if best == 0 else _detached(candidates[best])
     return chosen, PostureSelection(
         index=single_ik.index,
         restarts=config.restarts,
@@ -289,4 +291,18 @@ def select_postures(
         order=order_by_score(evaluations),
         evaluations=tuple(evaluations),
         postures=tuple(selections),
+    )
+
+
+def _detached(evaluation: GraspEvaluation) -> GraspEvaluation:
+    """The evaluation with its per-sample arrays copied: a kept posture must not hold the
+    kernel buffers of every candidate of its batch."""
+    return replace(
+        evaluation,
+        joint_positions=np.array(evaluation.joint_positions),
+        directions_in_base=np.array(evaluation.directions_in_base),
+        effective_mass_kg=np.array(evaluation.effective_mass_kg),
+        direction_is_worst_case=np.array(evaluation.direction_is_worst_case),
+        tip_speed_m_s=np.array(evaluation.tip_speed_m_s),
+        ik_iterations=np.array(evaluation.ik_iterations),
     )

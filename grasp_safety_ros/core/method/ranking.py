@@ -269,7 +269,7 @@ class GraspSafetyEvaluator:
             for k, grasp in enumerate(grasps)
             if self.ik.compiled and motion is not None and grasp.joint_trajectory is None
         ]
-        evaluations: list[GraspEvaluation | None] = [None] * len(grasps)
+        evaluations: dict[int, GraspEvaluation] = {}
         if fused_rows and motion is not None:
             results = evaluate_grasps_compiled(
                 self.ik,
@@ -284,11 +284,11 @@ class GraspSafetyEvaluator:
                     indices[k], grasps[k], result, motion, sampled_trajectory.times_s, metric
                 )
         for k, grasp in enumerate(grasps):
-            if evaluations[k] is None:
+            if k not in evaluations:
                 evaluations[k] = self._evaluate_one(
                     indices[k], grasp, object_inertia, sampled_trajectory, metric, seeds[k]
                 )
-        return [evaluation for evaluation in evaluations if evaluation is not None]
+        return [evaluations[k] for k in range(len(grasps))]
 
     def _from_compiled(
         self,
@@ -433,7 +433,9 @@ class GraspSafetyEvaluator:
         for large requests).
 
         Args:
-            progress: Called as ``progress(done, total)`` after each grasp.
+            progress: Called as ``progress(done, total)`` after each grasp (the grasps of a
+                batch come together; a ``progress`` that raises stops the work after the
+                batches already running).
         """
         metric = check_metric(metric or self.config.metric)
         seed_q = self.seed_q(seed_positions)  # validate once, before any work
