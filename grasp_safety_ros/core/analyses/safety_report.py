@@ -162,11 +162,14 @@ def analyse(
         if progress is not None:
             progress(done, per_grasp)
 
-    # Shared by every analysis: each grasp's motion, and its augmented model when one needs it.
+    # Shared by every analysis: each grasp's motion, and the augmented model of a feasible
+    # grasp when one needs it (an infeasible grasp's analyses need none).
     motions = [evaluator.trajectory_for(g, trajectory) for g in grasps]
     models: dict[int, pin.Model] = {}
 
-    def model_of(k: int) -> pin.Model:
+    def model_of(k: int) -> pin.Model | None:
+        if not evaluations[k].feasible:
+            return None
         if k not in models:
             models[k] = augmented_model(robot, object_inertia, grasps[k].transform_tip_to_object)
         return models[k]
@@ -183,7 +186,7 @@ def analyse(
                     g,
                     motions[k],
                     options.points_in_object_m,
-                    model_of(k) if e.feasible else None,
+                    model_of(k),
                 )
             )
             step()
@@ -193,9 +196,8 @@ def analyse(
         config = RedundancyConfig(metric=metric, max_joint_step=evaluator.config.ik.max_joint_step)
         resolutions = []
         for k, (e, g) in enumerate(zip(evaluations, grasps, strict=True)):
-            model = model_of(k) if e.feasible else None
             resolutions.append(
-                resolve_redundancy(robot, e, object_inertia, g, motions[k], config, model)
+                resolve_redundancy(robot, e, object_inertia, g, motions[k], config, model_of(k))
             )
             step()
         redundancy = tuple(resolutions)
@@ -233,9 +235,8 @@ def analyse(
             resolved = (
                 redundancy[k].joint_positions if redundancy and redundancy[k].applied else None
             )
-            model = model_of(k) if e.feasible else None
             efforts.append(
-                evaluate_effort(robot, e, object_inertia, g, motions[k], resolved, model)
+                evaluate_effort(robot, e, object_inertia, g, motions[k], resolved, model_of(k))
             )
             step()
         effort = tuple(efforts)

@@ -347,11 +347,12 @@ class GraspSafetyEvaluator:
                 _masses_along(mobilities, tip.tangents),
                 tip.speeds,
             )
-        if object_motion is None:  # the tip's own motion, composed with the identity
-            motion = _tip_as_object_motion(
-                trajectory.tip_motion(grasp.transform_tip_to_object, times)
-            )
-            if self.ik.compiled:
+        if object_motion is not None:
+            tip = object_motion.tip_motion(grasp.transform_tip_to_object)
+        else:
+            tip = trajectory.tip_motion(grasp.transform_tip_to_object, times)
+            if self.ik.compiled:  # the tip's own motion, composed with the identity
+                motion = _tip_as_object_motion(tip)
                 (result,) = evaluate_grasps_compiled(
                     self.ik,
                     object_inertia,
@@ -362,9 +363,6 @@ class GraspSafetyEvaluator:
                     motion_is_tip=True,
                 )
                 return self._from_compiled(index, grasp, result, motion, times, metric)
-            tip = motion.tip_motion(pin.SE3.Identity())
-        else:
-            tip = object_motion.tip_motion(grasp.transform_tip_to_object)
         ik = self.ik.solve_trajectory_arrays(
             tip.rotations, tip.positions, times, sampled_trajectory.s_values, seed_q
         )
