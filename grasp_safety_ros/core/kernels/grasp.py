@@ -6,7 +6,7 @@ import math
 
 from ._jit import _jit, _jit_inline
 from .effective_mass import _mobility_from_frames
-from .ik import _reset_predictor, _solve_pose_into, _trajectory_step
+from .ik import _relative_twists, _reset_predictor, _solve_pose_into, _trajectory_step
 from .kinematics import _forward_kinematics
 
 
@@ -22,13 +22,16 @@ def evaluate_grasps(
     seeds_q,
     q0_given,
     stationary_tangent,
+    object_twists,
     out,
     ws,
 ):
     """``_evaluate_grasp`` of each grasp g: its rows of ``bodies`` (BodyInertias), of the grasp
     rotations (G, 3, 3) and translations (G, 3) [m], seeds_q (G, nq), q0_given (G,) and of
     ``out`` (GraspBuffers); its outcome (status, sample, joint) in out.outcomes[g] and the
-    value in out.outcome_values[g]."""
+    value in out.outcome_values[g]. object_twists (N, 6): scratch for the object's motion
+    between samples, log6(O_{i-1}^-1 O_i), shared by the grasps."""
+    _relative_twists(motion.rotations, motion.positions, object_twists, ws)
     for g in range(grasp_rotations.shape[0]):
         status, sample, joint, value = _evaluate_grasp(
             chain,
@@ -41,6 +44,7 @@ def evaluate_grasps(
             seeds_q[g],
             q0_given[g],
             stationary_tangent,
+            object_twists,
             out,
             g,
             ws,
@@ -61,6 +65,7 @@ def _evaluate_grasp(
     seed_q,
     q0_given,
     stationary_tangent,
+    object_twists,
     out,
     g,
     ws,
@@ -74,8 +79,11 @@ def _evaluate_grasp(
     linear (N, 3) [m] and angular (N, 3) [rad] tangents, base frame; its speed_per_tangent is
     not read); the grasp: tip frame in the object frame (rotation, translation [m]); sample
     times [s]. Sample 0 is solved from seed_q unless q0_given (then seed_q is its solution,
-    found by the caller's restarts). out: ``method.compiled.GraspBuffers``; the world-frame
-    targets and the tip tangents are written first. ws: ``ik.workspace(n)``.
+    found by the caller's restarts). object_twists: the object's motion between samples
+    (``_relative_twists`` of its poses); the tip's is its adjoint by the grasp inverse,
+    log6(G^-1 X G) = Ad_{G^-1} log6(X), no log per grasp. out:
+    ``method.compiled.GraspBuffers``; the world-frame targets, the tip's twists and tangents
+    are written first. ws: ``ik.workspace(n)``.
 
     Returns:
         (status, sample, joint, value): status 0 OK, 1 IK not converged, 2 joint jump,
@@ -89,8 +97,19 @@ def _evaluate_grasp(
     object_rotations, object_positions = motion.rotations, motion.positions
     linear_tangents, angular_tangents = motion.linear_tangents, motion.angular_tangents
     tip_rotation, tangents = ws[19], out.tangents[g]  # ws[19]: scratch 3x3
+    tip_twists = out.tip_twists[g]
     g0, g1, g2 = grasp_translation[0], grasp_translation[1], grasp_translation[2]
     for i in range(count):
+        if i > 0:  # Ad_{G^-1} (v, w) = (R^T (v + w x p), R^T w), G = (R, p)
+            v0, v1, v2 = object_twists[i, 0], object_twists[i, 1], object_twists[i, 2]
+            w0, w1, w2 = object_twists[i, 3], object_twists[i, 4], object_twists[i, 5]
+            a0 = v0 + (w1 * g2 - w2 * g1)
+            a1 = v1 + (w2 * g0 - w0 * g2)
+            a2 = v2 + (w0 * g1 - w1 * g0)
+            for b in range(3):
+                r0, r1, r2 = grasp_rotation[0, b], grasp_rotation[1, b], grasp_rotation[2, b]
+                tip_twists[i, b] = r0 * a0 + r1 * a1 + r2 * a2
+                tip_twists[i, 3 + b] = r0 * w0 + r1 * w1 + r2 * w2
         # Tip in the base frame: object pose * grasp; lever = object origin -> tip.
         o = object_rotations[i]
         l0 = o[0, 0] * g0 + o[0, 1] * g1 + o[0, 2] * g2

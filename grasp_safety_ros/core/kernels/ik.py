@@ -60,34 +60,21 @@ def thread_workspace(n):
 
 
 @_jit_inline
-def _predict(
-    chain,
-    rotation_previous,
-    translation_previous,
-    rotation_next,
-    translation_next,
-    settings,
-    q_previous,
-    guess,
-    ws,
-):
-    """IKSolver._predict, compiled: guess = q_previous (+) J^+ (xi + c), xi = log6(T_{i-1}^-1
-    T_i), c = r D (``method.ik``'s docstring); ws[20] holds D (overwritten with c) and the
-    previous |xi|^2 (overwritten with this one).
+def _predict(chain, twist, settings, q_previous, guess, ws):
+    """IKSolver._predict, compiled: guess = q_previous (+) J^+ (xi + c), xi = ``twist`` =
+    log6(T_{i-1}^-1 T_i) (tip frame), c = r D (``method.ik``'s docstring); ws[20] holds D
+    (overwritten with c) and the previous |xi|^2 (overwritten with this one).
 
     ws must hold the joint and tip poses at q_previous (as the solve that returned it leaves
     them), so the tip-frame Jacobian there costs no forward kinematics.
     """
-    jac, er, et, error, step = ws[9], ws[4], ws[5], ws[8], ws[14]
+    jac, error, step = ws[9], ws[8], ws[14]
     _local_jacobian(chain, ws, jac)
-    _relative_pose(
-        rotation_previous, translation_previous, rotation_next, translation_next, er, et
-    )
-    _log6(er, et, error)
     defect = ws[20]
     xi2 = 0.0
     for j in range(6):
-        xi2 += error[j] * error[j]
+        error[j] = twist[j]
+        xi2 += twist[j] * twist[j]
     previous_xi2 = defect[6]
     ratio = min(xi2 / previous_xi2, settings.predictor_max_ratio) if previous_xi2 > 0.0 else 0.0
     for j in range(6):
@@ -96,6 +83,18 @@ def _predict(
     defect[6] = xi2
     _damped_step(jac, error, settings.max_iteration_step, ws[12], ws[13], step)
     _integrate(chain, q_previous, step, guess, False)
+
+
+@_jit_inline
+def _relative_twists(rotations, translations, twists, ws):
+    """twists[i] = log6(P_{i-1}^-1 P_i) of consecutive poses P (in the frame of P_{i-1}), for
+    i >= 1; ws: scratch (ws[4], ws[5])."""
+    er, et = ws[4], ws[5]
+    for i in range(1, rotations.shape[0]):
+        _relative_pose(
+            rotations[i - 1], translations[i - 1], rotations[i], translations[i], er, et
+        )
+        _log6(er, et, twists[i])
 
 
 @_jit_inline
@@ -175,24 +174,15 @@ def _trajectory_step(chain, settings, target_rotations, target_translations, tim
     """Sample i >= 1 of IKSolver._trajectory_python: (status, joint, value); status 0 is OK.
 
     Grasp g's rows of ``out`` (``method.compiled.GraspBuffers``): q_all, iterations, q_fail
-    (the iterate, kept when it fails) and guess (scratch). ws must hold the joint and tip
+    (the iterate, kept when it fails), guess (scratch) and tip_twists (the predictor's xi of
+    each sample, filled by the caller). ws must hold the joint and tip
     poses at q_all[i - 1] (for the predictor); on return it holds those at q_all[i] (or at
     q_fail).
     """
     q_all, iterations, q, guess = out.q_all[g], out.iterations[g], out.q_fail[g], out.guess[g]
     q_index, continuous = chain.q_index, chain.continuous
     check_velocity, velocity_limits = settings.check_velocity, settings.velocity_limits
-    _predict(
-        chain,
-        target_rotations[i - 1],
-        target_translations[i - 1],
-        target_rotations[i],
-        target_translations[i],
-        settings,
-        q_all[i - 1],
-        guess,
-        ws,
-    )
+    _predict(chain, out.tip_twists[g, i], settings, q_all[i - 1], guess, ws)
     converged, iterations[i] = _solve_pose_into(
         chain, settings, target_rotations[i], target_translations[i], guess, q, ws
     )
@@ -231,6 +221,7 @@ def solve_trajectory(chain, settings, target_rotations, target_translations, tim
     iterate. ws: ``workspace(n)``.
     """
     count = target_rotations.shape[0]
+    _relative_twists(target_rotations, target_translations, out.tip_twists[0], ws)
     _forward_kinematics(chain, out.q_all[0, 0], ws)  # the predictor of sample 1 needs these
     _reset_predictor(ws)
     for i in range(1, count):

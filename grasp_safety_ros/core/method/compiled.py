@@ -77,6 +77,7 @@ class GraspBuffers(NamedTuple):
     iterations: np.ndarray  # (G, N) int64
     q_fail: np.ndarray  # (G, nq) last iterate of a failed sample
     guess: np.ndarray  # (G, nq) predictor scratch
+    tip_twists: np.ndarray  # (G, N, 6) log6(T_{i-1}^-1 T_i) of the tip targets, tip frame
     mobilities: np.ndarray  # (G, N, 3, 3) [1/kg], base axes
     effective_masses: np.ndarray  # (G, N) [kg]
     directions: np.ndarray  # (G, N, 3) unit, base axes
@@ -97,6 +98,7 @@ def grasp_buffers(grasps: int, count: int, nq: int) -> GraspBuffers:
         np.zeros((grasps, count), dtype=np.int64),
         np.empty((grasps, nq)),
         np.empty((grasps, nq)),
+        np.empty((grasps, count, 6)),
         np.empty((grasps, count, 3, 3)),
         np.empty((grasps, count)),
         np.empty((grasps, count, 3)),
@@ -296,6 +298,7 @@ def evaluate_grasps_compiled(
     seeds = plain_array(np.broadcast_to(seeds_q, (count, nq)))
     fixed = (chain, settings)
     shared = (motion, rotations, translations, times_s)
+    object_twists = np.empty((len(times_s), 6))
     call_kernel(
         evaluate_grasps,
         *fixed,
@@ -304,6 +307,7 @@ def evaluate_grasps_compiled(
         seeds,
         np.zeros(count, dtype=np.bool_),
         STATIONARY_TANGENT_M,
+        object_twists,
         out,
         ws,
     )
@@ -342,6 +346,7 @@ def evaluate_grasps_compiled(
             q0[None],
             np.ones(1, dtype=np.bool_),
             STATIONARY_TANGENT_M,
+            object_twists,
             GraspBuffers(*(array[row] for array in out)),
             ws,
         )
