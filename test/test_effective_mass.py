@@ -10,6 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from grasp_safety_ros.core import ObjectInertia, RobotModel, solid_box
+from grasp_safety_ros.core.method.compiled import augmented_bodies
 from grasp_safety_ros.core.method.effective_mass import (
     augmented_inertia_arrays,
     augmented_model,
@@ -17,6 +18,7 @@ from grasp_safety_ros.core.method.effective_mass import (
     translational_mobility_in_base,
     worst_direction,
 )
+from grasp_safety_ros.core.method.ik import compiled_available
 
 
 def random_object(rng: np.random.Generator) -> ObjectInertia:
@@ -186,13 +188,20 @@ def test_worst_direction_maximises_effective_mass(arm7: RobotModel) -> None:
         assert effective_mass_along(matrix, rng.normal(size=3)) <= worst * (1 + 1e-12)
 
 
-def test_augmented_inertia_arrays_equal_the_augmented_model(baxter: RobotModel) -> None:
-    """The batched body inertias the kernels take (numpy, one row per grasp) equal the bodies
-    of Pinocchio's augmented model, grasp by grasp; other bodies are the robot's own."""
+@pytest.mark.parametrize("implementation", ["numpy", "kernel"])
+def test_augmented_inertia_arrays_equal_the_augmented_model(
+    baxter: RobotModel, implementation: str
+) -> None:
+    """The batched body inertias the kernels take (numpy, or the kernel ``augment_bodies``;
+    one row per grasp) equal the bodies of Pinocchio's augmented model, grasp by grasp; other
+    bodies are the robot's own."""
+    if implementation == "kernel" and not compiled_available():
+        pytest.skip("numba is not installed")
     rng = np.random.default_rng(21)
     obj = random_object(rng)
     grasps = [random_grasp(rng) for _ in range(5)]
-    batch = augmented_inertia_arrays(
+    augment = augmented_inertia_arrays if implementation == "numpy" else augmented_bodies
+    batch = augment(
         baxter,
         obj,
         np.array([g.rotation for g in grasps]),

@@ -142,3 +142,86 @@ def translational_mobilities(chain, bodies, q_all, out, ws):
     for sample in range(q_all.shape[0]):
         _forward_kinematics(chain, q_all[sample], ws)
         _mobility_from_frames(chain, bodies, 0, ws, out[sample])
+
+
+@_jit
+def augment_bodies(
+    robot_bodies,
+    tip_body,
+    tip_rotation,
+    tip_translation,
+    spatial,
+    grasp_rotations,
+    grasp_translations,
+    out,
+    scratch,
+):
+    """``method.effective_mass.augmented_inertia_arrays``, compiled: the chain's bodies
+    (``robot_bodies``: BodyInertias of one chain) for each grasp g, the object merged into
+    body ``tip_body`` as Pinocchio adds inertias, into ``out`` (BodyInertias, leading grasp
+    axis).
+
+    Args:
+        tip_rotation, tip_translation: The tip frame in the tip body's joint frame [m].
+        spatial: The object's (mass [kg], centre of mass (3,) [m], rotational inertia about it
+            (3, 3) [kg m^2]), object frame.
+        grasp_rotations, grasp_translations: (G, 3, 3), (G, 3): the tip frame in the object
+            frame [m].
+        scratch: (4, 3): the object frame's rotation in the joint frame, and the object's
+            centre of mass there.
+    """
+    object_mass, object_lever, object_inertia = spatial
+    masses, levers, inertias = robot_bodies
+    n = masses.shape[0]
+    body_mass = masses[tip_body]
+    mass = body_mass + object_mass
+    mass_inverse = 1.0 / max(mass, 2.220446049250313e-16)
+    reduced = body_mass * object_mass * mass_inverse
+    rotation, com = scratch[:3], scratch[3]
+    for g in range(grasp_rotations.shape[0]):
+        for k in range(n):
+            out.masses[g, k] = masses[k]
+            for i in range(3):
+                out.levers[g, k, i] = levers[k, i]
+                for j in range(3):
+                    out.rotational_inertias[g, k, i, j] = inertias[k, i, j]
+        grasp_rotation, grasp_translation = grasp_rotations[g], grasp_translations[g]
+        for i in range(3):  # object frame in the joint frame: tip placement * grasp^-1
+            for j in range(3):
+                rotation[i, j] = (
+                    tip_rotation[i, 0] * grasp_rotation[j, 0]
+                    + tip_rotation[i, 1] * grasp_rotation[j, 1]
+                    + tip_rotation[i, 2] * grasp_rotation[j, 2]
+                )
+        for i in range(3):
+            origin = tip_translation[i] - (
+                rotation[i, 0] * grasp_translation[0]
+                + rotation[i, 1] * grasp_translation[1]
+                + rotation[i, 2] * grasp_translation[2]
+            )
+            com[i] = origin + (
+                rotation[i, 0] * object_lever[0]
+                + rotation[i, 1] * object_lever[1]
+                + rotation[i, 2] * object_lever[2]
+            )
+        arm_square = 0.0
+        for i in range(3):
+            arm_square += (levers[tip_body, i] - com[i]) ** 2
+        tensor = out.rotational_inertias[g, tip_body]
+        for i in range(3):
+            arm_i = levers[tip_body, i] - com[i]
+            for j in range(3):
+                turned = 0.0  # (R I_object R^T)[i, j]
+                for a in range(3):
+                    for b in range(3):
+                        turned += rotation[i, a] * object_inertia[a, b] * rotation[j, b]
+                skew_square = arm_i * (levers[tip_body, j] - com[j])
+                if i == j:
+                    skew_square -= arm_square
+                tensor[i, j] = inertias[tip_body, i, j] + turned - reduced * skew_square
+        out.masses[g, tip_body] = mass
+        for i in range(3):
+            out.levers[g, tip_body, i] = (
+                body_mass * mass_inverse * levers[tip_body, i]
+                + object_mass * mass_inverse * com[i]
+            )

@@ -90,6 +90,14 @@ def _forward_kinematics(chain, q, ws):
         else:
             slide = q[index] * prismatic[k]
             s, c = _sincos(q[index] - slide)
+        if ax == 0.0 and ay == 0.0 and az == 1.0:  # the common z axis: Pinocchio's RZ / PZ
+            for i in range(3):
+                a0, a1, a2 = fr[i, 0], fr[i, 1], fr[i, 2]
+                jt[k, i] = ft[i] + slide * a2
+                jr[k, i, 0] = a0 * c + a1 * s
+                jr[k, i, 1] = a1 * c - a0 * s
+                jr[k, i, 2] = a2
+            continue
         v = 1.0 - c
         m00, m01, m02 = c + v * ax * ax, v * ax * ay - s * az, v * ax * az + s * ay
         m10, m11, m12 = v * ay * ax + s * az, c + v * ay * ay, v * ay * az - s * ax
@@ -120,9 +128,12 @@ def _joint_axis_in_world(axes, prismatic, joint_rotations, k):
     chain's axes and prismatic arrays)."""
     ax, ay, az = axes[k, 0], axes[k, 1], axes[k, 2]
     jr = joint_rotations
-    u0 = jr[k, 0, 0] * ax + jr[k, 0, 1] * ay + jr[k, 0, 2] * az
-    u1 = jr[k, 1, 0] * ax + jr[k, 1, 1] * ay + jr[k, 1, 2] * az
-    u2 = jr[k, 2, 0] * ax + jr[k, 2, 1] * ay + jr[k, 2, 2] * az
+    if ax == 0.0 and ay == 0.0 and az == 1.0:  # the common z axis: the frame's third column
+        u0, u1, u2 = jr[k, 0, 2], jr[k, 1, 2], jr[k, 2, 2]
+    else:
+        u0 = jr[k, 0, 0] * ax + jr[k, 0, 1] * ay + jr[k, 0, 2] * az
+        u1 = jr[k, 1, 0] * ax + jr[k, 1, 1] * ay + jr[k, 1, 2] * az
+        u2 = jr[k, 2, 0] * ax + jr[k, 2, 1] * ay + jr[k, 2, 2] * az
     slide = prismatic[k]
     turn = 1.0 - slide
     return u0, u1, u2, u0 * turn, u1 * turn, u2 * turn, slide

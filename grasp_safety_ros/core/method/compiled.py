@@ -16,11 +16,7 @@ import pinocchio as pin
 from ..exceptions import GraspSafetyError
 from ..model.robot import RobotModel
 from ..model.trajectory import ObjectMotion
-from .effective_mass import (
-    STATIONARY_TANGENT_M,
-    BodyInertias,
-    augmented_inertia_arrays,
-)
+from .effective_mass import STATIONARY_TANGENT_M, BodyInertias, robot_inertia_arrays
 
 if TYPE_CHECKING:
     from ..model.inertia import ObjectInertia
@@ -248,6 +244,37 @@ def call_kernel(kernel: Any, *args: Any) -> Any:
     return result
 
 
+def augmented_bodies(
+    robot: RobotModel,
+    object_inertia: ObjectInertia,
+    grasp_rotations: np.ndarray,
+    grasp_translations: np.ndarray,
+) -> BodyInertias:
+    """``effective_mass.augmented_inertia_arrays`` by the kernel ``augment_bodies`` (one call
+    for the G grasps: (G, 3, 3) rotations and (G, 3) translations [m] of the tip frame in the
+    object frame)."""
+    from ..kernels.effective_mass import augment_bodies
+
+    model = robot.model
+    tip = model.frames[robot.tip_frame_id]
+    spatial = object_inertia.spatial_inertia_in_object()
+    count, n = len(grasp_rotations), model.nv
+    out = BodyInertias(np.empty((count, n)), np.empty((count, n, 3)), np.empty((count, n, 3, 3)))
+    call_kernel(
+        augment_bodies,
+        robot_inertia_arrays(robot),
+        tip.parentJoint - 1,
+        plain_array(tip.placement.rotation),
+        plain_array(tip.placement.translation),
+        (float(spatial.mass), plain_array(spatial.lever), plain_array(spatial.inertia)),
+        plain_array(grasp_rotations),
+        plain_array(grasp_translations),
+        out,
+        np.empty((4, 3)),
+    )
+    return out
+
+
 def plain_array(array: Any) -> np.ndarray:
     """A C-contiguous, writable float64 array of ``array`` (copied only when needed)."""
     array = np.ascontiguousarray(array, dtype=float)
@@ -285,7 +312,7 @@ def evaluate_grasps_compiled(
     grasps = [pin.SE3(transform) for transform in transforms_tip_to_object]
     rotations = np.array([grasp.rotation for grasp in grasps]).reshape(-1, 3, 3)
     translations = np.array([grasp.translation for grasp in grasps]).reshape(-1, 3)
-    bodies = augmented_inertia_arrays(robot, object_inertia, rotations, translations)
+    bodies = augmented_bodies(robot, object_inertia, rotations, translations)
     if motion_is_tip:
         rotations = np.repeat(np.eye(3)[None], len(grasps), axis=0)
         translations = np.zeros((len(grasps), 3))

@@ -398,7 +398,7 @@ class GraspSafetyEvaluator:
         """The GraspEvaluation of a feasible grasp: where the tip does not translate
         (``worst``), the direction of largest effective mass and its mass are filled in."""
         masses, directions, worst = masses_directions_worst
-        if worst.any():
+        if np.count_nonzero(worst):
             for i in np.flatnonzero(worst):
                 directions[i], masses[i] = worst_direction(mobilities[i])
         return GraspEvaluation(
