@@ -443,26 +443,54 @@ def assess_motions(
         )
     indices = list(range(count)) if indices is None else list(indices)
     names = [""] * count if names is None else list(names)
-    checked = [_checked_motion(v, m) for v, m in zip(speeds_m_s, effective_masses_kg, strict=True)]
     duration = finite_float(duration_s, "iso15066.duration_s", 0.0, None, True)
     selected = select_regions(regions)
-    assessed: list[tuple[RegionAssessment, ...]] = []
-    if count and len({len(speed) for speed, _ in checked}) == 1:
-        speeds = np.array([speed for speed, _ in checked])
-        masses = np.array([mass for _, mass in checked])
-        assessed = _assess_regions_batch(speeds, masses, duration, selected)
+    batch = _checked_batch(speeds_m_s, effective_masses_kg)
+    if batch is not None:
+        assessed = _assess_regions_batch(*batch, duration, selected)
     else:
+        checked = [
+            _checked_motion(v, m) for v, m in zip(speeds_m_s, effective_masses_kg, strict=True)
+        ]
         assessed = [assess_regions(speed, mass, duration, selected) for speed, mass in checked]
+    permitted = [region.transient_contact_permitted for region in selected]
     return [
-        _motion_assessment(regions_k, duration, index, name)
+        _motion_assessment(regions_k, permitted, duration, index, name)
         for regions_k, index, name in zip(assessed, indices, names, strict=True)
     ]
 
 
+def _checked_batch(
+    speeds_m_s: Sequence[Any], effective_masses_kg: Sequence[Any]
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The motions as (M, N) speeds and masses when they are M >= 1 valid series of one
+    length N (checked in one pass); None otherwise (then each is checked, and a bad one is
+    named, by ``_checked_motion``)."""
+    try:
+        speeds = np.array(speeds_m_s, dtype=float)
+        masses = np.array(effective_masses_kg, dtype=float)
+    except (TypeError, ValueError):  # ragged or not numeric
+        return None
+    valid = (
+        speeds.ndim == 2
+        and len(speeds) > 0
+        and masses.shape == speeds.shape
+        and bool(np.isfinite(speeds).all() and np.isfinite(masses).all())
+        and bool((speeds >= 0.0).all() and (masses > 0.0).all())
+    )
+    return (speeds, masses) if valid else None
+
+
 def _motion_assessment(
-    assessed: tuple[RegionAssessment, ...], duration: float, index: int, name: str
+    assessed: tuple[RegionAssessment, ...],
+    permitted_flags: Sequence[bool],
+    duration: float,
+    index: int,
+    name: str,
 ) -> PowerForceLimitAssessment:
-    permitted = [a for a in assessed if a.transient_contact_permitted]
+    """The assessment of one motion from its regions' (``permitted_flags``: whether each
+    region permits transient contact)."""
+    permitted = [a for a, flag in zip(assessed, permitted_flags, strict=True) if flag]
     limiting = max(permitted, key=lambda a: a.worst_force_ratio) if permitted else None
     return PowerForceLimitAssessment(
         index=index,
@@ -475,7 +503,7 @@ def _motion_assessment(
         min_duration_s=limiting.min_duration_s if limiting is not None else math.nan,
         limiting_region=limiting.region.name if limiting is not None else "",
         regions_not_permitted=tuple(
-            a.region.name for a in assessed if not a.transient_contact_permitted
+            a.region.name for a, flag in zip(assessed, permitted_flags, strict=True) if not flag
         ),
     )
 
