@@ -14,6 +14,14 @@ QUATERNION_NORM_TOLERANCE = 1e-3
 """Accepted deviation of a quaternion's norm from 1 before it is normalised."""
 
 
+def read_only(array: Any, copy: bool = False) -> np.ndarray:
+    """``array`` as a numpy array that cannot be written: a copy when ``copy`` (for arrays
+    shared with the caller), else the array itself, frozen in place (for arrays just made)."""
+    result = np.array(array) if copy else np.asarray(array)
+    result.setflags(write=False)
+    return result
+
+
 def finite_array(value: Any, field: str, shape: tuple[int, ...] | None = None) -> np.ndarray:
     """Return ``value`` as a read-only float64 array, checking type, shape and finiteness."""
     try:

@@ -30,6 +30,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..exceptions import InvalidInputError
+from ..input_checks import read_only
 from ..method.effective_mass import augmented_model
 from ..method.ranking import Grasp, GraspEvaluation
 from ..model.inertia import ObjectInertia
@@ -102,12 +103,6 @@ def _nanmax(values: np.ndarray) -> float:
     return float(finite.max()) if finite.size else float("nan")
 
 
-def _read_only(array: np.ndarray) -> np.ndarray:
-    array = np.array(array, dtype=float)
-    array.setflags(write=False)
-    return array
-
-
 def effort_limits(robot: RobotModel) -> np.ndarray:
     """(n,) URDF effort limits in chain order [N m or N]; NaN where <= 0 or not finite."""
     limits = np.array(robot.model.effortLimit, dtype=float)
@@ -147,19 +142,19 @@ def evaluate_effort(
     n = robot.num_joints
     limits = effort_limits(robot)
     if not evaluation.feasible:
-        per_joint = _read_only(np.full(n, np.nan))
-        per_sample = _read_only(np.empty((0, n)))
+        per_joint = read_only(np.full(n, np.nan), copy=True)
+        per_sample = read_only(np.empty((0, n)), copy=True)
         return EffortEvaluation(
             index=evaluation.index,
             name=evaluation.name,
             feasible=False,
-            times_s=_read_only(np.empty(0)),
+            times_s=read_only(np.empty(0), copy=True),
             joint_velocities=per_sample,
             joint_accelerations=per_sample,
             joint_torques=per_sample,
             peak_abs_torque=per_joint,
             rms_torque=per_joint,
-            effort_limits=_read_only(limits),
+            effort_limits=read_only(limits, copy=True),
             peak_fraction_of_limit=per_joint,
             rms_fraction_of_limit=per_joint,
         )
@@ -231,15 +226,15 @@ def evaluate_effort(
         index=evaluation.index,
         name=evaluation.name,
         feasible=True,
-        times_s=_read_only(times),
-        joint_velocities=_read_only(velocities),
-        joint_accelerations=_read_only(accelerations),
-        joint_torques=_read_only(torques),
-        peak_abs_torque=_read_only(peak),
-        rms_torque=_read_only(rms),
-        effort_limits=_read_only(limits),
-        peak_fraction_of_limit=_read_only(peak / limits),
-        rms_fraction_of_limit=_read_only(rms / limits),
+        times_s=read_only(times, copy=True),
+        joint_velocities=read_only(velocities, copy=True),
+        joint_accelerations=read_only(accelerations, copy=True),
+        joint_torques=read_only(torques, copy=True),
+        peak_abs_torque=read_only(peak, copy=True),
+        rms_torque=read_only(rms, copy=True),
+        effort_limits=read_only(limits, copy=True),
+        peak_fraction_of_limit=read_only(peak / limits, copy=True),
+        rms_fraction_of_limit=read_only(rms / limits, copy=True),
     )
 
 

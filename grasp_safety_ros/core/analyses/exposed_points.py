@@ -24,7 +24,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..exceptions import InvalidInputError
-from ..input_checks import finite_array, finite_float
+from ..input_checks import finite_array, finite_float, read_only
 from ..method.effective_mass import STATIONARY_TANGENT_M, augmented_model
 from ..method.ranking import Grasp, GraspEvaluation, aggregate, check_metric
 from ..model.inertia import ObjectInertia
@@ -54,7 +54,7 @@ def box_corners_in_object(
         raise InvalidInputError("object.box_size_m", f"edges must be > 0, got {size.tolist()}")
     center = finite_array(center_in_object_m, "object.box_center_in_object_m", (3,))
     signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-    return _read_only(center + 0.5 * signs * size)
+    return read_only(center + 0.5 * signs * size)
 
 
 def cylinder_rim_points_in_object(
@@ -82,7 +82,7 @@ def cylinder_rim_points_in_object(
     angles = 2.0 * np.pi * np.arange(points_per_rim) / points_per_rim
     ring = np.stack([radius * np.cos(angles), radius * np.sin(angles)], axis=1)
     rims = [np.column_stack([ring, np.full(points_per_rim, z)]) for z in (-length / 2, length / 2)]
-    return _read_only(center + np.vstack(rims))
+    return read_only(center + np.vstack(rims))
 
 
 def check_points_in_object(points_in_object_m: Any, field: str = "object.points_m") -> np.ndarray:
@@ -205,12 +205,6 @@ class ExposedPointsEvaluation:
         return self._pick(self.speed_m_s, self.worst_point_index)
 
 
-def _read_only(array: np.ndarray) -> np.ndarray:
-    array = np.asarray(array)
-    array.setflags(write=False)
-    return array
-
-
 def evaluate_exposed_points(
     robot: RobotModel,
     evaluation: GraspEvaluation,
@@ -292,15 +286,15 @@ def evaluate_exposed_points(
         index=evaluation.index,
         name=evaluation.name,
         feasible=True,
-        times_s=_read_only(times.copy()),
+        times_s=read_only(times.copy()),
         points_in_object_m=points,
-        positions_in_base_m=_read_only(positions),
-        directions_in_base=_read_only(directions),
-        direction_is_worst_case=_read_only(stationary),
-        speed_m_s=_read_only(speeds),
-        effective_mass_kg=_read_only(masses),
-        leading_point_index=_read_only(leading),
-        worst_point_index=_read_only(worst),
+        positions_in_base_m=read_only(positions),
+        directions_in_base=read_only(directions),
+        direction_is_worst_case=read_only(stationary),
+        speed_m_s=read_only(speeds),
+        effective_mass_kg=read_only(masses),
+        leading_point_index=read_only(leading),
+        worst_point_index=read_only(worst),
     )
 
 
@@ -371,4 +365,4 @@ def order_by_metric_point(
     )
     feasible = [k for k, e in enumerate(evaluations) if e.feasible]
     order = tuple(evaluations[k].index for k in sorted(feasible, key=lambda k: scores[k]))
-    return order, _read_only(scores)
+    return order, read_only(scores)

@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from ..exceptions import GraspSafetyError, InvalidInputError
-from ..input_checks import finite_array, finite_float
+from ..input_checks import finite_array, finite_float, read_only
 from ..method.ranking import GraspEvaluation
 
 N_PER_MM_IN_N_PER_M = 1000.0
@@ -305,11 +305,6 @@ class PowerForceLimitAssessment:
         )
 
 
-def _read_only(array: np.ndarray) -> np.ndarray:
-    array.setflags(write=False)
-    return array
-
-
 def assess_region(
     speed_m_s: np.ndarray, effective_mass_kg: np.ndarray, duration_s: float, region: BodyRegion
 ) -> RegionAssessment:
@@ -328,7 +323,7 @@ def _region_columns(
         np.array([r.spring_constant_n_per_m for r in regions], dtype=float),
         np.array([r.max_transient_force_n or np.nan for r in regions], dtype=float),
     )
-    return tuple(_read_only(column[:, None]) for column in columns)  # type: ignore[return-value]
+    return tuple(read_only(column[:, None]) for column in columns)  # type: ignore[return-value]
 
 
 def assess_regions(
@@ -360,10 +355,10 @@ def _assess_regions_batch(
     """
     permitted, human_mass, stiffness, limit = (c[:, :, None] for c in _region_columns(regions))
     root = np.sqrt(reduced_mass_kg(human_mass, effective_mass_kg) * stiffness)  # sqrt(μ·k)
-    force = _read_only(speed_m_s * root)  # (R, M, N)
-    v_max = _read_only(np.where(permitted, limit / root, 0.0))
+    force = read_only(speed_m_s * root)  # (R, M, N)
+    v_max = read_only(np.where(permitted, limit / root, 0.0))
     moving = np.where(speed_m_s > 0.0, np.inf, 0.0)
-    ratio = _read_only(np.where(permitted, force / limit, moving))
+    ratio = read_only(np.where(permitted, force / limit, moving))
     count = ratio.shape[2]
     if count:
         worst_sample = np.argmax(ratio, axis=2)

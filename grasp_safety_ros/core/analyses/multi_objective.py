@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from ..exceptions import InvalidInputError
-from ..input_checks import finite_array, finite_float
+from ..input_checks import finite_array, finite_float, read_only
 from ..method.ranking import GraspEvaluation
 
 
@@ -58,11 +58,6 @@ class QualityRanking:
     combined: np.ndarray
     order: tuple[int, ...]
     pareto_set: tuple[int, ...]
-
-
-def _read_only(array: np.ndarray) -> np.ndarray:
-    array.setflags(write=False)
-    return array
 
 
 def min_max_normalise(values: np.ndarray, feasible: np.ndarray) -> np.ndarray:
@@ -141,11 +136,11 @@ def rank_with_quality(
     return QualityRanking(
         safety_weight=weight,
         quality_given=given,
-        scores=_read_only(score),
-        quality=_read_only(quality),
-        safety_normalised=_read_only(safety_norm),
-        quality_normalised=_read_only(quality_norm),
-        combined=_read_only(combined),
+        scores=read_only(score),
+        quality=read_only(quality),
+        safety_normalised=read_only(safety_norm),
+        quality_normalised=read_only(quality_norm),
+        combined=read_only(combined),
         order=order,
         pareto_set=pareto,
     )

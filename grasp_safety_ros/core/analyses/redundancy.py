@@ -66,6 +66,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..exceptions import InvalidInputError
+from ..input_checks import read_only
 from ..method.effective_mass import augmented_model, translational_mobility_in_base
 from ..method.ranking import Grasp, GraspEvaluation, aggregate, check_metric
 from ..model.inertia import ObjectInertia
@@ -225,12 +226,6 @@ class RedundancyResolution:
         Negative entries (at most the configured relative rise) can occur; the score is lower.
         """
         return self.original_effective_mass_kg - self.effective_mass_kg
-
-
-def _read_only(array: np.ndarray) -> np.ndarray:
-    array = np.array(array)
-    array.setflags(write=False)
-    return array
 
 
 def bernstein_basis(degree: int, s_values: np.ndarray) -> np.ndarray:
@@ -555,11 +550,11 @@ def resolve_redundancy(
         feasible=True,
         applied=True,
         reason="",
-        times_s=_read_only(times),
-        joint_positions=_read_only(positions),
-        effective_mass_kg=_read_only(result_masses),
-        original_joint_positions=_read_only(original),
-        original_effective_mass_kg=_read_only(masses),
+        times_s=read_only(times, copy=True),
+        joint_positions=read_only(positions, copy=True),
+        effective_mass_kg=read_only(result_masses, copy=True),
+        original_joint_positions=read_only(original, copy=True),
+        original_effective_mass_kg=read_only(masses, copy=True),
         score=aggregate(result_masses, times, config.metric),
         original_score=aggregate(masses, times, config.metric),
         metric=config.metric,
@@ -585,11 +580,11 @@ def _unchanged(
         feasible=evaluation.feasible,
         applied=False,
         reason=reason,
-        times_s=_read_only(times),
-        joint_positions=_read_only(evaluation.joint_positions),
-        effective_mass_kg=_read_only(masses),
-        original_joint_positions=_read_only(evaluation.joint_positions),
-        original_effective_mass_kg=_read_only(masses),
+        times_s=read_only(times, copy=True),
+        joint_positions=read_only(evaluation.joint_positions, copy=True),
+        effective_mass_kg=read_only(masses, copy=True),
+        original_joint_positions=read_only(evaluation.joint_positions, copy=True),
+        original_effective_mass_kg=read_only(masses, copy=True),
         score=score,
         original_score=score,
         metric=config.metric,
