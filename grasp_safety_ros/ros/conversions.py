@@ -489,10 +489,10 @@ def seed_from_joint_state(
 class _CollectorPause:
     """Context manager: the cyclic garbage collector paused while a result message is built.
 
-    A response holds a Python object per sample (``direction`` vectors, trajectory points) and
-    per region; none of them forms a reference cycle, but their allocation triggers the
-    collector over and over (it walks every tracked object of the process): 40 % of the
-    building time of a 1,000 x 201 response. Reference counting still frees everything; the
+    A response holds a Python object per trajectory point and per region; none of them forms a
+    reference cycle, but their allocation triggers the collector over and over (it walks every
+    tracked object of the process): 40 % of the building time of a 1,000 x 201 response (when
+    ``direction`` was a Vector3 per sample). Reference counting still frees everything; the
     collector resumes (if it was running) when the last of concurrent builds ends.
     """
 
@@ -523,32 +523,6 @@ def float64_array(values: Sequence[float] | np.ndarray) -> array.array:
     """``array('d')`` of ``values``: what a float64[] field holds; built from the bytes, so
     the message setter stores it as is instead of converting element by element."""
     return array.array("d", np.ascontiguousarray(values, dtype=np.float64).tobytes())
-
-
-_VECTOR3_CHECK_FIELDS = Vector3()._check_fields
-_FAST_VECTOR3 = set(Vector3.__slots__) == {"_x", "_y", "_z", "_check_fields"}
-"""Whether vector3_msgs may fill the slots of geometry_msgs/Vector3 directly (Jazzy's class)."""
-
-
-def vector3_msgs(vectors: np.ndarray) -> list[Vector3]:
-    """geometry_msgs/Vector3 of each row of an (N, 3) array.
-
-    The rows of a response's ``direction`` fields are its bulk (one message per sample): the
-    messages are made without the keyword constructor (its per-field setters cost about 5x
-    more), by filling the generated class's slots with the floats; if the class is not the
-    one this was written for (other slots), the constructor is used.
-    """
-    rows = np.asarray(vectors, dtype=np.float64).reshape(-1, 3).tolist()
-    if not _FAST_VECTOR3:
-        return [Vector3(x=x, y=y, z=z) for x, y, z in rows]
-    new, check = Vector3.__new__, _VECTOR3_CHECK_FIELDS
-    messages = []
-    append = messages.append
-    for x, y, z in rows:
-        vector = new(Vector3)
-        vector._x, vector._y, vector._z, vector._check_fields = x, y, z, check
-        append(vector)
-    return messages
 
 
 def evaluation_msg(evaluation: GraspEvaluation, per_sample: bool = True) -> GraspEvaluationMsg:
@@ -582,7 +556,7 @@ def evaluation_msg(evaluation: GraspEvaluation, per_sample: bool = True) -> Gras
     if per_sample:
         message.time_from_start_s = float64_array(evaluation.times_s)
         message.effective_mass_kg = float64_array(evaluation.effective_mass_kg)
-        message.direction = vector3_msgs(evaluation.directions_in_base)
+        message.direction_xyz = float64_array(evaluation.directions_in_base)  # row-major
         message.direction_is_worst_case = np.asarray(
             evaluation.direction_is_worst_case, bool
         ).tolist()
