@@ -22,8 +22,9 @@ Measured in one process, interleaved, repeated (median and spread):
 - where the time goes (cProfile of one ranking, ours and the peer's);
 - service cost (bench/service.py): 10 grasps x 101 samples through the running node
   (in-process, rclpy; a client in its own process on rclpy's EventsExecutor; median, p90,
-  the ranking's own time; the floor and a spin_until_future_complete client) and 1,000 grasps x 201 samples
-  end to end with the response's size, when the node and grasp_safety_msgs are importable;
+  the ranking's own time; the floor and a spin_until_future_complete client) and 1,000
+  grasps x 201 samples end to end with the response's size, when the node and
+  grasp_safety_msgs are importable;
 - posture selection (bench/postures.py): ms per grasp and score gain per restart count on
   Panda, Baxter and the book; alone: ``bench/run.py --postures-only``.
 

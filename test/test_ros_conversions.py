@@ -22,6 +22,7 @@ from geometry_msgs.msg import (
     Transform,
     Vector3,
 )
+from grasp_safety_msgs.msg import BodyRegionAssessment
 from grasp_safety_msgs.msg import GraspEvaluation as GraspEvaluationMsg
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -704,6 +705,59 @@ def test_directions_round_trip_through_the_flat_field_exactly() -> None:
     np.testing.assert_array_equal(np.reshape(back.direction_xyz, (-1, 3)), directions)
     assert np.signbit(np.reshape(back.direction_xyz, (-1, 3))[3, 1])
     assert len(conversions.evaluation_msg(evaluation, per_sample=False).direction_xyz) == 0
+
+
+def test_evaluation_messages_equal_the_keyword_constructor_and_share_nothing() -> None:
+    """The slot-filling construction of GraspEvaluation gives what the generated keyword
+    constructor gives, and two messages share no mutable field."""
+    evaluation = GraspEvaluation(
+        index=3,
+        name="g",
+        feasible=True,
+        reason="",
+        score=1.25,
+        times_s=np.array([0.0, 0.5]),
+        joint_positions=np.zeros((2, 2)),
+        directions_in_base=np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]),
+        effective_mass_kg=np.array([1.0, 1.5]),
+        direction_is_worst_case=np.array([False, True]),
+        tip_speed_m_s=np.zeros(2),
+        ik_iterations=np.zeros(2, dtype=int),
+    )
+    nan = float("nan")
+    expected = GraspEvaluationMsg(
+        index=3,
+        name="g",
+        feasible=True,
+        reason="",
+        score=1.25,
+        peak_effective_mass_kg=1.5,
+        mean_effective_mass_kg=1.25,
+        time_from_start_s=[0.0, 0.5],
+        effective_mass_kg=[1.0, 1.5],
+        direction_xyz=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0],
+        direction_is_worst_case=[False, True],
+        safety_score=1.25,
+        iso_min_duration_s=nan,
+        worst_case_score=nan,
+        percentile_score=nan,
+        probability_safest=nan,
+        grasp_quality=nan,
+        combined_score=nan,
+        score_without_redundancy=nan,
+        effort_score=nan,
+        score_single_ik=nan,
+        score_range_min=nan,
+        score_range_max=nan,
+    )
+    first, second = (conversions.evaluation_msg(evaluation) for _ in range(2))
+    assert repr(first) == repr(expected)  # every field; NaN-safe, unlike ==
+    first.iso_ts_15066.append(BodyRegionAssessment())
+    first.peak_abs_torque.append(1.0)
+    first.joint_trajectory.joint_names.append("j")
+    assert repr(second) == repr(expected)
+    empty = conversions.evaluation_msg(evaluation, per_sample=False)
+    assert len(empty.time_from_start_s) == len(empty.direction_is_worst_case) == 0
 
 
 def test_object_com_far_away_is_refused() -> None:

@@ -789,7 +789,9 @@ class GraspSafetyNode(Node):
             status.last_infeasible = len(ranking.evaluations) - feasible
             status.last_source = source
             status.last_was_error = False
-        self.get_logger().info(
+        # Debug, not info: an rclpy log call that is emitted costs about 2 ms here (its caller
+        # lookup, inspect.getmodule, scans every loaded module); /diagnostics has the counts.
+        self.get_logger().debug(
             f"{source}: ranked {len(grasps)} grasps ({feasible} feasible) in "
             f"{compute_time_s:.3f} s; order {list(report.order)}"
         )
