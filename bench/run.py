@@ -21,8 +21,10 @@ Measured in one process, interleaved, repeated (median and spread):
 - the physical floor (4k flops per evaluation + 2k per IK iteration) and our distance to it;
 - where the time goes (cProfile of one ranking, ours and the peer's);
 - service cost (bench/service.py): 10 grasps x 101 samples through the running node
-  (in-process, rclpy; median, p90, the ranking's own time) and 1,000 grasps x 201 samples
-  end to end with the response's size, when the node and grasp_safety_msgs are importable;
+  (in-process, rclpy; a client in its own process on rclpy's EventsExecutor; median, p90,
+  the ranking's own time; the floor and a spin_until_future_complete client) and 1,000
+  grasps x 201 samples end to end with the response's size, when the node and
+  grasp_safety_msgs are importable;
 - posture selection (bench/postures.py): ms per grasp and score gain per restart count on
   Panda, Baxter and the book; alone: ``bench/run.py --postures-only``.
 
@@ -708,8 +710,16 @@ def print_table(results: dict[str, Any]) -> None:
             f"ms, p90 {fmt(measured['latency_ms']['p90'])} ms "
             f"[{fmt(measured['latency_ms']['min'])}..{fmt(measured['latency_ms']['max'])}], "
             f"ranking alone {fmt(measured['ranking_ms']['median'])} ms "
-            f"(x{fmt(measured['latency_over_ranking'])})"
+            f"(x{fmt(measured['latency_over_ranking'])}; client: {measured.get('client')})"
         )
+        if "latency_spin_until_ms" in measured:
+            print(
+                f"  client waiting with spin_until_future_complete: median "
+                f"{fmt(measured['latency_spin_until_ms']['median'])} ms; empty request "
+                f"{fmt(measured['empty_request_ms']['median'])} ms (fast client), "
+                f"{fmt(measured['empty_request_spin_until_ms']['median'])} ms "
+                "(spin_until_future_complete)"
+            )
         large = measured.get("end_to_end_1000x201")
         if large:
             print(

@@ -2,9 +2,9 @@
 """Service cost of the grasp_safety node (issue 12): latency, where it goes, large requests.
 
 Baxter's right arm (example-robot-data), the benchmark box, grasps around it, a 2 s quintic
-trajectory; the node runs in-process (rclpy, MultiThreadedExecutor thread) and a client node
-in the same context calls ``~/rank_grasps`` (rclpy's SingleThreadedExecutor, as the README's
-example; also rclpy's EventsExecutor, whose own cost is smaller). Two node configurations:
+trajectory; the node runs in-process (rclpy, MultiThreadedExecutor thread, as its console
+script runs it) and the client is a separate process (bench/service_client.py, a small rclpy
+node as a user's), driven over a pipe. Three node configurations:
 
 - ``issue_comparable``: ``posture.restarts`` 0 (the paper's single IK, what the node ran when
   issue 12's targets were written) and the default response;
@@ -14,15 +14,21 @@ example; also rclpy's EventsExecutor, whose own cost is smaller). Two node confi
 
 Each is measured for:
 
-- latency, 10 grasps x 101 samples (dt 0.02 s): median and p90 of the round trip; interleaved
-  with each call, the ranking's own time (``GraspSafetyEvaluator.rank`` of the node's
-  evaluator on the same inputs, in this thread) and the spans of the node's work done by hand
-  with the node's settings (request conversion, ranking, posture selection, analyses, response
-  message, serialisation, and the client's deserialisation of it); the rest of the round trip
-  is the executors and the middleware (an empty request, GetParameters, measures that floor).
-  The markers are built only for a subscriber (none here): timed apart, not in the sum;
-- end to end, 1,000 grasps x 201 samples (dt 0.01 s): wall time of the call and the
-  response's size in bytes (serialised RankGrasps response), with the same spans once.
+- latency, 10 grasps x 101 samples (dt 0.02 s): median and p90 of the round trip from a
+  client on rclpy's EventsExecutor (the headline; the ``spin_once`` loop where rclpy has no
+  EventsExecutor) and, secondary, from a client waiting with
+  ``SingleThreadedExecutor.spin_until_future_complete`` (what the obvious client pays); the
+  floor of each (an empty request: GetParameters of one name). Interleaved with the calls,
+  with the node idle: the ranking's own time (``GraspSafetyEvaluator.rank`` of the node's
+  evaluator on the same inputs, in this process) and the spans of the node's work done by
+  hand with the node's settings (request conversion, ranking, posture selection, analyses,
+  response message, serialisation, and the client's deserialisation of it); the rest of the
+  round trip is the executors and the middleware. The markers and the ``~/ranking``
+  publication are made only for a subscriber (none here): the markers are timed apart, not
+  in the sum;
+- end to end, 1,000 grasps x 201 samples (dt 0.01 s), from the EventsExecutor client: wall
+  time of the call and the response's size in bytes (serialised RankGrasps response), with
+  the same spans once.
 
 Usage: .venv/bin/python bench/service.py [--repeats 30] [--large-repeats 2] [--json OUT]
 (not a test; also run by bench/run.py). Figures are wall-clock: other processes on the cores
@@ -35,6 +41,7 @@ import argparse
 import json
 import os
 import random
+import subprocess
 import sys
 import threading
 import time
@@ -62,6 +69,8 @@ DESCRIPTIONS = {
 SPANS = ("convert", "rank", "posture", "analyse", "response", "serialise", "deserialise")
 """The node's steps in a round trip, and the client's deserialisation."""
 REST = "rest (executors, middleware)"
+WAITS = ("events", "spin_once", "spin_until")
+"""How the clients wait for the answer (service_client.py): the headline's first."""
 
 
 def summary_ms(values_s: Sequence[float]) -> dict[str, float]:
@@ -78,22 +87,23 @@ def summary_ms(values_s: Sequence[float]) -> dict[str, float]:
 @contextmanager
 def running_node(
     arm: ArmWorkload, dt_s: float, overrides: dict[str, Any] | None = None
-) -> Iterator[tuple[Any, Any, Any, Any]]:
-    """The node for ``arm`` spinning in a thread; yields (node, client_node, executor, client).
+) -> Iterator[tuple[Any, dict[str, str]]]:
+    """The node for ``arm`` spinning in a thread; yields (node, environment of its clients).
 
-    ``overrides``: node parameters on top of the benchmark's (robot, seed, ``dt_s``).
+    ``overrides``: node parameters on top of the benchmark's (robot, seed, ``dt_s``). The
+    node runs on a random ROS domain with localhost discovery; the environment names both.
     """
     import rclpy
-    from grasp_safety_msgs.srv import RankGrasps
     from rclpy.context import Context
-    from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
+    from rclpy.executors import MultiThreadedExecutor
     from rclpy.parameter import Parameter
 
     from grasp_safety_ros.ros.node import EXECUTOR_THREADS, GraspSafetyNode
 
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    domain_id = random.SystemRandom().randint(0, 101)
     context = Context()
-    rclpy.init(context=context, domain_id=random.SystemRandom().randint(0, 101))
+    rclpy.init(context=context, domain_id=domain_id)
     parameters = {
         "urdf": arm.urdf,
         "base_frame": arm.base_frame,
@@ -112,20 +122,69 @@ def running_node(
     executor.add_node(node)
     thread = threading.Thread(target=executor.spin, daemon=True)
     thread.start()
-    client_node = rclpy.create_node("grasp_safety_bench_client", context=context)
-    client_executor = SingleThreadedExecutor(context=context)
-    client_executor.add_node(client_node)
-    client = client_node.create_client(RankGrasps, "/grasp_safety/rank_grasps")
     try:
-        if not client.wait_for_service(timeout_sec=20.0):
-            raise RuntimeError("service /grasp_safety/rank_grasps not found")
-        yield node, client_node, client_executor, client
+        yield node, {**os.environ, "ROS_DOMAIN_ID": str(domain_id)}
     finally:
         executor.shutdown()
         node.destroy_node()
-        client_node.destroy_node()
         rclpy.shutdown(context=context)
         thread.join(timeout=5.0)
+
+
+class ClientProcess:
+    """bench/service_client.py in its own process, waiting the ``wait`` way (see there)."""
+
+    def __init__(self, wait: str, environment: dict[str, str]) -> None:
+        self.process = subprocess.Popen(
+            [sys.executable, str(Path(__file__).with_name("service_client.py")), "--wait", wait],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            env=environment,
+            text=True,
+        )
+        ready = self._answer()
+        if not ready["ready"]:
+            self.close()
+            raise RuntimeError("service /grasp_safety/rank_grasps not found")
+        self.wait: str = ready["wait"]
+        """How it waits: the requested way, or spin_once for events without EventsExecutor."""
+
+    def _answer(self) -> dict[str, Any]:
+        assert self.process.stdout is not None
+        line = self.process.stdout.readline()
+        if not line:
+            raise RuntimeError(f"the client process ended (status {self.process.wait()})")
+        return json.loads(line)
+
+    def command(self, line: str) -> dict[str, Any]:
+        """Send one command (``rank GRASPS`` or ``empty``); its answer."""
+        assert self.process.stdin is not None
+        self.process.stdin.write(line + "\n")
+        self.process.stdin.flush()
+        return self._answer()
+
+    def close(self) -> None:
+        try:
+            if self.process.poll() is None and self.process.stdin is not None:
+                self.process.stdin.write("quit\n")
+                self.process.stdin.close()
+            self.process.wait(timeout=20.0)
+        except (OSError, subprocess.TimeoutExpired):
+            self.process.kill()
+            self.process.wait()
+
+
+@contextmanager
+def clients(environment: dict[str, str], *waits: str) -> Iterator[list[ClientProcess]]:
+    """Client processes, one per way of waiting, closed at the end."""
+    started: list[ClientProcess] = []
+    try:
+        for wait in waits:
+            started.append(ClientProcess(wait, environment))
+        yield started
+    finally:
+        for client in started:
+            client.close()
 
 
 def rank_request(arm: ArmWorkload, num_grasps: int) -> Any:
@@ -161,16 +220,6 @@ def rank_request(arm: ArmWorkload, num_grasps: int) -> Any:
 def samples_per_grasp(dt_s: float) -> int:
     """Samples of rank_request's 2 s trajectory at the node's ``trajectory.dt_s``."""
     return round(2.0 / dt_s) + 1
-
-
-def call(client_executor: Any, client: Any, request: Any, timeout_s: float = 60.0) -> Any:
-    """Call the service; return the response (raise when it fails)."""
-    future = client.call_async(request)
-    client_executor.spin_until_future_complete(future, timeout_sec=timeout_s)
-    response = future.result()
-    if response is None or not response.success:
-        raise RuntimeError("no answer" if response is None else response.message)
-    return response
 
 
 def node_spans(node: Any, request: Any) -> dict[str, float]:
@@ -253,78 +302,49 @@ def node_spans(node: Any, request: Any) -> dict[str, float]:
     return spans
 
 
-def _events_client(client_node: Any) -> tuple[Any, Any, Any] | None:
-    """(executor, client, node): a second client of the service on rclpy's EventsExecutor, or
-    None without it."""
-    try:
-        from grasp_safety_msgs.srv import RankGrasps
-        from rclpy.experimental import EventsExecutor
-    except ImportError:
-        return None
-    import rclpy
-
-    node = rclpy.create_node("grasp_safety_bench_events_client", context=client_node.context)
-    executor = EventsExecutor(context=client_node.context)
-    executor.add_node(node)
-    client = node.create_client(RankGrasps, "/grasp_safety/rank_grasps")
-    if not client.wait_for_service(timeout_sec=20.0):
-        executor.shutdown()
-        node.destroy_node()
-        return None
-    return executor, client, node
-
-
 def latency(arm: ArmWorkload, repeats: int, overrides: dict[str, Any]) -> dict[str, Any]:
-    """Round trip of 10 grasps x 101 samples, the ranking's own time and the spans.
-
-    Also the round trip of an empty request to the same node (GetParameters of one name):
-    the floor set by the executors and the middleware; and the round trip from a client on
-    rclpy's EventsExecutor.
-    """
-    from rcl_interfaces.srv import GetParameters
-
+    """Round trip of 10 grasps x 101 samples from each client (WAITS), the ranking's own time
+    and the spans; the floor of each client (an empty request, GetParameters of one name)."""
     request = rank_request(arm, 10)
-    with running_node(arm, 0.02, overrides) as (node, client_node, client_executor, client):
-        get = client_node.create_client(GetParameters, "/grasp_safety/get_parameters")
-        get.wait_for_service(timeout_sec=20.0)
-        events = _events_client(client_node)
-        round_trips, computes, empty, events_trips = [], [], [], []
-        spans: dict[str, list[float]] = {}
+    round_trips: dict[str, list[float]] = {wait: [] for wait in WAITS}
+    empty: dict[str, list[float]] = {wait: [] for wait in WAITS}
+    computes: list[float] = []
+    spans: dict[str, list[float]] = {}
+    with (
+        running_node(arm, 0.02, overrides) as (node, environment),
+        clients(environment, *WAITS) as processes,
+    ):
         for k in range(repeats + 3):
-            started = time.perf_counter()
-            response = call(client_executor, client, request)
-            elapsed = time.perf_counter() - started
-            steps = node_spans(node, request)
-            started = time.perf_counter()
-            future = get.call_async(GetParameters.Request(names=["metric"]))
-            client_executor.spin_until_future_complete(future, timeout_sec=30.0)
-            empty_elapsed = time.perf_counter() - started
-            if events is not None:
-                started = time.perf_counter()
-                call(events[0], events[1], request)
-                events_trips.append(time.perf_counter() - started)
+            answers, empties = {}, {}
+            for wait, process in zip(WAITS, processes, strict=True):
+                answers[wait] = process.command("rank 10")
+                empties[wait] = process.command("empty")
+                if wait == WAITS[0]:
+                    steps = node_spans(node, request)  # the node idle, between the calls
             if k >= 3:  # the first calls warm caches up
-                round_trips.append(elapsed)
-                empty.append(empty_elapsed)
-                computes.append(response.ranking.compute_time_s)
+                for wait in WAITS:
+                    round_trips[wait].append(answers[wait]["round_trip_s"])
+                    empty[wait].append(empties[wait]["round_trip_s"])
+                computes.append(answers[WAITS[0]]["compute_time_s"])
                 for name, value in steps.items():
                     spans.setdefault(name, []).append(value)
-        if events is not None:
-            events[0].shutdown()
-            events[2].destroy_node()
-        evaluations = response.ranking.evaluations
+        headline_wait = processes[0].wait
+    answer = answers[WAITS[0]]
     result = {
         "robot": arm.name,
-        "grasps": len(evaluations),
+        "grasps": answer["grasps"],
         "samples_per_grasp": samples_per_grasp(0.02),
-        "feasible_grasps": sum(1 for e in evaluations if e.feasible),
-        "joint_trajectories_sent": sum(1 for e in evaluations if e.joint_trajectory.points),
+        "feasible_grasps": answer["feasible_grasps"],
+        "joint_trajectories_sent": answer["joint_trajectories_sent"],
+        "response_bytes": answer["response_bytes"],
         "repeats": repeats,
-        "latency_ms": summary_ms(round_trips),
-        "latency_events_client_ms": summary_ms(events_trips[3:]) if events_trips else None,
+        "client": f"separate process, {headline_wait}",
+        "latency_ms": summary_ms(round_trips[WAITS[0]]),
+        **{f"latency_{wait}_ms": summary_ms(round_trips[wait]) for wait in WAITS[1:]},
         "ranking_ms": summary_ms(spans["rank"]),
         "node_compute_ms": summary_ms(computes),
-        "empty_request_ms": summary_ms(empty),
+        "empty_request_ms": summary_ms(empty[WAITS[0]]),
+        **{f"empty_request_{wait}_ms": summary_ms(empty[wait]) for wait in WAITS[1:]},
         "spans_ms": {name: summary_ms(spans[name])["median"] for name in SPANS},
         "spans_cpu_ms": {name: summary_ms(spans[f"{name}_cpu"])["median"] for name in SPANS},
         "markers_when_subscribed_ms": summary_ms(spans["markers"])["median"],
@@ -337,30 +357,31 @@ def latency(arm: ArmWorkload, repeats: int, overrides: dict[str, Any]) -> dict[s
 
 def large(arm: ArmWorkload, repeats: int, overrides: dict[str, Any]) -> dict[str, Any]:
     """End to end: 1,000 grasps x 201 samples through the service; the response's size."""
-    from rclpy.serialization import serialize_message
-
     request = rank_request(arm, 1000)
-    with running_node(arm, 0.01, overrides) as (node, _, client_executor, client):
-        call(client_executor, client, rank_request(arm, 10))  # warm-up
+    with (
+        running_node(arm, 0.01, overrides) as (node, environment),
+        clients(environment, "events") as (client,),
+    ):
+        client.command("rank 10")  # warm-up
         walls, computes = [], []
         for _ in range(repeats):
-            started = time.perf_counter()
-            response = call(client_executor, client, request)
-            walls.append(time.perf_counter() - started)
-            computes.append(response.ranking.compute_time_s)
-        evaluations = response.ranking.evaluations
+            answer = client.command("rank 1000")
+            walls.append(answer["round_trip_s"])
+            computes.append(answer["compute_time_s"])
         spans = node_spans(node, request)
+        wait = client.wait
     result = {
         "robot": arm.name,
-        "grasps": len(evaluations),
+        "grasps": answer["grasps"],
         "samples_per_grasp": samples_per_grasp(0.01),
-        "feasible_grasps": sum(1 for e in evaluations if e.feasible),
-        "joint_trajectories_sent": sum(1 for e in evaluations if e.joint_trajectory.points),
+        "feasible_grasps": answer["feasible_grasps"],
+        "joint_trajectories_sent": answer["joint_trajectories_sent"],
         "repeats": repeats,
+        "client": f"separate process, {wait}",
         "wall_s": summary_ms(walls)["median"] / 1e3,
         "wall_ms": summary_ms(walls),
         "node_compute_ms": summary_ms(computes),
-        "response_bytes": len(serialize_message(response)),
+        "response_bytes": answer["response_bytes"],
         "spans_ms": {name: 1e3 * spans[name] for name in SPANS},
         "spans_cpu_ms": {name: 1e3 * spans[f"{name}_cpu"] for name in SPANS},
         "markers_when_subscribed_ms": 1e3 * spans["markers"],
@@ -401,28 +422,32 @@ def print_results(results: dict[str, Any]) -> None:
         small = results[name]["latency_10x101"]
         lat, rank = small["latency_ms"], small["ranking_ms"]
         print(
-            f"  service latency 10 x 101 (Baxter): median {lat['median']:.2f} ms, p90 "
-            f"{lat['p90']:.2f} ms [{lat['min']:.2f}..{lat['max']:.2f}]; ranking alone "
-            f"{rank['median']:.2f} ms (latency / ranking = {small['latency_over_ranking']:.2f}); "
-            f"node compute {small['node_compute_ms']['median']:.2f} ms"
+            f"  service latency 10 x 101 (Baxter, client: {small['client']}): median "
+            f"{lat['median']:.2f} ms, p90 {lat['p90']:.2f} ms "
+            f"[{lat['min']:.2f}..{lat['max']:.2f}]; ranking alone {rank['median']:.2f} ms "
+            f"(latency / ranking = {small['latency_over_ranking']:.2f}); node compute "
+            f"{small['node_compute_ms']['median']:.2f} ms; response {small['response_bytes']} B"
         )
         print(f"    spans (median ms): {spans(small['spans_ms'])}")
         print(f"    spans (median CPU ms of the calling thread): {spans(small['spans_cpu_ms'])}")
-        events = small["latency_events_client_ms"]
-        print(
-            f"    empty request (GetParameters): {small['empty_request_ms']['median']:.2f} ms; "
-            + (
-                f"round trip from an EventsExecutor client: median {events['median']:.2f} ms, "
-                f"p90 {events['p90']:.2f} ms; "
-                if events
-                else ""
+        for wait in WAITS[1:]:
+            other = small[f"latency_{wait}_ms"]
+            print(
+                f"    client waiting with {wait}: median {other['median']:.2f} ms, p90 "
+                f"{other['p90']:.2f} ms"
             )
-            + f"markers (built only for a subscriber) {small['markers_when_subscribed_ms']:.2f} ms"
+        floors = [f"{small['empty_request_ms']['median']:.2f} ms ({WAITS[0]})"] + [
+            f"{small[f'empty_request_{wait}_ms']['median']:.2f} ms ({wait})" for wait in WAITS[1:]
+        ]
+        print(
+            f"    empty request (GetParameters), median: {', '.join(floors)}; markers (built "
+            f"only for a subscriber) {small['markers_when_subscribed_ms']:.2f} ms"
         )
         big = results[name].get("end_to_end_1000x201")
         if big:
             print(
-                f"  service end to end {big['grasps']} x {big['samples_per_grasp']} (Baxter): "
+                f"  service end to end {big['grasps']} x {big['samples_per_grasp']} (Baxter, "
+                f"client: {big['client']}): "
                 f"{big['wall_s']:.3f} s (node compute {big['node_compute_ms']['median']:.0f} ms),"
                 f" response {big['response_bytes']} bytes ({big['response_bytes'] / 1e6:.2f} MB)"
             )

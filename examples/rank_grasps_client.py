@@ -8,7 +8,9 @@ Start the node first (config/grasp_safety_node.yaml is the book on Baxter), then
 Exit status 0 when the node ranked the grasps, 1 otherwise.
 
 Note: write float literals (1.0, not 1) in float64 message fields: rclpy accepts an int there
-but puts garbage on the wire.
+but puts garbage on the wire. The client waits with rclpy's EventsExecutor: on Jazzy's rclpy,
+``rclpy.spin_until_future_complete`` returns milliseconds after the answer has arrived (see
+the README, "Calling the service from Python").
 """
 
 from __future__ import annotations
@@ -16,15 +18,41 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+import time
 
 import rclpy
+import rclpy.executors
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point, Pose, PoseArray, PoseStamped, Quaternion
 from grasp_safety_msgs.srv import RankGrasps
 from nav_msgs.msg import Path
 from std_msgs.msg import Header
 
+try:
+    from rclpy.experimental import EventsExecutor
+except ImportError:  # an rclpy without it
+    EventsExecutor = None
+
 SERVICE = "/grasp_safety/rank_grasps"
+
+
+def wait_for(node: rclpy.node.Node, future: rclpy.task.Future, timeout_s: float) -> None:
+    """Spin ``node`` until ``future`` is done or ``timeout_s`` has passed.
+
+    rclpy's EventsExecutor wakes as soon as the answer arrives; an rclpy without it gets
+    the same from a SingleThreadedExecutor's spin_once in a loop.
+    """
+    if EventsExecutor is not None:
+        executor = EventsExecutor(context=node.context)
+        executor.add_node(node)
+        executor.spin_until_future_complete(future, timeout_sec=timeout_s)
+    else:
+        executor = rclpy.executors.SingleThreadedExecutor(context=node.context)
+        executor.add_node(node)
+        deadline = time.monotonic() + timeout_s
+        while not future.done() and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=1.0)
+    executor.shutdown()
 
 
 def pose(position_m: tuple[float, float, float], quat_xyzw: tuple[float, ...]) -> Pose:
@@ -72,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"no service {SERVICE}: is the node running (same ROS_DOMAIN_ID)?")
             return 1
         future = client.call_async(request)
-        rclpy.spin_until_future_complete(node, future, timeout_sec=120.0)
+        wait_for(node, future, 120.0)
         response = future.result()
         if response is None:
             print("no answer within 120 s")

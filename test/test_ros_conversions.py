@@ -22,6 +22,7 @@ from geometry_msgs.msg import (
     Transform,
     Vector3,
 )
+from grasp_safety_msgs.msg import BodyRegionAssessment
 from grasp_safety_msgs.msg import GraspEvaluation as GraspEvaluationMsg
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -67,7 +68,6 @@ from grasp_safety_ros.ros.conversions import (
     trajectory_from_path,
     transform_from_pose_msg,
     transforms_from_pose_msgs,
-    vector3_msgs,
 )
 from grasp_safety_ros.ros.parameters import ResponseContent
 
@@ -339,7 +339,7 @@ def test_ranking_message(arm6: RobotModel) -> None:
         )
         np.testing.assert_array_equal(got.effective_mass_kg, want.effective_mass_kg)
         np.testing.assert_array_equal(got.time_from_start_s, want.times_s)
-        directions = np.array([[d.x, d.y, d.z] for d in got.direction]).reshape(-1, 3)
+        directions = np.reshape(got.direction_xyz, (-1, 3))
         np.testing.assert_array_equal(directions, want.directions_in_base)
         assert list(got.direction_is_worst_case) == want.direction_is_worst_case.tolist()
     unreachable = message.evaluations[2]
@@ -444,7 +444,7 @@ def test_infeasible_evaluation_fields_are_empty() -> None:
     ranking = Ranking(("j",), "mean", (), (evaluation,))
     message = ranking_msg(ranking, PoseArray(poses=[Pose()]), "b", Time(), 0.0)
     assert list(message.order) == [] and list(message.ranked_grasps.poses) == []
-    assert message.evaluations[0].direction == []
+    assert len(message.evaluations[0].direction_xyz) == 0
 
 
 # --- Safety reports (issue #6) -----------------------------------------------------------------
@@ -511,7 +511,7 @@ def test_report_message_content_drops_only_what_it_is_told(arm6: RobotModel) -> 
                 for name in (
                     "time_from_start_s",
                     "effective_mass_kg",
-                    "direction",
+                    "direction_xyz",
                     "direction_is_worst_case",
                     "leading_point_effective_mass_kg",
                     "worst_point_effective_mass_kg",
@@ -675,12 +675,89 @@ def test_poses_checked_at_once_equal_pose_by_pose() -> None:
             assert str(batch_error.value) == str(single_error.value)
 
 
-def test_vector3_msgs_equal_the_keyword_constructor() -> None:
-    rows = np.random.default_rng(6).normal(size=(5, 3))
-    messages = vector3_msgs(rows)
-    assert [type(m) for m in messages] == [Vector3] * 5
-    assert messages == [Vector3(x=float(x), y=float(y), z=float(z)) for x, y, z in rows]
-    assert vector3_msgs(np.empty((0, 3))) == []
+def test_directions_round_trip_through_the_flat_field_exactly() -> None:
+    """numpy (N, 3) -> GraspEvaluation.direction_xyz -> serialised and read back ->
+    reshape(-1, 3): the same numbers, bit for bit, rows in sample order."""
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    rng = np.random.default_rng(6)
+    directions = rng.normal(size=(7, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    directions[3] = [np.nextafter(1.0, 0.0), -0.0, 5e-324]  # exact to the last bit
+    evaluation = GraspEvaluation(
+        index=0,
+        name="g",
+        feasible=True,
+        reason="",
+        score=1.0,
+        times_s=np.linspace(0.0, 1.0, 7),
+        joint_positions=np.zeros((7, 2)),
+        directions_in_base=np.asfortranarray(directions),  # column-major in memory
+        effective_mass_kg=np.ones(7),
+        direction_is_worst_case=np.zeros(7, dtype=bool),
+        tip_speed_m_s=np.ones(7),
+        ik_iterations=np.zeros(7, dtype=int),
+    )
+    message = conversions.evaluation_msg(evaluation)
+    assert message.direction_xyz.typecode == "d" and len(message.direction_xyz) == 21
+    assert list(message.direction_xyz[3:6]) == list(directions[1])  # sample 1: x, y, z
+    back = deserialize_message(serialize_message(message), GraspEvaluationMsg)
+    np.testing.assert_array_equal(np.reshape(back.direction_xyz, (-1, 3)), directions)
+    assert np.signbit(np.reshape(back.direction_xyz, (-1, 3))[3, 1])
+    assert len(conversions.evaluation_msg(evaluation, per_sample=False).direction_xyz) == 0
+
+
+def test_evaluation_messages_equal_the_keyword_constructor_and_share_nothing() -> None:
+    """The slot-filling construction of GraspEvaluation gives what the generated keyword
+    constructor gives, and two messages share no mutable field."""
+    evaluation = GraspEvaluation(
+        index=3,
+        name="g",
+        feasible=True,
+        reason="",
+        score=1.25,
+        times_s=np.array([0.0, 0.5]),
+        joint_positions=np.zeros((2, 2)),
+        directions_in_base=np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]),
+        effective_mass_kg=np.array([1.0, 1.5]),
+        direction_is_worst_case=np.array([False, True]),
+        tip_speed_m_s=np.zeros(2),
+        ik_iterations=np.zeros(2, dtype=int),
+    )
+    nan = float("nan")
+    expected = GraspEvaluationMsg(
+        index=3,
+        name="g",
+        feasible=True,
+        reason="",
+        score=1.25,
+        peak_effective_mass_kg=1.5,
+        mean_effective_mass_kg=1.25,
+        time_from_start_s=[0.0, 0.5],
+        effective_mass_kg=[1.0, 1.5],
+        direction_xyz=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0],
+        direction_is_worst_case=[False, True],
+        safety_score=1.25,
+        iso_min_duration_s=nan,
+        worst_case_score=nan,
+        percentile_score=nan,
+        probability_safest=nan,
+        grasp_quality=nan,
+        combined_score=nan,
+        score_without_redundancy=nan,
+        effort_score=nan,
+        score_single_ik=nan,
+        score_range_min=nan,
+        score_range_max=nan,
+    )
+    first, second = (conversions.evaluation_msg(evaluation) for _ in range(2))
+    assert repr(first) == repr(expected)  # every field; NaN-safe, unlike ==
+    first.iso_ts_15066.append(BodyRegionAssessment())
+    first.peak_abs_torque.append(1.0)
+    first.joint_trajectory.joint_names.append("j")
+    assert repr(second) == repr(expected)
+    empty = conversions.evaluation_msg(evaluation, per_sample=False)
+    assert len(empty.time_from_start_s) == len(empty.direction_is_worst_case) == 0
 
 
 def test_object_com_far_away_is_refused() -> None:

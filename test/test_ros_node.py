@@ -257,7 +257,7 @@ def assert_matches_core(ranking: GraspRanking, expected: Any) -> None:
         np.testing.assert_allclose(
             got.effective_mass_kg, want.effective_mass_kg, rtol=1e-9, atol=1e-9
         )
-        directions = np.array([[d.x, d.y, d.z] for d in got.direction])
+        directions = np.reshape(got.direction_xyz, (-1, 3))
         np.testing.assert_allclose(directions, want.directions_in_base, rtol=0, atol=1e-9)
         assert list(got.direction_is_worst_case) == want.direction_is_worst_case.tolist()
 
@@ -521,7 +521,10 @@ def test_slow_request_does_not_block_the_next_for_ever(ros: NodeUnderTest) -> No
 def test_result_topics_are_built_for_subscribers_only(
     ros: NodeUnderTest, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """No subscriber: no markers are built; a late subscriber still gets the last ones."""
+    """No subscriber: no markers are built and the ranking is not published (serialised)
+    during the call; a late subscriber still gets the last ones."""
+    from rclpy.publisher import Publisher
+
     import grasp_safety_ros.ros.node as node_module
 
     built: list[int] = []
@@ -531,14 +534,24 @@ def test_result_topics_are_built_for_subscribers_only(
         built.append(1)
         return original(*args, **kwargs)
 
+    published: list[str] = []
+    original_publish = Publisher.publish
+
+    def recording_publish(self: Publisher, msg: Any) -> None:
+        published.append(type(msg).__name__)
+        original_publish(self, msg)
+
     monkeypatch.setattr(node_module, "markers_msg", counting_markers_msg)
-    publishers = [ros.node._ranking_pub, ros.node._markers_pub.publisher]
+    monkeypatch.setattr(Publisher, "publish", recording_publish)
+    publishers = [ros.node._ranking_pub.publisher, ros.node._markers_pub.publisher]
     assert ros.spin_until(lambda: all(p.get_subscription_count() == 0 for p in publishers))
     request = book_request()  # four grasps: a ranking size no other test looks for
     request.grasps.poses = [*request.grasps.poses, copy.deepcopy(request.grasps.poses[0])]
     response = ros.rank(request)
     assert response.success, response.message
     assert built == []
+    assert "GraspRanking" not in published
+    assert "MarkerArray" not in published
     received: dict[str, list[Any]] = {"ranking": [], "markers": []}
     subscriptions = [
         ros.client.create_subscription(
@@ -551,6 +564,7 @@ def test_result_topics_are_built_for_subscribers_only(
     try:
         assert ros.spin_until(lambda: bool(received["ranking"] and received["markers"]), 30.0)
         assert built == [1]
+        assert published.count("GraspRanking") == 1
         ranking = received["ranking"][-1]
         assert ranking.header.stamp == response.ranking.header.stamp
         assert list(ranking.order) == list(response.ranking.order)
@@ -559,6 +573,51 @@ def test_result_topics_are_built_for_subscribers_only(
     finally:
         for subscription in subscriptions:
             ros.client.destroy_subscription(subscription)
+
+
+def test_late_subscriber_gets_the_latest_ranking_only(ros: NodeUnderTest) -> None:
+    """A ranking published to a subscriber that has left is not what a later subscriber
+    receives once a newer ranking was computed with nobody listening: it gets the newer one
+    alone, even when the publication on matching comes late (the publisher's lock held: the
+    middleware would meanwhile deliver whatever the publisher's history holds)."""
+    stamps: list[tuple[int, int]] = []
+    first = ros.client.create_subscription(
+        GraspRanking,
+        "/grasp_safety/ranking",
+        lambda m: stamps.append((m.header.stamp.sec, m.header.stamp.nanosec)),
+        LATCHED,
+    )
+    publisher = ros.node._ranking_pub
+    assert ros.spin_until(lambda: publisher.publisher.get_subscription_count() > 0)
+    older = ros.rank(book_request())
+    assert older.success, older.message
+    older_stamp = (older.ranking.header.stamp.sec, older.ranking.header.stamp.nanosec)
+    assert ros.spin_until(lambda: older_stamp in stamps, 30.0)
+    ros.client.destroy_subscription(first)
+    assert ros.spin_until(lambda: publisher.publisher.get_subscription_count() == 0)
+    newer = ros.rank(book_request())
+    assert newer.success, newer.message
+    newer_stamp = (newer.ranking.header.stamp.sec, newer.ranking.header.stamp.nanosec)
+    assert newer_stamp != older_stamp
+    late: list[GraspRanking] = []
+    keep_ten = QoSProfile(  # keeps every message that arrives, not only the last
+        depth=10,
+        reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL,
+    )
+    with publisher._lock:  # the publication on matching waits
+        second = ros.client.create_subscription(
+            GraspRanking, "/grasp_safety/ranking", late.append, keep_ten
+        )
+        assert ros.spin_until(lambda: publisher.publisher.get_subscription_count() > 0)
+        ros.spin_until(lambda: bool(late), 1.0)
+    try:
+        assert ros.spin_until(lambda: bool(late), 30.0)
+        ros.spin_until(lambda: len(late) > 1, 0.5)  # an older one would have come by now
+        assert [(m.header.stamp.sec, m.header.stamp.nanosec) for m in late] == [newer_stamp]
+        assert list(late[0].order) == list(newer.ranking.order)
+    finally:
+        ros.client.destroy_subscription(second)
 
 
 def test_topics_rank_and_publish(ros: NodeUnderTest, core_ranking: Any) -> None:
@@ -1163,7 +1222,7 @@ def test_posture_restarts_parameter_is_typed_and_bounded(ros: NodeUnderTest) -> 
 PER_SAMPLE_FIELDS = (
     "time_from_start_s",
     "effective_mass_kg",
-    "direction",
+    "direction_xyz",
     "direction_is_worst_case",
     "leading_point_effective_mass_kg",
     "worst_point_effective_mass_kg",
@@ -1264,4 +1323,5 @@ def test_response_defaults_send_the_first_grasps_trajectory_and_every_sample() -
     ranking = response.ranking
     assert _with_trajectory(ranking) == [ranking.order[0]]
     for evaluation in ranking.evaluations:
-        assert len(evaluation.effective_mass_kg) == len(evaluation.direction) == 21  # 2 s / 0.1
+        assert len(evaluation.effective_mass_kg) == 21  # 2 s / 0.1
+        assert len(evaluation.direction_xyz) == 3 * 21

@@ -9,6 +9,7 @@ quaternion_msg_from_rotation. Each function raises InvalidInputError naming the 
 from __future__ import annotations
 
 import array
+import copy
 import gc
 import math
 import threading
@@ -212,10 +213,7 @@ def trajectory_from_path(
     for i, stamped in enumerate(path.poses):
         if stamped.header.frame_id:
             check_frame_id(stamped.header.frame_id, [base_frame], f"{field}.poses[{i}].header")
-    poses = [
-        transform_from_pose_msg(p.pose, f"{field}.poses[{i}].pose")
-        for i, p in enumerate(path.poses)
-    ]
+    poses = transforms_from_pose_msgs([p.pose for p in path.poses], f"{field}.poses", ".pose")
     return timed_trajectory(
         [stamp_to_seconds(p.header.stamp) for p in path.poses],
         poses,
@@ -370,8 +368,11 @@ def check_grasp_array(
     return transforms_from_pose_msgs(grasps.poses, f"{field}.poses")
 
 
-def transforms_from_pose_msgs(poses: Sequence[Pose], field: str) -> list[pin.SE3]:
-    """transform_from_pose_msg of each pose (``field[i]`` names a bad one), checked at once.
+def transforms_from_pose_msgs(
+    poses: Sequence[Pose], field: str, member: str = ""
+) -> list[pin.SE3]:
+    """transform_from_pose_msg of each pose (``field[i]member`` names a bad one), checked at
+    once.
 
     The numbers are read into one array and checked together (the checks of
     transform_from_pose_msg: keep them the same); only when one is bad does each pose go
@@ -388,7 +389,7 @@ def transforms_from_pose_msgs(poses: Sequence[Pose], field: str) -> list[pin.SE3
         and all(abs(norm - 1.0) <= QUATERNION_NORM_TOLERANCE for norm in norms)
         and np.all(np.abs(values[:, :3]) <= MAX_ABS_POSITION_M)
     ):
-        return [transform_from_pose_msg(p, f"{field}[{i}]") for i, p in enumerate(poses)]
+        return [transform_from_pose_msg(p, f"{field}[{i}]{member}") for i, p in enumerate(poses)]
     transforms = []
     for row, norm in zip(values, norms, strict=True):
         x, y, z, w = row[3:] / norm
@@ -489,10 +490,10 @@ def seed_from_joint_state(
 class _CollectorPause:
     """Context manager: the cyclic garbage collector paused while a result message is built.
 
-    A response holds a Python object per sample (``direction`` vectors, trajectory points) and
-    per region; none of them forms a reference cycle, but their allocation triggers the
-    collector over and over (it walks every tracked object of the process): 40 % of the
-    building time of a 1,000 x 201 response. Reference counting still frees everything; the
+    A response holds a Python object per trajectory point and per region; none of them forms a
+    reference cycle, but their allocation triggers the collector over and over (it walks every
+    tracked object of the process): 40 % of the building time of a 1,000 x 201 response (when
+    ``direction`` was a Vector3 per sample). Reference counting still frees everything; the
     collector resumes (if it was running) when the last of concurrent builds ends.
     """
 
@@ -525,32 +526,6 @@ def float64_array(values: Sequence[float] | np.ndarray) -> array.array:
     return array.array("d", np.ascontiguousarray(values, dtype=np.float64).tobytes())
 
 
-_VECTOR3_CHECK_FIELDS = Vector3()._check_fields
-_FAST_VECTOR3 = set(Vector3.__slots__) == {"_x", "_y", "_z", "_check_fields"}
-"""Whether vector3_msgs may fill the slots of geometry_msgs/Vector3 directly (Jazzy's class)."""
-
-
-def vector3_msgs(vectors: np.ndarray) -> list[Vector3]:
-    """geometry_msgs/Vector3 of each row of an (N, 3) array.
-
-    The rows of a response's ``direction`` fields are its bulk (one message per sample): the
-    messages are made without the keyword constructor (its per-field setters cost about 5x
-    more), by filling the generated class's slots with the floats; if the class is not the
-    one this was written for (other slots), the constructor is used.
-    """
-    rows = np.asarray(vectors, dtype=np.float64).reshape(-1, 3).tolist()
-    if not _FAST_VECTOR3:
-        return [Vector3(x=x, y=y, z=z) for x, y, z in rows]
-    new, check = Vector3.__new__, _VECTOR3_CHECK_FIELDS
-    messages = []
-    append = messages.append
-    for x, y, z in rows:
-        vector = new(Vector3)
-        vector._x, vector._y, vector._z, vector._check_fields = x, y, z, check
-        append(vector)
-    return messages
-
-
 def evaluation_msg(evaluation: GraspEvaluation, per_sample: bool = True) -> GraspEvaluationMsg:
     """grasp_safety_msgs/GraspEvaluation of a core evaluation (NaN scores when infeasible).
 
@@ -558,31 +533,21 @@ def evaluation_msg(evaluation: GraspEvaluation, per_sample: bool = True) -> Gras
     tip score, as with the default analysis options; report_msg fills them in. Without
     ``per_sample`` the per-sample arrays stay empty (the scores and aggregates are kept).
     """
-    message = GraspEvaluationMsg(
+    score = float(evaluation.score)
+    message = _new_evaluation(
         index=int(evaluation.index),
         name=evaluation.name,
         feasible=bool(evaluation.feasible),
         reason=evaluation.reason,
-        score=float(evaluation.score),
+        score=score,
         peak_effective_mass_kg=float(evaluation.peak_effective_mass_kg),
         mean_effective_mass_kg=float(evaluation.mean_effective_mass_kg),
-        safety_score=float(evaluation.score),
-        iso_min_duration_s=NAN,
-        worst_case_score=NAN,
-        percentile_score=NAN,
-        probability_safest=NAN,
-        grasp_quality=NAN,
-        combined_score=NAN,
-        score_without_redundancy=NAN,
-        effort_score=NAN,
-        score_single_ik=NAN,
-        score_range_min=NAN,
-        score_range_max=NAN,
+        safety_score=score,
     )
     if per_sample:
         message.time_from_start_s = float64_array(evaluation.times_s)
         message.effective_mass_kg = float64_array(evaluation.effective_mass_kg)
-        message.direction = vector3_msgs(evaluation.directions_in_base)
+        message.direction_xyz = float64_array(evaluation.directions_in_base)  # row-major
         message.direction_is_worst_case = np.asarray(
             evaluation.direction_is_worst_case, bool
         ).tolist()
@@ -617,6 +582,79 @@ def _slot_constructor(message_type: Any, fields: tuple[str, ...]) -> Callable[..
         return message
 
     return construct
+
+
+def _template_constructor(template: Any) -> Callable[..., Any]:
+    """A constructor of messages equal to ``template`` but for the fields given by keyword.
+
+    Like _slot_constructor it fills the generated class's slots directly: numbers and strings
+    of ``template`` are shared, every sequence and nested message is made anew (empty; the
+    template's must be empty), the keyword fields are stored as given (they must already have
+    the field types, as for _slot_constructor). A class that is not the kind this was written
+    for (slots other than its fields and ``_check_fields``) gets a copy of ``template`` with
+    the fields set through its setters.
+    """
+    message_type = type(template)
+    fields = message_type.get_fields_and_field_types()
+    if set(message_type.__slots__) != {*(f"_{name}" for name in fields), "_check_fields"}:
+
+        def set_fields(**values: Any) -> Any:
+            message = copy.deepcopy(template)
+            for name, value in values.items():
+                setattr(message, name, value)
+            return message
+
+        return set_fields
+    shared, arrays, lists, messages = [], [], [], []
+    for name in fields:
+        value = getattr(template, name)
+        if isinstance(value, array.array):
+            arrays.append((f"_{name}", value.typecode))
+        elif isinstance(value, list):
+            lists.append(f"_{name}")
+        elif isinstance(value, bool | int | float | str):
+            shared.append((f"_{name}", value))
+        else:
+            messages.append((f"_{name}", type(value)))
+    check_fields, new = template._check_fields, message_type.__new__
+
+    def construct(**values: Any) -> Any:
+        message = new(message_type)
+        for slot, value in shared:
+            setattr(message, slot, value)
+        for slot, typecode in arrays:
+            setattr(message, slot, array.array(typecode))
+        for slot in lists:
+            setattr(message, slot, [])
+        for slot, nested_type in messages:
+            setattr(message, slot, nested_type())
+        for name, value in values.items():
+            setattr(message, f"_{name}", value)
+        message._check_fields = check_fields
+        return message
+
+    return construct
+
+
+_new_pose = _slot_constructor(Pose, ("position", "orientation"))
+_new_point = _slot_constructor(Point, ("x", "y", "z"))
+_new_quaternion = _slot_constructor(Quaternion, ("x", "y", "z", "w"))
+_new_evaluation = _template_constructor(
+    GraspEvaluationMsg(
+        iso_min_duration_s=NAN,
+        worst_case_score=NAN,
+        percentile_score=NAN,
+        probability_safest=NAN,
+        grasp_quality=NAN,
+        combined_score=NAN,
+        score_without_redundancy=NAN,
+        effort_score=NAN,
+        score_single_ik=NAN,
+        score_range_min=NAN,
+        score_range_max=NAN,
+    )
+)
+"""GraspEvaluation messages whose analysis fields say "not computed" (NaN, empty, false)."""
 
 
 _FAST_POINTS = set(JointTrajectoryPoint.__slots__) == {
@@ -700,9 +738,7 @@ def ranked_pose_array(grasps: PoseArray, order: Sequence[int]) -> PoseArray:
 
 def _copy_pose(pose: Pose) -> Pose:
     p, q = pose.position, pose.orientation
-    return Pose(
-        position=Point(x=p.x, y=p.y, z=p.z), orientation=Quaternion(x=q.x, y=q.y, z=q.z, w=q.w)
-    )
+    return _new_pose(_new_point(p.x, p.y, p.z), _new_quaternion(q.x, q.y, q.z, q.w))
 
 
 def ranking_msg(
@@ -803,30 +839,47 @@ _body_region_assessment = _slot_constructor(
 )
 
 
-def region_assessment_msg(assessment: RegionAssessment) -> BodyRegionAssessment:
+def region_assessment_msg(
+    assessment: RegionAssessment, min_speed_m_s: float | None = None
+) -> BodyRegionAssessment:
     """grasp_safety_msgs/BodyRegionAssessment of one region's ISO/TS 15066 assessment.
 
     Where transient contact is not permitted, the core's ratio (inf while the point moves)
     becomes NaN, as does the null limit F_tr; ``min_duration_s`` keeps the core's inf.
+    ``min_speed_m_s``: the smallest of its ``max_permissible_speed_m_s`` if already known.
     """
     region = assessment.region
     permitted = region.transient_contact_permitted
     limit = region.max_transient_force_n
-    speeds = assessment.max_permissible_speed_m_s
+    if min_speed_m_s is None:
+        speeds = assessment.max_permissible_speed_m_s
+        min_speed_m_s = float(speeds.min()) if len(speeds) else NAN
     return _body_region_assessment(
         region.name,
         bool(permitted),
         float(assessment.worst_force_ratio) if permitted else NAN,
         float(assessment.peak_contact_force_n),
         float(limit) if limit is not None else NAN,
-        float(speeds.min()) if len(speeds) else NAN,
+        min_speed_m_s,
         bool(assessment.admissible),
         float(assessment.min_duration_s),
     )
 
 
+def _min_speeds(speeds: Sequence[np.ndarray]) -> list[float]:
+    """The smallest value of each array (NaN for an empty one); one array pass when they all
+    have the same length (the regions of one motion)."""
+    if len({len(s) for s in speeds}) == 1 and len(speeds[0]) > 0:
+        return np.min(speeds, axis=1).tolist()
+    return [float(s.min()) if len(s) else NAN for s in speeds]
+
+
 def _set_iso(message: GraspEvaluationMsg, assessment: PowerForceLimitAssessment) -> None:
-    message.iso_ts_15066 = [region_assessment_msg(r) for r in assessment.regions]
+    regions = assessment.regions
+    lowest = _min_speeds([r.max_permissible_speed_m_s for r in regions]) if regions else []
+    message.iso_ts_15066 = [
+        region_assessment_msg(r, v) for r, v in zip(regions, lowest, strict=True)
+    ]
     message.iso_admissible = bool(assessment.feasible and assessment.admissible_where_permitted)
     message.iso_min_duration_s = float(assessment.min_duration_s)
     message.iso_limiting_region = assessment.limiting_region

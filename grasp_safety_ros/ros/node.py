@@ -13,7 +13,8 @@ that cannot get the lock within ``service_busy_timeout_s`` is answered busy, and
 longer than ``max_compute_time_s`` is abandoned, so a slow request never blocks the next one
 for ever (checked after every grasp of the ranking, also on the worker pool; the analyses
 after it run to the end). The GIL still makes a long ranking share the CPU with the other
-callbacks. The markers are built only when they have a subscriber (_OnDemandPublisher).
+callbacks. The markers are built, and the ranking published (serialised), only when they
+have a subscriber; a late subscriber gets the latest (_OnDemandPublisher).
 """
 
 from __future__ import annotations
@@ -147,20 +148,28 @@ class _Snapshot:
 
 
 class _OnDemandPublisher:
-    """A latched (transient-local) publisher that builds its message only for subscribers.
+    """A latched (transient-local) publisher that builds and serialises its message only for
+    subscribers.
 
     ``publish(build)`` builds and publishes at once when the topic has a subscriber; else it
     keeps ``build`` and runs it when the next subscriber connects (the publisher's matched
     event), so a late subscriber still gets the latest message and nobody pays for messages
-    no one receives.
+    no one receives. When a message is kept while the publisher's history holds an older one
+    (published to a subscriber that has left since), the publisher is made anew first: a late
+    subscriber then receives the latest message only, never the older one before it.
     """
 
     def __init__(self, node: Node, msg_type: Any, topic: str) -> None:
+        self._node, self._msg_type, self._topic = node, msg_type, topic
         self._lock = threading.Lock()
         self._pending: Callable[[], Any] | None = None
-        self.publisher = node.create_publisher(
-            msg_type,
-            topic,
+        self._holds_message = False  # the publisher's history holds a message
+        self.publisher = self._create()
+
+    def _create(self) -> Any:
+        return self._node.create_publisher(
+            self._msg_type,
+            self._topic,
             LATCHED,
             event_callbacks=PublisherEventCallbacks(matched=self._on_matched),
         )
@@ -170,9 +179,17 @@ class _OnDemandPublisher:
         with self._lock:  # keeps the order: a late publish never overtakes a newer one
             if self.publisher.get_subscription_count() > 0:
                 self._pending = None
-                self.publisher.publish(build())
-            else:
-                self._pending = build
+                self._publish(build())
+                return
+            if self._holds_message:  # it would reach a late subscriber before this one
+                old, self.publisher = self.publisher, self._create()
+                self._holds_message = False
+                self._node.destroy_publisher(old)
+            self._pending = build
+
+    def _publish(self, message: Any) -> None:
+        self.publisher.publish(message)
+        self._holds_message = True
 
     def _on_matched(self, info: QoSPublisherMatchedInfo) -> None:
         if info.current_count_change <= 0:
@@ -180,7 +197,7 @@ class _OnDemandPublisher:
         with self._lock:
             build, self._pending = self._pending, None
             if build is not None:
-                self.publisher.publish(build())
+                self._publish(build())
 
 
 class GraspSafetyNode(Node):
@@ -239,7 +256,7 @@ class GraspSafetyNode(Node):
 
         self._service_group = ReentrantCallbackGroup()
         self._topic_group = MutuallyExclusiveCallbackGroup()
-        self._ranking_pub = self.create_publisher(GraspRanking, "~/ranking", LATCHED)
+        self._ranking_pub = _OnDemandPublisher(self, GraspRanking, "~/ranking")
         self._ranked_pub = self.create_publisher(PoseArray, "~/ranked_grasps", LATCHED)
         self._markers_pub = _OnDemandPublisher(self, MarkerArray, "~/markers")
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
@@ -747,7 +764,7 @@ class GraspSafetyNode(Node):
         result = report_msg(
             report, grasps_msg, settings.base_frame, stamp, compute_time_s, settings.response
         )
-        self._ranking_pub.publish(result)
+        self._ranking_pub.publish(lambda: result)
         self._ranked_pub.publish(result.ranked_grasps)
         self._markers_pub.publish(
             lambda: markers_msg(
@@ -772,7 +789,9 @@ class GraspSafetyNode(Node):
             status.last_infeasible = len(ranking.evaluations) - feasible
             status.last_source = source
             status.last_was_error = False
-        self.get_logger().info(
+        # Debug, not info: an rclpy log call that is emitted costs about 2 ms here (its caller
+        # lookup, inspect.getmodule, scans every loaded module); /diagnostics has the counts.
+        self.get_logger().debug(
             f"{source}: ranked {len(grasps)} grasps ({feasible} feasible) in "
             f"{compute_time_s:.3f} s; order {list(report.order)}"
         )

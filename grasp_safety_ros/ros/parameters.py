@@ -170,7 +170,7 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
     "response.per_sample": ParameterSpec(
         True,
         "fill the per-sample arrays of every evaluation (time_from_start_s, effective_mass_kg, "
-        "direction, ...); false: leave them empty (the scores and aggregates stay)",
+        "direction_xyz, ...); false: leave them empty (the scores and aggregates stay)",
     ),
 }
 """Every parameter of the node, by name."""
