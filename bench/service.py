@@ -4,13 +4,16 @@
 Baxter's right arm (example-robot-data), the benchmark box, grasps around it, a 2 s quintic
 trajectory; the node runs in-process (rclpy, MultiThreadedExecutor thread, as its console
 script runs it) and the client is a separate process (bench/service_client.py, a small rclpy
-node as a user's), driven over a pipe. Three node configurations:
+node as a user's), driven over a pipe. Four node configurations:
 
 - ``issue_comparable``: ``posture.restarts`` 0 (the paper's single IK, what the node ran when
   issue 12's targets were written) and the default response;
 - ``issue_comparable_per_sample_off``: the same with ``response.per_sample`` false (scores
   and aggregates only, the first grasp's joint trajectory);
-- ``node_defaults``: the node's default parameters (posture selection with 8 restarts).
+- ``node_defaults``: the node's default parameters (posture selection with 8 restarts);
+- ``least_response``: the least the node can be set to return (no per-sample arrays, no
+  joint trajectory, one ISO/TS 15066 region): what the round trip costs beyond the ranking
+  when the messages are as small as they get.
 
 Each is measured for:
 
@@ -59,12 +62,22 @@ CONFIGURATIONS: dict[str, dict[str, Any]] = {
     "issue_comparable": {"posture.restarts": 0},
     "issue_comparable_per_sample_off": {"posture.restarts": 0, "response.per_sample": False},
     "node_defaults": {},
+    "least_response": {
+        "posture.restarts": 0,
+        "response.per_sample": False,
+        "response.joint_trajectories": 0,
+        "iso_ts_15066.regions": ["chest"],
+    },
 }
 """Node parameters of each measured configuration, on top of the benchmark's."""
 DESCRIPTIONS = {
     "issue_comparable": "posture.restarts 0 (the paper's single IK), default response",
     "issue_comparable_per_sample_off": "posture.restarts 0, response.per_sample false",
     "node_defaults": "the node's defaults (posture.restarts 8, default response)",
+    "least_response": (
+        "the least the node returns: posture.restarts 0, response.per_sample false, "
+        "response.joint_trajectories 0, one ISO/TS 15066 region (chest)"
+    ),
 }
 SPANS = ("convert", "rank", "posture", "analyse", "response", "serialise", "deserialise")
 """The node's steps in a round trip, and the client's deserialisation."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 import copy
 import gc
 import math
+import warnings
 from typing import Any
 
 import numpy as np
@@ -127,6 +128,15 @@ def test_near_unit_quaternion_is_normalised() -> None:
 def test_bad_pose_is_refused(xyz: tuple, xyzw: tuple, pattern: str) -> None:
     with pytest.raises(InvalidInputError, match=pattern):
         transform_from_pose_msg(pose(xyz, xyzw), "g")
+
+
+def test_huge_quaternion_is_refused_without_a_warning() -> None:
+    """A component near the float limit overflows the norm: refused, and numpy prints nothing
+    (found by test_cli_fuzz)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(InvalidInputError, match=r"^g\.orientation: .* got norm inf$"):
+            transform_from_pose_msg(pose((0, 0, 0), (1e269, 1e269, 0, 0)), "g")
 
 
 # --- Trajectory --------------------------------------------------------------------------------

@@ -522,7 +522,8 @@ def test_result_topics_are_built_for_subscribers_only(
     ros: NodeUnderTest, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """No subscriber: no markers are built and the ranking is not published (serialised)
-    during the call; a late subscriber still gets the last ones."""
+    during the call; a late volatile subscriber is not sent them (it asked for later
+    messages only), a late transient-local one still gets the last ones."""
     from rclpy.publisher import Publisher
 
     import grasp_safety_ros.ros.node as node_module
@@ -553,6 +554,20 @@ def test_result_topics_are_built_for_subscribers_only(
     assert "GraspRanking" not in published
     assert "MarkerArray" not in published
     received: dict[str, list[Any]] = {"ranking": [], "markers": []}
+    volatile = QoSProfile(
+        depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE
+    )
+    subscriptions = [
+        ros.client.create_subscription(
+            GraspRanking, "/grasp_safety/ranking", received["ranking"].append, volatile
+        )
+    ]
+    try:
+        assert ros.spin_until(lambda: ros.node._ranking_pub.publisher.get_subscription_count())
+        ros.spin_until(lambda: bool(received["ranking"]), 1.0)
+        assert received["ranking"] == [] and built == []
+    finally:
+        ros.client.destroy_subscription(subscriptions.pop())
     subscriptions = [
         ros.client.create_subscription(
             GraspRanking, "/grasp_safety/ranking", received["ranking"].append, LATCHED

@@ -61,7 +61,8 @@ def finite_float(
 def rotation_from_quat_xyzw(quat_xyzw: Sequence[float] | np.ndarray, field: str) -> np.ndarray:
     """Rotation matrix of a quaternion in ROS order (x, y, z, w); near-unit ones are normalised."""
     quat = finite_array(quat_xyzw, field, (4,))
-    norm = float(np.linalg.norm(quat))
+    with np.errstate(over="ignore"):  # a huge component: the norm is inf, refused below
+        norm = float(np.linalg.norm(quat))
     if abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE:
         raise InvalidInputError(
             field,

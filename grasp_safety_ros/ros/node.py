@@ -23,7 +23,7 @@ import sys
 import threading
 import time
 import traceback
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -147,16 +147,25 @@ class _Snapshot:
     inertia_override: ObjectInertia | None
 
 
+GRAPH_CHECK_PERIOD_S = 0.02
+GRAPH_CHECK_ATTEMPTS = 100
+"""After a subscriber matches, _OnDemandPublisher waits up to 100 x 0.02 s for the ROS graph to
+list it (its durability decides whether the kept message is sent)."""
+
+
 class _OnDemandPublisher:
     """A latched (transient-local) publisher that builds and serialises its message only for
     subscribers.
 
     ``publish(build)`` builds and publishes at once when the topic has a subscriber; else it
-    keeps ``build`` and runs it when the next subscriber connects (the publisher's matched
-    event), so a late subscriber still gets the latest message and nobody pays for messages
-    no one receives. When a message is kept while the publisher's history holds an older one
-    (published to a subscriber that has left since), the publisher is made anew first: a late
-    subscriber then receives the latest message only, never the older one before it.
+    keeps ``build`` and runs it when a subscriber that asks for the latest message
+    (transient-local durability) connects (the publisher's
+    matched event), so a late subscriber still gets the latest message and nobody pays for
+    messages no one receives. A volatile subscriber is not sent the kept message: it asked for
+    messages published after it subscribed only. When a message is kept while the publisher's
+    history holds an older one (published to a subscriber that has left since), the publisher
+    is made anew first: a late subscriber then receives the latest message only, never the
+    older one before it.
     """
 
     def __init__(self, node: Node, msg_type: Any, topic: str) -> None:
@@ -164,6 +173,7 @@ class _OnDemandPublisher:
         self._lock = threading.Lock()
         self._pending: Callable[[], Any] | None = None
         self._holds_message = False  # the publisher's history holds a message
+        self._graph_check: Any = None  # the timer of _check_graph while it runs
         self.publisher = self._create()
 
     def _create(self) -> Any:
@@ -192,11 +202,33 @@ class _OnDemandPublisher:
         self._holds_message = True
 
     def _on_matched(self, info: QoSPublisherMatchedInfo) -> None:
-        if info.current_count_change <= 0:
+        """A subscriber connected: once the ROS graph shows it (it can lag the match), send
+        the kept message if a subscriber wants the latest one."""
+        if info.total_count_change <= 0:  # no new subscriber (one may have left meanwhile)
             return
         with self._lock:
-            build, self._pending = self._pending, None
-            if build is not None:
+            if self._pending is None or self._graph_check is not None:
+                return
+            attempts = iter(range(GRAPH_CHECK_ATTEMPTS))
+            self._graph_check = self._node.create_timer(
+                GRAPH_CHECK_PERIOD_S, lambda: self._check_graph(attempts)
+            )
+
+    def _check_graph(self, attempts: Iterator[int]) -> None:
+        with self._lock:
+            endpoints = self._node.get_subscriptions_info_by_topic(self.publisher.topic_name)
+            lagging = len(endpoints) < self.publisher.get_subscription_count()
+            if lagging and next(attempts, None) is not None:
+                return
+            if self._graph_check is not None:
+                self._node.destroy_timer(self._graph_check)
+                self._graph_check = None
+            wanted = any(
+                endpoint.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
+                for endpoint in endpoints
+            )
+            if self._pending is not None and wanted:
+                build, self._pending = self._pending, None
                 self._publish(build())
 
 
