@@ -545,6 +545,9 @@ def test_result_topics_are_built_for_subscribers_only(
     monkeypatch.setattr(node_module, "markers_msg", counting_markers_msg)
     monkeypatch.setattr(Publisher, "publish", recording_publish)
     publishers = [ros.node._ranking_pub.publisher, ros.node._markers_pub.publisher]
+    # Before any test of this module subscribes to them: once a message was published, every
+    # later one is (the history must hold the latest).
+    assert not ros.node._ranking_pub._holds_message and not ros.node._markers_pub._holds_message
     assert ros.spin_until(lambda: all(p.get_subscription_count() == 0 for p in publishers))
     request = book_request()  # four grasps: a ranking size no other test looks for
     request.grasps.poses = [*request.grasps.poses, copy.deepcopy(request.grasps.poses[0])]
@@ -593,8 +596,8 @@ def test_result_topics_are_built_for_subscribers_only(
 def test_late_subscriber_gets_the_latest_ranking_only(ros: NodeUnderTest) -> None:
     """A ranking published to a subscriber that has left is not what a later subscriber
     receives once a newer ranking was computed with nobody listening: it gets the newer one
-    alone, even when the publication on matching comes late (the publisher's lock held: the
-    middleware would meanwhile deliver whatever the publisher's history holds)."""
+    alone (published at once, since the history held the older), even while the publisher's
+    lock is held."""
     stamps: list[tuple[int, int]] = []
     first = ros.client.create_subscription(
         GraspRanking,

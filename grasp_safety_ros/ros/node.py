@@ -23,7 +23,7 @@ import sys
 import threading
 import time
 import traceback
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -159,47 +159,39 @@ class _OnDemandPublisher:
 
     ``publish(build)`` builds and publishes at once when the topic has a subscriber; else it
     keeps ``build`` and runs it when a subscriber that asks for the latest message
-    (transient-local durability) connects (the publisher's
-    matched event), so a late subscriber still gets the latest message and nobody pays for
-    messages no one receives. A volatile subscriber is not sent the kept message: it asked for
-    messages published after it subscribed only. When a message is kept while the publisher's
-    history holds an older one (published to a subscriber that has left since), the publisher
-    is made anew first: a late subscriber then receives the latest message only, never the
-    older one before it.
+    (transient-local durability) connects (the publisher's matched event, then the ROS graph
+    for the durability), so a late subscriber still gets the latest message and nobody pays
+    for messages no one receives. A volatile subscriber is not sent the kept message: it asked
+    for messages published after it subscribed only. Once a message was published (the
+    publisher's history holds it), every later one is published at once, subscribers or not:
+    a late subscriber receives the latest message only, never an older one from the history.
     """
 
     def __init__(self, node: Node, msg_type: Any, topic: str) -> None:
-        self._node, self._msg_type, self._topic = node, msg_type, topic
+        self._node = node
         self._lock = threading.Lock()
         self._pending: Callable[[], Any] | None = None
         self._holds_message = False  # the publisher's history holds a message
-        self._graph_check: Any = None  # the timer of _check_graph while it runs
-        self.publisher = self._create()
-
-    def _create(self) -> Any:
-        return self._node.create_publisher(
-            self._msg_type,
-            self._topic,
+        self._graph_check = node.create_timer(GRAPH_CHECK_PERIOD_S, self._check_graph)
+        self._graph_check.cancel()  # runs after a match only
+        self._graph_attempts = 0
+        self.publisher = node.create_publisher(
+            msg_type,
+            topic,
             LATCHED,
             event_callbacks=PublisherEventCallbacks(matched=self._on_matched),
         )
 
     def publish(self, build: Callable[[], Any]) -> None:
-        """Publish ``build()`` now if someone subscribes, else when someone does."""
+        """Publish ``build()`` now if someone subscribes (or the history holds an older
+        message), else when someone does."""
         with self._lock:  # keeps the order: a late publish never overtakes a newer one
-            if self.publisher.get_subscription_count() > 0:
+            if self._holds_message or self.publisher.get_subscription_count() > 0:
                 self._pending = None
-                self._publish(build())
+                self.publisher.publish(build())
+                self._holds_message = True
                 return
-            if self._holds_message:  # it would reach a late subscriber before this one
-                old, self.publisher = self.publisher, self._create()
-                self._holds_message = False
-                self._node.destroy_publisher(old)
             self._pending = build
-
-    def _publish(self, message: Any) -> None:
-        self.publisher.publish(message)
-        self._holds_message = True
 
     def _on_matched(self, info: QoSPublisherMatchedInfo) -> None:
         """A subscriber connected: once the ROS graph shows it (it can lag the match), send
@@ -207,29 +199,26 @@ class _OnDemandPublisher:
         if info.total_count_change <= 0:  # no new subscriber (one may have left meanwhile)
             return
         with self._lock:
-            if self._pending is None or self._graph_check is not None:
-                return
-            attempts = iter(range(GRAPH_CHECK_ATTEMPTS))
-            self._graph_check = self._node.create_timer(
-                GRAPH_CHECK_PERIOD_S, lambda: self._check_graph(attempts)
-            )
+            if self._pending is not None:
+                self._graph_attempts = GRAPH_CHECK_ATTEMPTS
+                self._graph_check.reset()
 
-    def _check_graph(self, attempts: Iterator[int]) -> None:
+    def _check_graph(self) -> None:
         with self._lock:
             endpoints = self._node.get_subscriptions_info_by_topic(self.publisher.topic_name)
             lagging = len(endpoints) < self.publisher.get_subscription_count()
-            if lagging and next(attempts, None) is not None:
+            self._graph_attempts -= 1
+            if lagging and self._graph_attempts > 0:
                 return
-            if self._graph_check is not None:
-                self._node.destroy_timer(self._graph_check)
-                self._graph_check = None
+            self._graph_check.cancel()
             wanted = any(
                 endpoint.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
                 for endpoint in endpoints
             )
             if self._pending is not None and wanted:
                 build, self._pending = self._pending, None
-                self._publish(build())
+                self.publisher.publish(build())
+                self._holds_message = True
 
 
 class GraspSafetyNode(Node):
