@@ -137,6 +137,10 @@ def test_huge_quaternion_is_refused_without_a_warning() -> None:
         warnings.simplefilter("error")
         with pytest.raises(InvalidInputError, match=r"^g\.orientation: .* got norm inf$"):
             transform_from_pose_msg(pose((0, 0, 0), (1e269, 1e269, 0, 0)), "g")
+        with pytest.raises(InvalidInputError, match=r"^g\[1\]\.orientation: .* got norm inf$"):
+            conversions.transforms_from_pose_msgs(
+                [pose(*START), pose((0, 0, 0), (1e269, 1e269, 0, 0))], "g"
+            )
 
 
 # --- Trajectory --------------------------------------------------------------------------------

@@ -383,7 +383,8 @@ def transforms_from_pose_msgs(
         values = np.array([_pose_numbers(p) for p in poses], dtype=float).reshape(-1, 7)
     except (TypeError, ValueError):  # not numbers: the per-pose check names the field
         values = np.full((len(poses), 7), np.nan)
-    norms = [float(np.linalg.norm(quat)) for quat in values[:, 3:]]
+    with np.errstate(over="ignore"):  # a huge component: the norm is inf, refused below
+        norms = [float(np.linalg.norm(quat)) for quat in values[:, 3:]]
     if not (
         np.all(np.isfinite(values))
         and all(abs(norm - 1.0) <= QUATERNION_NORM_TOLERANCE for norm in norms)
