@@ -31,7 +31,12 @@ from test_ros_node import (  # noqa: F401  (_localhost_only: autouse fixture)
     book_request,
     same_messages,
 )
-from test_ros_node_process import PARAMS, command, ros_env  # noqa: F401  (fixture)
+from test_ros_node_process import (  # noqa: F401  (ros_env: fixture)
+    PARAMS,
+    command,
+    first_answer,
+    ros_env,
+)
 
 from grasp_safety_ros.ros import node as node_module
 from grasp_safety_ros.ros.node import EXECUTOR_THREADS
@@ -267,9 +272,8 @@ def test_signal_during_a_ranking_shuts_down_cleanly(
         executor.add_node(client_node)
         client = client_node.create_client(RankGrasps, "/grasp_safety/rank_grasps")
         assert client.wait_for_service(timeout_sec=90.0), "service did not appear"
-        warm = client.call_async(book_request(with_inertia=False))
-        executor.spin_until_future_complete(warm, timeout_sec=60.0)
-        assert warm.done() and warm.result().success
+        warm = first_answer(executor, client, book_request(with_inertia=False), process)
+        assert warm.success, warm.message
         # ~1000 grasps x 10001 samples: minutes of work, abandoned at the signal
         future = client.call_async(long_request(grasps=1000, duration_s=200.0))
         executor.spin_until_future_complete(future, timeout_sec=2.0)  # the ranking runs
