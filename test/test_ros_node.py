@@ -168,6 +168,15 @@ def ros() -> Iterator[NodeUnderTest]:
     harness.close()
 
 
+@pytest.fixture()
+def own_ros() -> Iterator[NodeUnderTest]:
+    """A node of its own (own ROS domain): no candidate set, trajectory or quality left by
+    earlier tests, which the topic-pairing rules would otherwise act on."""
+    harness = NodeUnderTest(NODE_PARAMETERS)
+    yield harness
+    harness.close()
+
+
 # --- Requests ----------------------------------------------------------------------------------
 
 
@@ -1073,20 +1082,22 @@ def test_redundancy_resolution(
     )
 
 
-def test_quality_topic_pairs_with_candidate_sets(ros: NodeUnderTest) -> None:
+def test_quality_topic_pairs_with_candidate_sets(own_ros: NodeUnderTest) -> None:
     received: list[GraspRanking] = []
     diagnostics: list[DiagnosticArray] = []
     subs = [
-        ros.client.create_subscription(
+        own_ros.client.create_subscription(
             GraspRanking, "/grasp_safety/ranking", received.append, LATCHED
         ),
-        ros.client.create_subscription(DiagnosticArray, "/diagnostics", diagnostics.append, 10),
+        own_ros.client.create_subscription(
+            DiagnosticArray, "/diagnostics", diagnostics.append, 10
+        ),
     ]
-    quality_pub = ros.client.create_publisher(
+    quality_pub = own_ros.client.create_publisher(
         Float64MultiArray, "/grasp_safety/candidate_grasp_quality", 10
     )
-    grasps_pub = ros.client.create_publisher(PoseArray, "/grasp_safety/candidate_grasps", 10)
-    path_pub = ros.client.create_publisher(Path, "/grasp_safety/object_trajectory", 10)
+    grasps_pub = own_ros.client.create_publisher(PoseArray, "/grasp_safety/candidate_grasps", 10)
+    path_pub = own_ros.client.create_publisher(Path, "/grasp_safety/object_trajectory", 10)
     publishers = (quality_pub, grasps_pub, path_pub)
     request = book_request()
     two = PoseArray(header=request.grasps.header, poses=request.grasps.poses[:2])
@@ -1094,20 +1105,20 @@ def test_quality_topic_pairs_with_candidate_sets(ros: NodeUnderTest) -> None:
 
     def next_ranking() -> GraspRanking:
         """The first ranking computed after now (not the latched one of an earlier test)."""
-        now = ros.node.get_clock().now().nanoseconds
+        now = own_ros.node.get_clock().now().nanoseconds
 
         def new() -> list[GraspRanking]:
             stamps = [(r.header.stamp.sec * 10**9 + r.header.stamp.nanosec, r) for r in received]
             return [r for t, r in stamps if t > now]
 
-        assert ros.spin_until(lambda: bool(new()))
+        assert own_ros.spin_until(lambda: bool(new()))
         time.sleep(0.1)  # a second ranking would have come by now
-        ros.client_executor.spin_once(timeout_sec=0.05)
+        own_ros.client_executor.spin_once(timeout_sec=0.05)
         assert len(new()) == 1
         return new()[0]
 
     try:
-        assert ros.spin_until(lambda: min(p.get_subscription_count() for p in publishers) > 0)
+        assert own_ros.spin_until(lambda: min(p.get_subscription_count() for p in publishers) > 0)
         path_pub.publish(request.object_trajectory)
         # 1. quality first, then its set: ranked with the quality
         quality_pub.publish(Float64MultiArray(data=[0.0, 1.0]))
@@ -1140,12 +1151,12 @@ def test_quality_topic_pairs_with_candidate_sets(ros: NodeUnderTest) -> None:
                 for s in array.status
             )
 
-        assert ros.spin_until(warned)
+        assert own_ros.spin_until(warned)
     finally:
         for subscription in subs:
-            ros.client.destroy_subscription(subscription)
+            own_ros.client.destroy_subscription(subscription)
         for publisher in publishers:
-            ros.client.destroy_publisher(publisher)
+            own_ros.client.destroy_publisher(publisher)
 
 
 # --- Posture selection and the executable joint trajectory -----------------------------------
