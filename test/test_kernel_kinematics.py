@@ -17,7 +17,8 @@ SINCOS_ABS_ERROR = 2.3e-16
 
 
 def angles(rng: np.random.Generator) -> np.ndarray:
-    """Joint-like angles, far ones, multiples of pi/4 and their neighbours, signed zeros."""
+    """Joint-like angles, far ones, multiples of pi/4 and their neighbours, both zeros (compared
+    by value: the sine of _sincos(-0.0) is +0.0 where libm gives -0.0)."""
     multiples = np.arange(-64, 65) * (np.pi / 4)
     return np.concatenate(
         [

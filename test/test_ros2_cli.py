@@ -84,8 +84,9 @@ def ros2_all(
 
     ros2cli's ``param`` verbs wait without a limit for the node's answer, which the middleware
     can lose (the parameter-client hangs of ros2/system_tests#420; seen here in one full run
-    of two this round, and under load in the last): a ``param`` command with no result in half the budget is killed and run once
-    more (set, get and describe are idempotent); any other command gets the whole budget.
+    of two this round, and under load in the last): a ``param`` command with no result in
+    half the budget is killed and run once more (set, get and describe are idempotent); any
+    other command gets the whole budget.
     """
     retried = [args[0] == "param" for args in commands]
     first = _run_all(env, commands, [timeout_s / 2 if retry else timeout_s for retry in retried])

@@ -528,15 +528,17 @@ def test_slow_request_does_not_block_the_next_for_ever(ros: NodeUnderTest) -> No
 
 
 def test_result_topics_are_built_for_subscribers_only(
-    ros: NodeUnderTest, monkeypatch: pytest.MonkeyPatch
+    own_ros: NodeUnderTest, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """No subscriber: no markers are built and the ranking is not published (serialised)
-    during the call; a late volatile subscriber is not sent them (it asked for later
-    messages only), a late transient-local one still gets the last ones."""
+    during the call. A late volatile subscriber is not sent them (it asked for later messages
+    only); nor is a transient-local one while the volatile one stays (a publication reaches
+    both). A transient-local subscriber alone, or left alone, gets the last ones."""
     from rclpy.publisher import Publisher
 
     import grasp_safety_ros.ros.node as node_module
 
+    ros = own_ros
     built: list[int] = []
     original = node_module.markers_msg
 
@@ -553,33 +555,22 @@ def test_result_topics_are_built_for_subscribers_only(
 
     monkeypatch.setattr(node_module, "markers_msg", counting_markers_msg)
     monkeypatch.setattr(Publisher, "publish", recording_publish)
-    publishers = [ros.node._ranking_pub.publisher, ros.node._markers_pub.publisher]
-    # Before any test of this module subscribes to them: once a message was published, every
-    # later one is (the history must hold the latest).
-    assert not ros.node._ranking_pub._holds_message and not ros.node._markers_pub._holds_message
-    assert ros.spin_until(lambda: all(p.get_subscription_count() == 0 for p in publishers))
-    request = book_request()  # four grasps: a ranking size no other test looks for
-    request.grasps.poses = [*request.grasps.poses, copy.deepcopy(request.grasps.poses[0])]
-    response = ros.rank(request)
+    response = ros.rank(book_request())
     assert response.success, response.message
     assert built == []
     assert "GraspRanking" not in published
     assert "MarkerArray" not in published
-    received: dict[str, list[Any]] = {"ranking": [], "markers": []}
+    received: dict[str, list[Any]] = {"volatile": [], "ranking": [], "markers": []}
     volatile = QoSProfile(
         depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE
     )
-    subscriptions = [
-        ros.client.create_subscription(
-            GraspRanking, "/grasp_safety/ranking", received["ranking"].append, volatile
-        )
-    ]
-    try:
-        assert ros.spin_until(lambda: ros.node._ranking_pub.publisher.get_subscription_count())
-        ros.spin_until(lambda: bool(received["ranking"]), 1.0)
-        assert received["ranking"] == [] and built == []
-    finally:
-        ros.client.destroy_subscription(subscriptions.pop())
+    ranking_pub = ros.node._ranking_pub.publisher
+    volatile_sub = ros.client.create_subscription(
+        GraspRanking, "/grasp_safety/ranking", received["volatile"].append, volatile
+    )
+    assert ros.spin_until(lambda: ranking_pub.get_subscription_count() == 1)
+    ros.spin_until(lambda: bool(received["volatile"]), 1.0)
+    assert received["volatile"] == [] and built == []
     subscriptions = [
         ros.client.create_subscription(
             GraspRanking, "/grasp_safety/ranking", received["ranking"].append, LATCHED
@@ -589,14 +580,20 @@ def test_result_topics_are_built_for_subscribers_only(
         ),
     ]
     try:
-        assert ros.spin_until(lambda: bool(received["ranking"] and received["markers"]), 30.0)
-        assert built == [1]
-        assert published.count("GraspRanking") == 1
+        assert ros.spin_until(lambda: ranking_pub.get_subscription_count() == 2)
+        # the markers' only subscriber is transient-local: sent; the ranking's are not all
+        assert ros.spin_until(lambda: bool(received["markers"]), 30.0)
+        ros.spin_until(lambda: bool(received["ranking"] or received["volatile"]), 1.0)
+        assert received["ranking"] == [] and received["volatile"] == []
+        assert published.count("GraspRanking") == 0 and built == [1]
+        ros.client.destroy_subscription(volatile_sub)
+        assert ros.spin_until(lambda: bool(received["ranking"]), 30.0)
+        assert published.count("GraspRanking") == 1 and received["volatile"] == []
         ranking = received["ranking"][-1]
         assert ranking.header.stamp == response.ranking.header.stamp
         assert list(ranking.order) == list(response.ranking.order)
         arrows = [m for m in received["markers"][-1].markers if m.ns == "grasps"]
-        assert sorted(m.id for m in arrows) == [0, 1, 2, 3]
+        assert sorted(m.id for m in arrows) == [0, 1, 2]
     finally:
         for subscription in subscriptions:
             ros.client.destroy_subscription(subscription)

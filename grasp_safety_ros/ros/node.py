@@ -13,8 +13,8 @@ that cannot get the lock within ``service_busy_timeout_s`` is answered busy, and
 longer than ``max_compute_time_s`` is abandoned, so a slow request never blocks the next one
 for ever (checked after every grasp of the ranking, also on the worker pool; the analyses
 after it run to the end). The GIL still makes a long ranking share the CPU with the other
-callbacks. The markers are built, and the ranking published (serialised), only when they
-have a subscriber; a late subscriber gets the latest (_OnDemandPublisher).
+callbacks. The markers are built, and the ranking published (serialised), only once they
+have had a subscriber; a late transient-local subscriber gets the latest (_OnDemandPublisher).
 """
 
 from __future__ import annotations
@@ -149,8 +149,8 @@ class _Snapshot:
 
 GRAPH_CHECK_PERIOD_S = 0.02
 GRAPH_CHECK_ATTEMPTS = 100
-"""After a subscriber matches, _OnDemandPublisher waits up to 100 x 0.02 s for the ROS graph to
-list it (its durability decides whether the kept message is sent)."""
+"""After a subscriber matches or leaves, _OnDemandPublisher waits up to 100 x 0.02 s for the ROS
+graph to show it (the subscribers' durabilities decide whether the kept message is sent)."""
 
 
 class _OnDemandPublisher:
@@ -162,9 +162,13 @@ class _OnDemandPublisher:
     (transient-local durability) connects (the publisher's matched event, then the ROS graph
     for the durability), so a late subscriber still gets the latest message and nobody pays
     for messages no one receives. A volatile subscriber is not sent the kept message: it asked
-    for messages published after it subscribed only. Once a message was published (the
-    publisher's history holds it), every later one is published at once, subscribers or not:
-    a late subscriber receives the latest message only, never an older one from the history.
+    for messages published after it subscribed only. A publication reaches every matched
+    subscriber, so while a volatile one is matched the kept message stays kept (a stale
+    ranking is never delivered to a reader that did not ask for it); it is sent when the
+    volatile subscribers have left, or replaced by the next message. Once a message was
+    published (the publisher's history holds it), every later one is published at once,
+    subscribers or not: a late subscriber receives the latest message only, never an older
+    one from the history.
     """
 
     def __init__(self, node: Node, msg_type: Any, topic: str) -> None:
@@ -194,9 +198,9 @@ class _OnDemandPublisher:
             self._pending = build
 
     def _on_matched(self, info: QoSPublisherMatchedInfo) -> None:
-        """A subscriber connected: once the ROS graph shows it (it can lag the match), send
-        the kept message if a subscriber wants the latest one."""
-        if info.total_count_change <= 0:  # no new subscriber (one may have left meanwhile)
+        """A subscriber connected or left: once the ROS graph shows the change (it can lag
+        the match), send the kept message if every subscriber wants the latest one."""
+        if info.current_count == 0:
             return
         with self._lock:
             if self._pending is not None:
@@ -206,12 +210,12 @@ class _OnDemandPublisher:
     def _check_graph(self) -> None:
         with self._lock:
             endpoints = self._node.get_subscriptions_info_by_topic(self.publisher.topic_name)
-            lagging = len(endpoints) < self.publisher.get_subscription_count()
+            lagging = len(endpoints) != self.publisher.get_subscription_count()
             self._graph_attempts -= 1
             if lagging and self._graph_attempts > 0:
                 return
             self._graph_check.cancel()
-            wanted = any(
+            wanted = bool(endpoints) and all(
                 endpoint.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
                 for endpoint in endpoints
             )
