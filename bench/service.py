@@ -26,9 +26,11 @@ Each is measured for:
   evaluator on the same inputs, in this process) and the spans of the node's work done by
   hand with the node's settings (request conversion, ranking, posture selection, analyses,
   response message, serialisation, and the client's deserialisation of it); the rest of the
-  round trip is the executors and the middleware. The markers and the ``~/ranking``
-  publication are made only for a subscriber (none here): the markers are timed apart, not
-  in the sum;
+  round trip is the executors and the middleware. The headline's round trips also split
+  into legs (LEGS: client call to node callback, the callback, callback end to client) by
+  readings of the machine's monotonic clock in both processes. The markers and the
+  ``~/ranking`` publication are made only for a subscriber (none here): the markers are
+  timed apart, not in the sum;
 - end to end, 1,000 grasps x 201 samples (dt 0.01 s), from the EventsExecutor client: wall
   time of the call and the response's size in bytes (serialised RankGrasps response), with
   the same spans once.
@@ -82,6 +84,15 @@ DESCRIPTIONS = {
 SPANS = ("convert", "rank", "posture", "analyse", "response", "serialise", "deserialise")
 """The node's steps in a round trip, and the client's deserialisation."""
 REST = "rest (executors, middleware)"
+LEGS = (
+    "request (client call to node callback)",
+    "node callback",
+    "response (node callback end to client)",
+)
+"""The legs of a round trip, by clock readings in the client and the node's callback: the
+request leg is the client's serialisation, the transport and the node's executor; the
+response leg the node's serialisation, the transport, the client's executor and its
+deserialisation."""
 WAITS = ("events", "spin_once", "spin_until")
 """How the clients wait for the answer (service_client.py): the headline's first."""
 
@@ -198,6 +209,36 @@ def clients(environment: dict[str, str], *waits: str) -> Iterator[list[ClientPro
     finally:
         for client in started:
             client.close()
+
+
+class CallbackClock:
+    """Records ``time.monotonic()`` at the start and end of each call of the node's
+    ``~/rank_grasps`` callback (wrapped): with the client's clock readings at the call and
+    at the response, a round trip splits into its legs."""
+
+    def __init__(self, node: Any) -> None:
+        self.calls: list[tuple[float, float]] = []
+        (service,) = [s for s in node.services if s.srv_name.endswith("/rank_grasps")]
+        callback = service.callback
+
+        def timed(request: Any, response: Any) -> Any:
+            started = time.monotonic()
+            try:
+                return callback(request, response)
+            finally:
+                self.calls.append((started, time.monotonic()))
+
+        service.callback = timed
+
+
+def legs_s(answer: dict[str, Any], call: tuple[float, float]) -> dict[str, float]:
+    """The legs of one round trip [s]: ``answer`` the client's, ``call`` the node callback's
+    (start, end) of that request (CallbackClock)."""
+    return {
+        LEGS[0]: call[0] - answer["sent_s"],
+        LEGS[1]: call[1] - call[0],
+        LEGS[2]: answer["received_s"] - call[1],
+    }
 
 
 def rank_request(arm: ArmWorkload, num_grasps: int) -> Any:
@@ -323,14 +364,19 @@ def latency(arm: ArmWorkload, repeats: int, overrides: dict[str, Any]) -> dict[s
     empty: dict[str, list[float]] = {wait: [] for wait in WAITS}
     computes: list[float] = []
     spans: dict[str, list[float]] = {}
+    legs: dict[str, list[float]] = {leg: [] for leg in LEGS}
     with (
         running_node(arm, 0.02, overrides) as (node, environment),
         clients(environment, *WAITS) as processes,
     ):
+        clock = CallbackClock(node)
         for k in range(repeats + 3):
             answers, empties = {}, {}
             for wait, process in zip(WAITS, processes, strict=True):
                 answers[wait] = process.command("rank 10")
+                if wait == WAITS[0] and k >= 3:
+                    for leg, value in legs_s(answers[wait], clock.calls[-1]).items():
+                        legs[leg].append(value)
                 empties[wait] = process.command("empty")
                 if wait == WAITS[0]:
                     steps = node_spans(node, request)  # the node idle, between the calls
@@ -361,6 +407,7 @@ def latency(arm: ArmWorkload, repeats: int, overrides: dict[str, Any]) -> dict[s
         "spans_ms": {name: summary_ms(spans[name])["median"] for name in SPANS},
         "spans_cpu_ms": {name: summary_ms(spans[f"{name}_cpu"])["median"] for name in SPANS},
         "markers_when_subscribed_ms": summary_ms(spans["markers"])["median"],
+        "legs_ms": {leg: summary_ms(values)["median"] for leg, values in legs.items()},
     }
     result["median_ms"] = result["latency_ms"]["median"]
     result["latency_over_ranking"] = result["median_ms"] / result["ranking_ms"]["median"]
@@ -443,6 +490,7 @@ def print_results(results: dict[str, Any]) -> None:
         )
         print(f"    spans (median ms): {spans(small['spans_ms'])}")
         print(f"    spans (median CPU ms of the calling thread): {spans(small['spans_cpu_ms'])}")
+        print(f"    legs of the round trip (median ms): {spans(small['legs_ms'])}")
         for wait in WAITS[1:]:
             other = small[f"latency_{wait}_ms"]
             print(

@@ -4,9 +4,11 @@ drives it over stdin/stdout, one command per line, and it answers one JSON line 
 
 Commands:
 - ``rank GRASPS``: call ``~/rank_grasps`` with service.rank_request's GRASPS grasps; answers
-  ``{"round_trip_s", "compute_time_s", "grasps", "feasible_grasps", "joint_trajectories_sent",
-  "response_bytes"}`` (the round trip from the call to the deserialised response; the size of
-  the serialised response, measured after the clock stopped);
+  ``{"round_trip_s", "sent_s", "received_s", "compute_time_s", "grasps", "feasible_grasps",
+  "joint_trajectories_sent", "response_bytes"}`` (the round trip from the call to the
+  deserialised response; ``time.monotonic()`` at the call and once the response is there, a
+  clock shared by the processes of the machine; the size of the serialised response, measured
+  after the clock stopped);
 - ``empty``: call ``~/get_parameters`` for one name: the floor of a round trip; answers
   ``{"round_trip_s"}``;
 - ``quit``.
@@ -98,14 +100,17 @@ def main(argv: list[str] | None = None) -> int:
                 grasps = int(command[1])
                 if grasps not in requests:
                     requests[grasps] = rank_request(ARMS["baxter"], grasps)
-                started = time.perf_counter()
+                sent_s, started = time.monotonic(), time.perf_counter()
                 response = wait_for(executor, rank.call_async(requests[grasps]), wait)
                 elapsed = time.perf_counter() - started
+                received_s = time.monotonic()
                 if not response.success:
                     raise RuntimeError(response.message)
                 evaluations = response.ranking.evaluations
                 answer = {
                     "round_trip_s": elapsed,
+                    "sent_s": sent_s,
+                    "received_s": received_s,
                     "compute_time_s": response.ranking.compute_time_s,
                     "grasps": len(evaluations),
                     "feasible_grasps": sum(1 for e in evaluations if e.feasible),
