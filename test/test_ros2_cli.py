@@ -42,6 +42,11 @@ ECHO_ORDER = (  # the next ranking's order; volatile: not the last one, which is
     *("topic", "echo", "--once", "--no-daemon", "--qos-durability", "volatile"),
     *(f"{NODE}/ranking", "grasp_safety_msgs/msg/GraspRanking", "--field", "order"),
 )
+NODE_DEBUG_LOG = ("--log-level", "grasp_safety:=debug")  # each ranking in the node's log
+PUB_ONCE = ("--once", "-w", "1", "--keep-alive", "2")
+"""``-w 1`` waits until the publisher has matched the node's reader, not the reader the
+publisher: with the default 0.1 s keep-alive, a loaded machine can lose the message before the
+reader asks for it (ros2cli's own pub test keeps alive longer, ros2/ros2cli#546)."""
 WAIT = ("--no-daemon", "--timeout", "20")  # param verbs: no daemon, wait up to 20 s for the node
 
 pytestmark = pytest.mark.skipif(
@@ -152,7 +157,7 @@ class RunningNode:
         self.env, self.log = env, log
         with log.open("w") as out:
             self.process = subprocess.Popen(
-                [*RUN, "--ros-args", "--params-file", params_file],
+                [*RUN, "--ros-args", "--params-file", params_file, *NODE_DEBUG_LOG],
                 env=env,
                 stdout=out,
                 stderr=subprocess.STDOUT,
@@ -300,15 +305,18 @@ def test_topic_pub_then_echo_sees_the_new_ranking(
         wait_for_subscriber(node.env, f"{NODE}/ranking", echo)
         ros2_ok(
             node.env,
-            *("topic", "pub", "--once", "-w", "1", f"{NODE}/object_trajectory"),
+            *("topic", "pub", *PUB_ONCE, f"{NODE}/object_trajectory"),
             *("nav_msgs/msg/Path", book_path_yaml()),
         )
         ros2_ok(
             node.env,
-            *("topic", "pub", "--once", "-w", "1", f"{NODE}/candidate_grasps"),
+            *("topic", "pub", *PUB_ONCE, f"{NODE}/candidate_grasps"),
             *("geometry_msgs/msg/PoseArray", grasps_yaml(GRASP_Y_M[::-1])),
         )
-        stdout, stderr = echo.communicate(timeout=60.0)
+        try:
+            stdout, stderr = echo.communicate(timeout=60.0)
+        except subprocess.TimeoutExpired:
+            pytest.fail(f"ros2 topic echo saw no ranking in 60 s; node log:\n{node.output()}")
     finally:
         stop(echo)
     assert echo.returncode == 0, stdout + stderr

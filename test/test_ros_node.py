@@ -54,7 +54,7 @@ from grasp_safety_ros.core.method.executable import joint_velocities_acceleratio
 from grasp_safety_ros.core.method.posture import PostureConfig, select_postures
 from grasp_safety_ros.paths import config_file
 from grasp_safety_ros.ros.conversions import inertia_msg_from_object, pose_msg_from_transform
-from grasp_safety_ros.ros.node import EXECUTOR_THREADS, GraspSafetyNode
+from grasp_safety_ros.ros.node import EXECUTOR_THREADS, GraspSafetyNode, _join_callbacks
 
 BOOK = load_scenario(config_file("book_baxter.yaml"))
 BOOK_GRASPS = [Grasp(g.transform_tip_to_object, f"grasp_{i}") for i, g in enumerate(BOOK.grasps)]
@@ -131,11 +131,15 @@ class NodeUnderTest:
         assert self.set_client.wait_for_service(timeout_sec=10.0)
 
     def close(self) -> None:
+        """Stop spinning, then destroy: the spin thread and the callbacks end first, as in
+        the node's main (a spin still taking an event's data from a destroyed publisher
+        raised InvalidHandle in that thread)."""
         self.executor.shutdown()
+        self.thread.join(timeout=10.0)
+        _join_callbacks(self.executor)
         self.node.destroy_node()
         self.client.destroy_node()
         rclpy.shutdown(context=self.context)
-        self.thread.join(timeout=5.0)
 
     def wait(self, future: rclpy.task.Future, timeout_s: float = 30.0) -> Any:
         self.client_executor.spin_until_future_complete(future, timeout_sec=timeout_s)
