@@ -122,7 +122,7 @@ def running_node(
     from rclpy.executors import MultiThreadedExecutor
     from rclpy.parameter import Parameter
 
-    from grasp_safety_ros.ros.node import EXECUTOR_THREADS, GraspSafetyNode
+    from grasp_safety_ros.ros.node import EXECUTOR_THREADS, GraspSafetyNode, _join_callbacks
 
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     domain_id = random.SystemRandom().randint(0, 101)
@@ -149,10 +149,11 @@ def running_node(
     try:
         yield node, {**os.environ, "ROS_DOMAIN_ID": str(domain_id)}
     finally:
-        executor.shutdown()
+        executor.shutdown()  # stop spinning and let callbacks end before destroying (as main)
+        thread.join(timeout=10.0)
+        _join_callbacks(executor)
         node.destroy_node()
         rclpy.shutdown(context=context)
-        thread.join(timeout=5.0)
 
 
 class ClientProcess:

@@ -180,9 +180,9 @@ class Clients:
 
     def close(self) -> None:
         self.executor.shutdown()
+        self.thread.join(timeout=10.0)  # stop spinning before the nodes are destroyed
         for node in self.nodes:
             node.destroy_node()
-        self.thread.join(timeout=10.0)
 
 
 def call(client: Any, request: RankGrasps.Request) -> tuple[Any, float]:
