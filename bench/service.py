@@ -375,11 +375,9 @@ def latency(arm: ArmWorkload, repeats: int, overrides: dict[str, Any]) -> dict[s
             answers, empties = {}, {}
             for wait, process in zip(WAITS, processes, strict=True):
                 answers[wait] = process.command("rank 10")
-                if wait == WAITS[0] and k >= 3:
-                    for leg, value in legs_s(answers[wait], clock.calls[-1]).items():
-                        legs[leg].append(value)
                 empties[wait] = process.command("empty")
                 if wait == WAITS[0]:
+                    call = clock.calls[-1]  # this rank request's (empty is another service)
                     steps = node_spans(node, request)  # the node idle, between the calls
             if k >= 3:  # the first calls warm caches up
                 for wait in WAITS:
@@ -388,6 +386,8 @@ def latency(arm: ArmWorkload, repeats: int, overrides: dict[str, Any]) -> dict[s
                 computes.append(answers[WAITS[0]]["compute_time_s"])
                 for name, value in steps.items():
                     spans.setdefault(name, []).append(value)
+                for leg, value in legs_s(answers[WAITS[0]], call).items():
+                    legs[leg].append(value)
         headline_wait = processes[0].wait
     answer = answers[WAITS[0]]
     result = {
