@@ -84,3 +84,9 @@ lock:
 
 clean:
 	rm -rf $(VENV) build install log
+
+# README.md and docs/: re-render the generated blocks (parameters, benchmark tables) and
+# re-capture the outputs shown (scripts/render_docs.py; the tests fail while they are stale).
+.PHONY: docs
+docs: setup
+	$(PY) scripts/render_docs.py --capture

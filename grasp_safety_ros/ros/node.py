@@ -3,7 +3,7 @@
 A thin adapter: messages are converted in conversions.py, parameters validated in
 parameters.py, the work is GraspSafetyEvaluator.rank followed by
 core.analyses.safety_report.analyse (metric point, ISO/TS 15066, inertia uncertainty, grasp
-quality, redundancy, effort). See the README for the interface.
+quality, redundancy, effort). See docs/ros/interface.md for the interface.
 
 Threads: a MultiThreadedExecutor with EXECUTOR_THREADS threads. The service sits in its own
 reentrant callback group, the input topics in a mutually exclusive one, everything else
