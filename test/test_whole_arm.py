@@ -280,3 +280,81 @@ def test_sites_resolved_once(arm7: RobotModel) -> None:
     for bad in ({"link3": [[0, 0]]}, {"link3": [[0, 0, np.nan]]}, [[0, 0, 0]]):
         with pytest.raises(InvalidInputError, match=r"robot\.exposed_points_m"):
             resolve_arm_sites(arm7, bad)
+
+
+def _scenario(tmp_path, **changes) -> str:
+    import yaml
+
+    from grasp_safety_ros.paths import config_file
+
+    data = yaml.safe_load(config_file("book_baxter.yaml").read_text())
+    data["trajectory"]["dt_s"] = 0.1
+    data["posture"] = {"restarts": 0}
+    for key, value in changes.items():
+        section, _, leaf = key.partition("__")
+        if leaf:
+            data.setdefault(section, {})[leaf] = value
+        else:
+            data[key] = value
+    path = tmp_path / "s.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return str(path)
+
+
+def test_cli_rank_by_whole_arm(tmp_path, capsys: pytest.CaptureFixture[str]) -> None:
+    import json
+
+    from grasp_safety_ros.cli.main import main
+
+    scenario = _scenario(
+        tmp_path,
+        rank_by="whole_arm",
+        robot__exposed_points_m={"right_lower_forearm": [[0.05, 0.0, 0.1]]},
+        whole_arm__region="upper_arm_elbow",
+    )
+    out = tmp_path / "out.json"
+    assert main(["rank", scenario, "--json", str(out)]) == 0
+    table = capsys.readouterr().out
+    assert "whole arm (sites: right_e0, " in table and "right_lower_forearm[0]" in table
+    result = json.loads(out.read_text())
+    assert result["whole_arm"]["sites"][-1] == "right_lower_forearm[0]"
+    assert result["whole_arm"]["rank_region"] == "upper_arm_elbow"
+    region = BODY_REGIONS["upper_arm_elbow"]
+    peaks = []
+    for grasp in result["grasps"]:
+        whole = grasp["whole_arm"]
+        masses = np.array(whole["effective_mass_kg"], dtype=float)  # None (inf) -> nan
+        speeds = np.array(whole["speed_m_s"])
+        assert masses.shape == (len(grasp["samples"]), len(result["whole_arm"]["sites"]))
+        reduced = 1.0 / (1.0 / region.effective_mass_kg + 1.0 / np.nan_to_num(masses, nan=np.inf))
+        force = speeds * np.sqrt(reduced * region.spring_constant_n_per_m)
+        worst = whole["regions"]["upper_arm_elbow"]
+        assert worst["peak_contact_force_n"] == pytest.approx(force.max(), rel=1e-12)
+        sample, site = np.unravel_index(np.argmax(force), force.shape)
+        assert worst["site"] == result["whole_arm"]["sites"][site]
+        assert worst["time_s"] == pytest.approx(grasp["samples"][sample]["t_s"])
+        ratios = [
+            r["worst_force_ratio"] for r in whole["regions"].values() if r["worst_force_ratio"]
+        ]
+        assert whole["min_duration_s"] == pytest.approx(2.0 * max(ratios), rel=1e-12)
+        peaks.append(worst["peak_contact_force_n"])
+    assert result["ranking"] == sorted(range(3), key=lambda k: (peaks[k], k))
+    assert result["paper_ranking"] == sorted(range(3), key=lambda k: result["grasps"][k]["score"])
+
+
+def test_cli_whole_arm_bad_input(tmp_path, capsys: pytest.CaptureFixture[str]) -> None:
+    from grasp_safety_ros.cli.main import main
+
+    for changes, message in (
+        (
+            {"robot__exposed_points_m": {"right_lower_forarm": [[0, 0, 0]]}},
+            "robot.exposed_points_m.right_lower_forarm: unknown link 'right_lower_forarm'; "
+            "did you mean right_lower_forearm",
+        ),
+        ({"robot__exposed_points_m": {"right_lower_forearm": [[0, 0]]}}, "must be a list of"),
+        ({"whole_arm__region": "elbow"}, "whole_arm.region: unknown body region 'elbow'"),
+        ({"whole_arm__enabled": "yes"}, "whole_arm.enabled: must be true or false"),
+    ):
+        assert main(["rank", _scenario(tmp_path, **changes)]) == 2
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1, err
