@@ -389,7 +389,11 @@ def whole_arm_lines(report: SafetyReport) -> list[str]:
     sites = report.arm_sites
     region = report.options.whole_arm_region
     names = ", ".join(sites.names) if sites is not None else ""
-    lines = ["", f"whole arm (sites: {names}; worst over sites and samples):"]
+    lines = [
+        "",
+        f"whole arm (sites: {names}; worst over sites and samples; grasps in the final order, "
+        f"rank_by={report.options.rank_by}):",
+    ]
     by_index = {w.index: w for w in report.whole_arm if w.feasible}
     for k in report.order:
         w = by_index.get(k)
