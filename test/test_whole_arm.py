@@ -190,6 +190,29 @@ def test_two_link_planar_elbow_closed_form() -> None:
     assert np.all(lighter < exposure.effective_mass_kg[:, 1])
 
 
+def test_armature_and_object_flow_in_through_the_augmented_model() -> None:
+    """``model.armature`` written on the robot's model (as RobotModel does) reaches the
+    augmented model: the elbow closed form with the object (point mass m3 with isotropic
+    inertia i at the hand) added to the forearm: m2 -> m2 + m3, rotational term i."""
+    from grasp_safety_ros.core import ObjectInertia
+
+    l1, l2, m1, m2, m3, i, a1, a2 = 0.4, 0.3, 2.0, 1.5, 0.7, 0.01, 0.2, 0.05
+    robot = RobotModel.from_urdf(PLANAR.format(l1=l1, l2=l2, m1=m1, m2=m2), "base", "hand")
+    robot.model.armature = np.array([a1, a2])
+    model = augmented_model(
+        robot, ObjectInertia(m3, np.zeros(3), i * np.eye(3)), pin.SE3.Identity()
+    )
+    sites = resolve_arm_sites(robot, {"upper": [[l1, 0.0, 0.0]]}, defaults=False)
+    q_all = np.random.default_rng(5).uniform(-2.5, 2.5, (5, 2))
+    terms = ArmTerms(*pinocchio_kinematic_terms(model, q_all), np.ones((5, 2)))
+    mass = site_exposure(sites, terms, robot.transform_base_to_world).effective_mass_kg[:, 0]
+    c2, m = np.cos(q_all[:, 1]), m2 + m3
+    m11 = m1 * l1**2 + m * (l1**2 + l2**2 + 2 * l1 * l2 * c2) + i + a1
+    m12 = m * (l2**2 + l1 * l2 * c2) + i
+    m22 = m * l2**2 + i + a2
+    np.testing.assert_allclose(mass, (m11 * m22 - m12**2) / (l1**2 * m22), rtol=1e-12)
+
+
 @pytest.fixture(scope="module")
 def book(baxter: RobotModel) -> tuple:
     trajectory = book_trajectory(goal_rotation_log=(0.2, -0.3, 0.25))
