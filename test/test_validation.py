@@ -382,3 +382,5 @@ def test_quick_run_elbow_impact(quick_run) -> None:
     assert elbow["rel_error"] <= 0.005
     assert elbow["rel_error_with_tip_mass"] >= 1.0
     assert "elbow impact (right_e1" in format_summary(results)
+    report = (quick_run[0] / "results.md").read_text()
+    assert "- Elbow impact: a free impact at the whole-arm site right_e1" in report
