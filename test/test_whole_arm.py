@@ -381,3 +381,42 @@ def test_cli_whole_arm_bad_input(tmp_path, capsys: pytest.CaptureFixture[str]) -
         assert main(["rank", _scenario(tmp_path, **changes)]) == 2
         err = capsys.readouterr().err
         assert message in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_whole_arm_follows_the_redundancy_resolved_motion(tmp_path) -> None:
+    """With redundancy on, the arm moves along the optimised joint path: the whole arm's tip
+    site then has the optimised tip effective mass wherever the tip moves."""
+    import yaml
+
+    from grasp_safety_ros.cli.scenario import parse_scenario
+    from grasp_safety_ros.core.analyses.safety_report import analyse
+    from grasp_safety_ros.paths import config_file
+
+    data = yaml.safe_load(config_file("book_baxter_extended.yaml").read_text())
+    data["trajectory"]["dt_s"] = 0.1
+    data.update(redundancy=True, rank_by="whole_arm")
+    data.pop("uncertainty")
+    scenario = parse_scenario(data, tmp_path)
+    evaluator = GraspSafetyEvaluator(scenario.robot.load())
+    report = analyse(
+        evaluator,
+        scenario.grasps,
+        scenario.object_inertia,
+        scenario.trajectory,
+        scenario.options,
+        scenario.robot.seed,
+    )
+    applied = [k for k, r in enumerate(report.redundancy) if r.applied]
+    assert applied
+    for k in applied:
+        whole, resolution = report.whole_arm[k], report.redundancy[k]
+        tip = whole.site_names.index(evaluator.robot.tip_frame)
+        moving = ~whole.stationary[:, tip]
+        np.testing.assert_allclose(
+            whole.effective_mass_kg[moving, tip],
+            resolution.effective_mass_kg[moving],
+            rtol=1e-8,
+        )
+        assert not np.allclose(
+            resolution.effective_mass_kg, report.ranking.evaluations[k].effective_mass_kg
+        )

@@ -308,6 +308,9 @@ def analyse(
                     arm_sites,
                     options.iso_regions,
                     model_of(k),
+                    redundancy[k].joint_positions
+                    if redundancy and redundancy[k].applied
+                    else None,
                 )
             )
             step()

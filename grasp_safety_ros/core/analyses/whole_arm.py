@@ -494,12 +494,15 @@ def evaluate_whole_arm(
     sites: ArmSites,
     regions: Sequence[str | BodyRegion] | None = None,
     model: pin.Model | None = None,
+    joint_positions: np.ndarray | None = None,
 ) -> WholeArmEvaluation:
     """Effective mass, speed, energy and ISO/TS 15066 ratios at every site, per sample.
 
-    Reuses the evaluation's joint positions (no IK). ``grasp`` and ``trajectory`` must be the
-    ones the evaluation was computed with; ``model``: their ``augmented_model`` when already
-    built (its ``armature`` is used, as everywhere M appears); ``regions``: None for all.
+    Reuses the evaluation's joint positions (no IK), or ``joint_positions`` (N, n) with the
+    same samples and tip poses (e.g. RedundancyResolution.joint_positions). ``grasp`` and
+    ``trajectory`` must be the ones the evaluation was computed with; ``model``: their
+    ``augmented_model`` when already built (its ``armature`` is used, as everywhere M
+    appears); ``regions``: None for all.
     """
     selected = select_regions(None if regions is None else list(regions))
     count_sites = len(sites)
@@ -514,7 +517,9 @@ def evaluate_whole_arm(
         )
         return _whole_arm_result(evaluation, sites, np.empty(0), exposure, selected, math.nan)
     times = np.asarray(evaluation.times_s, dtype=float)
-    positions = np.asarray(evaluation.joint_positions, dtype=float)
+    positions = np.asarray(
+        evaluation.joint_positions if joint_positions is None else joint_positions, dtype=float
+    )
     if positions.shape != (len(times), robot.num_joints):
         raise InvalidInputError("evaluation.joint_positions", "must have one row per sample")
     if model is None:
