@@ -38,6 +38,7 @@ from grasp_safety_ros.core.analyses.whole_arm import (
     site_exposure,
     tip_following_joint_velocities,
     tip_jacobians_world,
+    tip_twists_in_base,
 )
 from grasp_safety_ros.core.method.effective_mass import augmented_model
 
@@ -59,7 +60,7 @@ def bench_whole_arm(arm: ArmWorkload, grasps: int = 10, repeats: int = 5) -> dic
         model = augmented_model(robot, obj, grasp.transform_tip_to_object)
         q_all = np.array([robot.q_from_positions(p) for p in evaluation.joint_positions])
         kinematics = pinocchio_kinematic_terms(model, q_all)
-        twists, _ = trajectory.tip_twists(grasp.transform_tip_to_object, evaluation.times_s)
+        twists = tip_twists_in_base(trajectory, grasp.transform_tip_to_object, evaluation.times_s)
         rotation = robot.transform_base_to_world.rotation
         twists = np.concatenate([twists[:, :3] @ rotation.T, twists[:, 3:] @ rotation.T], 1)
         rates = tip_following_joint_velocities(

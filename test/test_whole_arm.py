@@ -420,3 +420,19 @@ def test_whole_arm_follows_the_redundancy_resolved_motion(tmp_path) -> None:
         assert not np.allclose(
             resolution.effective_mass_kg, report.ranking.evaluations[k].effective_mass_kg
         )
+
+
+def test_tip_twists_from_the_object_motion_equal_the_trajectorys() -> None:
+    """The vectorised twists (object motion sampled once) equal each trajectory's tip_twists,
+    for the quintic and for a waypoint path."""
+    from grasp_safety_ros.cli.scenario import load_scenario
+    from grasp_safety_ros.core.analyses.whole_arm import tip_twists_in_base
+    from grasp_safety_ros.paths import config_file
+
+    grasp = pin.SE3(pin.rpy.rpyToMatrix(0.3, 0.2, -0.1), np.array([0.05, -0.1, 0.02]))
+    waypoints = load_scenario(config_file("book_baxter_waypoints.yaml")).trajectory
+    for trajectory in (book_trajectory(goal_rotation_log=(0.2, -0.3, 0.25)), waypoints):
+        times = trajectory.times_s()
+        expected = trajectory.tip_twists(grasp, times)[0]
+        got = tip_twists_in_base(trajectory, grasp, times)
+        np.testing.assert_allclose(got, expected, rtol=0, atol=1e-14 * np.abs(expected).max())

@@ -44,7 +44,7 @@ from ..method.executable import joint_velocities_accelerations
 from ..method.ranking import Grasp, GraspEvaluation
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
-from ..model.trajectory import Trajectory
+from ..model.trajectory import ObjectPath, Trajectory
 from .iso15066 import (
     ADMISSIBLE_RATIO_TOLERANCE,
     BodyRegion,
@@ -287,6 +287,20 @@ def site_exposure(
     )
 
 
+def tip_twists_in_base(
+    trajectory: Trajectory, transform_tip_to_object: pin.SE3, times_s: np.ndarray
+) -> np.ndarray:
+    """Tip twists (N, 6) (linear [m/s], angular [rad/s]), base axes: from the object motion
+    sampled once (ObjectMotion: tangent times speed per tangent) for an object path, else the
+    trajectory's own ``tip_twists``."""
+    if not isinstance(trajectory, ObjectPath):
+        return trajectory.tip_twists(transform_tip_to_object, times_s)[0]
+    motion = trajectory.object_motion(times_s)
+    rate = motion.speed_per_tangent[:, None]
+    tip = motion.tip_motion(transform_tip_to_object)
+    return np.concatenate([tip.tangents * rate, motion.angular_tangents * rate], axis=1)
+
+
 def tip_jacobians_world(robot: RobotModel, terms_kinematics: tuple[np.ndarray, ...]) -> np.ndarray:
     """(N, 6, n) Jacobians of the tip frame, world axes at the tip origin (LOCAL_WORLD_ALIGNED),
     from ``pinocchio_kinematic_terms``' placements and world columns."""
@@ -526,7 +540,7 @@ def evaluate_whole_arm(
         model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
     q_all = np.array([robot.q_from_positions(p) for p in positions]).reshape(len(times), -1)
     kinematics = pinocchio_kinematic_terms(model, q_all)
-    twists_in_base, _ = trajectory.tip_twists(grasp.transform_tip_to_object, times)
+    twists_in_base = tip_twists_in_base(trajectory, grasp.transform_tip_to_object, times)
     rotation = robot.transform_base_to_world.rotation
     twists = np.concatenate(
         [twists_in_base[:, :3] @ rotation.T, twists_in_base[:, 3:] @ rotation.T], axis=1
