@@ -203,7 +203,7 @@ class ArmTerms(NamedTuple):
     joint_rotations: np.ndarray  # (N, n, 3, 3) joint frames in the world frame
     joint_translations: np.ndarray  # (N, n, 3) [m] joint origins in the world frame
     joint_jacobians: np.ndarray  # (N, 6, n) columns (v_O [m/s], ω [rad/s]) per unit rate
-    minv: np.ndarray  # (N, n, n) M⁻¹ of the augmented model, armature included [1/kg...]
+    minv: np.ndarray  # (N, n, n) M⁻¹ of the augmented model, armature included [1/(kg m²)]
     joint_velocities: np.ndarray  # (N, n) q̇ [rad/s or m/s]
 
 
