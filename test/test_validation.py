@@ -369,3 +369,18 @@ def test_quick_run_waypoint_path(quick_run) -> None:
     assert [c["name"] for c in changes] == [g["name"] for g in straight["grasps"]]
     report = (out / "results.md").read_text(encoding="utf-8")
     assert "## Book along a timed waypoint path" in report
+
+
+def test_quick_run_elbow_impact(quick_run) -> None:
+    """A free impact at the elbow site follows the whole-arm effective mass (MuJoCo's own M and
+    J agree with it), and the tip's effective mass in its place is far off."""
+    results = quick_run[1]
+    elbow = results["elbow_impact"]
+    assert (elbow["site"], elbow["link"]) == ("right_e1", "right_lower_elbow")
+    assert not elbow["stationary"] and not elbow["joint_limit_active"]
+    assert elbow["engine_effective_mass_kg"] == pytest.approx(elbow["effective_mass_kg"], 1e-9)
+    assert elbow["rel_error"] <= 0.005
+    assert elbow["rel_error_with_tip_mass"] >= 1.0
+    assert "elbow impact (right_e1" in format_summary(results)
+    report = (quick_run[0] / "results.md").read_text()
+    assert "- Elbow impact: a free impact at the whole-arm site right_e1" in report

@@ -14,6 +14,7 @@ import yaml
 from ..core.analyses.exposed_points import box_corners_in_object, cylinder_rim_points_in_object
 from ..core.analyses.safety_report import RANK_BY, AnalysisOptions
 from ..core.analyses.uncertainty import InertiaUncertainty
+from ..core.analyses.whole_arm import DEFAULT_RANK_REGION
 from ..core.exceptions import InvalidInputError
 from ..core.input_checks import finite_array, finite_float, pose_from_position_quat
 from ..core.method.joint_trajectory import PlannedJointTrajectory
@@ -189,7 +190,8 @@ def _check_keys(section: Mapping[str, Any], allowed: set[str], prefix: str) -> N
 def parse_robot(section: Any) -> RobotSpec:
     """Parse the ``robot`` section."""
     robot = _mapping(section, "robot")
-    _check_keys(robot, {"urdf", "base_frame", "tip_frame", "seed", "locked_joints"}, "robot")
+    allowed = {"urdf", "base_frame", "tip_frame", "seed", "locked_joints", "exposed_points_m"}
+    _check_keys(robot, allowed, "robot")  # exposed_points_m: an analysis option
     seed = robot.get("seed")
     locked = robot.get("locked_joints")
     if locked is not None:
@@ -418,6 +420,7 @@ OPTIONAL_SECTIONS = {
     "effort",
     "rank_by",
     "posture",
+    "whole_arm",
 }
 
 
@@ -471,6 +474,9 @@ def parse_options(
         uncertainty = InertiaUncertainty(**renamed)
     effort = _mapping(root.get("effort", {}), "effort")
     _check_keys(effort, {"enabled", "criterion"}, "effort")
+    whole_arm = _mapping(root.get("whole_arm", {}), "whole_arm")
+    _check_keys(whole_arm, {"enabled", "region"}, "whole_arm")
+    arm_points = _mapping(root.get("robot", {}), "robot").get("exposed_points_m")
     rank_by = root.get("rank_by", "safety")
     if rank_by not in RANK_BY:
         raise InvalidInputError("rank_by", f"must be one of {', '.join(RANK_BY)}, got {rank_by!r}")
@@ -492,6 +498,9 @@ def parse_options(
             effort=_flag(effort.get("enabled", True), "effort.enabled"),
             rank_by=rank_by,
             effort_criterion=effort.get("criterion", "peak_fraction"),
+            whole_arm=_flag(whole_arm.get("enabled", False), "whole_arm.enabled"),
+            arm_points_m=arm_points,
+            whole_arm_region=whole_arm.get("region", DEFAULT_RANK_REGION),
         )
     except InvalidInputError as error:  # the core says iso15066.<field>; the file iso_ts_15066
         if not error.field.startswith("iso15066."):

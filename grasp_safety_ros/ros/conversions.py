@@ -30,6 +30,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from ..core.analyses.iso15066 import PowerForceLimitAssessment, RegionAssessment
 from ..core.analyses.safety_report import SafetyReport
+from ..core.analyses.whole_arm import WholeArmEvaluation, whole_arm_score
 from ..core.exceptions import InvalidInputError
 from ..core.input_checks import (
     QUATERNION_NORM_TOLERANCE,
@@ -653,6 +654,10 @@ _new_evaluation = _template_constructor(
         score_single_ik=NAN,
         score_range_min=NAN,
         score_range_max=NAN,
+        whole_arm_rank_force_n=NAN,
+        whole_arm_worst_force_ratio=NAN,
+        whole_arm_min_duration_s=NAN,
+        whole_arm_worst_energy_j=NAN,
     )
 )
 """GraspEvaluation messages whose analysis fields say "not computed" (NaN, empty, false)."""
@@ -886,6 +891,25 @@ def _set_iso(message: GraspEvaluationMsg, assessment: PowerForceLimitAssessment)
     message.iso_limiting_region = assessment.limiting_region
 
 
+def _set_whole_arm(message: GraspEvaluationMsg, whole: WholeArmEvaluation, region: str) -> None:
+    """The whole_arm_* fields of one grasp (left at "not computed" when infeasible)."""
+    if not whole.feasible:
+        return
+    if any(r.region == region for r in whole.regions):
+        message.whole_arm_rank_force_n = float(whole_arm_score(whole, region))
+    if whole.limiting_region:
+        limiting = whole.region(whole.limiting_region)
+        message.whole_arm_limiting_region = whole.limiting_region
+        message.whole_arm_worst_force_ratio = float(limiting.worst_force_ratio)
+        message.whole_arm_worst_site = whole.site_names[limiting.worst_site]
+        message.whole_arm_worst_link = whole.site_links[limiting.worst_site]
+    message.whole_arm_admissible = bool(whole.admissible_where_permitted)
+    message.whole_arm_min_duration_s = float(whole.min_duration_s)
+    energy, site, _ = whole.worst_energy
+    message.whole_arm_worst_energy_j = float(energy)
+    message.whole_arm_worst_energy_site = whole.site_names[site]
+
+
 def report_msg(
     report: SafetyReport,
     grasps: PoseArray,
@@ -931,12 +955,17 @@ def _report_msg(
         message.order_stability = float(report.uncertainty.order_stability)
         message.worst_case_order = [int(i) for i in report.uncertainty.worst_case_order]
         message.uncertainty_message = report.uncertainty.message
+    if report.arm_sites is not None:
+        message.whole_arm_region = options.whole_arm_region
+        message.whole_arm_sites = list(report.arm_sites.names)
     iso = {a.index: a for a in report.iso}
     pareto = set(message.pareto_set)
     for k, evaluation in enumerate(message.evaluations):
         evaluation.safety_score = float(report.scores[k])
         if k in iso:
             _set_iso(evaluation, iso[k])
+        if report.whole_arm:
+            _set_whole_arm(evaluation, report.whole_arm[k], options.whole_arm_region)
         if per_sample and report.exposed and report.exposed[k].feasible:
             exposed = report.exposed[k]
             evaluation.leading_point_effective_mass_kg = float64_array(

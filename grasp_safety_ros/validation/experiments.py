@@ -29,6 +29,7 @@ from ..core.model.inertia import (
 from ..core.model.robot import RobotModel
 from ..core.model.trajectory import ObjectTrajectory
 from ..core.model.waypoint_trajectory import WaypointTrajectory
+from .elbow import elbow_impact, format_elbow
 from .scene import ContactConfig, ObjectShape, SensorConfig
 from .simulation import (
     CollisionResult,
@@ -742,6 +743,15 @@ def reproduce(
             [(tensor.key, tensor_runs), (book.key, book_runs)], config.impulse
         ),
         "posture_selection": postures,
+        "elbow_impact": elbow_impact(
+            robot,
+            ROBOT_SOURCE,
+            book.grasps[0].object_inertia,
+            Grasp(book.grasps[0].transform_tip_to_object, book.grasps[0].name),
+            book_runs[0].evaluation,
+            book.trajectory,
+            config.impulse,
+        ),
     }
     low, high = PAPER_BOOK_PEAK_FORCES_N
     results["book"]["paper_gazebo"] = {
@@ -798,6 +808,8 @@ def format_summary(results: dict[str, Any]) -> str:
         f"{impulse['worst_rel_error']:.2e} over {impulse['cases']} free impacts "
         f"(e = {impulse['restitution_min']:.3f}..{impulse['restitution_max']:.3f})",
     ]
+    if results.get("elbow_impact"):
+        lines.append(format_elbow(results["elbow_impact"]))
     postures = results.get("posture_selection")
     if postures:
         changes = ", ".join(

@@ -442,6 +442,21 @@ def _signed(value: float) -> str:
     return f"{100.0 * value:+.2f} %"
 
 
+def _elbow_markdown(result: dict[str, Any] | None) -> str:
+    """The results.md bullet of the elbow impact ("" when it was not run)."""
+    if not result:
+        return ""
+    return (
+        f"- Elbow impact: a free impact at the whole-arm site {result['site']} (link "
+        f"{result['link']}), grasp {result['grasp']}, t = {result['time_s']:g} s, "
+        f"{result['speed_m_s']:.2f} m/s along the site's own direction of motion: impulse vs "
+        f"(1 + e)·M_eff·v with the whole-arm M_eff {result['effective_mass_kg']:.3f} kg off by "
+        f"{result['rel_error']:.1e} (MuJoCo's own: {result['engine_effective_mass_kg']:.3f} kg); "
+        f"with the tip's {result['tip_effective_mass_kg']:.3f} kg in its place, by "
+        f"{result['rel_error_with_tip_mass']:.2f}.\n"
+    )
+
+
 def results_markdown(results: dict[str, Any]) -> str:
     """The markdown report of a validation run."""
     setup = results["setup"]
@@ -484,7 +499,7 @@ in {results["timing_s"]["total"]:.0f} s ({versions}). Everything below is genera
   e measured {impulse["restitution_min"]:.3f} to {impulse["restitution_max"]:.3f}; MuJoCo's own
   1/(uᵀ J M⁻¹ Jᵀ u) differs from the core's by at most
   {impulse["engine_vs_core_effective_mass_max_rel_diff"]:.1e} (relative).
-
+{_elbow_markdown(results.get("elbow_impact"))}
 ## Reading the results
 
 {_reading(results)}

@@ -465,17 +465,24 @@ class ImpulseChecker:
         object_inertia: ObjectInertia,
         transform_tip_to_object: pin.SE3,
         setup: ImpulseSetup | None = None,
+        body_name: str | None = None,
     ) -> None:
+        """``body_name``: the link whose origin carries the colliding sphere (default: the
+        tip frame's), e.g. an elbow link for a whole-arm site at its joint's origin."""
         self.robot = robot
         self.setup = setup or ImpulseSetup()
+        body_name = body_name or robot.tip_frame
         rigid = SensorConfig(stiffness_n_m=None)
         spec = base_spec(robot, urdf_source, self.setup.timestep_s, gravity=False)
         add_object(spec, robot.tip_frame, object_inertia, transform_tip_to_object)
-        add_tip_sphere(spec, robot.tip_frame, self.setup.tip_sphere_radius_m, self.setup.contact)
+        add_tip_sphere(spec, body_name, self.setup.tip_sphere_radius_m, self.setup.contact)
         add_obstacle(
             spec, np.array([10.0, 0.0, 0.0]), np.array([1.0, 0.0, 0.0]), self.setup.contact, rigid
         )
         self.scene = compile_scene(spec, robot)
+        self.scene.tip_body = int(
+            mujoco.mj_name2id(self.scene.model, mujoco.mjtObj.mjOBJ_BODY, body_name)
+        )
         self.pillar = int(mujoco.mj_name2id(self.scene.model, mujoco.mjtObj.mjOBJ_BODY, "pillar"))
 
     def run(
