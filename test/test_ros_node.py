@@ -28,7 +28,7 @@ from geometry_msgs.msg import InertiaStamped, Point, Pose, PoseArray, PoseStampe
 from grasp_safety_msgs.msg import GraspRanking
 from grasp_safety_msgs.srv import RankGrasps
 from nav_msgs.msg import Path
-from rcl_interfaces.srv import GetParameters, SetParameters
+from rcl_interfaces.srv import GetParameters, SetParameters, SetParametersAtomically
 from rclpy.context import Context
 from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.parameter import Parameter
@@ -1385,3 +1385,133 @@ def test_rank_by_whole_arm_through_the_service(
         assert evaluation.whole_arm_min_duration_s == pytest.approx(whole.min_duration_s, 1e-9)
     forces = [ranking.evaluations[i].whole_arm_rank_force_n for i in ranking.order]
     assert forces == sorted(forces)
+
+
+def set_parameters_atomically(ros: NodeUnderTest, **values: Any) -> Any:
+    """All of ``values`` in one change (``~/set_parameters_atomically``): the SetParameters
+    service applies its parameters one by one, so a pair validated together (e.g.
+    whole_arm.point_links with whole_arm.points_m) must change at once."""
+    client = ros.client.create_client(
+        SetParametersAtomically, "/grasp_safety/set_parameters_atomically"
+    )
+    try:
+        assert client.wait_for_service(timeout_sec=10.0)
+        request = SetParametersAtomically.Request(
+            parameters=[
+                Parameter(name.replace("__", "."), value=value).to_parameter_msg()
+                for name, value in values.items()
+            ]
+        )
+        return ros.wait(client.call_async(request)).result
+    finally:
+        ros.client.destroy_client(client)
+
+
+FOREARM_POINT_M = [0.0, 0.0, 0.1]
+
+
+def test_whole_arm_parameters_through_the_service(
+    ros: NodeUnderTest, core_evaluator: GraspSafetyEvaluator, core_ranking: Any
+) -> None:
+    """whole_arm.region, the extra points (whole_arm.point_links + whole_arm.points_m) and
+    iso_ts_15066.regions reach the analysis: the response equals the core's report with the
+    same options (the scenario's whole_arm section and robot.exposed_points_m)."""
+    results = ros.set_parameters(
+        iso_ts_15066__regions=["chest", "upper_arm_elbow"],
+        whole_arm__region="upper_arm_elbow",
+        rank_by="whole_arm",
+    )
+    assert all(r.successful for r in results), results
+    try:
+        # one at a time, the pair is refused naming the parameter; together it is taken
+        (result,) = ros.set_parameters(whole_arm__point_links=["right_lower_forearm"])
+        assert not result.successful
+        assert result.reason.startswith(
+            "whole_arm.points_m: must hold x y z for each of the 1 whole_arm.point_links"
+        )
+        points = {"whole_arm__point_links": ["right_lower_forearm"]}
+        result = set_parameters_atomically(ros, **points, whole_arm__points_m=FOREARM_POINT_M)
+        assert result.successful, result.reason
+        response = ros.rank(book_request())
+    finally:
+        result = set_parameters_atomically(
+            ros,
+            whole_arm__point_links=[],
+            whole_arm__points_m=[],
+            rank_by="safety",
+            whole_arm__region="chest",
+            iso_ts_15066__regions=[],
+        )
+        assert result.successful, result.reason
+    assert response.success, response.message
+    ranking = response.ranking
+    want = core_report(
+        core_evaluator,
+        core_ranking,
+        iso_regions=("chest", "upper_arm_elbow"),
+        rank_by="whole_arm",
+        whole_arm_region="upper_arm_elbow",
+        arm_points_m={"right_lower_forearm": [FOREARM_POINT_M]},
+    )
+    assert want.arm_sites is not None and want.arm_sites.names[-1] == "right_lower_forearm[0]"
+    assert ranking.rank_by == "whole_arm" and ranking.whole_arm_region == "upper_arm_elbow"
+    assert tuple(ranking.whole_arm_sites) == want.arm_sites.names
+    assert tuple(ranking.order) == want.order
+    for k, evaluation in enumerate(ranking.evaluations):
+        whole = want.whole_arm[k]
+        elbow = whole.region("upper_arm_elbow")
+        assert evaluation.whole_arm_rank_force_n == pytest.approx(elbow.peak_contact_force_n, 1e-9)
+        assert evaluation.whole_arm_limiting_region == whole.limiting_region
+        limiting = whole.region(whole.limiting_region)
+        assert evaluation.whole_arm_worst_site == whole.site_names[limiting.worst_site]
+        assert [r.region for r in evaluation.iso_ts_15066] == ["chest", "upper_arm_elbow"]
+    forces = [ranking.evaluations[i].whole_arm_rank_force_n for i in ranking.order]
+    assert forces == sorted(forces)
+
+
+def test_whole_arm_enabled_without_ranking_by_it(ros: NodeUnderTest) -> None:
+    """whole_arm.enabled fills the whole_arm_* fields and keeps the paper's order."""
+    (result,) = ros.set_parameters(whole_arm__enabled=True)
+    assert result.successful, result.reason
+    try:
+        response = ros.rank(book_request())
+    finally:
+        (result,) = ros.set_parameters(whole_arm__enabled=False)
+        assert result.successful, result.reason
+    assert response.success, response.message
+    ranking = response.ranking
+    assert ranking.rank_by == "safety" and tuple(ranking.order) == tuple(ranking.safety_order)
+    assert ranking.whole_arm_region == "chest" and len(ranking.whole_arm_sites) == 6
+    assert all(math.isfinite(e.whole_arm_rank_force_n) for e in ranking.evaluations if e.feasible)
+    response = ros.rank(book_request())  # off again: not computed
+    assert response.success and not response.ranking.whole_arm_sites
+
+
+def test_whole_arm_parameters_are_refused_naming_them(ros: NodeUnderTest) -> None:
+    result = set_parameters_atomically(
+        ros, whole_arm__point_links=["right_lower_forarm"], whole_arm__points_m=FOREARM_POINT_M
+    )
+    assert not result.successful
+    assert result.reason.startswith(
+        "whole_arm.point_links: unknown link 'right_lower_forarm'; did you mean "
+        "right_lower_forearm, "
+    )
+    (result,) = ros.set_parameters(whole_arm__region="elbow")
+    assert not result.successful and result.reason.startswith("whole_arm.region: must be one of")
+    (result,) = ros.set_parameters(rank_by="whole_arm")
+    assert result.successful, result.reason
+    try:
+        # rank_by whole_arm orders by chest (whole_arm.region), which must stay assessed
+        (result,) = ros.set_parameters(iso_ts_15066__regions=["face", "hand_fingers"])
+        assert not result.successful
+        assert result.reason == (
+            "whole_arm.region: rank_by whole_arm ranks by 'chest', which is not among the "
+            "assessed iso_ts_15066.regions (face, hand_fingers); add it there or set "
+            "whole_arm.region to one of them"
+        )
+    finally:
+        (result,) = ros.set_parameters(rank_by="safety")
+        assert result.successful, result.reason
+    response = ros.rank(book_request())  # nothing of the refused changes applied
+    assert response.success and response.ranking.rank_by == "safety"
+    assert not response.ranking.whole_arm_sites

@@ -197,6 +197,30 @@ BAD: list[tuple[dict[str, Any], str]] = [
     ),
     ({"response.joint_trajectories": 2.0}, r"^response\.joint_trajectories: must be an integer"),
     ({"response.per_sample": "false"}, r"^response\.per_sample: must be true or false"),
+    # the whole arm
+    ({"whole_arm.enabled": 1}, r"^whole_arm\.enabled: must be true or false"),
+    ({"whole_arm.region": "elbow"}, r"^whole_arm\.region: must be one of skull_forehead, "),
+    ({"whole_arm.point_links": "link3"}, r"^whole_arm\.point_links: must be a list of link n"),
+    ({"whole_arm.point_links": ["link3", ""]}, r"^whole_arm\.point_links: must be a list of"),
+    ({"whole_arm.points_m": [0.0, "a", 1.0]}, r"^whole_arm\.points_m: must be a list of numb"),
+    ({"whole_arm.points_m": [0.0, float("nan"), 1.0]}, r"^whole_arm\.points_m: must be finite"),
+    ({"whole_arm.points_m": [0.0] * 4}, r"^whole_arm\.points_m: must hold x y z per point"),
+    ({"whole_arm.points_m": [0.0] * 3003}, r"^whole_arm\.points_m: must hold at most 1000 po"),
+    (
+        {"whole_arm.point_links": ["link3", "link4"], "whole_arm.points_m": [0.0] * 3},
+        r"^whole_arm\.points_m: must hold x y z for each of the 2 whole_arm\.point_links "
+        r"\(6 numbers\), got 3 numbers$",
+    ),
+    (
+        {"whole_arm.points_m": [0.0] * 3},
+        r"^whole_arm\.points_m: must hold x y z for each of the 0 whole_arm\.point_links",
+    ),
+    (
+        {"rank_by": "whole_arm", "iso_ts_15066.regions": ["face", "hand_fingers"]},
+        r"^whole_arm\.region: rank_by whole_arm ranks by 'chest', which is not among the "
+        r"assessed iso_ts_15066\.regions \(face, hand_fingers\); add it there or set "
+        r"whole_arm\.region to one of them$",
+    ),
 ]
 
 
@@ -265,6 +289,42 @@ def test_analysis_parameters() -> None:
     assert analysis.effort_criterion == "rms_fraction"
 
 
+def test_whole_arm_parameters() -> None:
+    """The scenario's whole_arm section and robot.exposed_points_m, as node parameters."""
+    analysis = settings_from_parameters(MINIMAL).analysis
+    assert not analysis.whole_arm and analysis.arm_points_m is None
+    assert analysis.whole_arm_region == "chest"
+    values = {
+        **MINIMAL,
+        "whole_arm.enabled": True,
+        "whole_arm.region": "upper_arm_elbow",
+        "iso_ts_15066.regions": ["upper_arm_elbow", "face"],
+        "rank_by": "whole_arm",
+    }
+    analysis = settings_from_parameters(values).analysis
+    assert analysis.whole_arm and analysis.rank_by == "whole_arm"
+    assert analysis.whole_arm_region == "upper_arm_elbow" and analysis.arm_points_m is None
+    # extra points turn the analysis on; a link's points keep their order, links their first
+    points = {
+        "whole_arm.point_links": ["link4", "link3", "link4"],
+        "whole_arm.points_m": [0.1, 0.0, 0.0, 0.0, 0.2, 0.0, 0.0, 0.0, 0.3],
+    }
+    analysis = settings_from_parameters({**MINIMAL, **points}).analysis
+    assert analysis.whole_arm and analysis.arm_points_m is not None
+    assert list(analysis.arm_points_m) == ["link4", "link3"]
+    np.testing.assert_array_equal(analysis.arm_points_m["link4"], [[0.1, 0, 0], [0, 0, 0.3]])
+    np.testing.assert_array_equal(analysis.arm_points_m["link3"], [[0, 0.2, 0]])
+    # rank_by whole_arm with all regions (the default) takes any region
+    analysis = settings_from_parameters({**MINIMAL, "rank_by": "whole_arm"}).analysis
+    assert analysis.whole_arm and analysis.iso_regions is None
+    # whole_arm.region outside the assessed regions is fine unless it orders the ranking
+    outside = {"whole_arm.enabled": True, "iso_ts_15066.regions": ["face"]}
+    assert settings_from_parameters({**MINIMAL, **outside}).analysis.whole_arm
+    # empty lists from a params file arrive NOT_SET (None) or as empty arrays
+    empty = {"whole_arm.point_links": None, "whole_arm.points_m": array.array("d")}
+    assert settings_from_parameters({**MINIMAL, **empty}).analysis.arm_points_m is None
+
+
 def test_object_points_precedence() -> None:
     cylinder = {"object.cylinder_radius_m": 0.04, "object.cylinder_length_m": 0.2}
     analysis = settings_from_parameters({**MINIMAL, **cylinder}).analysis
@@ -328,3 +388,14 @@ def test_robot_errors_name_the_parameter() -> None:
         build_robot(broken, None)
     with pytest.raises(InvalidInputError, match=r"^/robot_description: cannot read URDF XML"):
         build_robot(settings_from_parameters(MINIMAL), "<robot><link")
+
+
+def test_whole_arm_point_links_are_links_of_the_robot() -> None:
+    points = {"whole_arm.point_links": ["link3", "lnk4"], "whole_arm.points_m": [0.0] * 6}
+    settings = settings_from_parameters({**MINIMAL, **points})
+    pattern = r"^whole_arm\.point_links: unknown link 'lnk4'; did you mean link4"
+    with pytest.raises(InvalidInputError, match=pattern):
+        build_robot(settings, URDF)
+    points["whole_arm.point_links"] = ["link3", "link4"]
+    bundle = build_robot(settings_from_parameters({**MINIMAL, **points}), URDF)
+    assert bundle is not None

@@ -79,6 +79,7 @@ from .parameters import (
     NodeSettings,
     RobotBundle,
     build_robot,
+    check_arm_point_links,
     check_parameter,
     settings_from_parameters,
 )
@@ -453,6 +454,8 @@ class GraspSafetyNode(Node):
             bundle = self._robot
             if set(changes) & {*ROBOT_PARAMETERS, "ik_seed"}:
                 bundle = build_robot(settings, self._topic_description)
+            elif bundle is not None:  # build_robot checks them on a new robot
+                check_arm_point_links(settings, bundle.robot)
             period_changed = settings.diagnostics_period_s != self._settings.diagnostics_period_s
             robot_changed = bundle is not self._robot
             self._values, self._settings, self._robot = values, settings, bundle

@@ -24,6 +24,7 @@ from ..core.analyses.exposed_points import (
 from ..core.analyses.iso15066 import BODY_REGIONS
 from ..core.analyses.safety_report import RANK_BY, AnalysisOptions
 from ..core.analyses.uncertainty import InertiaUncertainty
+from ..core.analyses.whole_arm import DEFAULT_RANK_REGION, MAX_SITES, resolve_arm_sites
 from ..core.exceptions import FrameNotFoundError, GraspSafetyError, InvalidInputError
 from ..core.input_checks import finite_array, finite_float
 from ..core.method.posture import DEFAULT_RESTARTS, MAX_RESTARTS, PostureConfig
@@ -172,6 +173,29 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
         "fill the per-sample arrays of every evaluation (time_from_start_s, effective_mass_kg, "
         "direction_xyz, ...); false: leave them empty (the scores and aggregates stay)",
     ),
+    # --- The whole arm's exposure (core.analyses.whole_arm, docs/whole_arm.md) ---
+    "whole_arm.enabled": ParameterSpec(
+        False,
+        "assess points on the arm's links (every chain joint origin from the third on, the "
+        "tip, and whole_arm.points_m); rank_by whole_arm or extra points turn it on",
+    ),
+    "whole_arm.region": ParameterSpec(
+        DEFAULT_RANK_REGION,
+        "body region whose worst predicted transient force over the arm's points orders "
+        "rank_by whole_arm; must be among iso_ts_15066.regions (when not empty)",
+    ),
+    "whole_arm.point_links": ParameterSpec(
+        [],
+        "link of each extra point on the arm, one per x y z of whole_arm.points_m (a link may "
+        "repeat); empty: the default points only",
+        item_type=str,
+    ),
+    "whole_arm.points_m": ParameterSpec(
+        [],
+        "extra points on the arm, each in the frame of its whole_arm.point_links entry, flat "
+        "x y z x y z ... [m]",
+        item_type=float,
+    ),
 }
 """Every parameter of the node, by name."""
 
@@ -180,13 +204,16 @@ ROBOT_PARAMETERS = ("robot_description", "urdf", "base_frame", "tip_frame")
 
 _STRINGS = ("robot_description", "urdf", "base_frame", "tip_frame", "object_frame", "metric")
 _STRINGS += ("metric_point", "effort.criterion", "rank_by")
+_STRINGS += ("whole_arm.region",)
 _CHOICES: Mapping[str, Sequence[str]] = {
     "metric": METRICS,
     "metric_point": METRIC_POINTS,
     "effort.criterion": EFFORT_CRITERIA,
     "rank_by": RANK_BY,
+    "whole_arm.region": BODY_REGIONS,
 }
 _FLAGS = ("use_joint_states_seed", "redundancy.enabled", "effort.enabled", "response.per_sample")
+_FLAGS += ("whole_arm.enabled",)
 _POSITIVE = ("trajectory.dt_s", "trajectory.duration_s", "max_mass_kg", "max_compute_time_s")
 _POSITIVE += ("service_busy_timeout_s", "diagnostics_period_s")
 _FRACTIONS = ("uncertainty.mass_fraction", "uncertainty.inertia_fraction")
@@ -350,6 +377,10 @@ def check_parameter(name: str, value: Any) -> Any:
         return size
     if name == "iso_ts_15066.regions":
         return _regions(name, value)
+    if name == "whole_arm.point_links":
+        return _link_names(name, value)
+    if name == "whole_arm.points_m":
+        return _points(name, value, MAX_SITES)
     if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
         raise InvalidInputError(name, f"must be a number, got {_show(value)}")
     if name in _POSITIVE:
@@ -366,17 +397,32 @@ def check_parameter(name: str, value: Any) -> Any:
     return finite_float(value, name, minimum=0.0)
 
 
-def _points(name: str, value: Any) -> tuple[float, ...]:
+def _points(name: str, value: Any, maximum: int = _MAX_POINTS) -> tuple[float, ...]:
     numbers = _numbers(name, value, None)
     if len(numbers) % 3:
         raise InvalidInputError(
             name, f"must hold x y z per point (a multiple of 3 numbers), got {len(numbers)}"
         )
-    if len(numbers) > 3 * _MAX_POINTS:
+    if len(numbers) > 3 * maximum:
         raise InvalidInputError(
-            name, f"must hold at most {_MAX_POINTS} points, got {len(numbers) // 3}"
+            name, f"must hold at most {maximum} points, got {len(numbers) // 3}"
         )
     return numbers
+
+
+def _link_names(name: str, value: Any) -> tuple[str, ...]:
+    if value is None:  # an empty list in a params file arrives as NOT_SET
+        value = []
+    if isinstance(value, (str, bytes)) or not isinstance(value, (list, tuple, array.array)):
+        raise InvalidInputError(name, f"must be a list of link names, got {_show(value)}")
+    names = list(value)
+    if not names:  # [] may arrive as an empty byte or integer array
+        return ()
+    if not all(isinstance(link, str) and link for link in names):
+        raise InvalidInputError(name, f"must be a list of link names, got {_show(names)}")
+    if len(names) > MAX_SITES:
+        raise InvalidInputError(name, f"must hold at most {MAX_SITES} links, got {len(names)}")
+    return tuple(names)
 
 
 def _regions(name: str, value: Any) -> tuple[str, ...]:
@@ -449,6 +495,10 @@ def parameter_constraints(name: str) -> ParameterConstraints:
         text = "empty or 3 edge lengths > 0"
     elif name == "iso_ts_15066.regions":
         text = f"distinct names from: {', '.join(BODY_REGIONS)}"
+    elif name == "whole_arm.point_links":
+        text = f"links of the robot, one per point of whole_arm.points_m, at most {MAX_SITES}"
+    elif name == "whole_arm.points_m":
+        text = "x y z (3 finite values) per entry of whole_arm.point_links"
     elif name in PARAMETERS and isinstance(PARAMETERS[name].default, float):
         text = ">= 0"
     return ParameterConstraints(closed, text)
@@ -520,7 +570,43 @@ def analysis_from_parameters(values: Mapping[str, Any]) -> AnalysisOptions:
         effort=values["effort.enabled"],
         rank_by=values["rank_by"],
         effort_criterion=values["effort.criterion"],
+        whole_arm=values["whole_arm.enabled"],
+        arm_points_m=arm_points_from_parameters(values),
+        whole_arm_region=values["whole_arm.region"],
     )
+
+
+def arm_points_from_parameters(values: Mapping[str, Any]) -> dict[str, np.ndarray] | None:
+    """The extra whole-arm points ``{link: (P, 3) [m], link frame}`` of checked parameter
+    values (``whole_arm.point_links`` with 3 numbers each of ``whole_arm.points_m``), links in
+    order of first mention, a link's points in the order given; None when there are none.
+    """
+    links, numbers = values["whole_arm.point_links"], values["whole_arm.points_m"]
+    if len(numbers) != 3 * len(links):
+        raise InvalidInputError(
+            "whole_arm.points_m",
+            f"must hold x y z for each of the {len(links)} whole_arm.point_links "
+            f"({3 * len(links)} numbers), got {len(numbers)} numbers",
+        )
+    points: dict[str, list[np.ndarray]] = {}
+    for link, point in zip(links, np.reshape(numbers, (-1, 3)), strict=True):
+        points.setdefault(link, []).append(point)
+    return {link: np.array(p) for link, p in points.items()} or None
+
+
+def check_arm_point_links(settings: NodeSettings, robot: RobotModel) -> None:
+    """Refuse extra whole-arm points on links ``robot`` does not have.
+
+    Raises:
+        InvalidInputError: naming ``whole_arm.point_links``, with close link names.
+    """
+    points = settings.analysis.arm_points_m
+    if not points:
+        return
+    try:
+        resolve_arm_sites(robot, points, defaults=False, field="whole_arm.point_links")
+    except InvalidInputError as error:
+        raise InvalidInputError("whole_arm.point_links", error.reason) from None
 
 
 def inertia_tensor_from_components(components: Sequence[float], field: str) -> np.ndarray:
@@ -653,6 +739,7 @@ def build_robot(settings: NodeSettings, topic_description: str | None) -> RobotB
         return None
     try:
         robot = RobotModel.from_urdf(source, settings.base_frame, settings.tip_frame)
+        check_arm_point_links(settings, robot)
         seed = None
         if settings.ik_seed is not None:
             seed = tuple(float(x) for x in robot.check_positions(settings.ik_seed, "robot.seed"))

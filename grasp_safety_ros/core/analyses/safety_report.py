@@ -129,8 +129,9 @@ class AnalysisOptions:
         if self.rank_by == "whole_arm" and assessed and self.whole_arm_region not in assessed:
             raise InvalidInputError(
                 "whole_arm.region",
-                f"{self.whole_arm_region!r} is not among the assessed iso_ts_15066.regions "
-                f"({', '.join(assessed)})",
+                f"rank_by whole_arm ranks by {self.whole_arm_region!r}, which is not among the "
+                f"assessed iso_ts_15066.regions ({', '.join(assessed)}); add it there or set "
+                "whole_arm.region to one of them",
             )
         if self.rank_by == "whole_arm" or self.arm_points_m:
             object.__setattr__(self, "whole_arm", True)
