@@ -11,7 +11,10 @@ process (less inflated than wall-clock time when other processes share the cores
 - ``us_per_sample_given_terms``: the vectorised part alone (``site_exposure`` + ``assess_sites``)
   from precomputed terms: what remains once a shared compiled computation provides the terms;
 - ``ranking_us_per_sample``: the compiled ranking of the same candidates (IK + tip effective
-  mass) in the same run, per (grasp, sample) of all candidates, for the ratio.
+  mass) in the same run, per (grasp, sample) of all candidates, for the ratio;
+- ``posture_ms_per_grasp``: posture selection (``select_postures``, POSTURE_RESTARTS restarts)
+  of the same candidates, ms per grasp, by the tip score and by the whole arm's chest force
+  (``rank_by: whole_arm``'s criterion, ``posture_criterion``).
 
 Run alone: .venv/bin/python bench/whole_arm.py [--arms panda,baxter] [--grasps 10]
 """
@@ -29,6 +32,7 @@ from workload import ARMS, ArmWorkload, box_object, grasps_around_box
 
 from grasp_safety_ros.core import EvaluationConfig, GraspSafetyEvaluator
 from grasp_safety_ros.core.analyses.iso15066 import select_regions
+from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions, posture_criterion
 from grasp_safety_ros.core.analyses.whole_arm import (
     ArmTerms,
     assess_sites,
@@ -41,6 +45,9 @@ from grasp_safety_ros.core.analyses.whole_arm import (
     tip_twists_in_base,
 )
 from grasp_safety_ros.core.method.effective_mass import augmented_model
+from grasp_safety_ros.core.method.posture import PostureConfig, select_postures
+
+POSTURE_RESTARTS = 8
 
 
 def bench_whole_arm(arm: ArmWorkload, grasps: int = 10, repeats: int = 5) -> dict[str, Any]:
@@ -84,12 +91,30 @@ def bench_whole_arm(arm: ArmWorkload, grasps: int = 10, repeats: int = 5) -> dic
     def rank() -> None:
         evaluator.rank(candidates, obj, trajectory, seed_positions=arm.seed_positions)
 
-    timings: dict[str, list[float]] = {"full": [], "given_terms": [], "rank": []}
+    config = PostureConfig(restarts=POSTURE_RESTARTS)
+    criterion = posture_criterion(robot, AnalysisOptions(rank_by="whole_arm"))
+
+    def postures_by_score() -> None:
+        select_postures(evaluator, candidates, obj, trajectory, ranking, config)
+
+    def postures_by_whole_arm() -> None:
+        select_postures(evaluator, candidates, obj, trajectory, ranking, config, None, criterion)
+
+    timings: dict[str, list[float]] = {
+        "full": [],
+        "given_terms": [],
+        "rank": [],
+        "postures_by_score": [],
+        "postures_by_whole_arm": [],
+    }
+    per_grasp_ms = 1e3 * len(candidates)  # seconds / (1e3 grasps) * 1e6 = ms per grasp
     for _ in range(repeats):
         for key, function, count in (
             ("full", full, samples),
             ("given_terms", given_terms, samples),
             ("rank", rank, len(candidates) * trajectory.num_samples),
+            ("postures_by_score", postures_by_score, per_grasp_ms),
+            ("postures_by_whole_arm", postures_by_whole_arm, per_grasp_ms),
         ):
             start = time.process_time()
             function()
@@ -102,6 +127,11 @@ def bench_whole_arm(arm: ArmWorkload, grasps: int = 10, repeats: int = 5) -> dic
         "us_per_sample": statistics.median(timings["full"]),
         "us_per_sample_given_terms": statistics.median(timings["given_terms"]),
         "ranking_us_per_sample": statistics.median(timings["rank"]),
+        "posture_restarts": POSTURE_RESTARTS,
+        "posture_ms_per_grasp": {
+            "score": statistics.median(timings["postures_by_score"]),
+            "whole_arm": statistics.median(timings["postures_by_whole_arm"]),
+        },
     }
 
 
@@ -112,7 +142,10 @@ def print_whole_arm(results: dict[str, dict[str, Any]]) -> None:
             f"whole arm ({name}, {r['sites']} sites, {r['feasible_grasps']} grasps x 201): "
             f"{r['us_per_sample']:.1f} us/sample (Pinocchio terms + vectorised), "
             f"{r['us_per_sample_given_terms']:.1f} us/sample given the terms; the ranking "
-            f"{r['ranking_us_per_sample']:.1f} us/sample (CPU time, median)"
+            f"{r['ranking_us_per_sample']:.1f} us/sample (CPU time, median); posture "
+            f"selection ({r['posture_restarts']} restarts) by the tip score "
+            f"{r['posture_ms_per_grasp']['score']:.1f} ms/grasp, by the whole arm "
+            f"{r['posture_ms_per_grasp']['whole_arm']:.1f} ms/grasp"
         )
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pickle
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -16,7 +18,16 @@ from grasp_safety_ros.core import (
     RobotModel,
     solid_box,
 )
-from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions, analyse
+from grasp_safety_ros.core.analyses.safety_report import (
+    AnalysisOptions,
+    analyse,
+    posture_criterion,
+)
+from grasp_safety_ros.core.analyses.whole_arm import (
+    evaluate_whole_arm,
+    resolve_arm_sites,
+    whole_arm_score,
+)
 from grasp_safety_ros.core.input_checks import pose_from_position_quat
 from grasp_safety_ros.core.method.executable import joint_velocities_accelerations
 from grasp_safety_ros.core.method.posture import PostureConfig, select_postures
@@ -313,3 +324,51 @@ def test_scenario_posture_section_and_cli_json() -> None:
         assert [s["q"] for s in grasp["samples"]] == e.joint_positions.tolist()
         qd, _ = joint_velocities_accelerations(e.times_s, e.joint_positions)
         assert [s["qd"] for s in grasp["samples"]] == qd.tolist()
+
+
+def test_selection_by_the_whole_arm(baxter_book) -> None:
+    """rank_by whole_arm: each grasp keeps the start posture of least worst predicted force
+    over the arm's sites for the region; never worse than the single IK by it, deterministic,
+    among the same candidates as the selection by the tip score."""
+    evaluator, grasps, trajectory, ranking = baxter_book
+    region = "upper_arm_elbow"
+    options = AnalysisOptions(rank_by="whole_arm", whole_arm_region=region)
+    criterion = posture_criterion(evaluator.robot, options)
+    assert criterion is not None and posture_criterion(evaluator.robot, AnalysisOptions()) is None
+    assert pickle.loads(pickle.dumps(criterion)).name == criterion.name  # for a process pool
+    config = PostureConfig(restarts=8)
+    by_arm = select_postures(evaluator, grasps, BOOK, trajectory, ranking, config, None, criterion)
+    again = select_postures(evaluator, grasps, BOOK, trajectory, ranking, config, None, criterion)
+    by_tip = select_postures(evaluator, grasps, BOOK, trajectory, ranking, config)
+    sites = resolve_arm_sites(evaluator.robot)
+
+    def force(evaluation, grasp) -> float:  # every region assessed, a model of its own
+        whole = evaluate_whole_arm(evaluator.robot, evaluation, BOOK, grasp, trajectory, sites)
+        return whole_arm_score(whole, region)
+
+    differs = 0
+    for k, grasp in enumerate(grasps):
+        chosen, evaluation = by_arm.postures[k], by_arm.evaluations[k]
+        assert chosen.criterion == "whole_arm:upper_arm_elbow" and chosen.postures_feasible > 1
+        assert chosen.criterion_value == pytest.approx(force(evaluation, grasp), rel=1e-12)
+        single = force(ranking.evaluations[k], grasp)
+        assert chosen.criterion_single_ik == pytest.approx(single, rel=1e-12)
+        assert chosen.criterion_value <= chosen.criterion_single_ik
+        assert chosen.score == evaluation.score  # score: still the kept posture's tip score
+        # the same candidates: each choice is the best of them by its own criterion
+        assert chosen.criterion_value <= force(by_tip.evaluations[k], grasp) * (1 + 1e-12)
+        assert by_tip.evaluations[k].score <= evaluation.score
+        assert by_tip.postures[k].criterion == "score"
+        repeated = again.postures[k]
+        assert (repeated.selected, repeated.criterion_value) == (
+            chosen.selected,
+            chosen.criterion_value,
+        )
+        assert np.array_equal(again.evaluations[k].joint_positions, evaluation.joint_positions)
+        differs += chosen.selected != by_tip.postures[k].selected
+    assert differs  # on this arm and book, the whole arm picks other postures than the tip
+    report = analyse(evaluator, grasps, BOOK, trajectory, options, ranking=by_arm)
+    for k, whole in enumerate(report.whole_arm):  # what ranks is what chose the posture
+        assert whole_arm_score(whole, region) == pytest.approx(
+            by_arm.postures[k].criterion_value, rel=1e-12
+        )

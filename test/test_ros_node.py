@@ -48,7 +48,11 @@ from grasp_safety_ros.core import (
 from grasp_safety_ros.core.analyses.exposed_points import box_corners_in_object
 from grasp_safety_ros.core.analyses.iso15066 import assess_grasp
 from grasp_safety_ros.core.analyses.multi_objective import rank_with_quality
-from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions, analyse
+from grasp_safety_ros.core.analyses.safety_report import (
+    AnalysisOptions,
+    analyse,
+    posture_criterion,
+)
 from grasp_safety_ros.core.analyses.uncertainty import InertiaUncertainty
 from grasp_safety_ros.core.method.executable import joint_velocities_accelerations
 from grasp_safety_ros.core.method.posture import PostureConfig, select_postures
@@ -1515,3 +1519,42 @@ def test_whole_arm_parameters_are_refused_naming_them(ros: NodeUnderTest) -> Non
     response = ros.rank(book_request())  # nothing of the refused changes applied
     assert response.success and response.ranking.rank_by == "safety"
     assert not response.ranking.whole_arm_sites
+
+
+def test_rank_by_whole_arm_selects_postures_by_it(
+    ros: NodeUnderTest, core_evaluator: GraspSafetyEvaluator, core_ranking: Any
+) -> None:
+    """With rank_by whole_arm and posture.restarts, the node keeps the postures the core's
+    whole-arm criterion keeps, and each grasp's ranking force is its kept posture's value."""
+    results = ros.set_parameters(
+        whole_arm__region="upper_arm_elbow", rank_by="whole_arm", posture__restarts=6
+    )
+    assert all(r.successful for r in results), results
+    try:
+        response = ros.rank(book_request())
+    finally:
+        results = ros.set_parameters(
+            posture__restarts=0, rank_by="safety", whole_arm__region="chest"
+        )
+        assert all(r.successful for r in results), results
+    assert response.success, response.message
+    options = AnalysisOptions(rank_by="whole_arm", whole_arm_region="upper_arm_elbow")
+    expected = select_postures(
+        core_evaluator,
+        BOOK_GRASPS,
+        BOOK.object_inertia,
+        book_trajectory(),
+        core_ranking,
+        PostureConfig(restarts=6),
+        criterion=posture_criterion(core_evaluator.robot, options),
+    )
+    want = core_report(
+        core_evaluator, expected, rank_by="whole_arm", whole_arm_region="upper_arm_elbow"
+    )
+    ranking = response.ranking
+    assert tuple(ranking.order) == want.order
+    for got, posture in zip(ranking.evaluations, expected.postures, strict=True):
+        assert posture.criterion == "whole_arm:upper_arm_elbow"
+        np.testing.assert_allclose(got.start_positions, posture.start_positions, atol=1e-12)
+        assert got.whole_arm_rank_force_n == pytest.approx(posture.criterion_value, rel=1e-9)
+        assert posture.criterion_value <= posture.criterion_single_ik

@@ -436,3 +436,28 @@ def test_tip_twists_from_the_object_motion_equal_the_trajectorys() -> None:
         expected = trajectory.tip_twists(grasp, times)[0]
         got = tip_twists_in_base(trajectory, grasp, times)
         np.testing.assert_allclose(got, expected, rtol=0, atol=1e-14 * np.abs(expected).max())
+
+
+def test_cli_rank_by_whole_arm_chooses_postures_by_it(
+    tmp_path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """With posture restarts, rank_by whole_arm picks each start posture by the force it
+    ranks by: the JSON records it, and it is the force the whole-arm block reports."""
+    import json
+
+    from grasp_safety_ros.cli.main import main
+
+    scenario = _scenario(
+        tmp_path, rank_by="whole_arm", whole_arm__region="upper_arm_elbow", posture={"restarts": 4}
+    )
+    out = tmp_path / "out.json"
+    assert main(["rank", scenario, "--json", str(out)]) == 0
+    assert "chosen by whole_arm:upper_arm_elbow " in capsys.readouterr().out
+    for grasp in json.loads(out.read_text())["grasps"]:
+        posture = grasp["posture"]
+        assert posture["criterion"] == "whole_arm:upper_arm_elbow"
+        assert posture["criterion_value"] <= posture["criterion_single_ik"]
+        worst = grasp["whole_arm"]["regions"]["upper_arm_elbow"]
+        assert posture["criterion_value"] == pytest.approx(worst["peak_contact_force_n"], 1e-12)
+    assert main(["rank", _scenario(tmp_path, posture={"restarts": 4}), "--json", str(out)]) == 0
+    assert "criterion" not in json.loads(out.read_text())["grasps"][0]["posture"]

@@ -9,7 +9,7 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from ..core.analyses.safety_report import SafetyReport, analyse
+from ..core.analyses.safety_report import SafetyReport, analyse, posture_criterion
 from ..core.exceptions import GraspSafetyError, InvalidInputError
 from ..core.method.posture import select_postures
 from ..core.method.ranking import METRICS, EvaluationConfig, GraspSafetyEvaluator
@@ -61,6 +61,7 @@ def rank_scenario(scenario: Scenario, metric: str | None = None) -> SafetyReport
         scenario.trajectory,
         ranking,
         scenario.posture,
+        criterion=posture_criterion(robot, scenario.options),
     )
     return analyse(
         evaluator,

@@ -11,7 +11,7 @@ from ..core.analyses.iso15066 import PowerForceLimitAssessment
 from ..core.analyses.safety_report import SafetyReport
 from ..core.analyses.whole_arm import ArmSites, WholeArmEvaluation
 from ..core.method.executable import joint_velocities_accelerations
-from ..core.method.posture import PostureSelection
+from ..core.method.posture import SCORE_CRITERION, PostureSelection
 from ..core.method.ranking import GraspEvaluation, Ranking
 
 SCORE_UNITS = {"mean": "kg", "max": "kg", "integral": "kg*s"}
@@ -60,8 +60,9 @@ def evaluation_to_dict(evaluation: GraspEvaluation) -> dict[str, Any]:
 
 
 def posture_to_dict(posture: PostureSelection) -> dict[str, Any]:
-    """How one grasp's posture was chosen (core.method.posture); scores in the ranking's unit."""
-    return {
+    """How one grasp's posture was chosen (core.method.posture); scores in the ranking's unit,
+    and, when a criterion other than the score chose it, its name and values."""
+    result = {
         "restarts": posture.restarts,
         "score_single_ik": number(posture.score_single_ik),
         "score_range": [number(posture.score_range[0]), number(posture.score_range[1])],
@@ -69,6 +70,11 @@ def posture_to_dict(posture: PostureSelection) -> dict[str, Any]:
         "postures_tried": posture.postures_tried,
         "postures_feasible": posture.postures_feasible,
     }
+    if posture.criterion != SCORE_CRITERION:
+        result["criterion"] = posture.criterion
+        result["criterion_single_ik"] = number(posture.criterion_single_ik)
+        result["criterion_value"] = number(posture.criterion_value)
+    return result
 
 
 def ranking_to_dict(ranking: Ranking) -> dict[str, Any]:
@@ -294,10 +300,16 @@ def report_text(report: SafetyReport) -> str:
         for p in postures:
             name = evaluations[p.index].name[:16]
             if p.postures_feasible:
+                by = ""
+                if p.criterion != SCORE_CRITERION:
+                    by = (
+                        f", chosen by {p.criterion} {p.criterion_single_ik:.4g} -> "
+                        f"{p.criterion_value:.4g}"
+                    )
                 lines.append(
                     f"  {name:<16} single IK {p.score_single_ik:.4f} -> {p.score:.4f} "
                     f"(range {p.score_range[0]:.4f}..{p.score_range[1]:.4f}, "
-                    f"{p.postures_feasible}/{p.postures_tried} postures feasible)"
+                    f"{p.postures_feasible}/{p.postures_tried} postures feasible{by})"
                 )
             else:
                 lines.append(f"  {name:<16} no feasible posture ({p.postures_tried} tried)")

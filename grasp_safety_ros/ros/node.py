@@ -54,7 +54,7 @@ from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from ..core.analyses.exposed_points import check_metric_point
-from ..core.analyses.safety_report import AnalysisOptions, analyse
+from ..core.analyses.safety_report import AnalysisOptions, analyse, posture_criterion
 from ..core.exceptions import GraspSafetyError, InvalidInputError
 from ..core.input_checks import finite_array
 from ..core.method.posture import select_postures
@@ -774,6 +774,7 @@ class GraspSafetyNode(Node):
                 ranking,
                 settings.posture,
                 progress=deadline_check,
+                criterion=posture_criterion(bundle.robot, options),
             )
             report = analyse(
                 bundle.evaluator,

@@ -20,6 +20,7 @@ from ..exceptions import InvalidInputError
 from ..method.effective_mass import augmented_model
 from ..method.ranking import Grasp, GraspEvaluation, GraspSafetyEvaluator, Ranking, aggregate
 from ..model.inertia import ObjectInertia
+from ..model.robot import RobotModel
 from ..model.trajectory import Trajectory
 from .effort import EffortEvaluation, check_effort_criterion, evaluate_effort, order_by_effort
 from .exposed_points import (
@@ -43,6 +44,7 @@ from .whole_arm import (
     DEFAULT_RANK_REGION,
     ArmSites,
     WholeArmEvaluation,
+    WholeArmPostureCriterion,
     check_exposed_points_m,
     evaluate_whole_arm,
     order_by_whole_arm,
@@ -135,6 +137,18 @@ class AnalysisOptions:
             )
         if self.rank_by == "whole_arm" or self.arm_points_m:
             object.__setattr__(self, "whole_arm", True)
+
+
+def posture_criterion(
+    robot: RobotModel, options: AnalysisOptions
+) -> WholeArmPostureCriterion | None:
+    """What posture selection (core.method.posture) minimises for ``options``: with
+    ``rank_by: whole_arm`` the whole arm's worst force for ``whole_arm_region`` over its sites
+    (the defaults and ``arm_points_m``), the criterion that ranks; else None (the tip score)."""
+    if options.rank_by != "whole_arm":
+        return None
+    sites = resolve_arm_sites(robot, options.arm_points_m)
+    return WholeArmPostureCriterion(sites, options.whole_arm_region)
 
 
 @dataclass(frozen=True)

@@ -568,3 +568,56 @@ def order_by_whole_arm(whole_arm: Sequence[WholeArmEvaluation], region: str) -> 
     """Feasible grasps by ``whole_arm_score``, lowest first (ties: input order)."""
     scored = [(whole_arm_score(w, region), k) for k, w in enumerate(whole_arm) if w.feasible]
     return tuple(whole_arm[k].index for _, k in sorted(scored))
+
+
+@dataclass(frozen=True)
+class WholeArmPostureCriterion:
+    """Posture selection by the whole arm (a core.method.posture.PostureCriterion): each
+    candidate posture's worst predicted transient force [N] over ``sites`` and the samples
+    for ``region`` (``whole_arm_score``), the criterion ``rank_by: whole_arm`` ranks by.
+
+    Attributes:
+        sites: The sites assessed (``resolve_arm_sites``).
+        region: Body region name.
+    """
+
+    sites: ArmSites
+    region: str = DEFAULT_RANK_REGION
+
+    def __post_init__(self) -> None:
+        select_regions([self.region])  # raises on an unknown name
+
+    @property
+    def name(self) -> str:
+        """``whole_arm:<region>``."""
+        return f"whole_arm:{self.region}"
+
+    def __call__(
+        self,
+        evaluator: Any,
+        grasp: Grasp,
+        object_inertia: ObjectInertia,
+        trajectory: Trajectory,
+        evaluations: Sequence[GraspEvaluation],
+    ) -> np.ndarray:
+        """The force [N] of each feasible evaluation of ``grasp`` (one augmented model)."""
+        robot = evaluator.robot
+        model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
+        return np.array(
+            [
+                whole_arm_score(
+                    evaluate_whole_arm(
+                        robot,
+                        evaluation,
+                        object_inertia,
+                        grasp,
+                        trajectory,
+                        self.sites,
+                        [self.region],
+                        model,
+                    ),
+                    self.region,
+                )
+                for evaluation in evaluations
+            ]
+        )

@@ -14,6 +14,11 @@ solutions, and the effective mass depends on which one the arm is in. The paper 
    once, in 0 iterations, to that posture), and scored;
 4. the feasible one with the lowest score is kept (ties: the earliest, so the single IK).
 
+A ``PostureCriterion`` may replace the score in step 4 (core.analyses.whole_arm's, with
+``rank_by: whole_arm``: the worst predicted force over the arm's points); the single IK is
+among the candidates and kept on ties, so the kept posture is never worse than the single IK
+by the criterion used.
+
 The null-space refinement (core.analyses.redundancy, when enabled) then starts from the kept
 posture. A grasp is infeasible only when no start posture gives a feasible trajectory.
 ``restarts=0`` returns the ranking unchanged.
@@ -21,8 +26,10 @@ posture. A grasp is infeasible only when no start posture gives a feasible traje
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from typing import Any, Protocol
 
 import numpy as np
 import pinocchio as pin
@@ -86,6 +93,33 @@ class PostureConfig:
             )
 
 
+class PostureCriterion(Protocol):
+    """What posture selection minimises instead of the tip score (lower is better).
+
+    Picklable (a frozen dataclass of a module-level class) so a process pool can run it.
+    """
+
+    @property
+    def name(self) -> str:
+        """Short name recorded in PostureSelection.criterion, e.g. ``whole_arm:chest``."""
+        ...
+
+    def __call__(
+        self,
+        evaluator: Any,
+        grasp: Grasp,
+        object_inertia: ObjectInertia,
+        trajectory: ObjectTrajectory,
+        evaluations: Sequence[GraspEvaluation],
+    ) -> np.ndarray:
+        """One finite value per (feasible) evaluation of ``grasp``, in their order."""
+        ...
+
+
+SCORE_CRITERION = "score"
+"""PostureSelection.criterion of selection by the tip score (the default)."""
+
+
 @dataclass(frozen=True)
 class PostureSelection:
     """How one grasp's posture was chosen.
@@ -103,6 +137,10 @@ class PostureSelection:
             IK's counts as one, also when it fails).
         postures_feasible: Of those, the ones whose whole trajectory is feasible.
         selected: Which of the tried postures was kept (0: the single IK's); -1 if none.
+        criterion: What chose the posture: SCORE_CRITERION or a PostureCriterion's name.
+        criterion_value: The kept posture's value of it (its score for SCORE_CRITERION; the
+            criterion's unit, e.g. N); NaN if infeasible.
+        criterion_single_ik: The single IK's value of it; NaN when that one is infeasible.
     """
 
     index: int
@@ -114,6 +152,9 @@ class PostureSelection:
     postures_tried: int
     postures_feasible: int
     selected: int
+    criterion: str = SCORE_CRITERION
+    criterion_value: float = math.nan
+    criterion_single_ik: float = math.nan
 
 
 def restart_seeds(evaluator: GraspSafetyEvaluator, config: PostureConfig) -> np.ndarray:
@@ -140,6 +181,8 @@ def single_posture(evaluation: GraspEvaluation, restarts: int = 0) -> PostureSel
         postures_tried=1,
         postures_feasible=int(feasible),
         selected=0 if feasible else -1,
+        criterion_value=evaluation.score,
+        criterion_single_ik=evaluation.score,
     )
 
 
@@ -153,6 +196,7 @@ def select_posture(
     metric: str,
     seeds: np.ndarray | None = None,
     sampled: SampledTrajectory | None = None,
+    criterion: PostureCriterion | None = None,
 ) -> tuple[GraspEvaluation, PostureSelection]:
     """The lowest-score posture of one grasp (module docstring); a grasp with a planned joint
     trajectory keeps its posture (``single_ik``).
@@ -162,6 +206,7 @@ def select_posture(
         metric: The score's aggregate (the single IK's).
         seeds: ``restart_seeds(evaluator, config)``, when already computed.
         sampled: ``sample_trajectory(trajectory)``, when already computed.
+        criterion: What to minimise instead of the score; None: the score.
 
     Returns:
         The kept evaluation (``single_ik`` itself when nothing scores lower) and the record.
@@ -219,9 +264,23 @@ def select_posture(
             postures_tried=len(candidates),
             postures_feasible=0,
             selected=-1,
+            criterion=SCORE_CRITERION if criterion is None else criterion.name,
         )
     scores = np.array([candidates[k].score for k in feasible])
-    best = feasible[int(np.argmin(scores))]  # argmin keeps the first of equal scores
+    values = scores
+    if criterion is not None:
+        feasible_candidates = [candidates[k] for k in feasible]
+        values = np.asarray(
+            criterion(evaluator, grasp, object_inertia, trajectory, feasible_candidates),
+            dtype=float,
+        )
+        if values.shape != scores.shape or not np.all(np.isfinite(values)):
+            raise InvalidInputError(
+                "posture.criterion",
+                f"{criterion.name} must give one finite value per posture, got {values!r}",
+            )
+    chosen_k = int(np.argmin(values))  # argmin keeps the first of equal values
+    best = feasible[chosen_k]
     chosen = candidates[best] if best == 0 else _detached(candidates[best])
     return chosen, PostureSelection(
         index=single_ik.index,
@@ -233,6 +292,9 @@ def select_posture(
         postures_tried=len(candidates),
         postures_feasible=len(feasible),
         selected=best,
+        criterion=SCORE_CRITERION if criterion is None else criterion.name,
+        criterion_value=float(values[chosen_k]),
+        criterion_single_ik=float(values[0]) if single_ik.feasible else math.nan,
     )
 
 
@@ -244,6 +306,7 @@ def select_postures(
     ranking: Ranking,
     config: PostureConfig,
     progress: Callable[[int, int], None] | None = None,
+    criterion: PostureCriterion | None = None,
 ) -> Ranking:
     """Posture selection on every grasp of ``ranking`` (from ``evaluator.rank`` on the same
     grasps, inertia and trajectory); re-ranked by the kept postures' scores.
@@ -254,6 +317,7 @@ def select_postures(
 
     Args:
         progress: Called as ``progress(done, total)`` after each grasp; it may raise.
+        criterion: What each grasp's posture minimises; None: its score (select_posture).
     """
     grasps = list(grasps)
     if len(grasps) != len(ranking.evaluations):
@@ -266,7 +330,17 @@ def select_postures(
     seeds = restart_seeds(evaluator, config)
     sampled = sample_trajectory(trajectory)  # once for every grasp and posture
     jobs = [
-        (grasp, object_inertia, trajectory, single_ik, config, ranking.metric, seeds, sampled)
+        (
+            grasp,
+            object_inertia,
+            trajectory,
+            single_ik,
+            config,
+            ranking.metric,
+            seeds,
+            sampled,
+            criterion,
+        )
         for grasp, single_ik in zip(grasps, ranking.evaluations, strict=True)
     ]
     # Work estimate: every grasp followed from up to restarts + 1 postures.
