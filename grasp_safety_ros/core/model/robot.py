@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import copy
 import importlib.metadata
 import os
 import sys
@@ -17,7 +18,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..exceptions import FrameNotFoundError, InvalidInputError
-from ..input_checks import finite_array
+from ..input_checks import finite_array, read_only
 
 EXAMPLE_ROBOT_DATA_PREFIX = "example-robot-data:"
 
@@ -42,6 +43,73 @@ FRAME_TYPES: Mapping[str, pin.FrameType] = dict(pin.FrameType.names)
 
 MASS_MATRIX_RELATIVE_TOLERANCE = 1e-12
 """Smallest accepted eigenvalue ratio of the chain's mass matrix with an object at the tip."""
+
+ARMATURE_FIELD = "robot.armature_kgm2"
+"""Name of the armature input in messages."""
+
+NO_ARMATURE_NOTE = "rotor inertia not given: effective masses are the links' only (a lower bound)"
+"""Said once per result when the chain has no armature (reflected rotor inertia)."""
+
+
+def armature_from_input(
+    value: Sequence[float] | Mapping[str, float] | np.ndarray,
+    joint_names: Sequence[str],
+    field: str = ARMATURE_FIELD,
+) -> np.ndarray:
+    """Armature (reflected rotor inertia, I_rotor N^2) per chain joint, chain order: [kg m^2]
+    for a revolute or continuous joint, [kg] for a prismatic one.
+
+    Args:
+        value: One value per chain joint in chain order, or ``{joint_name: value}`` (joints
+            not named: 0).
+        joint_names: The chain joints, base to tip.
+
+    Raises:
+        InvalidInputError: a wrong count, an unknown joint, or a value not finite and >= 0
+            (the message names the joint).
+    """
+    names = list(joint_names)
+    if isinstance(value, Mapping):
+        values = np.zeros(len(names))
+        for name, entry in value.items():
+            if name not in names:
+                raise InvalidInputError(
+                    field, f"unknown chain joint '{name}'; chain joints: {', '.join(names)}"
+                )
+            values[names.index(name)] = _armature_value(entry, f"{field}.{name}")
+    else:
+        if isinstance(value, (str, bytes)) or not isinstance(value, (Sequence, np.ndarray)):
+            raise InvalidInputError(
+                field,
+                f"must be a list of {len(names)} values (chain order) or a mapping "
+                f"{{joint_name: value}}, got {value!r}",
+            )
+        if len(value) != len(names):
+            raise InvalidInputError(
+                field,
+                f"must have one value per chain joint ({len(names)}: {', '.join(names)}), "
+                f"got {len(value)}",
+            )
+        values = np.array(
+            [_armature_value(v, f"{field}[{k}] (joint '{names[k]}')") for k, v in enumerate(value)]
+        )
+    values.setflags(write=False)
+    return values
+
+
+def _armature_value(value: object, field: str) -> float:
+    """One armature value: finite and >= 0 [kg m^2 or kg]."""
+    if isinstance(value, bool):
+        raise InvalidInputError(field, f"must be a number >= 0, got {value!r}")
+    try:
+        number = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise InvalidInputError(field, f"must be a number >= 0, got {value!r}") from None
+    if not np.isfinite(number) or number < 0.0:
+        raise InvalidInputError(
+            field, f"must be finite and >= 0 [kg m^2, kg if prismatic], got {number:g}"
+        )
+    return number
 
 
 def example_robot_data_dirs() -> list[Path]:
@@ -326,6 +394,11 @@ class RobotModel:
         tip_frame_id: Id of the tip frame in ``model``.
         transform_base_to_world: Constant pose of the base frame in the model's world frame.
         joint_names: Chain joint names, base to tip.
+        armature_kgm2: Reflected rotor inertia per chain joint, chain order [kg m^2, kg for
+            prismatic joints]; written to ``model.armature``, so every Pinocchio call on the
+            model or a copy of it (crba, rnea, aba, computeMinverse) includes it.
+        armature_given: Whether the armature was given (explicitly, or non-zero in the
+            description, e.g. an MJCF); False: the effective masses are the links' only.
     """
 
     def __init__(
@@ -335,6 +408,7 @@ class RobotModel:
         tip_frame: str,
         locked_positions: Mapping[str, float] | None = None,
         mimic_joints: Mapping[str, MimicJoint] | None = None,
+        armature_kgm2: Sequence[float] | Mapping[str, float] | np.ndarray | None = None,
     ) -> None:
         base_id = find_frame(full_model, base_frame, "robot.base_frame")
         tip_id = find_frame(full_model, tip_frame, "robot.tip_frame")
@@ -395,6 +469,14 @@ class RobotModel:
         pin.framesForwardKinematics(self.model, data, pin.neutral(self.model))
         self.transform_base_to_world = pin.SE3(data.oMf[self.base_frame_id])
         self.joint_names: tuple[str, ...] = tuple(self.model.names[1:])
+        if armature_kgm2 is None:  # the description's own (an MJCF's; a URDF has none)
+            armature_kgm2 = armature_from_input(
+                np.array(self.model.armature), self.joint_names, "robot.urdf armature"
+            )
+        self.armature_kgm2 = armature_from_input(armature_kgm2, self.joint_names)
+        self.armature_given = bool(np.any(self.armature_kgm2 > 0.0))
+        self.model.armature = np.array(self.armature_kgm2)
+        self._links_only: RobotModel | None = None
         self._continuous = np.array([j.nq == 2 for j in self.model.joints[1:]])
         self._idx_q = np.array([j.idx_q for j in self.model.joints[1:]])
         lower, upper = self.model.lowerPositionLimit, self.model.upperPositionLimit
@@ -444,11 +526,27 @@ class RobotModel:
         tip_frame: str,
         locked_positions: Mapping[str, float] | None = None,
         relative_to: Path | None = None,
+        armature_kgm2: Sequence[float] | Mapping[str, float] | np.ndarray | None = None,
     ) -> RobotModel:
         """Load from a URDF path, URDF XML or ``example-robot-data:<name>``."""
         full_model = load_urdf_model(source, relative_to)
         mimic_joints = load_urdf_mimic_joints(source, relative_to)
-        return cls(full_model, base_frame, tip_frame, locked_positions, mimic_joints)
+        return cls(
+            full_model, base_frame, tip_frame, locked_positions, mimic_joints, armature_kgm2
+        )
+
+    def links_only(self) -> RobotModel:
+        """This chain without armature (the links' inertia only): itself when it has none."""
+        if not self.armature_given:
+            return self
+        if self._links_only is None:
+            links_only = copy.copy(self)
+            links_only.model = self.model.copy()
+            links_only.model.armature = np.zeros(self.model.nv)
+            links_only.armature_kgm2 = read_only(np.zeros(self.num_joints))
+            links_only.armature_given = False
+            self._links_only = links_only
+        return self._links_only
 
     @property
     def num_joints(self) -> int:

@@ -1,0 +1,125 @@
+"""Reflected rotor inertia (armature): validation, Pinocchio's use of it, closed forms."""
+
+from __future__ import annotations
+
+import pickle
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from conftest import ARM6_AXES, random_positions, serial_arm_urdf
+
+from grasp_safety_ros.core import InvalidInputError, RobotModel
+from grasp_safety_ros.core.method.effective_mass import (
+    effective_mass_along,
+    translational_mobility_in_base,
+)
+
+ARMATURE = (0.3, 0.25, 0.2, 0.05, 0.04, 0.03)
+
+
+def one_joint_urdf(mass_kg: float, com_m: float, izz_kgm2: float, tip_m: float) -> str:
+    """A link turning about z, centre of mass at com_m on x, tool frame at tip_m on x."""
+    return f"""<robot name="one"><link name="base"/>
+<link name="arm"><inertial><origin xyz="{com_m} 0 0"/><mass value="{mass_kg}"/>
+<inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="{izz_kgm2}"/></inertial></link>
+<joint name="j" type="revolute"><parent link="base"/><child link="arm"/><axis xyz="0 0 1"/>
+<limit lower="-3" upper="3" effort="10" velocity="3"/></joint>
+<link name="tool"/><joint name="t" type="fixed"><parent link="arm"/><child link="tool"/>
+<origin xyz="{tip_m} 0 0"/></joint></robot>"""
+
+
+@pytest.fixture(scope="module")
+def geared() -> RobotModel:
+    return RobotModel.from_urdf(
+        serial_arm_urdf(ARM6_AXES), "base_link", "tool", armature_kgm2=ARMATURE
+    )
+
+
+def symmetric(upper: np.ndarray) -> np.ndarray:
+    upper = np.triu(upper)
+    return upper + np.triu(upper, 1).T
+
+
+def test_crba_rnea_minverse_and_aba_include_the_armature(geared: RobotModel) -> None:
+    links = geared.links_only()
+    assert links.armature_given is False and geared.armature_given is True
+    np.testing.assert_array_equal(links.model.armature, 0.0)
+    rng = np.random.default_rng(3)
+    data, links_data = geared.model.createData(), links.model.createData()
+    for _ in range(5):
+        q = geared.q_from_positions(random_positions(geared, rng))
+        v, a = rng.normal(size=(2, geared.model.nv))
+        mass = symmetric(pin.crba(geared.model, data, q))
+        links_mass = symmetric(pin.crba(links.model, links_data, q))
+        np.testing.assert_allclose(mass, links_mass + np.diag(ARMATURE), rtol=0, atol=1e-12)
+        torque = pin.rnea(geared.model, data, q, v, a)
+        links_torque = pin.rnea(links.model, links_data, q, v, a)
+        np.testing.assert_allclose(torque, links_torque + np.array(ARMATURE) * a, atol=1e-12)
+        pin.computeMinverse(geared.model, data, q)
+        np.testing.assert_allclose(symmetric(data.Minv), np.linalg.inv(mass), atol=1e-10)
+        acceleration = pin.aba(geared.model, data, q, v, torque)
+        np.testing.assert_allclose(acceleration, a, atol=1e-9)
+
+
+def test_one_joint_arm_has_the_closed_form_effective_mass() -> None:
+    mass, com, izz, tip, armature = 1.5, 0.2, 0.03, 0.4, 0.5
+    robot = RobotModel.from_urdf(
+        one_joint_urdf(mass, com, izz, tip), "base", "tool", armature_kgm2=[armature]
+    )
+    for angle in (-1.0, 0.3, 2.0):
+        data = robot.model.createData()
+        mobility = translational_mobility_in_base(
+            robot, robot.model, data, robot.q_from_positions([angle])
+        )
+        tangent = np.array([-np.sin(angle), np.cos(angle), 0.0])
+        expected = (izz + mass * com**2 + armature) / tip**2
+        assert effective_mass_along(mobility, tangent) == pytest.approx(expected, rel=1e-12)
+        links = robot.links_only()
+        links_mobility = translational_mobility_in_base(
+            links, links.model, links.model.createData(), robot.q_from_positions([angle])
+        )
+        assert effective_mass_along(links_mobility, tangent) == pytest.approx(
+            (izz + mass * com**2) / tip**2, rel=1e-12
+        )
+
+
+def test_a_mapping_names_joints_and_the_others_get_zero() -> None:
+    robot = RobotModel.from_urdf(
+        serial_arm_urdf(ARM6_AXES), "base_link", "tool", armature_kgm2={"j2": 0.4, "j5": 0.1}
+    )
+    np.testing.assert_array_equal(robot.armature_kgm2, [0, 0.4, 0, 0, 0.1, 0])
+    np.testing.assert_array_equal(robot.model.armature, [0, 0.4, 0, 0, 0.1, 0])
+    with pytest.raises(ValueError):
+        robot.armature_kgm2[0] = 1.0  # read-only
+
+
+def test_no_armature_leaves_the_model_as_it_was() -> None:
+    robot = RobotModel.from_urdf(serial_arm_urdf(ARM6_AXES), "base_link", "tool")
+    assert robot.armature_given is False and robot.links_only() is robot
+    np.testing.assert_array_equal(robot.model.armature, 0.0)
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        ([0.1] * 5, r"robot.armature_kgm2: must have one value per chain joint \(6: j1"),
+        ([0.1, -0.2, 0, 0, 0, 0], r"robot.armature_kgm2\[1\] \(joint 'j2'\): must be finite"),
+        ([0.1, 0, float("nan"), 0, 0, 0], r"\(joint 'j3'\): must be finite and >= 0"),
+        ([0.1, 0, 0, float("inf"), 0, 0], r"\(joint 'j4'\): must be finite and >= 0"),
+        ([0.1, 0, 0, 0, "heavy", 0], r"\(joint 'j5'\): must be a number >= 0"),
+        ([True, 0, 0, 0, 0, 0], r"\(joint 'j1'\): must be a number >= 0"),
+        ({"j9": 0.1}, r"robot.armature_kgm2: unknown chain joint 'j9'; chain joints: j1, j2"),
+        ({"j3": -1.0}, r"robot.armature_kgm2.j3: must be finite and >= 0"),
+        ("0.1", r"robot.armature_kgm2: must be a list of 6 values"),
+    ],
+)
+def test_bad_armature_is_refused_naming_the_joint(value: object, message: str) -> None:
+    with pytest.raises(InvalidInputError, match=message):
+        RobotModel.from_urdf(serial_arm_urdf(ARM6_AXES), "base_link", "tool", armature_kgm2=value)
+
+
+def test_the_armature_survives_pickling_for_the_worker_pool(geared: RobotModel) -> None:
+    copy = pickle.loads(pickle.dumps(geared))
+    np.testing.assert_array_equal(copy.model.armature, ARMATURE)
+    np.testing.assert_array_equal(copy.links_only().model.armature, 0.0)
