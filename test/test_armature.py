@@ -123,3 +123,29 @@ def test_the_armature_survives_pickling_for_the_worker_pool(geared: RobotModel) 
     copy = pickle.loads(pickle.dumps(geared))
     np.testing.assert_array_equal(copy.model.armature, ARMATURE)
     np.testing.assert_array_equal(copy.links_only().model.armature, 0.0)
+
+
+@pytest.mark.parametrize("backend", ["python", "compiled"])
+def test_links_only_column_is_the_run_without_armature(geared: RobotModel, backend: str) -> None:
+    from test_performance_paths import BOX, grasps_near_identity, reach_trajectory
+
+    from grasp_safety_ros.core import EvaluationConfig, GraspSafetyEvaluator
+    from grasp_safety_ros.core.method.ik import compiled_available
+
+    if backend == "compiled" and not compiled_available():
+        pytest.skip("numba is not installed")
+    plain = RobotModel.from_urdf(serial_arm_urdf(ARM6_AXES), "base_link", "tool")
+    seed = np.array([0.2, -0.5, 0.9, 0.3, 0.6, -0.2])
+    trajectory = reach_trajectory(plain, seed, dt=0.05)
+    grasps = grasps_near_identity(3)
+    config = EvaluationConfig(backend=backend, workers=1)
+    with_armature = GraspSafetyEvaluator(geared, config).rank(grasps, BOX, trajectory, seed)
+    without = GraspSafetyEvaluator(plain, config).rank(grasps, BOX, trajectory, seed)
+    for a, b in zip(with_armature.evaluations, without.evaluations, strict=True):
+        assert a.feasible and b.feasible
+        np.testing.assert_array_equal(a.joint_positions, b.joint_positions)  # IK: no inertia
+        np.testing.assert_allclose(
+            a.links_only_effective_mass_kg, b.effective_mass_kg, rtol=1e-12, atol=0
+        )
+        assert np.all(a.effective_mass_kg > a.links_only_effective_mass_kg)
+        assert b.links_only_effective_mass_kg is b.effective_mass_kg  # bit for bit: the same

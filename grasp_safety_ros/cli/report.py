@@ -9,7 +9,7 @@ import numpy as np
 
 from ..core.analyses.iso15066 import PowerForceLimitAssessment
 from ..core.analyses.safety_report import SafetyReport
-from ..core.method.executable import joint_velocities_accelerations
+from ..core.method.executable import joint_velocities_accelerations, rates_for_execution
 from ..core.method.posture import PostureSelection
 from ..core.method.ranking import GraspEvaluation, Ranking
 
@@ -32,7 +32,9 @@ def numbers(values: np.ndarray) -> list[Any]:
 
 def evaluation_to_dict(evaluation: GraspEvaluation) -> dict[str, Any]:
     """One grasp of the paper's ranking (samples carry q and qd in joint_names order)."""
-    velocities, _ = joint_velocities_accelerations(evaluation.times_s, evaluation.joint_positions)
+    velocities, _ = rates_for_execution(
+        evaluation.times_s, evaluation.joint_positions, evaluation.planned_joint_rates
+    )
     samples = [
         {
             "t_s": float(evaluation.times_s[i]),

@@ -38,7 +38,7 @@ from ..core.input_checks import (
     quat_xyzw_from_rotation,
     rotation_from_quat_xyzw,
 )
-from ..core.method.executable import joint_velocities_accelerations
+from ..core.method.executable import rates_for_execution
 from ..core.method.joint_trajectory import PlannedJointTrajectory
 from ..core.method.posture import PostureSelection, single_posture
 from ..core.method.ranking import Grasp, GraspEvaluation, Ranking
@@ -672,16 +672,21 @@ _DURATION_CHECK_FIELDS = Duration()._check_fields
 
 
 def joint_trajectory_msg(
-    joint_names: Sequence[str], times_s: np.ndarray, joint_positions: np.ndarray, header: Header
+    joint_names: Sequence[str],
+    times_s: np.ndarray,
+    joint_positions: np.ndarray,
+    header: Header,
+    planned_rates: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> JointTrajectory:
     """trajectory_msgs/JointTrajectory of sampled joint positions [rad or m] at times [s]:
-    velocities and accelerations from core.method.executable (C2 spline, at rest at both ends);
-    no points when there are no samples. Give ``header`` a zero stamp: in a JointTrajectory
-    the stamp is when execution starts, and 0 means on receipt."""
+    velocities and accelerations the planner's (``planned_rates``), else from
+    core.method.executable (C2 spline, at rest at both ends); no points when there are no
+    samples. Give ``header`` a zero stamp: in a JointTrajectory the stamp is when execution
+    starts, and 0 means on receipt."""
     message = JointTrajectory(header=header, joint_names=list(joint_names))
     if len(times_s) == 0:
         return message
-    velocities, accelerations = joint_velocities_accelerations(times_s, joint_positions)
+    velocities, accelerations = rates_for_execution(times_s, joint_positions, planned_rates)
     # One point per sample: made by filling the messages' slots when the classes are the
     # ones this was written for (the keyword constructors cost several times more); stamps
     # rounded as duration_msg rounds them.
@@ -766,7 +771,10 @@ def ranking_msg(
         _set_joint_trajectories(
             message,
             ranking.joint_names,
-            {e.index: (e.times_s, e.joint_positions) for e in ranking.evaluations},
+            {
+                e.index: (e.times_s, e.joint_positions, e.planned_joint_rates)
+                for e in ranking.evaluations
+            },
             content.with_joint_trajectory(message.order, len(ranking.evaluations)),
             base_frame,
         )
@@ -811,17 +819,18 @@ def _ranking_msg_without_trajectories(
 def _set_joint_trajectories(
     message: GraspRanking,
     joint_names: Sequence[str],
-    motions: Mapping[int, tuple[np.ndarray, np.ndarray]],
+    motions: Mapping[int, tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray] | None]],
     indices: Collection[int],
     base_frame: str,
 ) -> None:
     """Fill ``joint_trajectory`` of the evaluations whose index is in ``indices`` from
-    ``motions`` (index: sample times [s], joint positions); the others keep an empty one."""
+    ``motions`` (index: sample times [s], joint positions, a planner's own rates or None);
+    the others keep an empty one."""
     by_index = {item.index: item for item in message.evaluations}
     for index in sorted(indices):
-        times_s, joint_positions = motions[index]
+        times_s, joint_positions, planned_rates = motions[index]
         by_index[index].joint_trajectory = joint_trajectory_msg(
-            joint_names, times_s, joint_positions, Header(frame_id=base_frame)
+            joint_names, times_s, joint_positions, Header(frame_id=base_frame), planned_rates
         )
 
 
@@ -919,7 +928,10 @@ def _report_msg(
     message = _ranking_msg_without_trajectories(
         report.ranking, grasps, base_frame, stamp, compute_time_s, report.order, per_sample
     )
-    motions = {e.index: (e.times_s, e.joint_positions) for e in report.ranking.evaluations}
+    motions = {
+        e.index: (e.times_s, e.joint_positions, e.planned_joint_rates)
+        for e in report.ranking.evaluations
+    }
     message.metric_point = options.metric_point
     message.rank_by = options.rank_by
     message.safety_order = [int(i) for i in report.safety_order]
@@ -959,7 +971,7 @@ def _report_msg(
             evaluation.redundancy_applied = bool(resolution.applied)
             evaluation.score_without_redundancy = float(resolution.original_score)
             if resolution.applied:
-                motions[k] = (resolution.times_s, resolution.joint_positions)
+                motions[k] = (resolution.times_s, resolution.joint_positions, None)
                 if per_sample:
                     evaluation.effective_mass_with_redundancy_kg = float64_array(
                         resolution.effective_mass_kg
