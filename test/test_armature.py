@@ -149,3 +149,109 @@ def test_links_only_column_is_the_run_without_armature(geared: RobotModel, backe
         )
         assert np.all(a.effective_mass_kg > a.links_only_effective_mass_kg)
         assert b.links_only_effective_mass_kg is b.effective_mass_kg  # bit for bit: the same
+
+
+# --- Scenario files and the CLI --------------------------------------------------------------
+
+
+def arm_scenario(tmp_path, armature: object | None) -> dict:
+    from test_performance_paths import reach_trajectory
+
+    from grasp_safety_ros.core.input_checks import quat_xyzw_from_rotation
+
+    (tmp_path / "arm.urdf").write_text(serial_arm_urdf(ARM6_AXES))
+    plain = RobotModel.from_urdf(serial_arm_urdf(ARM6_AXES), "base_link", "tool")
+    seed = [0.2, -0.5, 0.9, 0.3, 0.6, -0.2]
+    trajectory = reach_trajectory(plain, np.array(seed), dt=0.1)
+    ends = {}
+    for key, pose in (
+        ("start", trajectory.transform_object_to_base_start),
+        ("goal", trajectory.transform_object_to_base_goal),
+    ):
+        ends[key] = {
+            "position_m": pose.translation.tolist(),
+            "quat_xyzw": quat_xyzw_from_rotation(pose.rotation).tolist(),
+        }
+    robot = {"urdf": "arm.urdf", "base_frame": "base_link", "tip_frame": "tool", "seed": seed}
+    if armature is not None:
+        robot["armature_kgm2"] = armature
+    return {
+        "robot": robot,
+        "object": {"mass_kg": 0.4, "box_size_m": [0.05, 0.08, 0.1]},
+        "trajectory": {**ends, "duration_s": 1.0, "dt_s": 0.1},
+        "grasps": [
+            {"name": "a", "position_m": [0, 0, 0], "quat_xyzw": [0, 0, 0, 1]},
+            {"name": "b", "position_m": [0.02, 0, 0.03], "quat_xyzw": [0, 0, 0, 1]},
+        ],
+        "posture": {"restarts": 0},
+    }
+
+
+def run_cli(tmp_path, data: dict, name: str, capsys) -> tuple[int, dict | None, str]:
+    import json
+
+    import yaml
+
+    from grasp_safety_ros.cli.main import main
+
+    path, out = tmp_path / f"{name}.yaml", tmp_path / f"{name}.json"
+    path.write_text(yaml.safe_dump(data))
+    code = main(["rank", str(path), "--json", str(out)])
+    captured = capsys.readouterr()
+    return code, json.loads(out.read_text()) if code == 0 else None, captured.out + captured.err
+
+
+def test_scenario_armature_gives_both_columns_and_the_note_once(tmp_path, capsys) -> None:
+    from grasp_safety_ros.core.model.robot import NO_ARMATURE_NOTE
+
+    code, plain, text = run_cli(tmp_path, arm_scenario(tmp_path, None), "plain", capsys)
+    assert code == 0 and text.count(NO_ARMATURE_NOTE) == 1
+    assert plain["armature"]["given"] is False and plain["armature"]["ratio_median"] == 1.0
+    for grasp in plain["grasps"]:
+        for sample in grasp["samples"]:  # the links-only column is today's number, bit for bit
+            assert sample["links_only_effective_mass_kg"] == sample["effective_mass_kg"]
+    as_list = arm_scenario(tmp_path, list(ARMATURE))
+    code, geared, text = run_cli(tmp_path, as_list, "geared", capsys)
+    assert code == 0 and NO_ARMATURE_NOTE not in text and "links [kg]" in text
+    named = {f"j{k + 1}": value for k, value in enumerate(ARMATURE)}
+    code, mapped, _ = run_cli(tmp_path, arm_scenario(tmp_path, named), "mapped", capsys)
+    assert mapped["grasps"] == geared["grasps"]
+    assert geared["armature"]["given"] is True and geared["armature"]["ratio_p10"] > 1.0
+    for grasp, base in zip(geared["grasps"], plain["grasps"], strict=True):
+        for sample, reference in zip(grasp["samples"], base["samples"], strict=True):
+            assert sample["links_only_effective_mass_kg"] == pytest.approx(
+                reference["effective_mass_kg"], rel=1e-12
+            )
+            assert sample["effective_mass_kg"] > sample["links_only_effective_mass_kg"]
+
+
+@pytest.mark.parametrize(
+    ("armature", "message"),
+    [
+        ([0.1, 0.1, -1, 0, 0, 0], "robot.armature_kgm2[2] (joint 'j3'): must be finite and >= 0"),
+        ({"j7": 0.1}, "robot.armature_kgm2: unknown chain joint 'j7'"),
+        ("heavy", "robot.armature_kgm2: must be a list, a mapping"),
+        ("published", "robot.armature_kgm2: no published armature for 'arm.urdf'"),
+        ("published:franka_fr3", "published entry 'franka_fr3' names none of the chain joints"),
+        ([[0.3, 0.1], 0, 0, 0, 0, 0], "robot.armature_kgm2[0] (joint 'j1'): range [lo, hi]"),
+    ],
+)
+def test_bad_scenario_armature_exits_2_naming_the_field(
+    tmp_path, capsys, armature: object, message: str
+) -> None:
+    code, _, text = run_cli(tmp_path, arm_scenario(tmp_path, armature), "bad", capsys)
+    assert code == 2 and message in text, text
+
+
+def test_published_fr3_values_go_to_the_panda() -> None:
+    from grasp_safety_ros.cli.scenario import RobotSpec
+    from grasp_safety_ros.core.model.armature import published_armatures
+
+    entry = published_armatures()["franka_fr3"]
+    assert entry.status == "identified" and "panda" in entry.robots
+    spec = RobotSpec(
+        "example-robot-data:panda", "panda_link0", "panda_hand", None, None, "published"
+    )
+    robot = spec.load()
+    np.testing.assert_array_equal(robot.armature_kgm2, [0.195] * 4 + [0.074] * 3)
+    assert spec.published_armature(robot) is entry

@@ -13,6 +13,7 @@ from ..core.analyses.safety_report import SafetyReport, analyse
 from ..core.exceptions import GraspSafetyError, InvalidInputError
 from ..core.method.posture import select_postures
 from ..core.method.ranking import METRICS, EvaluationConfig, GraspSafetyEvaluator
+from ..core.model.robot import NO_ARMATURE_NOTE
 from ..paths import config_file
 from .report import report_text, report_to_dict
 from .scenario import Scenario, load_scenario
@@ -81,11 +82,14 @@ def run_header(scenario: Scenario, report: SafetyReport) -> str:
         robot = "(inline URDF)"
     else:
         robot = Path(urdf).name
-    return (
+    header = (
         f"robot {robot} ({scenario.robot.base_frame} -> {scenario.robot.tip_frame}), "
         f"{len(scenario.grasps)} grasps x {scenario.trajectory.num_samples} samples, "
         f"backend {report.ranking.backend}"
     )
+    if not report.ranking.armature_given:
+        header += f"\n{NO_ARMATURE_NOTE}"
+    return header
 
 
 def _write_outputs(

@@ -12,6 +12,8 @@ from ..core.analyses.safety_report import SafetyReport
 from ..core.method.executable import joint_velocities_accelerations, rates_for_execution
 from ..core.method.posture import PostureSelection
 from ..core.method.ranking import GraspEvaluation, Ranking
+from ..core.model.armature import ArmatureRatio, armature_ratio
+from ..core.model.robot import NO_ARMATURE_NOTE
 
 SCORE_UNITS = {"mean": "kg", "max": "kg", "integral": "kg*s"}
 
@@ -45,6 +47,7 @@ def evaluation_to_dict(evaluation: GraspEvaluation) -> dict[str, Any]:
             "direction_is_worst_case": bool(evaluation.direction_is_worst_case[i]),
             "tip_speed_m_s": float(evaluation.tip_speed_m_s[i]),
             "ik_iterations": int(evaluation.ik_iterations[i]),
+            "links_only_effective_mass_kg": float(evaluation.links_only_effective_mass_kg[i]),
         }
         for i in range(len(evaluation.times_s))
     ]
@@ -56,6 +59,7 @@ def evaluation_to_dict(evaluation: GraspEvaluation) -> dict[str, Any]:
         "score": number(evaluation.score),
         "mean_effective_mass_kg": number(evaluation.mean_effective_mass_kg),
         "peak_effective_mass_kg": number(evaluation.peak_effective_mass_kg),
+        **_links_only_to_dict(evaluation),
         "samples": samples,
     }
 
@@ -84,6 +88,7 @@ def ranking_to_dict(ranking: Ranking) -> dict[str, Any]:
         "metric": ranking.metric,
         "score_unit": SCORE_UNITS[ranking.metric],
         "ranking": list(ranking.order),
+        "armature": armature_to_dict(ranking),
         "grasps": grasps,
     }
 
@@ -216,14 +221,21 @@ def ranking_table(ranking: Ranking) -> str:
     header = (
         f"{'rank':>4}  {'index':>5}  {'name':<16} {score:>14} {'mean [kg]':>10} {'peak [kg]':>10}"
     )
+    if ranking.armature_given:  # with armature; the links-only mean (a lower bound) beside
+        header += f" {'links [kg]':>10}"
     lines = [f"metric: {ranking.metric}", header, "-" * len(header)]
     for rank, index in enumerate(ranking.order, start=1):
         e = ranking.evaluations[index]
         worst = "  (worst-case direction used)" if e.direction_is_worst_case.any() else ""
+        links = ""
+        if ranking.armature_given:
+            links = f" {float(np.mean(e.links_only_effective_mass_kg)):>10.4f}"
         lines.append(
             f"{rank:>4}  {index:>5}  {e.name[:16]:<16} {e.score:>14.4f} "
-            f"{e.mean_effective_mass_kg:>10.4f} {e.peak_effective_mass_kg:>10.4f}{worst}"
+            f"{e.mean_effective_mass_kg:>10.4f} {e.peak_effective_mass_kg:>10.4f}{links}{worst}"
         )
+    if ranking.armature_given:
+        lines.append(armature_line(ranking))
     for e in ranking.evaluations:
         if not e.feasible:
             lines.append(f"{'-':>4}  {e.index:>5}  {e.name[:16]:<16} infeasible: {e.reason}")
@@ -325,3 +337,48 @@ def report_text(report: SafetyReport) -> str:
                     f"{options.effort_criterion} {e.score(options.effort_criterion):.3f}"
                 )
     return "\n".join(lines)
+
+
+# --- Armature (reflected rotor inertia): links-only masses and their ratio -------------------
+
+
+def _links_only_to_dict(evaluation: GraspEvaluation) -> dict[str, Any]:
+    """Mean and peak of the links-only effective mass [kg] (NaN: None if infeasible)."""
+    links = evaluation.links_only_effective_mass_kg
+    feasible = evaluation.feasible and len(links) > 0
+    return {
+        "links_only_mean_effective_mass_kg": number(np.mean(links)) if feasible else None,
+        "links_only_peak_effective_mass_kg": number(np.max(links)) if feasible else None,
+    }
+
+
+def _ratio_of(ranking: Ranking) -> ArmatureRatio:
+    feasible = [e for e in ranking.evaluations if e.feasible]
+    return armature_ratio(
+        [e.effective_mass_kg for e in feasible], [e.links_only_effective_mass_kg for e in feasible]
+    )
+
+
+def armature_to_dict(ranking: Ranking) -> dict[str, Any]:
+    """Whether armature was given, and the ratio with armature / links only over the samples."""
+    ratio = _ratio_of(ranking)
+    return {
+        "given": ranking.armature_given,
+        "note": "" if ranking.armature_given else NO_ARMATURE_NOTE,
+        "ratio_median": number(ratio.median),
+        "ratio_p10": number(ratio.p10),
+        "ratio_p90": number(ratio.p90),
+        "ratio_max": number(ratio.maximum),
+    }
+
+
+def armature_line(ranking: Ranking) -> str:
+    """The ratio with armature / links only (under the ranking table), or the note."""
+    if not ranking.armature_given:
+        return NO_ARMATURE_NOTE
+    ratio = _ratio_of(ranking)
+    return (
+        f"effective mass with rotor inertia / links only: median x{ratio.median:.2f} "
+        f"(p10 x{ratio.p10:.2f}, p90 x{ratio.p90:.2f}, max x{ratio.maximum:.2f}, "
+        f"{ratio.samples} samples)"
+    )

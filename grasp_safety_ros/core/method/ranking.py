@@ -162,6 +162,8 @@ class Ranking:
             order; empty when posture selection was not run.
         backend: What ran: ``compiled`` or ``python``, with the reason when ``auto`` fell
             back, e.g. ``python (numba not installed)``; empty when not recorded.
+        armature_given: Whether the chain had armature (reflected rotor inertia); False: the
+            effective masses are the links' only (a lower bound, robot.NO_ARMATURE_NOTE).
     """
 
     joint_names: tuple[str, ...]
@@ -170,6 +172,7 @@ class Ranking:
     evaluations: tuple[GraspEvaluation, ...]
     postures: tuple[PostureSelection, ...] = ()
     backend: str = ""
+    armature_given: bool = False
 
 
 def aggregate(effective_mass_kg: np.ndarray, times_s: np.ndarray, metric: str) -> float:
@@ -543,6 +546,7 @@ class GraspSafetyEvaluator:
             order=order_by_score(evaluations),
             evaluations=tuple(evaluations),
             backend=self.ik.backend_used,
+            armature_given=self.robot.armature_given,
         )
 
 

@@ -18,7 +18,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..exceptions import FrameNotFoundError, InvalidInputError
-from ..input_checks import finite_array, read_only
+from ..input_checks import finite_array
 
 EXAMPLE_ROBOT_DATA_PREFIX = "example-robot-data:"
 
@@ -535,17 +535,25 @@ class RobotModel:
             full_model, base_frame, tip_frame, locked_positions, mimic_joints, armature_kgm2
         )
 
+    def with_armature(
+        self, armature_kgm2: Sequence[float] | Mapping[str, float] | np.ndarray
+    ) -> RobotModel:
+        """This chain with another armature (validated as in the constructor)."""
+        values = armature_from_input(armature_kgm2, self.joint_names)
+        robot = copy.copy(self)
+        robot.model = self.model.copy()
+        robot.model.armature = np.array(values)
+        robot.armature_kgm2 = values
+        robot.armature_given = bool(np.any(values > 0.0))
+        robot._links_only = None
+        return robot
+
     def links_only(self) -> RobotModel:
         """This chain without armature (the links' inertia only): itself when it has none."""
         if not self.armature_given:
             return self
         if self._links_only is None:
-            links_only = copy.copy(self)
-            links_only.model = self.model.copy()
-            links_only.model.armature = np.zeros(self.model.nv)
-            links_only.armature_kgm2 = read_only(np.zeros(self.num_joints))
-            links_only.armature_given = False
-            self._links_only = links_only
+            self._links_only = self.with_armature(np.zeros(self.num_joints))
         return self._links_only
 
     @property
