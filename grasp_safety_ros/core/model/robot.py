@@ -6,6 +6,7 @@ import contextlib
 import copy
 import importlib.metadata
 import os
+import re
 import sys
 import tempfile
 import threading
@@ -219,6 +220,8 @@ def load_urdf_model(source: str, relative_to: Path | None = None) -> pin.Model:
     model from it (a malformed ``<inertial>`` would otherwise become a massless link).
     """
     text, is_xml = resolve_urdf(source, relative_to)
+    if _is_mjcf(text, is_xml):
+        return load_mjcf_model(text, is_xml)
     where = "URDF XML" if is_xml else f"'{text}'"
     captured: list[str] = []
     try:
@@ -235,6 +238,66 @@ def load_urdf_model(source: str, relative_to: Path | None = None) -> pin.Model:
     if parser_errors:
         raise InvalidInputError("robot.urdf", f"cannot read {where}: {'; '.join(parser_errors)}")
     return model
+
+
+def _is_mjcf(text: str, is_xml: bool) -> bool:
+    """Whether a description (XML text, or a file path) is MJCF: its root element <mujoco>."""
+    if not is_xml:
+        try:
+            with open(text, "rb") as file:
+                text = file.read(4096).decode("utf-8", errors="replace")
+        except OSError:
+            return False
+    match = re.search(
+        r"<\s*([A-Za-z_][\w.-]*)", re.sub(r"<(\?|!--).*?(\?|--)>", "", text, flags=re.S)
+    )
+    return bool(match) and match.group(1) == "mujoco"
+
+
+def _mjcf_bodies_without_inertial(root: ElementTree.Element) -> list[str]:
+    """Bodies whose inertia MuJoCo would compute from their geoms (no <inertial>, or
+    inertiafromgeom="true"): Pinocchio's MJCF reader does not, so they are refused."""
+    compiler = root.find("compiler")
+    from_geom = compiler.get("inertiafromgeom", "auto") if compiler is not None else "auto"
+    if from_geom == "false":
+        return []
+    return [
+        body.get("name", "(unnamed)")
+        for body in root.iter("body")
+        if body.find("geom") is not None and (from_geom == "true" or body.find("inertial") is None)
+    ]
+
+
+def load_mjcf_model(text: str, is_xml: bool) -> pin.Model:
+    """Build the Pinocchio model (fixed base) of an MJCF (MuJoCo XML) file or text with
+    Pinocchio's MJCF reader; joint ``armature`` comes with it (``model.armature``).
+
+    Meshes are not read: every body with geoms needs an explicit ``<inertial>`` (MuJoCo's
+    ``mj_saveLastXML`` writes a model's compiled inertials), else it is refused.
+    """
+    where = "MJCF XML" if is_xml else f"'{text}'"
+    try:
+        root = ElementTree.fromstring(text) if is_xml else ElementTree.parse(text).getroot()
+    except (ElementTree.ParseError, OSError) as error:
+        raise InvalidInputError("robot.urdf", f"cannot read {where}: {error}") from None
+    missing = _mjcf_bodies_without_inertial(root)
+    if missing:
+        raise InvalidInputError(
+            "robot.urdf",
+            f"MJCF bodies {', '.join(missing[:8])} have geoms but no <inertial> (or "
+            "inertiafromgeom='true'): Pinocchio does not compute inertia from geoms; add "
+            "<inertial> elements (mujoco's mj_saveLastXML writes them)",
+        )
+    try:
+        if is_xml:
+            with tempfile.TemporaryDirectory() as folder:
+                path = Path(folder) / "robot.xml"
+                path.write_text(text)
+                return pin.buildModelFromMJCF(str(path))
+        return pin.buildModelFromMJCF(text)
+    except (RuntimeError, ValueError) as error:
+        message = " ".join(str(error).split()) or "parse error"
+        raise InvalidInputError("robot.urdf", f"cannot read {where}: {message}") from None
 
 
 @dataclass(frozen=True)
@@ -528,7 +591,8 @@ class RobotModel:
         relative_to: Path | None = None,
         armature_kgm2: Sequence[float] | Mapping[str, float] | np.ndarray | None = None,
     ) -> RobotModel:
-        """Load from a URDF path, URDF XML or ``example-robot-data:<name>``."""
+        """Load from a URDF or MJCF path, URDF or MJCF XML, or ``example-robot-data:<name>``;
+        an explicit ``armature_kgm2`` replaces an MJCF's joint armature."""
         full_model = load_urdf_model(source, relative_to)
         mimic_joints = load_urdf_mimic_joints(source, relative_to)
         return cls(
