@@ -255,3 +255,29 @@ def test_published_fr3_values_go_to_the_panda() -> None:
     robot = spec.load()
     np.testing.assert_array_equal(robot.armature_kgm2, [0.195] * 4 + [0.074] * 3)
     assert spec.published_armature(robot) is entry
+
+
+def test_armature_ranges_bound_the_effective_mass_by_their_ends(tmp_path, capsys) -> None:
+    lower, upper = np.array(ARMATURE) * 0.5, np.array(ARMATURE) * 2.0
+    ranges = [[float(lo), float(hi)] for lo, hi in zip(lower, upper, strict=True)]
+    ranged = arm_scenario(tmp_path, ranges)
+    code, result, text = run_cli(tmp_path, ranged, "ranged", capsys)
+    assert code == 0 and "armature ranges (tip effective mass): ranking" in text
+    assert result["grasps"][0]["feasible"]
+    _, at_lower, _ = run_cli(tmp_path, arm_scenario(tmp_path, lower.tolist()), "low", capsys)
+    spread = result["armature_range"]
+    assert spread["upper_kgm2"] == upper.tolist() and spread["lower_kgm2"] == lower.tolist()
+    for k, (grasp, low) in enumerate(zip(result["grasps"], at_lower["grasps"], strict=True)):
+        if not grasp["feasible"]:
+            assert spread["effective_mass_range_kg"][k] == [None, None]
+            continue
+        masses = [s["effective_mass_kg"] for s in grasp["samples"]]  # ranked: the upper ends
+        masses_low = [s["effective_mass_kg"] for s in low["samples"]]
+        assert spread["effective_mass_range_kg"][k] == pytest.approx(
+            [min(masses_low), max(masses)], rel=1e-12
+        )
+        assert spread["scores_lower"][k] == pytest.approx(low["score"], rel=1e-12)
+        assert spread["scores_upper"][k] == pytest.approx(grasp["score"], rel=1e-12)
+    assert spread["order_upper"] == result["paper_ranking"]
+    assert spread["order_lower"] == at_lower["paper_ranking"]
+    assert spread["ranking_flips"] == (spread["order_lower"] != spread["order_upper"])

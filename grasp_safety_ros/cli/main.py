@@ -7,9 +7,11 @@ import json
 import sys
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 
 from ..core.analyses.safety_report import SafetyReport, analyse
+from ..core.analyses.uncertainty import analyse_armature_range
 from ..core.exceptions import GraspSafetyError, InvalidInputError
 from ..core.method.posture import select_postures
 from ..core.method.ranking import METRICS, EvaluationConfig, GraspSafetyEvaluator
@@ -63,7 +65,7 @@ def rank_scenario(scenario: Scenario, metric: str | None = None) -> SafetyReport
         ranking,
         scenario.posture,
     )
-    return analyse(
+    report = analyse(
         evaluator,
         scenario.grasps,
         scenario.object_inertia,
@@ -71,6 +73,19 @@ def rank_scenario(scenario: Scenario, metric: str | None = None) -> SafetyReport
         scenario.options,
         ranking=ranking,
     )
+    bounds = scenario.robot.armature_range(robot)
+    if bounds is None or not bounds.is_range:
+        return report
+    spread = analyse_armature_range(
+        robot,
+        ranking.evaluations,
+        scenario.grasps,
+        scenario.object_inertia,
+        bounds.lower_kgm2,
+        bounds.upper_kgm2,
+        ranking.metric,
+    )
+    return replace(report, armature_range=spread)
 
 
 def run_header(scenario: Scenario, report: SafetyReport) -> str:

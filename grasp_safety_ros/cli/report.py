@@ -150,6 +150,8 @@ def report_to_dict(report: SafetyReport) -> dict[str, Any]:
             "worst_case_ranking": list(u.worst_case_order),
             "message": u.message,
         }
+    if report.armature_range is not None:
+        result["armature_range"] = armature_range_to_dict(report)
     iso = {a.index: a for a in report.iso}
     for k, grasp in enumerate(result["grasps"]):
         grasp["safety_score"] = number(report.scores[k])
@@ -321,6 +323,8 @@ def report_text(report: SafetyReport) -> str:
                     f"{g.worst_case_score:.4f}  p{report.uncertainty.uncertainty.percentile:g} "
                     f"{g.percentile_score:.4f}  P(safest) {g.probability_safest:.2f}"
                 )
+    if report.armature_range is not None:
+        lines += armature_range_lines(report)
     if report.redundancy:
         lines += ["", "redundancy (null-space) resolution, tip effective mass:"]
         for r in report.redundancy:
@@ -382,3 +386,37 @@ def armature_line(ranking: Ranking) -> str:
         f"(p10 x{ratio.p10:.2f}, p90 x{ratio.p90:.2f}, max x{ratio.maximum:.2f}, "
         f"{ratio.samples} samples)"
     )
+
+
+def armature_range_to_dict(report: SafetyReport) -> dict[str, Any] | None:
+    """Effective-mass range and scores at both ends of the armature ranges, if given."""
+    spread = report.armature_range
+    if spread is None:
+        return None
+    return {
+        "lower_kgm2": spread.lower_kgm2.tolist(),
+        "upper_kgm2": spread.upper_kgm2.tolist(),
+        "effective_mass_range_kg": numbers(spread.effective_mass_range_kg),
+        "scores_lower": numbers(spread.scores_lower),
+        "scores_upper": numbers(spread.scores_upper),
+        "order_lower": list(spread.order_lower),
+        "order_upper": list(spread.order_upper),
+        "ranking_flips": spread.ranking_flips,
+        "message": spread.message,
+    }
+
+
+def armature_range_lines(report: SafetyReport) -> list[str]:
+    """Per grasp the effective-mass range over the armature ranges, and whether it flips."""
+    spread = report.armature_range
+    if spread is None:
+        return []
+    lines = ["", f"armature ranges (tip effective mass): {spread.message}"]
+    for k, e in enumerate(report.ranking.evaluations):
+        if e.feasible:
+            low, high = spread.effective_mass_range_kg[k]
+            scores = f"{spread.scores_lower[k]:.4f}..{spread.scores_upper[k]:.4f}"
+            lines.append(
+                f"  {e.name[:16]:<16} score {scores}  effective mass {low:.3f}..{high:.3f} kg"
+            )
+    return lines

@@ -30,7 +30,12 @@ from .exposed_points import (
 from .iso15066 import PowerForceLimitAssessment, assess_grasp, assess_motions, select_regions
 from .multi_objective import QualityRanking, rank_with_quality
 from .redundancy import RedundancyConfig, RedundancyResolution, resolve_redundancy
-from .uncertainty import InertiaUncertainty, UncertaintyAnalysis, analyse_inertia_uncertainty
+from .uncertainty import (
+    ArmatureRangeAnalysis,
+    InertiaUncertainty,
+    UncertaintyAnalysis,
+    analyse_inertia_uncertainty,
+)
 
 RANK_BY = ("safety", "effort")
 """What orders the final ranking: the safety score (with quality, when given) or the effort."""
@@ -108,6 +113,8 @@ class SafetyReport:
         quality: Safety/quality combination and Pareto set (pure safety when no quality).
         redundancy: Null-space resolution per grasp, when on.
         effort: Joint effort per grasp, when on.
+        armature_range: Effective masses and ranking at both ends of armature ranges, when
+            the armature was given as ranges (uncertainty.analyse_armature_range).
     """
 
     ranking: Ranking
@@ -121,6 +128,7 @@ class SafetyReport:
     uncertainty: UncertaintyAnalysis | None = None
     redundancy: tuple[RedundancyResolution, ...] = ()
     effort: tuple[EffortEvaluation, ...] = ()
+    armature_range: ArmatureRangeAnalysis | None = None
 
 
 def analyse(
