@@ -281,3 +281,63 @@ def test_armature_ranges_bound_the_effective_mass_by_their_ends(tmp_path, capsys
     assert spread["order_upper"] == result["paper_ranking"]
     assert spread["order_lower"] == at_lower["paper_ranking"]
     assert spread["ranking_flips"] == (spread["order_lower"] != spread["order_upper"])
+
+
+# --- Node parameters (pure: no rclpy) --------------------------------------------------------
+
+
+def node_settings(**values: object):
+    from grasp_safety_ros.ros.parameters import settings_from_parameters
+
+    return settings_from_parameters(
+        {
+            "urdf": "example-robot-data:panda",
+            "base_frame": "panda_link0",
+            "tip_frame": "panda_hand",
+            **values,
+        }
+    )
+
+
+def test_node_armature_parameters_build_the_chain_with_it() -> None:
+    from grasp_safety_ros.ros.parameters import build_robot
+
+    fr3 = [0.195] * 4 + [0.074] * 3
+    for values in (
+        {"robot.armature_kgm2": fr3},
+        {"robot.armature_published": "published"},
+        {"robot.armature_published": "published:franka_fr3"},
+        {
+            "robot.armature_kgm2": fr3[::-1],
+            "robot.armature_joint_names": [f"panda_joint{k}" for k in range(7, 0, -1)],
+        },
+    ):
+        bundle = build_robot(node_settings(**values), None)
+        assert bundle is not None
+        np.testing.assert_array_equal(bundle.robot.armature_kgm2, fr3)
+    plain = build_robot(node_settings(), None)
+    assert plain is not None and not plain.robot.armature_given
+
+
+@pytest.mark.parametrize(
+    ("values", "message"),
+    [
+        ({"robot.armature_kgm2": [0.1, -0.2]}, r"robot.armature_kgm2\[1\]: must be >= 0"),
+        ({"robot.armature_kgm2": [0.1] * 3}, "robot.armature_kgm2: must have one value per"),
+        (
+            {"robot.armature_kgm2": [0.1], "robot.armature_joint_names": ["elbow"]},
+            "robot.armature_kgm2: unknown chain joint 'elbow'",
+        ),
+        (
+            {"robot.armature_kgm2": [0.1], "robot.armature_joint_names": ["a", "b"]},
+            "robot.armature_joint_names: has 2 names for 1 values",
+        ),
+        ({"robot.armature_published": "yes"}, "robot.armature_published: must be empty"),
+        ({"robot.armature_published": "published:kuka"}, "no published entry 'kuka'"),
+    ],
+)
+def test_bad_node_armature_parameters_are_refused_by_name(values: dict, message: str) -> None:
+    from grasp_safety_ros.ros.parameters import build_robot
+
+    with pytest.raises(InvalidInputError, match=message):
+        build_robot(node_settings(**values), None)

@@ -50,7 +50,8 @@ def test_params_file_declares_exactly_the_node_parameters() -> None:
 
 
 def test_every_parameter_is_documented() -> None:
-    docs = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    root = Path(__file__).resolve().parents[1]
+    docs = "".join(p.read_text() for p in [root / "README.md", *sorted(root.glob("docs/**/*.md"))])
     for name in PARAMETERS:
         assert f"| `{name}` |" in docs, name
 

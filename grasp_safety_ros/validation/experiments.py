@@ -29,6 +29,7 @@ from ..core.model.inertia import (
 from ..core.model.robot import RobotModel
 from ..core.model.trajectory import ObjectTrajectory
 from ..core.model.waypoint_trajectory import WaypointTrajectory
+from .armature_check import armature_impulse_check
 from .scene import ContactConfig, ObjectShape, SensorConfig
 from .simulation import (
     CollisionResult,
@@ -41,6 +42,8 @@ from .simulation import (
 )
 
 ROBOT_SOURCE = "example-robot-data:baxter"
+ARMATURE_IMPACTS, ARMATURE_IMPACTS_QUICK = 8, 3
+"""Free impacts of the armature check (validation.armature_check): full and quick runs."""
 BASE_FRAME = "base"
 TIP_FRAME = "right_gripper"
 SEED_POSITIONS = (0.0, -0.55, 0.0, 0.75, 0.0, 1.26, 0.0)
@@ -742,6 +745,9 @@ def reproduce(
             [(tensor.key, tensor_runs), (book.key, book_runs)], config.impulse
         ),
         "posture_selection": postures,
+        "impulse_check_armature": armature_impulse_check(
+            ARMATURE_IMPACTS_QUICK if quick else ARMATURE_IMPACTS, config.impulse, log=log
+        ),
     }
     low, high = PAPER_BOOK_PEAK_FORCES_N
     results["book"]["paper_gazebo"] = {
@@ -798,6 +804,15 @@ def format_summary(results: dict[str, Any]) -> str:
         f"{impulse['worst_rel_error']:.2e} over {impulse['cases']} free impacts "
         f"(e = {impulse['restitution_min']:.3f}..{impulse['restitution_max']:.3f})",
     ]
+    geared = results.get("impulse_check_armature")
+    if geared and geared["valid_cases"]:
+        lines.append(
+            f"  impulse check with rotor inertia (Panda, FR3 armature): worst error "
+            f"{geared['worst_rel_error']:.2e} with armature; links-only prediction off by "
+            f"{geared['links_only_min_rel_error']:.1%} to "
+            f"median {geared['links_only_median_rel_error']:.1%} "
+            f"({geared['valid_cases']} free impacts)"
+        )
     postures = results.get("posture_selection")
     if postures:
         changes = ", ".join(
