@@ -341,3 +341,41 @@ def test_bad_node_armature_parameters_are_refused_by_name(values: dict, message:
 
     with pytest.raises(InvalidInputError, match=message):
         build_robot(node_settings(**values), None)
+
+
+# --- Service response and diagnostics ---------------------------------------------------------
+
+
+@pytest.mark.parametrize("backend", ["python"])
+def test_response_carries_both_masses_the_ratio_and_the_note(geared: RobotModel, backend) -> None:
+    from builtin_interfaces.msg import Time
+    from geometry_msgs.msg import Pose, PoseArray
+    from test_performance_paths import BOX, grasps_near_identity, reach_trajectory
+
+    from grasp_safety_ros.core import EvaluationConfig, GraspSafetyEvaluator
+    from grasp_safety_ros.core.model.robot import NO_ARMATURE_NOTE
+    from grasp_safety_ros.ros.conversions import ranking_msg
+
+    seed = np.array([0.2, -0.5, 0.9, 0.3, 0.6, -0.2])
+    plain = geared.links_only()
+    trajectory = reach_trajectory(plain, seed, dt=0.1)
+    grasps = grasps_near_identity(2)
+    poses = PoseArray(poses=[Pose(), Pose()])
+    config = EvaluationConfig(backend=backend, workers=1)
+    for robot in (geared, plain):
+        ranking = GraspSafetyEvaluator(robot, config).rank(grasps, BOX, trajectory, seed)
+        message = ranking_msg(ranking, poses, "base_link", Time(), 0.0)
+        assert message.armature_given == robot.armature_given
+        assert message.armature_note == ("" if robot.armature_given else NO_ARMATURE_NOTE)
+        ratios = []
+        for got, want in zip(message.evaluations, ranking.evaluations, strict=True):
+            np.testing.assert_array_equal(
+                got.links_only_effective_mass_kg, want.links_only_effective_mass_kg
+            )
+            assert got.links_only_mean_effective_mass_kg == pytest.approx(
+                np.mean(want.links_only_effective_mass_kg), rel=1e-15
+            )
+            ratios.append(want.effective_mass_kg / want.links_only_effective_mass_kg)
+        assert message.armature_ratio_median == pytest.approx(np.median(ratios), rel=1e-15)
+        if not robot.armature_given:
+            assert message.armature_ratio_median == 1.0

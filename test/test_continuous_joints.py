@@ -14,6 +14,7 @@ import yaml
 from grasp_safety_ros.cli.main import main
 from grasp_safety_ros.core import RobotModel
 from grasp_safety_ros.core.input_checks import quat_xyzw_from_rotation
+from grasp_safety_ros.core.model.robot import NO_ARMATURE_NOTE
 
 KINOVA = ("example-robot-data:kinova", "j2s6s200_link_base", "j2s6s200_end_effector")
 JOINT_1 = (2.9, 3.0, 3.15, 3.3, 3.4)
@@ -147,5 +148,8 @@ def test_node_joint_trajectory_keeps_continuous_joints_unwrapped(kinova: RobotMo
         assert max(abs(p.velocities[0]) for p in first.points) < 0.6
         assert [p.velocities[0] for p in second.points] == [0.25] * 5
         assert all(math.isfinite(p.accelerations[0]) for p in second.points)
+        values = {v.key: v.value for v in harness.node.diagnostics_status().values}
+        assert values["armature"] == NO_ARMATURE_NOTE  # Kinova without armature: said once
+        assert response.ranking.armature_note == NO_ARMATURE_NOTE
     finally:
         harness.close()

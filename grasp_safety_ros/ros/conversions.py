@@ -42,8 +42,9 @@ from ..core.method.executable import rates_for_execution
 from ..core.method.joint_trajectory import PlannedJointTrajectory
 from ..core.method.posture import PostureSelection, single_posture
 from ..core.method.ranking import Grasp, GraspEvaluation, Ranking
+from ..core.model.armature import armature_ratio
 from ..core.model.inertia import ObjectInertia
-from ..core.model.robot import RobotModel
+from ..core.model.robot import NO_ARMATURE_NOTE, RobotModel
 from ..core.model.trajectory import ObjectTrajectory
 from ..core.model.waypoint_trajectory import WaypointTrajectory
 from .parameters import ResponseContent, inertia_tensor_from_components
@@ -545,9 +546,14 @@ def evaluation_msg(evaluation: GraspEvaluation, per_sample: bool = True) -> Gras
         mean_effective_mass_kg=float(evaluation.mean_effective_mass_kg),
         safety_score=score,
     )
+    links_only = evaluation.links_only_effective_mass_kg
+    message.links_only_mean_effective_mass_kg = (
+        float(np.mean(links_only)) if evaluation.feasible and len(links_only) else NAN
+    )
     if per_sample:
         message.time_from_start_s = float64_array(evaluation.times_s)
         message.effective_mass_kg = float64_array(evaluation.effective_mass_kg)
+        message.links_only_effective_mass_kg = float64_array(links_only)
         message.direction_xyz = float64_array(evaluation.directions_in_base)  # row-major
         message.direction_is_worst_case = np.asarray(
             evaluation.direction_is_worst_case, bool
@@ -810,10 +816,22 @@ def _ranking_msg_without_trajectories(
         effort_criterion="",
         order_stability=NAN,
     )
+    _set_armature(message, ranking)
     postures = ranking.postures or tuple(single_posture(e) for e in ranking.evaluations)
     for item, posture in zip(message.evaluations, postures, strict=True):
         _set_posture(item, posture)
     return message
+
+
+def _set_armature(message: GraspRanking, ranking: Ranking) -> None:
+    """The armature fields of a GraspRanking: given or the note, and the ratio's median."""
+    feasible = [e for e in ranking.evaluations if e.feasible]
+    ratio = armature_ratio(
+        [e.effective_mass_kg for e in feasible], [e.links_only_effective_mass_kg for e in feasible]
+    )
+    message.armature_given = bool(ranking.armature_given)
+    message.armature_note = "" if ranking.armature_given else NO_ARMATURE_NOTE
+    message.armature_ratio_median = float(ratio.median)
 
 
 def _set_joint_trajectories(
