@@ -379,3 +379,49 @@ def test_response_carries_both_masses_the_ratio_and_the_note(geared: RobotModel,
         assert message.armature_ratio_median == pytest.approx(np.median(ratios), rel=1e-15)
         if not robot.armature_given:
             assert message.armature_ratio_median == 1.0
+
+
+# --- The analyses inherit the armature ----------------------------------------------------------
+
+
+def test_effort_and_uncertainty_include_the_armature(geared: RobotModel) -> None:
+    from test_performance_paths import BOX, grasps_near_identity, reach_trajectory
+
+    from grasp_safety_ros.core import EvaluationConfig, GraspSafetyEvaluator
+    from grasp_safety_ros.core.analyses.effort import evaluate_effort
+    from grasp_safety_ros.core.analyses.uncertainty import (
+        InertiaUncertainty,
+        analyse_inertia_uncertainty,
+    )
+
+    plain = geared.links_only()
+    seed = np.array([0.2, -0.5, 0.9, 0.3, 0.6, -0.2])
+    trajectory = reach_trajectory(plain, seed, dt=0.05)
+    grasps = grasps_near_identity(2)
+    config = EvaluationConfig(workers=1)
+    ranking = GraspSafetyEvaluator(geared, config).rank(grasps, BOX, trajectory, seed)
+    evaluation = ranking.evaluations[0]
+    assert evaluation.feasible
+    with_armature = evaluate_effort(geared, evaluation, BOX, grasps[0], trajectory)
+    links_only = evaluate_effort(plain, evaluation, BOX, grasps[0], trajectory)
+    np.testing.assert_array_equal(
+        with_armature.joint_accelerations, links_only.joint_accelerations
+    )
+    assert np.abs(links_only.joint_accelerations).max() > 1e-2  # the armature term shows
+    np.testing.assert_allclose(  # rnea adds a_k q̈_k per joint
+        with_armature.joint_torques,
+        links_only.joint_torques + np.array(ARMATURE) * links_only.joint_accelerations,
+        rtol=0,
+        atol=1e-10,
+    )
+    feasible = [e for e in ranking.evaluations if e.feasible]
+    spread = analyse_inertia_uncertainty(
+        geared,
+        feasible,
+        [grasps[e.index] for e in feasible],
+        BOX,
+        InertiaUncertainty(mass_fraction=0.1, num_random_samples=2),
+    )
+    for result, e in zip(spread.grasps, feasible, strict=True):
+        assert result.nominal_score == pytest.approx(e.score, rel=1e-9)
+        assert result.nominal_score > 1.05 * np.mean(e.links_only_effective_mass_kg)

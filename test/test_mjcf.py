@@ -140,3 +140,19 @@ def test_mjcf_body_with_geoms_and_no_inertial_is_refused() -> None:
         RobotModel.from_urdf(text, "base_link", "tool")
     with pytest.raises(InvalidInputError, match=r"robot.urdf: cannot read MJCF XML"):
         RobotModel.from_urdf("<mujoco><worldbody><body", "base_link", "tool")
+
+
+def test_node_takes_an_mjcf_robot_description() -> None:
+    from grasp_safety_ros.ros.parameters import build_robot, settings_from_parameters
+
+    settings = settings_from_parameters(
+        {"robot_description": arm_mjcf(), "base_frame": "base_link", "tip_frame": "tool"}
+    )
+    bundle = build_robot(settings, None)
+    assert bundle is not None and bundle.origin == "robot_description"
+    np.testing.assert_array_equal(bundle.robot.armature_kgm2, ARMATURE)
+    from_topic = build_robot(
+        settings_from_parameters({"base_frame": "base_link", "tip_frame": "tool"}), arm_mjcf()
+    )
+    assert from_topic is not None and from_topic.origin == "/robot_description"
+    assert from_topic.robot.joint_names == ("j1", "j2", "j3", "j4")
