@@ -425,3 +425,23 @@ def test_effort_and_uncertainty_include_the_armature(geared: RobotModel) -> None
     for result, e in zip(spread.grasps, feasible, strict=True):
         assert result.nominal_score == pytest.approx(e.score, rel=1e-9)
         assert result.nominal_score > 1.05 * np.mean(e.links_only_effective_mass_kg)
+
+
+def test_cli_header_names_the_published_entry(tmp_path, capsys) -> None:
+    start = {"position_m": [0.45, 0.0, 0.4], "quat_xyzw": [1, 0, 0, 0]}
+    scenario = {
+        "robot": {
+            "urdf": "example-robot-data:panda",
+            "base_frame": "panda_link0",
+            "tip_frame": "panda_hand",
+            "seed": [0.0, -0.5, 0.0, -2.0, 0.0, 1.6, 0.8],
+            "armature_kgm2": "published",
+        },
+        "object": {"mass_kg": 0.5, "box_size_m": [0.05, 0.1, 0.15]},
+        "trajectory": {"start": start, "goal": start, "duration_s": 1.0, "dt_s": 0.5},
+        "grasps": [{"name": "a", "position_m": [0, 0, 0], "quat_xyzw": [0, 0, 0, 1]}],
+        "posture": {"restarts": 0},
+    }
+    code, result, text = run_cli(tmp_path, scenario, "panda", capsys)
+    assert code == 0 and "armature: published 'franka_fr3' (identified, 2025-04-25)" in text
+    assert result["armature"]["given"] is True

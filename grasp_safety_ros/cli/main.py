@@ -15,6 +15,7 @@ from ..core.analyses.uncertainty import analyse_armature_range
 from ..core.exceptions import GraspSafetyError, InvalidInputError
 from ..core.method.posture import select_postures
 from ..core.method.ranking import METRICS, EvaluationConfig, GraspSafetyEvaluator
+from ..core.model.armature import published_for
 from ..core.model.robot import NO_ARMATURE_NOTE
 from ..paths import config_file
 from .report import report_text, report_to_dict
@@ -104,6 +105,9 @@ def run_header(scenario: Scenario, report: SafetyReport) -> str:
     )
     if not report.ranking.armature_given:
         header += f"\n{NO_ARMATURE_NOTE}"
+    elif isinstance(scenario.robot.armature_kgm2, str):
+        entry = published_for(scenario.robot.armature_kgm2, scenario.robot.urdf, ())
+        header += f"\narmature: published '{entry.name}' ({entry.status}, {entry.date})"
     return header
 
 
