@@ -808,10 +808,9 @@ def format_summary(results: dict[str, Any]) -> str:
     if geared and geared["valid_cases"]:
         lines.append(
             f"  impulse check with rotor inertia (Panda, FR3 armature): worst error "
-            f"{geared['worst_rel_error']:.2e} with armature; links-only prediction off by "
-            f"{geared['links_only_min_rel_error']:.1%} to "
-            f"median {geared['links_only_median_rel_error']:.1%} "
-            f"({geared['valid_cases']} free impacts)"
+            f"{geared['worst_rel_error']:.2e} with armature; the impulse exceeds the links-only "
+            f"prediction by {geared['links_only_min_rel_error']:.1%} or more (median "
+            f"{geared['links_only_median_rel_error']:.1%}, {geared['valid_cases']} free impacts)"
         )
     postures = results.get("posture_selection")
     if postures:

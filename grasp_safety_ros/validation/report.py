@@ -448,9 +448,10 @@ def _armature_section(results: dict[str, Any]) -> str:
 {geared["robot"]}, armature {geared["armature_kgm2"]} kg m^2 per joint in MuJoCo
 (`dof_armature`) and in the core: over {geared["valid_cases"]} free impacts at random
 configurations and directions, the measured impulse matches (1 + e)·M_eff·v with the effective
-mass *with* armature to {_number(geared["worst_rel_error"])} (worst relative error); the
-links-only effective mass predicts it {_percent(geared["links_only_min_rel_error"])} to
-{_percent(geared["links_only_median_rel_error"])} (median) too low.
+mass *with* armature to {geared["worst_rel_error"]:.1e} (worst relative error), and exceeds the
+prediction from the links-only effective mass by at least
+{100 * geared["links_only_min_rel_error"]:.1f} % (median
+{100 * geared["links_only_median_rel_error"]:.1f} %).
 
 """
 
