@@ -397,6 +397,9 @@ def test_free_impacts_with_armature_follow_the_effective_mass_with_it() -> None:
     assert result["valid_cases"] >= 2
     assert result["worst_rel_error"] < 5e-3
     assert result["links_only_min_rel_error"] > 0.1
+    # The peak force follows the same M_eff: peak / (M_eff v) is one constant with armature.
+    assert result["peak_force_per_mass_spread"] < 1.05
+    assert result["links_only_peak_force_per_mass_spread"] > result["peak_force_per_mass_spread"]
     for case in result["per_case"]:
         assert case["engine_effective_mass_kg"] == pytest.approx(
             case["effective_mass_kg"], rel=1e-9

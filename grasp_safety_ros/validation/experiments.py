@@ -810,7 +810,9 @@ def format_summary(results: dict[str, Any]) -> str:
             f"  impulse check with rotor inertia (Panda, FR3 armature): worst error "
             f"{geared['worst_rel_error']:.2e} with armature; the impulse exceeds the links-only "
             f"prediction by {geared['links_only_min_rel_error']:.1%} or more (median "
-            f"{geared['links_only_median_rel_error']:.1%}, {geared['valid_cases']} free impacts)"
+            f"{geared['links_only_median_rel_error']:.1%}, {geared['valid_cases']} free impacts); "
+            f"peak force / (M_eff v) spread x{geared['peak_force_per_mass_spread']:.3f} "
+            f"(links only x{geared['links_only_peak_force_per_mass_spread']:.3f})"
         )
     postures = results.get("posture_selection")
     if postures:
