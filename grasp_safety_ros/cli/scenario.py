@@ -20,6 +20,14 @@ from ..core.input_checks import finite_array, finite_float, pose_from_position_q
 from ..core.method.joint_trajectory import PlannedJointTrajectory
 from ..core.method.posture import DEFAULT_RESTARTS, PostureConfig
 from ..core.method.ranking import METRICS, Grasp, check_metric
+from ..core.model.armature import (
+    PUBLISHED,
+    ArmatureRange,
+    PublishedArmature,
+    armature_range,
+    published_for,
+    published_values,
+)
 from ..core.model.inertia import ObjectInertia, solid_box, solid_cylinder, solid_sphere
 from ..core.model.robot import RobotModel
 from ..core.model.trajectory import ObjectTrajectory
@@ -125,6 +133,10 @@ class RobotSpec:
         base_frame, tip_frame: Chain ends.
         seed: IK seed for the first sample, chain joint order [rad or m]; None: mid-range.
         locked_joints: Positions of joints off the chain (default: neutral) [rad or m].
+        armature_kgm2: Reflected rotor inertia (core.model.armature): a list in chain order or
+            ``{joint_name: value}``, values or ``[lo, hi]`` ranges [kg m^2, kg if prismatic],
+            or ``published`` / ``published:<entry>``; None: the description's own (MJCF) or
+            none.
     """
 
     urdf: str
@@ -132,12 +144,31 @@ class RobotSpec:
     tip_frame: str
     seed: tuple[float, ...] | None = None
     locked_joints: Mapping[str, float] | None = None
+    armature_kgm2: Any = None
 
     def load(self, relative_to: Path | None = None) -> RobotModel:
-        """Build the chain model."""
-        return RobotModel.from_urdf(
+        """Build the chain model, with the upper ends of armature ranges."""
+        robot = RobotModel.from_urdf(
             self.urdf, self.base_frame, self.tip_frame, self.locked_joints, relative_to
         )
+        bounds = self.armature_range(robot)
+        return robot if bounds is None else robot.with_armature(bounds.upper_kgm2)
+
+    def armature_range(self, robot: RobotModel) -> ArmatureRange | None:
+        """The armature bounds per chain joint of ``robot``; None when not given."""
+        value = self.armature_kgm2
+        if value is None:
+            return None
+        if isinstance(value, str):
+            entry = published_for(value, self.urdf, robot.joint_names)
+            value = published_values(entry, robot.joint_names)
+        return armature_range(value, robot.joint_names)
+
+    def published_armature(self, robot: RobotModel) -> PublishedArmature | None:
+        """The published entry the armature comes from, if any."""
+        if not isinstance(self.armature_kgm2, str):
+            return None
+        return published_for(self.armature_kgm2, self.urdf, robot.joint_names)
 
 
 @dataclass(frozen=True)
@@ -190,8 +221,19 @@ def _check_keys(section: Mapping[str, Any], allowed: set[str], prefix: str) -> N
 def parse_robot(section: Any) -> RobotSpec:
     """Parse the ``robot`` section."""
     robot = _mapping(section, "robot")
-    allowed = {"urdf", "base_frame", "tip_frame", "seed", "locked_joints", "exposed_points_m"}
-    _check_keys(robot, allowed, "robot")  # exposed_points_m: an analysis option
+    _check_keys(
+        robot,
+        {"urdf", "base_frame", "tip_frame", "seed", "locked_joints", "armature_kgm2"}
+        | {"exposed_points_m"},  # exposed_points_m: an analysis option
+        "robot",
+    )
+    armature = robot.get("armature_kgm2")
+    if isinstance(armature, str) and armature.partition(":")[0] != PUBLISHED:
+        raise InvalidInputError(
+            "robot.armature_kgm2",
+            f"must be a list, a mapping {{joint_name: value}}, '{PUBLISHED}' or "
+            f"'{PUBLISHED}:<entry>', got {armature!r}",
+        )
     seed = robot.get("seed")
     locked = robot.get("locked_joints")
     if locked is not None:
@@ -210,6 +252,7 @@ def parse_robot(section: Any) -> RobotSpec:
         tip_frame=_string(_required(robot, "tip_frame", "robot"), "robot.tip_frame"),
         seed=seed,
         locked_joints=locked,
+        armature_kgm2=armature,
     )
 
 
