@@ -271,9 +271,12 @@ def test_local_cluster_and_serial_give_identical_parts(
 ) -> None:
     from distributed import Client, LocalCluster
 
+    from grasp_safety_ros.dataset import batch
+
     serial = tmp_path / "serial"
     run_batch(dataset.spec_path, serial, workers=1)
     assert _parts(serial) == _parts(local_run)
+    batch._EVALUATORS.clear()
     with (
         LocalCluster(
             n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None
@@ -283,6 +286,9 @@ def test_local_cluster_and_serial_give_identical_parts(
         summary = run_batch(dataset.spec_path, tmp_path / "dask", client=client)
     assert summary["chunks_computed"] == 8
     assert _parts(tmp_path / "dask") == _parts(local_run)
+    # the Dask workers (threads of this process here) ran the package pool with one worker
+    workers = [e.config.workers for e in batch._EVALUATORS.values()]
+    assert workers and set(workers) == {1}
 
 
 def _free_port() -> int:
@@ -438,3 +444,53 @@ def test_cli_bad_spec_exits_2_with_one_line(
     assert main(["batch", str(path), "--out", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err.strip()
     assert err == "grasp-safety: error: sources: is required"
+
+
+def test_kernels_warm_once_per_process_and_plain_progress_lines(
+    dataset: Dataset,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    from grasp_safety_ros.dataset import batch
+
+    calls = []
+    monkeypatch.setattr(batch, "warm_up", lambda: calls.append(1) or 0.0)
+    monkeypatch.setattr(batch, "_WARMED", False)
+    run_batch(dataset.spec_path, tmp_path / "a", workers=1)
+    run_batch(dataset.spec_path, tmp_path / "b", workers=1)
+    assert calls == [1]  # 16 chunks, one warm-up
+    lines = capsys.readouterr().err.splitlines()  # stderr is not a terminal: plain lines
+    assert lines[-1].startswith("batch: 8/8 chunks") and len(lines) == 16
+
+
+def test_per_sample_series_equal_rank(dataset: Dataset, tmp_path: Path) -> None:
+    spec = dict(dataset.spec, sources=[{"format": "acronym", "path": "acronym/a.h5"}])
+    out = tmp_path / "series"
+    assert (
+        main(
+            [
+                "batch",
+                str(dataset.write_spec("series.yaml", spec)),
+                "--out",
+                str(out),
+                "--per-sample",
+                "--workers",
+                "1",
+            ]
+        )
+        == 0
+    )
+    rows = read_batch(out).to_pylist()
+    path = dataset.write_spec(
+        "equivalent_series.yaml", dataset.equivalent_scenario("acronym/a.h5")
+    )
+    report = rank_scenario(load_scenario(path))
+    for row, e in zip(rows, report.ranking.evaluations, strict=True):
+        if not e.feasible:
+            assert row["time_s"] is None and row["effective_mass_kg"] is None
+            continue
+        assert row["time_s"] == e.times_s.tolist()
+        assert np.allclose(row["effective_mass_kg"], e.effective_mass_kg, rtol=1e-12, atol=0)
+        assert np.allclose(row["tip_speed_m_s"], e.tip_speed_m_s, rtol=1e-12, atol=1e-15)
+    assert sum(len(r["time_s"] or []) for r in rows) == 4 * 6  # 4 feasible x 6 samples

@@ -147,7 +147,10 @@ def _evaluator(scenario: Scenario, workers: int) -> GraspSafetyEvaluator:
     )
     with _LOCK:
         if key not in _EVALUATORS:
-            config = EvaluationConfig(metric=scenario.metric, workers=workers)
+            # a chunk is already a coarse unit: share out whatever its size
+            config = EvaluationConfig(
+                metric=scenario.metric, workers=workers, parallel_min_samples=1
+            )
             _EVALUATORS[key] = GraspSafetyEvaluator(robot.load(scenario.base_dir), config)
         return _EVALUATORS[key]
 
