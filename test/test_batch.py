@@ -11,6 +11,7 @@ import shutil
 import socket
 import subprocess
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -494,3 +495,33 @@ def test_per_sample_series_equal_rank(dataset: Dataset, tmp_path: Path) -> None:
         assert np.allclose(row["effective_mass_kg"], e.effective_mass_kg, rtol=1e-12, atol=0)
         assert np.allclose(row["tip_speed_m_s"], e.tip_speed_m_s, rtol=1e-12, atol=1e-15)
     assert sum(len(r["time_s"] or []) for r in rows) == 4 * 6  # 4 feasible x 6 samples
+
+
+def test_killed_run_resumed_equals_uninterrupted(dataset: Dataset, tmp_path: Path) -> None:
+    import os
+    import signal
+
+    spec = dict(dataset.spec, chunk_grasps=1, posture={"restarts": 12})
+    spec_path = dataset.write_spec("kill.yaml", spec)
+    whole, killed = tmp_path / "whole", tmp_path / "killed"
+    run_batch(spec_path, whole, workers=1)
+    command = [sys.executable, "-m", "grasp_safety_ros.cli", "batch", str(spec_path)]
+    process = subprocess.Popen(
+        [*command, "--out", str(killed), "--workers", "1"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        deadline = time.monotonic() + 60
+        while len(list((killed / PARTS).glob("part-*.parquet"))) < 3:
+            assert process.poll() is None and time.monotonic() < deadline
+            time.sleep(0.002)
+        os.kill(process.pid, signal.SIGKILL)
+    finally:
+        process.wait(timeout=30)
+    written = len(list((killed / PARTS).glob("part-*.parquet")))
+    if written == 17:
+        pytest.skip("the run finished before it was killed")
+    summary = run_batch(spec_path, killed, workers=1, resume=True)
+    assert summary["chunks_resumed"] == written and summary["chunks_computed"] == 17 - written
+    assert _parts(killed) == _parts(whole)

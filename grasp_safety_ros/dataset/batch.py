@@ -28,7 +28,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from .. import __version__
-from ..cli.scenario import Scenario, rank_with_evaluator
+from ..cli.scenario import Scenario, rank_with_evaluator, read_yaml_file
 from ..core.exceptions import GraspSafetyError
 from ..core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
 from ..core.method.warm_up import warm_up
@@ -232,17 +232,19 @@ def part_is_done(out_dir: Path, chunk: Chunk) -> bool:
     return metadata.get(HASH_KEY) == chunk.content_hash.encode()
 
 
-def read_batch(out_dir: str | Path) -> pa.Table:
-    """The whole grasp table of a finished batch (its parts in manifest order)."""
+def read_batch(out_dir: str | Path, columns: Sequence[str] | None = None) -> pa.Table:
+    """The grasp table of a finished batch (its parts in manifest order), all columns or
+    ``columns``."""
     out_dir = Path(out_dir)
     manifest = json.loads((out_dir / "manifest.json").read_text(encoding="utf-8"))
     schema = grasp_schema(manifest["per_sample"])
-    tables = [pq.read_table(out_dir / PARTS / p["file"]) for p in manifest["parts"]]
-    return (
-        pa.concat_tables([t.replace_schema_metadata(None) for t in tables])
-        if tables
-        else (schema.empty_table())
-    )
+    if columns is not None:
+        schema = pa.schema([schema.field(name) for name in columns])
+    tables = [
+        pq.read_table(out_dir / PARTS / part["file"], columns=columns).replace_schema_metadata()
+        for part in manifest["parts"]
+    ]
+    return pa.concat_tables(tables) if tables else schema.empty_table()
 
 
 class _Progress:
@@ -300,21 +302,28 @@ def _reason_pattern(reason: str) -> str:
     return re.sub(r"[-+]?\d+(\.\d+)?([eE][-+]?\d+)?", "#", reason)[:160]
 
 
-def summarise(rows: pa.Table, failures: Sequence[Failure]) -> dict[str, Any]:
-    """Counts and failures of a finished table (independent of how it was computed)."""
-    data = rows.select(["source", "grasp_id", "feasible", "reason", "error_key"]).to_pylist()
-    unreadable = [r for r in data if r["error_key"] is not None]
+def summarise(out_dir: Path, failures: Sequence[Failure]) -> dict[str, Any]:
+    """Counts and failures of a finished batch, from its parts (so they do not depend on how
+    it was computed or resumed); reads the few columns needed, not the per-sample ones."""
+    import pyarrow.compute as pc
+
+    rows = read_batch(out_dir, ["source", "feasible", "reason", "error_key"])
+    failed = rows.filter(pc.invert(rows.column("feasible")))
+    unreadable = failed.filter(pc.is_valid(failed.column("error_key")))
     listed = [{"file": f.file, "key": f.key, "reason": f.reason} for f in failures]
     listed += [
-        {"file": r["source"], "key": r["error_key"], "reason": r["reason"]} for r in unreadable
+        {"file": r["source"], "key": r["error_key"], "reason": r["reason"]}
+        for r in unreadable.slice(0, MAX_LISTED_FAILURES).to_pylist()
     ]
-    by_reason = Counter(_reason_pattern(r["reason"]) for r in data if not r["feasible"])
+    by_reason: Counter[str] = Counter()
+    for item in pc.value_counts(failed.column("reason")).to_pylist():
+        by_reason[_reason_pattern(item["values"])] += item["counts"]
     by_reason.update(_reason_pattern(f"file refused: {f.reason}") for f in failures)
     return {
-        "grasps": len(data),
-        "feasible": sum(r["feasible"] for r in data),
-        "infeasible": len(data) - sum(r["feasible"] for r in data) - len(unreadable),
-        "unreadable_grasps": len(unreadable),
+        "grasps": rows.num_rows,
+        "feasible": rows.num_rows - failed.num_rows,
+        "infeasible": failed.num_rows - unreadable.num_rows,
+        "unreadable_grasps": unreadable.num_rows,
         "files_refused": len(failures),
         "failures_by_reason": dict(sorted(by_reason.items(), key=lambda kv: (-kv[1], kv[0]))),
         "failures": listed[:MAX_LISTED_FAILURES],
@@ -339,8 +348,6 @@ def run_batch(
         client: A ``distributed.Client`` to use instead (tests, notebooks).
         resume: Keep the parts already written for the same inputs.
     """
-    from ..cli.scenario import read_yaml_file
-
     spec_path = Path(spec_path)
     data = read_yaml_file(spec_path, "spec")
     spec = parse_spec(data, spec_path.resolve().parent)
@@ -398,7 +405,7 @@ def run_batch(
         ],
     }
     _write_json(out_dir / "manifest.json", manifest)
-    summary = summarise(read_batch(out_dir), failures)
+    summary = summarise(out_dir, failures)
     summary.update(
         {
             "chunks": len(chunks),
