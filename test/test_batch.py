@@ -525,3 +525,18 @@ def test_killed_run_resumed_equals_uninterrupted(dataset: Dataset, tmp_path: Pat
     summary = run_batch(spec_path, killed, workers=1, resume=True)
     assert summary["chunks_resumed"] == written and summary["chunks_computed"] == 17 - written
     assert _parts(killed) == _parts(whole)
+
+
+def test_missing_dependency_is_one_line(dataset: Dataset, tmp_path: Path) -> None:
+    code = (
+        "import sys; sys.modules['h5py'] = None\n"
+        "from grasp_safety_ros.cli.main import main\n"
+        f"sys.exit(main(['batch', {str(dataset.spec_path)!r}, '--out', {str(tmp_path)!r}]))"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120
+    )
+    assert result.returncode == 2
+    assert result.stderr.strip() == (
+        "grasp-safety: error: batch: needs the package 'h5py': pip install -r requirements.txt"
+    )

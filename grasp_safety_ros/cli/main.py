@@ -119,9 +119,15 @@ def _command_reproduce(args: argparse.Namespace) -> int:
 
 
 def _command_batch(args: argparse.Namespace) -> int:
-    from ..dataset.commands import command_batch  # dask, pyarrow, h5py only for this command
+    try:  # pyarrow, h5py, dask and tqdm are needed by this command only
+        from ..dataset.commands import command_batch
 
-    return command_batch(args)
+        return command_batch(args)
+    except ImportError as error:
+        missing = error.name or str(error)
+        raise InvalidInputError(
+            "batch", f"needs the package {missing!r}: pip install -r requirements.txt"
+        ) from None
 
 
 def _non_negative_int(text: str) -> int:

@@ -311,6 +311,7 @@ def _graspgen_block(spec: BatchSpec, source: SourceFile, start: int, stop: int) 
             labels.append(confidence)
         except InvalidInputError as error:
             field = error.field.replace(".quat_xyzw", ".orientation")
+            field = field.replace(".position_m", ".position")
             entries.append((name, None, field, error.reason))
             labels.append(None)
     return _block(spec, source, start, spec.object_defaults, entries, labels)
