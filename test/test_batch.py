@@ -540,3 +540,19 @@ def test_missing_dependency_is_one_line(dataset: Dataset, tmp_path: Path) -> Non
     assert result.stderr.strip() == (
         "grasp-safety: error: batch: needs the package 'h5py': pip install -r requirements.txt"
     )
+
+
+def test_no_scheduler_is_a_one_line_error(
+    dataset: Dataset, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import dask
+
+    address = f"tcp://127.0.0.1:{_free_port()}"  # nothing listens there
+    with dask.config.set({"distributed.comm.timeouts.connect": "1s"}):
+        code = main(
+            ["batch", str(dataset.spec_path), "--out", str(tmp_path), "--scheduler", address]
+        )
+    assert code == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"grasp-safety: error: --scheduler: cannot connect to '{address}'")
+    assert len(err.splitlines()) == 1

@@ -29,7 +29,7 @@ import pyarrow.parquet as pq
 
 from .. import __version__
 from ..cli.scenario import Scenario, rank_with_evaluator, read_yaml_file
-from ..core.exceptions import GraspSafetyError
+from ..core.exceptions import GraspSafetyError, InvalidInputError
 from ..core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
 from ..core.method.warm_up import warm_up
 from .rows import block_columns
@@ -297,6 +297,20 @@ def _run_dask(payload: SpecPayload, chunks: Sequence[Chunk], client: Any) -> Ite
         future.release()
 
 
+def _connect(address: str) -> Any:
+    """A ``distributed.Client`` of the scheduler at ``address``; a one-line error naming
+    ``--scheduler`` when there is none (timeout: distributed.comm.timeouts.connect)."""
+    from distributed import Client
+
+    try:
+        return Client(address)
+    except (OSError, ValueError, TypeError) as error:  # TimeoutError is an OSError
+        reason = " ".join(str(error).split()) or type(error).__name__
+        raise InvalidInputError(
+            "--scheduler", f"cannot connect to {address!r}: {reason}"
+        ) from None
+
+
 def _reason_pattern(reason: str) -> str:
     """A failure reason with its numbers as '#', so alike failures count together."""
     return re.sub(r"[-+]?\d+(\.\d+)?([eE][-+]?\d+)?", "#", reason)[:160]
@@ -364,9 +378,7 @@ def run_batch(
     own_client = None
     try:
         if scheduler is not None and client is None:
-            from distributed import Client
-
-            client = own_client = Client(scheduler)
+            client = own_client = _connect(scheduler)
         results = (
             _run_dask(payload, todo, client)
             if client is not None
