@@ -556,3 +556,20 @@ def test_no_scheduler_is_a_one_line_error(
     err = capsys.readouterr().err.strip()
     assert err.startswith(f"grasp-safety: error: --scheduler: cannot connect to '{address}'")
     assert len(err.splitlines()) == 1
+
+
+def test_progress_bar_on_a_terminal(
+    dataset: Dataset, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import io
+
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    terminal = Terminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
+    run_batch(dataset.spec_path, tmp_path, workers=1)
+    shown = terminal.getvalue()
+    assert "8/8" in shown and "chunk" in shown and "\r" in shown  # tqdm's bar, redrawn
+    assert "batch: " not in shown  # not the plain lines
