@@ -573,3 +573,14 @@ def test_progress_bar_on_a_terminal(
     shown = terminal.getvalue()
     assert "8/8" in shown and "chunk" in shown and "\r" in shown  # tqdm's bar, redrawn
     assert "batch: " not in shown  # not the plain lines
+
+
+def test_the_docs_spec_example_is_valid(tmp_path: Path) -> None:
+    import re
+
+    docs = Path(__file__).resolve().parents[1] / "docs" / "batch.md"
+    example = re.search(r"## The SPEC file\n\n```yaml\n(.*?)```", docs.read_text(), re.S)
+    assert example is not None
+    spec = parse_spec(yaml.safe_load(example.group(1)), tmp_path)
+    assert [s.format for s in spec.sources] == ["acronym", "graspgen", "scenarios"]
+    assert spec.trajectory is not None and spec.trajectory.num_samples == 51
