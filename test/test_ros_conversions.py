@@ -529,6 +529,7 @@ def test_report_message_content_drops_only_what_it_is_told(arm6: RobotModel) -> 
                     "direction_is_worst_case",
                     "leading_point_effective_mass_kg",
                     "worst_point_effective_mass_kg",
+                    "links_only_effective_mass_kg",
                 ):
                     setattr(item, name, getattr(GraspEvaluationMsg(), name))  # empty
         assert repr(message) == repr(expected)  # every field; NaN-safe, unlike ==
@@ -798,6 +799,8 @@ def test_evaluation_messages_equal_the_keyword_constructor_and_share_nothing() -
         whole_arm_worst_force_ratio=nan,
         whole_arm_min_duration_s=nan,
         whole_arm_worst_energy_j=nan,
+        links_only_effective_mass_kg=[1.0, 1.5],  # no armature: the same masses
+        links_only_mean_effective_mass_kg=1.25,
     )
     first, second = (conversions.evaluation_msg(evaluation) for _ in range(2))
     assert repr(first) == repr(expected)  # every field; NaN-safe, unlike ==

@@ -1260,6 +1260,7 @@ PER_SAMPLE_FIELDS = (
     "direction_is_worst_case",
     "leading_point_effective_mass_kg",
     "worst_point_effective_mass_kg",
+    "links_only_effective_mass_kg",
 )
 
 

@@ -1,4 +1,4 @@
-"""Command line: ``grasp-safety rank``, ``grasp-safety demo``, ``grasp-safety reproduce``."""
+"""Command line: ``grasp-safety rank``, ``demo``, ``reproduce`` and ``batch``."""
 
 from __future__ import annotations
 
@@ -9,13 +9,14 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from ..core.analyses.safety_report import SafetyReport, analyse, posture_criterion
+from ..core.analyses.safety_report import SafetyReport
 from ..core.exceptions import GraspSafetyError, InvalidInputError
-from ..core.method.posture import select_postures
 from ..core.method.ranking import METRICS, EvaluationConfig, GraspSafetyEvaluator
+from ..core.model.armature import published_for
+from ..core.model.robot import NO_ARMATURE_NOTE
 from ..paths import config_file
 from .report import report_text, report_to_dict
-from .scenario import Scenario, load_scenario
+from .scenario import Scenario, load_scenario, rank_with_evaluator
 
 EXIT_BAD_INPUT = 2
 DEMO_SCENARIO = "book_baxter.yaml"
@@ -47,30 +48,7 @@ def rank_scenario(scenario: Scenario, metric: str | None = None) -> SafetyReport
     robot = scenario.robot.load(scenario.base_dir)
     evaluator = GraspSafetyEvaluator(robot, EvaluationConfig(metric=metric or scenario.metric))
     progress = _progress_printer(len(scenario.grasps) * len(scenario.trajectory.times_s()))
-    ranking = evaluator.rank(
-        scenario.grasps,
-        scenario.object_inertia,
-        scenario.trajectory,
-        seed_positions=scenario.robot.seed,
-        progress=progress,
-    )
-    ranking = select_postures(
-        evaluator,
-        scenario.grasps,
-        scenario.object_inertia,
-        scenario.trajectory,
-        ranking,
-        scenario.posture,
-        criterion=posture_criterion(robot, scenario.options),
-    )
-    return analyse(
-        evaluator,
-        scenario.grasps,
-        scenario.object_inertia,
-        scenario.trajectory,
-        scenario.options,
-        ranking=ranking,
-    )
+    return rank_with_evaluator(scenario, evaluator, progress)
 
 
 def run_header(scenario: Scenario, report: SafetyReport) -> str:
@@ -82,11 +60,17 @@ def run_header(scenario: Scenario, report: SafetyReport) -> str:
         robot = "(inline URDF)"
     else:
         robot = Path(urdf).name
-    return (
+    header = (
         f"robot {robot} ({scenario.robot.base_frame} -> {scenario.robot.tip_frame}), "
         f"{len(scenario.grasps)} grasps x {scenario.trajectory.num_samples} samples, "
         f"backend {report.ranking.backend}"
     )
+    if not report.ranking.armature_given:
+        header += f"\n{NO_ARMATURE_NOTE}"
+    elif isinstance(scenario.robot.armature_kgm2, str):
+        entry = published_for(scenario.robot.armature_kgm2, scenario.robot.urdf, ())
+        header += f"\narmature: published '{entry.name}' ({entry.status}, {entry.date})"
+    return header
 
 
 def _write_outputs(
@@ -142,6 +126,25 @@ def _command_reproduce(args: argparse.Namespace) -> int:
     return 0
 
 
+def _command_batch(args: argparse.Namespace) -> int:
+    try:  # pyarrow, h5py, dask and tqdm are needed by this command only
+        from ..dataset.commands import command_batch
+
+        return command_batch(args)
+    except ImportError as error:
+        missing = error.name or str(error)
+        raise InvalidInputError(
+            "batch", f"needs the package {missing!r}: pip install -r requirements.txt"
+        ) from None
+
+
+def _non_negative_int(text: str) -> int:
+    value = int(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``grasp-safety``."""
     parser = argparse.ArgumentParser(
@@ -165,6 +168,18 @@ def build_parser() -> argparse.ArgumentParser:
     reproduce.add_argument("--out", default="validation_output", help="output folder")
     reproduce.add_argument("--quick", action="store_true", help="a reduced, fast version")
     reproduce.set_defaults(handler=_command_reproduce)
+    batch = commands.add_parser(
+        "batch", help="safety labels for grasp datasets (ACRONYM, GraspGen, scenario files)"
+    )
+    batch.add_argument("spec", help="batch SPEC YAML file (docs/batch.md)")
+    batch.add_argument("--out", type=Path, required=True, help="output folder (Parquet parts)")
+    batch.add_argument("--scheduler", help="Dask scheduler address tcp://HOST:PORT")
+    batch.add_argument(
+        "--workers", type=_non_negative_int, default=0, help="local pool size (0: one per core)"
+    )
+    batch.add_argument("--resume", action="store_true", help="keep parts already written")
+    batch.add_argument("--per-sample", action="store_true", help="add per-sample series")
+    batch.set_defaults(handler=_command_batch)
     return parser
 
 

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
-from dataclasses import dataclass, field
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -12,14 +12,28 @@ import numpy as np
 import yaml
 
 from ..core.analyses.exposed_points import box_corners_in_object, cylinder_rim_points_in_object
-from ..core.analyses.safety_report import RANK_BY, AnalysisOptions
-from ..core.analyses.uncertainty import InertiaUncertainty
+from ..core.analyses.safety_report import (
+    RANK_BY,
+    AnalysisOptions,
+    SafetyReport,
+    analyse,
+    posture_criterion,
+)
+from ..core.analyses.uncertainty import InertiaUncertainty, analyse_armature_range
 from ..core.analyses.whole_arm import DEFAULT_RANK_REGION
 from ..core.exceptions import InvalidInputError
 from ..core.input_checks import finite_array, finite_float, pose_from_position_quat
 from ..core.method.joint_trajectory import PlannedJointTrajectory
-from ..core.method.posture import DEFAULT_RESTARTS, PostureConfig
-from ..core.method.ranking import METRICS, Grasp, check_metric
+from ..core.method.posture import DEFAULT_RESTARTS, PostureConfig, select_postures
+from ..core.method.ranking import METRICS, Grasp, GraspSafetyEvaluator, check_metric
+from ..core.model.armature import (
+    PUBLISHED,
+    ArmatureRange,
+    PublishedArmature,
+    armature_range,
+    published_for,
+    published_values,
+)
 from ..core.model.inertia import ObjectInertia, solid_box, solid_cylinder, solid_sphere
 from ..core.model.robot import RobotModel
 from ..core.model.trajectory import ObjectTrajectory
@@ -125,6 +139,10 @@ class RobotSpec:
         base_frame, tip_frame: Chain ends.
         seed: IK seed for the first sample, chain joint order [rad or m]; None: mid-range.
         locked_joints: Positions of joints off the chain (default: neutral) [rad or m].
+        armature_kgm2: Reflected rotor inertia (core.model.armature): a list in chain order or
+            ``{joint_name: value}``, values or ``[lo, hi]`` ranges [kg m^2, kg if prismatic],
+            or ``published`` / ``published:<entry>``; None: the description's own (MJCF) or
+            none.
     """
 
     urdf: str
@@ -132,12 +150,31 @@ class RobotSpec:
     tip_frame: str
     seed: tuple[float, ...] | None = None
     locked_joints: Mapping[str, float] | None = None
+    armature_kgm2: Any = None
 
     def load(self, relative_to: Path | None = None) -> RobotModel:
-        """Build the chain model."""
-        return RobotModel.from_urdf(
+        """Build the chain model, with the upper ends of armature ranges."""
+        robot = RobotModel.from_urdf(
             self.urdf, self.base_frame, self.tip_frame, self.locked_joints, relative_to
         )
+        bounds = self.armature_range(robot)
+        return robot if bounds is None else robot.with_armature(bounds.upper_kgm2)
+
+    def armature_range(self, robot: RobotModel) -> ArmatureRange | None:
+        """The armature bounds per chain joint of ``robot``; None when not given."""
+        value = self.armature_kgm2
+        if value is None:
+            return None
+        if isinstance(value, str):
+            entry = published_for(value, self.urdf, robot.joint_names)
+            value = published_values(entry, robot.joint_names)
+        return armature_range(value, robot.joint_names)
+
+    def published_armature(self, robot: RobotModel) -> PublishedArmature | None:
+        """The published entry the armature comes from, if any."""
+        if not isinstance(self.armature_kgm2, str):
+            return None
+        return published_for(self.armature_kgm2, self.urdf, robot.joint_names)
 
 
 @dataclass(frozen=True)
@@ -190,8 +227,19 @@ def _check_keys(section: Mapping[str, Any], allowed: set[str], prefix: str) -> N
 def parse_robot(section: Any) -> RobotSpec:
     """Parse the ``robot`` section."""
     robot = _mapping(section, "robot")
-    allowed = {"urdf", "base_frame", "tip_frame", "seed", "locked_joints", "exposed_points_m"}
-    _check_keys(robot, allowed, "robot")  # exposed_points_m: an analysis option
+    _check_keys(
+        robot,
+        {"urdf", "base_frame", "tip_frame", "seed", "locked_joints", "armature_kgm2"}
+        | {"exposed_points_m"},  # exposed_points_m: an analysis option
+        "robot",
+    )
+    armature = robot.get("armature_kgm2")
+    if isinstance(armature, str) and armature.partition(":")[0] != PUBLISHED:
+        raise InvalidInputError(
+            "robot.armature_kgm2",
+            f"must be a list, a mapping {{joint_name: value}}, '{PUBLISHED}' or "
+            f"'{PUBLISHED}:<entry>', got {armature!r}",
+        )
     seed = robot.get("seed")
     locked = robot.get("locked_joints")
     if locked is not None:
@@ -210,6 +258,7 @@ def parse_robot(section: Any) -> RobotSpec:
         tip_frame=_string(_required(robot, "tip_frame", "robot"), "robot.tip_frame"),
         seed=seed,
         locked_joints=locked,
+        armature_kgm2=armature,
     )
 
 
@@ -540,24 +589,75 @@ def parse_scenario(data: Any, base_dir: Path) -> Scenario:
     )
 
 
-def load_scenario(path: str | Path) -> Scenario:
-    """Read and validate a scenario YAML file (at most MAX_SCENARIO_BYTES, UTF-8)."""
+def read_yaml_file(path: str | Path, field: str = "scenario") -> Any:
+    """Read and parse a YAML file of at most MAX_SCENARIO_BYTES (UTF-8, bounded structure);
+    errors as one-line InvalidInputError(``field``)."""
     path = Path(path)
     try:
         with path.open("rb") as stream:
             raw = stream.read(MAX_SCENARIO_BYTES + 1)
     except OSError as error:
         reason = error.strerror or str(error)
-        raise InvalidInputError("scenario", f"cannot read '{path}': {reason}") from None
+        raise InvalidInputError(field, f"cannot read '{path}': {reason}") from None
     if len(raw) > MAX_SCENARIO_BYTES:
         raise InvalidInputError(
-            "scenario", f"'{path}' is larger than {MAX_SCENARIO_BYTES} bytes, the limit"
+            field, f"'{path}' is larger than {MAX_SCENARIO_BYTES} bytes, the limit"
         )
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as error:
         raise InvalidInputError(
-            "scenario", f"'{path}' is not UTF-8 text (byte {error.start}: {error.reason})"
+            field, f"'{path}' is not UTF-8 text (byte {error.start}: {error.reason})"
         ) from None
-    data = load_yaml(text, f"'{path}'")
-    return parse_scenario(data, path.resolve().parent)
+    return load_yaml(text, f"'{path}'")
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a scenario YAML file (at most MAX_SCENARIO_BYTES, UTF-8)."""
+    return parse_scenario(read_yaml_file(path), Path(path).resolve().parent)
+
+
+def rank_with_evaluator(
+    scenario: Scenario,
+    evaluator: GraspSafetyEvaluator,
+    progress: Callable[[int, int], None] | None = None,
+) -> SafetyReport:
+    """Rank the scenario's grasps with ``evaluator`` (built for its robot; its metric is the
+    one used), select their postures and run the analyses the scenario asks for."""
+    ranking = evaluator.rank(
+        scenario.grasps,
+        scenario.object_inertia,
+        scenario.trajectory,
+        seed_positions=scenario.robot.seed,
+        progress=progress,
+    )
+    ranking = select_postures(
+        evaluator,
+        scenario.grasps,
+        scenario.object_inertia,
+        scenario.trajectory,
+        ranking,
+        scenario.posture,
+        criterion=posture_criterion(evaluator.robot, scenario.options),
+    )
+    report = analyse(
+        evaluator,
+        scenario.grasps,
+        scenario.object_inertia,
+        scenario.trajectory,
+        scenario.options,
+        ranking=ranking,
+    )
+    bounds = scenario.robot.armature_range(evaluator.robot)
+    if bounds is None or not bounds.is_range:
+        return report
+    spread = analyse_armature_range(
+        evaluator.robot,
+        ranking.evaluations,
+        scenario.grasps,
+        scenario.object_inertia,
+        bounds.lower_kgm2,
+        bounds.upper_kgm2,
+        ranking.metric,
+    )
+    return replace(report, armature_range=spread)

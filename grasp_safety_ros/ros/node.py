@@ -60,6 +60,7 @@ from ..core.input_checks import finite_array
 from ..core.method.posture import select_postures
 from ..core.method.ranking import check_metric
 from ..core.model.inertia import ObjectInertia
+from ..core.model.robot import NO_ARMATURE_NOTE, RobotModel
 from .conversions import (
     check_frame_id,
     check_grasp_array,
@@ -867,6 +868,7 @@ class GraspSafetyNode(Node):
                 "last_infeasible_grasps": status.last_infeasible,
                 "last_error": status.last_error,
                 "robot_description_error": status.robot_description_error,
+                "armature": _armature_status(bundle.robot) if bundle else "",
             }
         return DiagnosticStatus(
             level=level,
@@ -945,6 +947,16 @@ def _deadline_check(
             )
 
     return check
+
+
+def _armature_status(robot: RobotModel) -> str:
+    """The chain's armature per joint [kg m^2 or kg], or the note that none was given."""
+    if not robot.armature_given:
+        return NO_ARMATURE_NOTE
+    return ", ".join(
+        f"{name} {value:g}"
+        for name, value in zip(robot.joint_names, robot.armature_kgm2, strict=True)
+    )
 
 
 def main(args: list[str] | None = None) -> int:

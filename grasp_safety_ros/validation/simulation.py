@@ -435,6 +435,7 @@ class ImpulseCase:
         rel_error: |impulse - predicted| / predicted (inf if the tip never separated).
         duration_s: Contact duration [s].
         limit_active: Whether a joint-limit constraint acted (would spoil the check).
+        peak_force_n: Largest contact normal force during the impact [N].
     """
 
     effective_mass_kg: float
@@ -447,6 +448,7 @@ class ImpulseCase:
     rel_error: float
     duration_s: float
     limit_active: bool
+    peak_force_n: float = 0.0
 
 
 class ImpulseChecker:
@@ -507,7 +509,7 @@ class ImpulseChecker:
         engine_mass = engine_effective_mass(scene, unit)
         speed_before = float(unit @ (tip_translational_jacobian(scene) @ data.qvel))
         steps = round(setup.max_duration_s / setup.timestep_s)
-        impulse = 0.0
+        impulse = peak_force = 0.0
         started = False
         limit_active = False
         duration = 0.0
@@ -520,6 +522,7 @@ class ImpulseChecker:
             )
             if force > 0.0:
                 started = True
+                peak_force = max(peak_force, force)
                 impulse += force * setup.timestep_s
                 duration += setup.timestep_s
             elif started and not _touching(scene):
@@ -540,6 +543,7 @@ class ImpulseChecker:
             rel_error=float(error),
             duration_s=duration,
             limit_active=limit_active,
+            peak_force_n=peak_force,
         )
 
 

@@ -39,7 +39,12 @@ from .iso15066 import (
 )
 from .multi_objective import QualityRanking, rank_with_quality
 from .redundancy import RedundancyConfig, RedundancyResolution, resolve_redundancy
-from .uncertainty import InertiaUncertainty, UncertaintyAnalysis, analyse_inertia_uncertainty
+from .uncertainty import (
+    ArmatureRangeAnalysis,
+    InertiaUncertainty,
+    UncertaintyAnalysis,
+    analyse_inertia_uncertainty,
+)
 from .whole_arm import (
     DEFAULT_RANK_REGION,
     ArmSites,
@@ -170,6 +175,8 @@ class SafetyReport:
         effort: Joint effort per grasp, when on.
         whole_arm: Exposure of the arm's sites per grasp, when on.
         arm_sites: The sites assessed (resolved once per report), when on.
+        armature_range: Effective masses and ranking at both ends of armature ranges, when
+            the armature was given as ranges (uncertainty.analyse_armature_range).
     """
 
     ranking: Ranking
@@ -185,6 +192,7 @@ class SafetyReport:
     effort: tuple[EffortEvaluation, ...] = ()
     whole_arm: tuple[WholeArmEvaluation, ...] = ()
     arm_sites: ArmSites | None = None
+    armature_range: ArmatureRangeAnalysis | None = None
 
 
 def analyse(
