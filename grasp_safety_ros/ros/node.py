@@ -61,6 +61,7 @@ from ..core.method.posture import select_postures
 from ..core.method.ranking import check_metric
 from ..core.model.inertia import ObjectInertia
 from ..core.model.robot import NO_ARMATURE_NOTE, RobotModel
+from .arm_points import check_arm_point_links
 from .conversions import (
     check_frame_id,
     check_grasp_array,
@@ -80,7 +81,6 @@ from .parameters import (
     NodeSettings,
     RobotBundle,
     build_robot,
-    check_arm_point_links,
     check_parameter,
     settings_from_parameters,
 )
@@ -456,7 +456,7 @@ class GraspSafetyNode(Node):
             if set(changes) & {*ROBOT_PARAMETERS, "ik_seed"}:
                 bundle = build_robot(settings, self._topic_description)
             elif bundle is not None:  # build_robot checks them on a new robot
-                check_arm_point_links(settings, bundle.robot)
+                check_arm_point_links(settings.analysis.arm_points_m, bundle.robot)
             period_changed = settings.diagnostics_period_s != self._settings.diagnostics_period_s
             robot_changed = bundle is not self._robot
             self._values, self._settings, self._robot = values, settings, bundle

@@ -24,7 +24,7 @@ from ..core.analyses.exposed_points import (
 from ..core.analyses.iso15066 import BODY_REGIONS
 from ..core.analyses.safety_report import RANK_BY, AnalysisOptions
 from ..core.analyses.uncertainty import InertiaUncertainty
-from ..core.analyses.whole_arm import DEFAULT_RANK_REGION, MAX_SITES, resolve_arm_sites
+from ..core.analyses.whole_arm import DEFAULT_RANK_REGION, MAX_SITES
 from ..core.exceptions import FrameNotFoundError, GraspSafetyError, InvalidInputError
 from ..core.input_checks import finite_array, finite_float
 from ..core.method.posture import DEFAULT_RESTARTS, MAX_RESTARTS, PostureConfig
@@ -33,6 +33,7 @@ from ..core.method.warm_up import warm_up
 from ..core.model.armature import PUBLISHED, published_for, published_values
 from ..core.model.inertia import ObjectInertia
 from ..core.model.robot import RobotModel
+from .arm_points import arm_points, check_arm_point_links, check_point_links
 
 
 @dataclass(frozen=True)
@@ -422,7 +423,7 @@ def check_parameter(name: str, value: Any) -> Any:
     if name == "iso_ts_15066.regions":
         return _regions(name, value)
     if name == "whole_arm.point_links":
-        return _link_names(name, value)
+        return check_point_links(value)
     if name == "whole_arm.points_m":
         return _points(name, value, MAX_SITES)
     if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
@@ -465,21 +466,6 @@ def _names(name: str, value: Any) -> tuple[str, ...]:
         return ()
     if not all(isinstance(n, str) and n for n in names) or len(set(names)) != len(names):
         raise InvalidInputError(name, f"must be distinct joint names, got {_show(names)}")
-    return tuple(names)
-
-
-def _link_names(name: str, value: Any) -> tuple[str, ...]:
-    if value is None:  # an empty list in a params file arrives as NOT_SET
-        value = []
-    if isinstance(value, (str, bytes)) or not isinstance(value, (list, tuple, array.array)):
-        raise InvalidInputError(name, f"must be a list of link names, got {_show(value)}")
-    names = list(value)
-    if not names:  # [] may arrive as an empty byte or integer array
-        return ()
-    if not all(isinstance(link, str) and link for link in names):
-        raise InvalidInputError(name, f"must be a list of link names, got {_show(names)}")
-    if len(names) > MAX_SITES:
-        raise InvalidInputError(name, f"must hold at most {MAX_SITES} links, got {len(names)}")
     return tuple(names)
 
 
@@ -629,42 +615,9 @@ def analysis_from_parameters(values: Mapping[str, Any]) -> AnalysisOptions:
         rank_by=values["rank_by"],
         effort_criterion=values["effort.criterion"],
         whole_arm=values["whole_arm.enabled"],
-        arm_points_m=arm_points_from_parameters(values),
+        arm_points_m=arm_points(values["whole_arm.point_links"], values["whole_arm.points_m"]),
         whole_arm_region=values["whole_arm.region"],
     )
-
-
-def arm_points_from_parameters(values: Mapping[str, Any]) -> dict[str, np.ndarray] | None:
-    """The extra whole-arm points ``{link: (P, 3) [m], link frame}`` of checked parameter
-    values (``whole_arm.point_links`` with 3 numbers each of ``whole_arm.points_m``), links in
-    order of first mention, a link's points in the order given; None when there are none.
-    """
-    links, numbers = values["whole_arm.point_links"], values["whole_arm.points_m"]
-    if len(numbers) != 3 * len(links):
-        raise InvalidInputError(
-            "whole_arm.points_m",
-            f"must hold x y z for each of the {len(links)} whole_arm.point_links "
-            f"({3 * len(links)} numbers), got {len(numbers)} numbers",
-        )
-    points: dict[str, list[np.ndarray]] = {}
-    for link, point in zip(links, np.reshape(numbers, (-1, 3)), strict=True):
-        points.setdefault(link, []).append(point)
-    return {link: np.array(p) for link, p in points.items()} or None
-
-
-def check_arm_point_links(settings: NodeSettings, robot: RobotModel) -> None:
-    """Refuse extra whole-arm points on links ``robot`` does not have.
-
-    Raises:
-        InvalidInputError: naming ``whole_arm.point_links``, with close link names.
-    """
-    points = settings.analysis.arm_points_m
-    if not points:
-        return
-    try:
-        resolve_arm_sites(robot, points, defaults=False, field="whole_arm.point_links")
-    except InvalidInputError as error:
-        raise InvalidInputError("whole_arm.point_links", error.reason) from None
 
 
 def inertia_tensor_from_components(components: Sequence[float], field: str) -> np.ndarray:
@@ -822,7 +775,7 @@ def build_robot(settings: NodeSettings, topic_description: str | None) -> RobotB
     try:
         robot = RobotModel.from_urdf(source, settings.base_frame, settings.tip_frame)
         robot = _with_armature_parameters(robot, settings, source)
-        check_arm_point_links(settings, robot)
+        check_arm_point_links(settings.analysis.arm_points_m, robot)
         seed = None
         if settings.ik_seed is not None:
             seed = tuple(float(x) for x in robot.check_positions(settings.ik_seed, "robot.seed"))
