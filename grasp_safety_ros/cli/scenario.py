@@ -54,6 +54,8 @@ much larger objects make the augmented mass matrix numerically singular)."""
 
 
 _SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml when available
+_PARSER_DEPTH_LIMIT = "exceeded maximum nesting depth"
+"""What libyaml's scanner says when its own nesting limit (1000 flow levels) trips."""
 
 
 def _check_yaml_structure(text: str) -> None:
@@ -102,6 +104,13 @@ def load_yaml(text: str, where: str) -> Any:
     except (yaml.YAMLError, ValueError, OverflowError) as error:
         if isinstance(error, InvalidInputError):
             raise
+        if isinstance(error, yaml.MarkedYAMLError) and _PARSER_DEPTH_LIMIT in str(error.problem):
+            # libyaml (PyYAML >= 6.0.4) has a nesting limit of its own, which its scanner can
+            # reach before our event loop sees MAX_NESTING_DEPTH levels: one message for both.
+            line = error.problem_mark.line + 1 if error.problem_mark else 1
+            raise InvalidInputError(
+                "scenario", f"nesting deeper than {MAX_NESTING_DEPTH} levels at line {line}"
+            ) from None
         reason = " ".join(str(error).split())
         raise InvalidInputError("scenario", f"{where} is not valid YAML: {reason}") from None
 
