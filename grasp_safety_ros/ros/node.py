@@ -23,7 +23,7 @@ import sys
 import threading
 import time
 import traceback
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -75,13 +75,13 @@ from .conversions import (
 from .declaration import declare_node_parameters, typed_parameters
 from .parameters import (
     PARAMETERS,
-    ROBOT_PARAMETERS,
     NodeSettings,
     RobotBundle,
     build_robot,
     check_parameter,
     settings_from_parameters,
 )
+from .robot_group import PENDING_FIELDS, ROBOT_GROUP, group_complete, pending_reason
 
 NODE_NAME = "grasp_safety"
 EXECUTOR_THREADS = 4
@@ -472,8 +472,8 @@ class GraspSafetyNode(Node):
                 except GraspSafetyError as error:
                     if getattr(error, "field", None) not in PENDING_FIELDS:
                         raise
-                    reason = _pending_reason(pending, error, self._robot)
-                    if _group_complete(pending):
+                    reason = pending_reason(pending, error, self._robot)
+                    if group_complete(pending):
                         self._status.robot_parameters_pending = reason
                         raise InvalidInputError(", ".join(sorted(robot_changes)), reason) from None
                     others = {k: v for k, v in changes.items() if k not in ROBOT_GROUP}
@@ -917,41 +917,6 @@ class GraspSafetyNode(Node):
                 status=[self.diagnostics_status()],
             )
         )
-
-
-ROBOT_GROUP = frozenset({*ROBOT_PARAMETERS, "ik_seed"})
-"""Parameters that make the robot model; applied together (GraspSafetyNode._apply_parameters)."""
-
-PENDING_FIELDS = frozenset({"base_frame", "tip_frame", "ik_seed"})
-"""Fields of build_robot's errors that another robot parameter can resolve (a frame or a seed
-that does not fit the description yet): the change is pending, not refused."""
-
-
-def _group_complete(pending: Mapping[str, Any]) -> bool:
-    """Whether every robot parameter (urdf or robot_description, base_frame, tip_frame,
-    ik_seed) is among the pending ones: no other parameter can make the group consistent."""
-    return PENDING_FIELDS <= set(pending) and bool({*ROBOT_PARAMETERS[:2]} & set(pending))
-
-
-def _pending_reason(
-    pending: Mapping[str, Any], error: GraspSafetyError, serving: RobotBundle | None
-) -> str:
-    """The one line that the parameter result, the log and /diagnostics give while the robot
-    group is pending."""
-    model = (
-        f"the model from {serving.origin} ({serving.robot.base_frame} -> "
-        f"{serving.robot.tip_frame}) serves until they are"
-        if serving is not None
-        else "no model serves until they are"
-    )
-    if _group_complete(pending):
-        return (
-            f"robot parameters {', '.join(sorted(pending))} are not consistent ({error}); {model}"
-        )
-    return (
-        f"robot parameters pending ({', '.join(sorted(pending))}): not consistent yet "
-        f"({error}); {model}; set the rest of urdf, base_frame, tip_frame, ik_seed"
-    )
 
 
 def _robot_key(settings: NodeSettings) -> tuple[Any, ...]:
