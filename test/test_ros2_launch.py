@@ -155,3 +155,29 @@ def test_ros2_pkg_finds_the_launch_file(tmp_path: Path) -> None:
             "grasp_safety.launch.py",
         )
     assert "params_file" in shown
+
+
+def test_sigint_to_ros2_run_alone_does_not_stop_the_node(tmp_path: Path) -> None:
+    """Why the doc's scripts signal the node or the group: ``ros2 run`` catches the
+    KeyboardInterrupt and waits for its child, which never got the signal."""
+    with claim_ros_domain() as claim:
+        env = ros_env(tmp_path, claim.domain_id)
+        log = tmp_path / "run.log"
+        params = str(ROOT / "config" / "grasp_safety_node.yaml")
+        command = [str(ROS2), "run", "grasp_safety_ros", "grasp_safety_node"]
+        process = _start([*command, "--ros-args", "--params-file", params], env, log)
+        try:
+            process.send_signal(signal.SIGINT)
+            time.sleep(5.0)
+            assert process.poll() is None, log.read_text()
+            got = ros2_ok(env, "param", "get", *WAIT, NODE, "metric")
+            assert got == "String value is: mean\n"  # the node still serves
+        finally:
+            if process.poll() is None:
+                os.killpg(process.pid, signal.SIGINT)  # the group, as the doc's second script
+            try:
+                code = process.wait(timeout=30.0)
+            except subprocess.TimeoutExpired:
+                _kill(process)
+                raise
+    assert code == 0, log.read_text()
