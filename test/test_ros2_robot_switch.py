@@ -11,12 +11,11 @@ in the parameter results, the log and /diagnostics.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+import test_ros2_cli
 import yaml
-from ros_domains import claim_ros_domain
 from test_ros2_cli import (
     NODE,
     PARAMS,
@@ -26,9 +25,9 @@ from test_ros2_cli import (
     book_request_yaml,
     response_field,
     ros2_all,
-    ros_env,
 )
 
+node = test_ros2_cli.node  # a fixture here too: this module's own node, started by ros2 run
 pytestmark = pytest.mark.skipif(not ROS2.exists(), reason=f"no ros2 command line at {ROS2}")
 
 UR5 = {
@@ -46,17 +45,6 @@ DIAGNOSTICS = (
     *("topic", "echo", "--once", "--no-daemon"),
     *("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray"),
 )
-
-
-@pytest.fixture(scope="module")
-def node(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RunningNode]:
-    log_dir = tmp_path_factory.mktemp("ros2_switch")
-    with claim_ros_domain() as claim:
-        running = RunningNode(ros_env(log_dir, claim.domain_id), PARAMS, log_dir / "node.log")
-        yield running
-        running.close()
-    assert running.process.returncode == 0, running.output()
-    assert "Traceback" not in running.output(), running.output()
 
 
 def _params_file(tmp_path: Path, name: str, values: dict) -> str:
