@@ -7,12 +7,16 @@ import json
 import sys
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 
 from ..core.analyses.safety_report import SafetyReport, analyse
+from ..core.analyses.uncertainty import analyse_armature_range
 from ..core.exceptions import GraspSafetyError, InvalidInputError
 from ..core.method.posture import select_postures
 from ..core.method.ranking import METRICS, EvaluationConfig, GraspSafetyEvaluator
+from ..core.model.armature import published_for
+from ..core.model.robot import NO_ARMATURE_NOTE
 from ..paths import config_file
 from .report import report_text, report_to_dict
 from .scenario import Scenario, load_scenario
@@ -62,7 +66,7 @@ def rank_scenario(scenario: Scenario, metric: str | None = None) -> SafetyReport
         ranking,
         scenario.posture,
     )
-    return analyse(
+    report = analyse(
         evaluator,
         scenario.grasps,
         scenario.object_inertia,
@@ -70,6 +74,19 @@ def rank_scenario(scenario: Scenario, metric: str | None = None) -> SafetyReport
         scenario.options,
         ranking=ranking,
     )
+    bounds = scenario.robot.armature_range(robot)
+    if bounds is None or not bounds.is_range:
+        return report
+    spread = analyse_armature_range(
+        robot,
+        ranking.evaluations,
+        scenario.grasps,
+        scenario.object_inertia,
+        bounds.lower_kgm2,
+        bounds.upper_kgm2,
+        ranking.metric,
+    )
+    return replace(report, armature_range=spread)
 
 
 def run_header(scenario: Scenario, report: SafetyReport) -> str:
@@ -81,10 +98,16 @@ def run_header(scenario: Scenario, report: SafetyReport) -> str:
         robot = "(inline URDF)"
     else:
         robot = Path(urdf).name
-    return (
+    header = (
         f"robot {robot} ({scenario.robot.base_frame} -> {scenario.robot.tip_frame}), "
         f"{_problem_size(scenario)}, backend {report.ranking.backend}"
     )
+    if not report.ranking.armature_given:
+        header += f"\n{NO_ARMATURE_NOTE}"
+    elif isinstance(scenario.robot.armature_kgm2, str):
+        entry = published_for(scenario.robot.armature_kgm2, scenario.robot.urdf, ())
+        header += f"\narmature: published '{entry.name}' ({entry.status}, {entry.date})"
+    return header
 
 
 def _problem_size(scenario: Scenario) -> str:

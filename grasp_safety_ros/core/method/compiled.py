@@ -45,6 +45,7 @@ class ChainArrays(NamedTuple):
     base_translation: np.ndarray  # (3,) [m]
     lower_q: np.ndarray  # (nq,) -inf for continuous joints
     upper_q: np.ndarray  # (nq,) +inf for continuous joints
+    armature: np.ndarray  # (n,) reflected rotor inertia [kg m^2, kg if prismatic]
 
 
 class IKSettings(NamedTuple):
@@ -177,6 +178,7 @@ def chain_arrays_or_reason(robot: RobotModel) -> ChainArrays | str:
         base_translation=np.array(base.translation),
         lower_q=lower,
         upper_q=upper,
+        armature=np.array(robot.armature_kgm2, dtype=float),
     )
     for array in arrays:
         array.setflags(write=False)
