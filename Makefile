@@ -1,7 +1,8 @@
 # Two commands do everything on a fresh machine: `make demo` and `make test`.
 # Each creates .venv/ and installs what is missing (PyPI wheels, incl. ROS 2 Jazzy), registers
 # the package in the venv's ament prefix and writes .venv/setup.bash; with ../shared/tools/
-# ros2cli/install beside the checkout it also installs the ROS 2 command line (`ros2`).
+# ros2cli/install beside the checkout it also installs the ROS 2 command line (`ros2`), and with
+# ../shared/tools/ros2launch/install too `ros2 launch`.
 # Every pip install of the setup (the interface build's and ../shared/tools' too) takes the
 # exact versions in requirements.lock (PIP_CONSTRAINT); requirements*.txt are the loose
 # specification it is made from by `make lock` (see docs/development.md).
@@ -22,6 +23,7 @@ AMENT_STAMP := $(VENV)/.ament
 ROS2CLI_INSTALL := $(wildcard ../shared/tools/ros2cli/install)
 ROS2CLI_STAMP := $(if $(ROS2CLI_INSTALL),$(VENV)/.ros2cli)
 ROS2LAUNCH_INSTALL := $(wildcard ../shared/tools/ros2launch/install)
+ROS2LAUNCH_STAMP := $(if $(and $(ROS2CLI_INSTALL),$(ROS2LAUNCH_INSTALL)),$(VENV)/.ros2launch)
 # some machines' pip.conf names local indexes that do not exist: drop pip's warning about them
 PIP_QUIET := sed -e '/is ignored: it is neither a file nor a directory/d'
 
@@ -29,7 +31,7 @@ PIP_QUIET := sed -e '/is ignored: it is neither a file nor a directory/d'
 
 all: setup
 
-setup: $(IFACE_STAMP) $(AMENT_STAMP) $(ROS2CLI_STAMP) $(KERNELS_STAMP)
+setup: $(IFACE_STAMP) $(AMENT_STAMP) $(ROS2CLI_STAMP) $(ROS2LAUNCH_STAMP) $(KERNELS_STAMP)
 
 $(STAMP): requirements.txt setup.py $(LOCK)
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -47,12 +49,19 @@ $(IFACE_STAMP): $(STAMP) $(IFACE_SRC)
 	bash scripts/build_interfaces.sh
 	touch $@
 
-$(AMENT_STAMP): $(STAMP) package.xml resource/grasp_safety_ros scripts/register_ament.sh
+# launch/ and config/ are linked file by file: a new or removed file re-registers
+$(AMENT_STAMP): $(STAMP) package.xml resource/grasp_safety_ros scripts/register_ament.sh \
+  launch $(wildcard launch/*.py) config $(wildcard config/*)
 	bash scripts/register_ament.sh
 	touch $@
 
 $(VENV)/.ros2cli: $(STAMP) $(ROS2CLI_INSTALL)
 	set -o pipefail; bash $(ROS2CLI_INSTALL) $(VENV) 2>&1 | $(PIP_QUIET)
+	touch $@
+
+# ros2 launch (launch, launch_ros, ros2launch): a ros2 verb, so after the ros2 command line
+$(VENV)/.ros2launch: $(VENV)/.ros2cli $(ROS2LAUNCH_INSTALL)
+	set -o pipefail; bash $(ROS2LAUNCH_INSTALL) $(VENV) 2>&1 | $(PIP_QUIET)
 	touch $@
 
 demo: setup
