@@ -64,7 +64,8 @@ $(VENV)/.ros2launch: $(VENV)/.ros2cli $(ROS2LAUNCH_INSTALL)
 	set -o pipefail; bash $(ROS2LAUNCH_INSTALL) $(VENV) 2>&1 | $(PIP_QUIET)
 	touch $@
 
-demo: setup
+# the demo needs the Python packages and the kernels only: the ROS 2 parts install with `make test`
+demo: $(KERNELS_STAMP)
 	$(VENV)/bin/grasp-safety demo --out demo_output
 
 test: setup
