@@ -41,7 +41,8 @@ $(STAMP): requirements.txt setup.py $(LOCK)
 
 # Compile the kernels, or load them from numba's cache of the same sources, shared by the
 # checkouts of this machine (see core/kernels/_jit.py).
-$(KERNELS_STAMP): $(STAMP) $(wildcard $(KERNELS)/*.py)
+$(KERNELS_STAMP): $(STAMP) $(wildcard $(KERNELS)/*.py) \
+  $(shell grep -rl --include='*.py' NamedTuple grasp_safety_ros/core)
 	$(PY) -c "from grasp_safety_ros.core.method.warm_up import warm_up; print(f'compiled kernels ready ({warm_up():.1f} s)')"
 	touch $@
 
