@@ -50,7 +50,7 @@ def test_extended_scenario_json(tmp_path: Path) -> None:
     safety = [grasps[k]["safety_score"] for k in result["safety_ranking"]]
     assert safety == sorted(safety)
     for grasp in grasps:
-        masses = [s["leading_point_effective_mass_kg"] for s in grasp["samples"]]
+        masses = grasp["samples"]["leading_point_effective_mass_kg"]
         assert grasp["safety_score"] == pytest.approx(np.mean(masses), rel=1e-12)
         assert set(grasp["iso_ts_15066"]["regions"]) == {
             "chest",
@@ -61,7 +61,7 @@ def test_extended_scenario_json(tmp_path: Path) -> None:
         }
         assert grasp["iso_ts_15066"]["regions"]["face"]["worst_force_ratio"] is None
         assert grasp["redundancy"]["score"] <= grasp["redundancy"]["score_without"] + 1e-9
-        assert len(grasp["samples"][0]["joint_torques"]) == 7
+        assert len(grasp["samples"]["joint_torques"][0]) == 7
         assert grasp["uncertainty"]["worst_case_score"] >= grasp["score"] - 1e-12
     assert result["uncertainty"]["perturbations"] > 8
     pareto = set(result["pareto_set"])

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 from typing import Any
 
@@ -15,6 +16,10 @@ from ..core.method.ranking import GraspEvaluation, Ranking
 
 SCORE_UNITS = {"mean": "kg", "max": "kg", "integral": "kg*s"}
 
+SCHEMA_VERSION = 2
+"""Version of the JSON layout: 2 holds each grasp's ``samples`` as one array per field
+(columnar; 1, before it, held one object per sample)."""
+
 
 def number(value: float) -> float | None:
     """A finite float, or None (JSON null) for NaN and inf."""
@@ -22,31 +27,20 @@ def number(value: float) -> float | None:
     return value if math.isfinite(value) else None
 
 
-def numbers(values: np.ndarray) -> list[Any]:
-    """Nested lists of finite floats, with None for NaN and inf."""
-    array = np.asarray(values, dtype=float)
-    if array.ndim == 0:
-        return number(array)  # type: ignore[return-value]
-    return [numbers(row) for row in array] if array.ndim > 1 else [number(v) for v in array]
+def numbers(values: np.ndarray) -> Any:
+    """Nested lists of an array (one ``tolist``), with None for NaN and inf floats."""
+    array = np.asarray(values)
+    if array.dtype.kind == "f" and not np.isfinite(array).all():
+        patched = array.astype(object)
+        patched[~np.isfinite(array)] = None
+        return patched.tolist()
+    return array.tolist()
 
 
-def evaluation_to_dict(evaluation: GraspEvaluation) -> dict[str, Any]:
-    """One grasp of the paper's ranking (samples carry q and qd in joint_names order)."""
-    velocities, _ = joint_velocities_accelerations(evaluation.times_s, evaluation.joint_positions)
-    samples = [
-        {
-            "t_s": float(evaluation.times_s[i]),
-            "q": evaluation.joint_positions[i].tolist(),
-            "qd": velocities[i].tolist(),
-            "direction_in_base": evaluation.directions_in_base[i].tolist(),
-            "effective_mass_kg": float(evaluation.effective_mass_kg[i]),
-            "direction_is_worst_case": bool(evaluation.direction_is_worst_case[i]),
-            "tip_speed_m_s": float(evaluation.tip_speed_m_s[i]),
-            "ik_iterations": int(evaluation.ik_iterations[i]),
-        }
-        for i in range(len(evaluation.times_s))
-    ]
-    return {
+def evaluation_to_dict(evaluation: GraspEvaluation, per_sample: bool = True) -> dict[str, Any]:
+    """One grasp of the paper's ranking; with ``per_sample``, its ``samples``: one array per
+    field, one entry per sample (q and qd rows in joint_names order)."""
+    result: dict[str, Any] = {
         "index": evaluation.index,
         "name": evaluation.name,
         "feasible": evaluation.feasible,
@@ -54,8 +48,22 @@ def evaluation_to_dict(evaluation: GraspEvaluation) -> dict[str, Any]:
         "score": number(evaluation.score),
         "mean_effective_mass_kg": number(evaluation.mean_effective_mass_kg),
         "peak_effective_mass_kg": number(evaluation.peak_effective_mass_kg),
-        "samples": samples,
     }
+    if per_sample:
+        velocities, _ = joint_velocities_accelerations(
+            evaluation.times_s, evaluation.joint_positions
+        )
+        result["samples"] = {
+            "t_s": numbers(evaluation.times_s),
+            "q": numbers(evaluation.joint_positions),
+            "qd": numbers(velocities),
+            "direction_in_base": numbers(evaluation.directions_in_base),
+            "effective_mass_kg": numbers(evaluation.effective_mass_kg),
+            "direction_is_worst_case": numbers(evaluation.direction_is_worst_case),
+            "tip_speed_m_s": numbers(evaluation.tip_speed_m_s),
+            "ik_iterations": numbers(evaluation.ik_iterations),
+        }
+    return result
 
 
 def posture_to_dict(posture: PostureSelection) -> dict[str, Any]:
@@ -70,13 +78,15 @@ def posture_to_dict(posture: PostureSelection) -> dict[str, Any]:
     }
 
 
-def ranking_to_dict(ranking: Ranking) -> dict[str, Any]:
-    """The paper's ranking: joint names, metric, ranking (indices), per-grasp results and the
-    backend that ran (``compiled`` or ``python``, with the reason of a fallback)."""
-    grasps = [evaluation_to_dict(e) for e in ranking.evaluations]
+def ranking_to_dict(ranking: Ranking, per_sample: bool = True) -> dict[str, Any]:
+    """The paper's ranking: joint names, metric, ranking (indices), per-grasp results (with
+    their per-sample arrays when ``per_sample``) and the backend that ran (``compiled`` or
+    ``python``, with the reason of a fallback)."""
+    grasps = [evaluation_to_dict(e, per_sample) for e in ranking.evaluations]
     for grasp, posture in zip(grasps, ranking.postures, strict=False):
         grasp["posture"] = posture_to_dict(posture)
     return {
+        "schema_version": SCHEMA_VERSION,
         "backend": ranking.backend,
         "joint_names": list(ranking.joint_names),
         "metric": ranking.metric,
@@ -109,13 +119,14 @@ def iso_to_dict(assessment: PowerForceLimitAssessment) -> dict[str, Any]:
     }
 
 
-def report_to_dict(report: SafetyReport) -> dict[str, Any]:
+def report_to_dict(report: SafetyReport, per_sample: bool = True) -> dict[str, Any]:
     """The CLI's JSON: the paper's ranking plus every analysis the options asked for.
 
     ``ranking`` is the final order (safety, safety + quality, or effort); ``safety_ranking``
-    orders by the safety score alone (with the chosen ``metric_point``).
+    orders by the safety score alone (with the chosen ``metric_point``). Without
+    ``per_sample``, the grasps have no ``samples`` (per-grasp summaries only).
     """
-    result = ranking_to_dict(report.ranking)
+    result = ranking_to_dict(report.ranking, per_sample)
     options = report.options
     result.update(
         {
@@ -163,18 +174,23 @@ def report_to_dict(report: SafetyReport) -> dict[str, Any]:
     return result
 
 
+def report_json(report: SafetyReport, per_sample: bool = True) -> str:
+    """``report_to_dict`` as compact, strict JSON text (no NaN or inf)."""
+    return json.dumps(report_to_dict(report, per_sample), allow_nan=False, separators=(",", ":"))
+
+
 def _add_per_grasp_series(report: SafetyReport, k: int, grasp: dict[str, Any]) -> None:
-    samples = grasp["samples"]
+    """The analyses' per-grasp results, and their per-sample arrays into ``grasp["samples"]``
+    when it is there."""
+    samples = grasp.get("samples")
     if report.exposed:
         exposed = report.exposed[k]
-        grasp["exposed_points_in_object_m"] = exposed.points_in_object_m.tolist()
-        for i, sample in enumerate(samples):
-            sample["leading_point_index"] = int(exposed.leading_point_index[i])
-            sample["leading_point_effective_mass_kg"] = number(
-                exposed.leading_effective_mass_kg[i]
-            )
-            sample["worst_point_index"] = int(exposed.worst_point_index[i])
-            sample["worst_point_effective_mass_kg"] = number(exposed.worst_effective_mass_kg[i])
+        grasp["exposed_points_in_object_m"] = numbers(exposed.points_in_object_m)
+        if samples is not None:
+            samples["leading_point_index"] = numbers(exposed.leading_point_index)
+            samples["leading_point_effective_mass_kg"] = numbers(exposed.leading_effective_mass_kg)
+            samples["worst_point_index"] = numbers(exposed.worst_point_index)
+            samples["worst_point_effective_mass_kg"] = numbers(exposed.worst_effective_mass_kg)
     if report.redundancy:
         resolution = report.redundancy[k]
         grasp["redundancy"] = {
@@ -183,28 +199,27 @@ def _add_per_grasp_series(report: SafetyReport, k: int, grasp: dict[str, Any]) -
             "score": number(resolution.score),
             "score_without": number(resolution.original_score),
         }
-        if resolution.applied:
+        if resolution.applied and samples is not None:
             velocities, _ = joint_velocities_accelerations(
                 resolution.times_s, resolution.joint_positions
             )
-            for i, sample in enumerate(samples):
-                sample["q_redundancy"] = resolution.joint_positions[i].tolist()
-                sample["qd_redundancy"] = velocities[i].tolist()
-                sample["effective_mass_redundancy_kg"] = float(resolution.effective_mass_kg[i])
+            samples["q_redundancy"] = numbers(resolution.joint_positions)
+            samples["qd_redundancy"] = numbers(velocities)
+            samples["effective_mass_redundancy_kg"] = numbers(resolution.effective_mass_kg)
     if report.effort:
         effort = report.effort[k]
         if effort.feasible:
             grasp["effort"] = {
-                "peak_abs_torque": effort.peak_abs_torque.tolist(),
-                "rms_torque": effort.rms_torque.tolist(),
+                "peak_abs_torque": numbers(effort.peak_abs_torque),
+                "rms_torque": numbers(effort.rms_torque),
                 "effort_limits": numbers(effort.effort_limits),
                 "peak_fraction_of_limit": numbers(effort.peak_fraction_of_limit),
                 "rms_fraction_of_limit": numbers(effort.rms_fraction_of_limit),
                 "score": number(effort.score(report.options.effort_criterion)),
                 "criterion": report.options.effort_criterion,
             }
-            for i, sample in enumerate(samples):
-                sample["joint_torques"] = effort.joint_torques[i].tolist()
+            if samples is not None:
+                samples["joint_torques"] = numbers(effort.joint_torques)
 
 
 def ranking_table(ranking: Ranking) -> str:

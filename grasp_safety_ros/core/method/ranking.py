@@ -22,6 +22,8 @@ from .effective_mass import (
 )
 from .ik import IKConfig, IKSolver, check_backend
 from .joint_trajectory import JointSpaceTrajectory, PlannedJointTrajectory
+from .metrics import METRICS as METRICS  # imported from here by ros.parameters
+from .metrics import aggregate, check_metric
 from .pool import evaluate_jobs, executor_for
 
 if TYPE_CHECKING:
@@ -30,9 +32,6 @@ if TYPE_CHECKING:
 BATCH_GRASPS = 16
 """Grasps per call of the fused kernel in ``rank``: one job of the worker pool (its results,
 and the ``progress`` calls, come together)."""
-
-METRICS = ("mean", "max", "integral")
-"""Aggregates of the per-sample effective mass: mean [kg], max [kg], integral [kg s]."""
 
 
 @dataclass(frozen=True)
@@ -81,13 +80,6 @@ class EvaluationConfig:
         ):
             if not isinstance(value, int) or isinstance(value, bool) or value < 0:
                 raise InvalidInputError(name, f"must be an integer >= 0, got {value!r}")
-
-
-def check_metric(metric: str, field_name: str = "metric") -> str:
-    """Return ``metric`` if it is one of METRICS, else raise InvalidInputError."""
-    if metric not in METRICS:
-        raise InvalidInputError(field_name, f"must be one of {', '.join(METRICS)}, got {metric!r}")
-    return metric
 
 
 @dataclass(frozen=True)
@@ -157,17 +149,6 @@ class Ranking:
     evaluations: tuple[GraspEvaluation, ...]
     postures: tuple[PostureSelection, ...] = ()
     backend: str = ""
-
-
-def aggregate(effective_mass_kg: np.ndarray, times_s: np.ndarray, metric: str) -> float:
-    """Score of per-sample effective masses: mean [kg], max [kg] or trapezoid integral [kg s]."""
-    check_metric(metric)
-    if metric == "mean":
-        masses = np.asarray(effective_mass_kg)
-        return float(masses.sum() / len(masses))  # = np.mean, without its overhead
-    if metric == "max":
-        return float(np.max(effective_mass_kg))
-    return float(np.trapezoid(effective_mass_kg, times_s)) if len(times_s) > 1 else 0.0
 
 
 def order_by_score(evaluations: Sequence[GraspEvaluation]) -> tuple[int, ...]:
