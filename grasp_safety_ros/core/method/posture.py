@@ -26,7 +26,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import pinocchio as pin
-from scipy.stats import qmc
 
 from ..exceptions import InvalidInputError
 from ..model.inertia import ObjectInertia
@@ -123,6 +122,8 @@ def restart_seeds(evaluator: GraspSafetyEvaluator, config: PostureConfig) -> np.
         return np.empty((0, robot.num_joints))
     lower = np.where(np.isfinite(robot.lower_limits), robot.lower_limits, -np.pi)
     upper = np.where(np.isfinite(robot.upper_limits), robot.upper_limits, np.pi)
+    from scipy.stats import qmc  # scipy.stats takes ~0.5 s to import: only when restarting
+
     unit = qmc.Halton(d=robot.num_joints, scramble=True, seed=config.seed).random(config.restarts)
     return lower + unit * (upper - lower)
 
