@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from grasp_safety_ros.core.kernels._jit import SOURCES_STAMP, drop_stale_cache
+from grasp_safety_ros.core.kernels._jit import SOURCES_STAMP, VALUE_TYPES, drop_stale_cache
 from grasp_safety_ros.core.method.ik import compiled_available
 
 
@@ -45,3 +45,19 @@ def test_installed_kernels_are_stamped() -> None:
     from grasp_safety_ros.core.kernels import grasp  # imports _jit, which checks the cache
 
     assert not drop_stale_cache(Path(grasp.__file__).parent)  # up to date now
+
+
+def test_moving_a_kernel_argument_type_drops_the_cache(tmp_path: Path) -> None:
+    """numba's cache index names the module of each named-tuple argument: a change in
+    method/packed.py (where they live) must drop the cache like a kernel edit."""
+    kernels, packed = tmp_path / "kernels", tmp_path / VALUE_TYPES
+    (kernels / "__pycache__").mkdir(parents=True)
+    packed.parent.mkdir(parents=True)
+    (kernels / "grasp.py").write_text("x = 1\n")
+    packed.write_text("class ChainArrays: ...\n")
+    drop_stale_cache(kernels)
+    (kernels / "__pycache__" / "grasp.f-1.py311.nbi").write_bytes(b"compiled")
+    assert not drop_stale_cache(kernels)
+    packed.write_text("class ChainArrays: ...\nclass IKSettings: ...\n")
+    assert drop_stale_cache(kernels)
+    assert not (kernels / "__pycache__" / "grasp.f-1.py311.nbi").exists()

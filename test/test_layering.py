@@ -4,8 +4,9 @@ Layers, lowest first: ``core.exceptions`` and ``core.input_checks`` <- ``core.mo
 ``core.method`` <- ``core.analyses`` <- the adapters (``cli``, ``ros``, ``validation``,
 ``paths``). A module may import its own layer or lower ones. ``core.kernels`` imports only
 itself and is imported only by ``core.method``; ``core`` never imports rclpy, ROS interface
-packages or an adapter. Imports inside functions count; those under ``if TYPE_CHECKING:`` do
-not (they never run).
+packages or an adapter. Imports inside functions count. For the layers, those under
+``if TYPE_CHECKING:`` do not (they never run); for cycles they do, at every level (a
+type-only circle still says a value type lives in the wrong module).
 """
 
 from __future__ import annotations
@@ -60,16 +61,22 @@ def _is_type_checking(test: ast.expr) -> bool:
     )
 
 
-def imports_of(source: str, module: str, is_package: bool, known: Iterable[str]) -> set[str]:
-    """Modules imported anywhere in ``source`` (module level and in functions), except under
-    ``if TYPE_CHECKING:``; relative imports resolved, ``from pkg import submodule`` counted as
-    the submodule when it is one of ``known``."""
+def imports_of(
+    source: str,
+    module: str,
+    is_package: bool,
+    known: Iterable[str],
+    type_checking: bool = False,
+) -> set[str]:
+    """Modules imported anywhere in ``source`` (module level and in functions), those under
+    ``if TYPE_CHECKING:`` only when ``type_checking``; relative imports resolved,
+    ``from pkg import submodule`` counted as the submodule when it is one of ``known``."""
     known = set(known)
     package = module if is_package else module.rpartition(".")[0]
     found: set[str] = set()
 
     def visit(node: ast.AST) -> None:
-        if isinstance(node, ast.If) and _is_type_checking(node.test):
+        if isinstance(node, ast.If) and _is_type_checking(node.test) and not type_checking:
             for child in node.orelse:
                 visit(child)
             return
@@ -92,15 +99,16 @@ def imports_of(source: str, module: str, is_package: bool, known: Iterable[str])
     return found
 
 
-def package_imports() -> dict[str, set[str]]:
-    """Every module of the package -> the modules it imports."""
+def package_imports(type_checking: bool = False) -> dict[str, set[str]]:
+    """Every module of the package -> the modules it imports (with the type-only imports when
+    ``type_checking``)."""
     files = {}
     for path in sorted(ROOT.rglob("*.py")):
         parts = path.relative_to(ROOT.parent).with_suffix("").parts
         is_package = parts[-1] == "__init__"
         files[".".join(parts[:-1] if is_package else parts)] = (path, is_package)
     return {
-        module: imports_of(path.read_text(), module, is_package, files)
+        module: imports_of(path.read_text(), module, is_package, files, type_checking)
         for module, (path, is_package) in files.items()
     }
 
@@ -165,7 +173,7 @@ def test_package_imports_follow_the_layers() -> None:
 
 
 def test_package_has_no_import_cycle() -> None:
-    cycle = find_cycle(package_imports())
+    cycle = find_cycle(package_imports(type_checking=True))
     assert cycle is None, "import cycle: " + " -> ".join(cycle or [])
 
 
@@ -188,6 +196,8 @@ def test_checker_sees_lazy_imports_and_skips_type_checking_blocks() -> None:
         f"{PACKAGE}.core.method.ik",
         "rclpy",
     }
+    with_types = imports_of(source, module, False, known, type_checking=True)
+    assert with_types == found | {f"{PACKAGE}.core.method.ranking"}
     problems = layer_violations({module: found})
     assert len(problems) == 2
     assert "upward import" in problems[0] and "free of ROS" in problems[1]

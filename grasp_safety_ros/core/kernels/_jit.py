@@ -26,17 +26,25 @@ SOURCES_STAMP = "kernels.sources"
 """File in the kernels' ``__pycache__`` holding the digest of the sources it was built from."""
 
 
+VALUE_TYPES = Path("method") / "packed.py"
+"""Where (below ``core``) the named tuples the kernels take are defined: numba's cache index
+names their module, so a change there must drop the cache too."""
+
+
 def drop_stale_cache(folder: Path | None = None) -> bool:
     """Delete numba's cached kernels (``*.nbi``, ``*.nbc``) in ``folder/__pycache__`` when any
     ``folder/*.py`` changed since they were written; returns whether it deleted them.
 
     numba invalidates a cached function only when its own file changes, but the kernels call
     each other across files: an edit in one file must recompile its callers in the others.
+    ``folder/../method/packed.py`` (VALUE_TYPES), where the kernels' argument types live,
+    counts as one of the sources.
     """
     folder = folder or Path(__file__).resolve().parent
     digest = hashlib.sha256()
-    for source in sorted(folder.glob("*.py")):
-        digest.update(source.name.encode() + b"\0" + source.read_bytes())
+    for source in [*sorted(folder.glob("*.py")), folder.parent / VALUE_TYPES]:
+        if source.is_file():
+            digest.update(source.name.encode() + b"\0" + source.read_bytes())
     cache = folder / "__pycache__"
     stamp = cache / SOURCES_STAMP
     try:

@@ -33,14 +33,12 @@ from ..model.trajectory import ObjectTrajectory
 from .pool import evaluate_jobs, executor_for
 from .ranking import (
     BATCH_GRASPS,
-    Grasp,
-    GraspEvaluation,
     GraspSafetyEvaluator,
-    Ranking,
     SampledTrajectory,
     order_by_score,
     sample_trajectory,
 )
+from .results import Grasp, GraspEvaluation, PostureSelection, Ranking
 
 MAX_RESTARTS = 1000
 """Largest number of posture restarts accepted per grasp."""
@@ -83,36 +81,6 @@ class PostureConfig:
                 "posture.duplicate_tolerance_rad",
                 f"must be a finite number > 0, got {tolerance!r}",
             )
-
-
-@dataclass(frozen=True)
-class PostureSelection:
-    """How one grasp's posture was chosen.
-
-    Attributes:
-        index: Position in the candidate list.
-        restarts: Restarts asked for (besides the single IK).
-        score: Score of the kept posture (the evaluation's score); NaN if infeasible.
-        score_single_ik: Score of the paper's single IK from the configured seed; NaN when
-            that one is infeasible.
-        score_range: (lowest, highest) score over the feasible postures found; NaN if none.
-        start_positions: (n,) joint positions at t = 0 of the kept posture [rad or m], chain
-            order; empty if infeasible.
-        postures_tried: Distinct start postures followed along the trajectory (the single
-            IK's counts as one, also when it fails).
-        postures_feasible: Of those, the ones whose whole trajectory is feasible.
-        selected: Which of the tried postures was kept (0: the single IK's); -1 if none.
-    """
-
-    index: int
-    restarts: int
-    score: float
-    score_single_ik: float
-    score_range: tuple[float, float]
-    start_positions: np.ndarray
-    postures_tried: int
-    postures_feasible: int
-    selected: int
 
 
 def restart_seeds(evaluator: GraspSafetyEvaluator, config: PostureConfig) -> np.ndarray:

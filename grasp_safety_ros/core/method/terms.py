@@ -20,7 +20,8 @@ import pinocchio as pin
 
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
-from .compiled import ChainArrays, augmented_bodies, call_kernel, plain_array
+from .compiled import augmented_bodies, call_kernel, plain_array
+from .packed import ChainArrays
 
 
 class SampleTerms(NamedTuple):
