@@ -287,9 +287,13 @@ def order_by_effort(
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """a × b over the last axis (size 3), broadcast (np.cross without its axis handling)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
     a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
     b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+    np.subtract(a1 * b2, a2 * b1, out=out[..., 0])
+    np.subtract(a2 * b0, a0 * b2, out=out[..., 1])
+    np.subtract(a0 * b1, a1 * b0, out=out[..., 2])
+    return out
 
 
 def _dynamics_from_terms(
@@ -347,7 +351,7 @@ def _dynamics_from_terms(
     acc_angular = np.cumsum(angular_axes * accelerations[..., None] + bias_angular, axis=1)
     masses, levers, inertias = (array[0] for array in bodies)
     rotations = terms.joint_rotations  # (N, n, 3, 3)
-    centres = origins + np.einsum("nkab,kb->nka", rotations, levers)
+    centres = origins + (rotations @ levers[..., None])[..., 0]
     inertias_world = rotations @ inertias @ np.swapaxes(rotations, -1, -2)
     momentum = masses[:, None] * (body_linear + _cross(body_angular, centres))
     angular_momentum = (inertias_world @ body_angular[..., None])[..., 0] + _cross(
@@ -359,8 +363,6 @@ def _dynamics_from_terms(
     moment = moment + _cross(body_angular, angular_momentum) + _cross(body_linear, momentum)
     force = np.cumsum(force[:, ::-1], axis=1)[:, ::-1]  # the subtree's total
     moment = np.cumsum(moment[:, ::-1], axis=1)[:, ::-1]
-    torques = np.einsum("nka,nka->nk", linear_axes, force) + np.einsum(
-        "nka,nka->nk", angular_axes, moment
-    )
+    torques = (linear_axes * force).sum(axis=-1) + (angular_axes * moment).sum(axis=-1)
     torques += np.asarray(robot.model.armature, dtype=float) * accelerations
     return velocities, accelerations, torques

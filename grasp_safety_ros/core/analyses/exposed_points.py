@@ -123,12 +123,15 @@ def _point_jacobians(
     Jacobians (..., 6, nv) and tip rotations (..., 3, 3), world; base axes."""
     levers = points @ np.swapaxes(rotation_tip, -1, -2)  # (..., K, 3): tip -> point, world
     linear, angular = jacobian_world[..., :3, :], jacobian_world[..., 3:, :]
-    # r × (J_ω col) for every column: J_p = J_v − r̂ J_ω = J_v + J_ω-columns × r
-    cross = np.cross(  # (..., K, nv, 3): ω_j × r
-        np.swapaxes(angular, -1, -2)[..., None, :, :], levers[..., :, None, :]
-    )
-    jacobians = linear[..., None, :, :] + np.swapaxes(cross, -1, -2)
-    return np.einsum("ab,...kbn->...kan", robot.transform_base_to_world.rotation.T, jacobians)
+    # J_p = J_v − r̂ J_ω: row a of r̂ J_ω is r_b J_ω,c − r_c J_ω,b ((a, b, c) cyclic)
+    r = levers[..., :, :, None]  # (..., K, 3, 1)
+    w = angular[..., None, :, :]  # (..., 1, 3, nv)
+    jacobians = np.empty((*np.broadcast_shapes(r.shape[:-2], w.shape[:-2]), 3, linear.shape[-1]))
+    for a, b, c in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        jacobians[..., a, :] = linear[..., None, a, :] - (
+            r[..., b, :] * w[..., c, :] - r[..., c, :] * w[..., b, :]
+        )
+    return robot.transform_base_to_world.rotation.T @ jacobians
 
 
 def point_mobility_in_base(
