@@ -759,3 +759,36 @@ def test_effort_from_shared_terms_equals_pinocchio(
     for field in ("joint_velocities", "joint_accelerations", "joint_torques"):
         assert_close_to_scale(getattr(shared, field), getattr(reference, field), field)
     assert_close_to_scale(shared.peak_abs_torque, reference.peak_abs_torque, "peak")
+
+
+@needs_numba
+@pytest.mark.parametrize("name", TERM_ARMS)
+def test_point_jacobians_from_shared_terms_equal_pinocchio(
+    name: str, request: pytest.FixtureRequest
+) -> None:
+    """A point on each link (0.1 m off its joint origin) and the tip: linear Jacobians from the
+    terms equal Pinocchio's frame Jacobians (LOCAL_WORLD_ALIGNED) of frames placed there."""
+    from grasp_safety_ros.core.method.terms import point_jacobians
+
+    robot: RobotModel = request.getfixturevalue(name)
+    _, evaluation, terms, _ = _terms_case(robot, 14)
+    model = robot.model.copy()
+    offset = pin.SE3(np.eye(3), np.array([0.03, -0.05, 0.1]))
+    frames = [
+        model.addFrame(pin.Frame(f"site{k}", k + 1, 0, offset, pin.FrameType.OP_FRAME))
+        for k in range(robot.num_joints)
+    ]
+    data = model.createData()
+    tip = point_jacobians(terms, robot.num_joints - 1, terms.tip_translations[:, None])
+    assert_close_to_scale(tip[:, 0], terms.tip_jacobians[:, :3], "tip as a point")
+    for i, positions in enumerate(evaluation.joint_positions[::10]):
+        q = robot.q_from_positions(positions)
+        pin.computeJointJacobians(model, data, q)
+        pin.updateFramePlacements(model, data)
+        for k, frame in enumerate(frames):
+            point = data.oMf[frame].translation
+            ours = point_jacobians(terms, k, point[None, None])  # every sample, one point
+            expected = pin.getFrameJacobian(
+                model, data, frame, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+            )[:3]
+            assert_close_to_scale(ours[10 * i, 0], expected, f"site on link {k}")

@@ -103,3 +103,24 @@ def grasp_terms(
     ws = thread_workspace(n)
     call_kernel(sample_terms, chain, bodies, q_all, counts, out, lower_inverse, ws)
     return out.of_grasp(0)
+
+
+def point_jacobians(terms: SampleTerms, joint: int, points_in_world_m: np.ndarray) -> np.ndarray:
+    """Linear Jacobians (..., K, 3, n) of points fixed to the body of chain joint ``joint``
+    (0-based), world axes, from a grasp's terms (leading axes as in ``terms``, e.g. (N,)).
+
+    ``points_in_world_m`` (..., K, 3) [m]: the points' world positions at each sample. Column
+    k <= joint is joint k's motion subspace moved to the point, v + w × p (S = (v, w) at the
+    world origin); the columns of the joints after ``joint`` are zero. For the whole-arm
+    analysis: a link site's Jacobian, then J M⁻¹ Jᵀ with ``mass_matrix_inverses``.
+    """
+    motions = terms.joint_motions[..., None, :, :]  # (..., 1, n, 6)
+    points = np.asarray(points_in_world_m, dtype=float)[..., :, None, :]  # (..., K, 1, 3)
+    linear, angular = motions[..., :3], motions[..., 3:]
+    columns = np.empty(np.broadcast_shapes(linear.shape, points.shape))  # (..., K, n, 3)
+    for a, b, c in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):  # v + w × p, row a
+        columns[..., a] = linear[..., a] + (
+            angular[..., b] * points[..., c] - angular[..., c] * points[..., b]
+        )
+    columns[..., joint + 1 :, :] = 0.0
+    return np.swapaxes(columns, -1, -2)
