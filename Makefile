@@ -2,11 +2,18 @@
 # Each creates .venv/ and installs what is missing (PyPI wheels, incl. ROS 2 Jazzy), registers
 # the package in the venv's ament prefix and writes .venv/setup.bash; with ../shared/tools/
 # ros2cli/install beside the checkout it also installs the ROS 2 command line (`ros2`).
+# Every pip install of the setup (the interface build's and ../shared/tools' too) takes the
+# exact versions in requirements.lock (PIP_CONSTRAINT); requirements*.txt are the loose
+# specification it is made from by `make lock` (see docs/development.md).
 SHELL := /bin/bash
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+LOCK := requirements.lock
+LOCK_VENV := build/lock-venv
+# LOCKED=0 installs what PyPI serves today within requirements*.txt (used by `make lock`)
+export PIP_CONSTRAINT := $(if $(filter 0,$(LOCKED)),,$(abspath $(LOCK)))
 IFACE_STAMP := $(VENV)/.interfaces
 KERNELS_STAMP := $(VENV)/.kernels
 KERNELS := grasp_safety_ros/core/kernels
@@ -14,24 +21,25 @@ IFACE_SRC := $(shell find msg_defs -type f 2>/dev/null) scripts/build_interfaces
 AMENT_STAMP := $(VENV)/.ament
 ROS2CLI_INSTALL := $(wildcard ../shared/tools/ros2cli/install)
 ROS2CLI_STAMP := $(if $(ROS2CLI_INSTALL),$(VENV)/.ros2cli)
+ROS2LAUNCH_INSTALL := $(wildcard ../shared/tools/ros2launch/install)
 # some machines' pip.conf names local indexes that do not exist: drop pip's warning about them
 PIP_QUIET := sed -e '/is ignored: it is neither a file nor a directory/d'
 
-.PHONY: all setup demo test bench lint clean
+.PHONY: all setup demo test bench lint lock clean
 
 all: setup
 
 setup: $(IFACE_STAMP) $(AMENT_STAMP) $(ROS2CLI_STAMP) $(KERNELS_STAMP)
 
-$(STAMP): requirements.txt setup.py
+$(STAMP): requirements.txt setup.py $(LOCK)
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	set -o pipefail; $(PY) -m pip install -q -r requirements.txt 2>&1 | $(PIP_QUIET)
 	set -o pipefail; $(PY) -m pip install -q --no-deps -e . 2>&1 | $(PIP_QUIET)
 	touch $@
 
-# numba's cache goes stale across kernel files (see core/kernels/__init__.py): recompile here.
+# Compile the kernels, or load them from numba's cache of the same sources, shared by the
+# checkouts of this machine (see core/kernels/_jit.py).
 $(KERNELS_STAMP): $(STAMP) $(wildcard $(KERNELS)/*.py)
-	rm -f $(KERNELS)/__pycache__/*.nbi $(KERNELS)/__pycache__/*.nbc
 	$(PY) -c "from grasp_safety_ros.core.method.warm_up import warm_up; print(f'compiled kernels ready ({warm_up():.1f} s)')"
 	touch $@
 
@@ -59,5 +67,26 @@ bench: setup
 lint: $(STAMP)
 	$(VENV)/bin/ruff check grasp_safety_ros test bench examples launch
 
+# Re-resolve requirements*.txt (and the PyPI packages of ../shared/tools' installers) in a
+# scratch venv and write every installed version to requirements.lock.
+lock:
+	rm -rf $(LOCK_VENV)
+	$(PYTHON) -m venv $(LOCK_VENV)
+	set -o pipefail; PIP_CONSTRAINT= $(LOCK_VENV)/bin/python -m pip install -q \
+	  -r requirements.txt -r requirements-interfaces.txt cmake 2>&1 | $(PIP_QUIET)
+	$(if $(ROS2CLI_INSTALL),set -o pipefail; PIP_CONSTRAINT= bash $(ROS2CLI_INSTALL) $(LOCK_VENV) 2>&1 | $(PIP_QUIET))
+	$(if $(ROS2LAUNCH_INSTALL),set -o pipefail; PIP_CONSTRAINT= bash $(ROS2LAUNCH_INSTALL) $(LOCK_VENV) 2>&1 | $(PIP_QUIET))
+	{ echo "# Exact versions of every PyPI package the venv gets; written by \`make lock\` from"; \
+	  echo "# requirements*.txt on $$(date -u +%F) (Python $$($(LOCK_VENV)/bin/python -c 'import platform; print(platform.python_version())')). Do not edit by hand."; \
+	  $(LOCK_VENV)/bin/python -m pip freeze --all --exclude-editable | grep -v ' @ ' | LC_ALL=C sort -f; \
+	} > $(LOCK)
+	rm -rf $(LOCK_VENV)
+
 clean:
 	rm -rf $(VENV) build install log
+
+# README.md and docs/: re-render the generated blocks (parameters, benchmark tables) and
+# re-capture the outputs shown (scripts/render_docs.py; the tests fail while they are stale).
+.PHONY: docs
+docs: setup
+	$(PY) scripts/render_docs.py --capture

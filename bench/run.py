@@ -25,6 +25,7 @@ Measured in one process, interleaved, repeated (median and spread):
   the ranking's own time; the floor and a spin_until_future_complete client) and 1,000
   grasps x 201 samples end to end with the response's size, when the node and
   grasp_safety_msgs are importable;
+- whole-arm exposure (bench/whole_arm.py): µs per (grasp, sample), CPU time;
 - posture selection (bench/postures.py): ms per grasp and score gain per restart count on
   Panda, Baxter and the book; alone: ``bench/run.py --postures-only``;
 - the whole pipeline (bench/pipeline.py): CLI wall time incl. start-up for the book with 100
@@ -59,6 +60,7 @@ from pipeline import bench_pipeline, print_pipeline
 from postures import bench_postures, print_postures
 from pykdl_peer import PyKDLPipeline, build_chain, load_pykdl
 from reference import ReferenceIK, reference_effective_masses
+from whole_arm import bench_whole_arm, print_whole_arm
 from workload import ARMS, ArmWorkload, box_object, grasps_around_box
 
 from grasp_safety_ros.core import GraspSafetyEvaluator
@@ -547,6 +549,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     print("[postures] cost and gain of posture selection", file=sys.stderr)
     posture_selection = bench_postures(args.posture_grasps)
+    print("[whole arm] cost of the whole-arm exposure per sample", file=sys.stderr)
+    whole_arm = {name: bench_whole_arm(ARMS[name]) for name in arms}
     print("[pipeline] CLI, posture selection and analyses vs the ranking", file=sys.stderr)
     pipeline = bench_pipeline()
     if args.no_service:
@@ -613,6 +617,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "service_latency_ms_median": service.get("median_ms"),
         "service": service,
         "posture_selection": posture_selection,
+        "whole_arm": whole_arm,
         "pipeline": pipeline,
         "pykdl_unavailable_reason": kdl_reason or None,
         "arms": arms,
@@ -636,6 +641,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.json.write_text(text + "\n")
     print_table(results)
     print_postures(posture_selection)
+    print_whole_arm(whole_arm)
     print_pipeline(pipeline)
     return 0
 

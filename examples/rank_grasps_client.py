@@ -10,7 +10,7 @@ Exit status 0 when the node ranked the grasps, 1 otherwise.
 Note: write float literals (1.0, not 1) in float64 message fields: rclpy accepts an int there
 but puts garbage on the wire. The client waits with rclpy's EventsExecutor: on Jazzy's rclpy,
 ``rclpy.spin_until_future_complete`` returns milliseconds after the answer has arrived (see
-the README, "Calling the service from Python").
+docs/ros/client.md).
 """
 
 from __future__ import annotations

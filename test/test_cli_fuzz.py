@@ -23,6 +23,7 @@ from conftest import ARM6_AXES, serial_arm_urdf
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from grasp_safety_ros.cli import scenario as scenario_module
 from grasp_safety_ros.cli.main import main
 from grasp_safety_ros.cli.scenario import (
     MAX_EXPANDED_NODES,
@@ -210,6 +211,25 @@ def test_nesting_limit_is_exact() -> None:
             assert field == "robot" and message in err
         else:
             assert field == "scenario" and "nesting deeper than" in err
+
+
+@pytest.mark.parametrize("loader", ["CSafeLoader", "SafeLoader"])
+def test_either_parser_limit_gives_our_nesting_message(
+    monkeypatch: pytest.MonkeyPatch, loader: str
+) -> None:
+    """libyaml (PyYAML >= 6.0.4) refuses more than 1000 flow levels in its scanner, before our
+    event loop counts MAX_NESTING_DEPTH; the pure-Python parser has no limit, so ours trips. The
+    user sees the same one line either way."""
+    if not hasattr(yaml, loader):
+        pytest.skip(f"PyYAML built without {loader}")
+    monkeypatch.setattr(scenario_module, "_SAFE_LOADER", getattr(yaml, loader))
+    text = "[" * 5000
+    if loader == "CSafeLoader":  # the parser's own limit is the one that trips here
+        with pytest.raises(yaml.YAMLError, match="maximum nesting depth"):
+            list(yaml.parse(text, Loader=yaml.CSafeLoader))
+    code, err = run_cli(text)
+    assert assert_one_line_error(code, err) == "scenario"
+    assert f"nesting deeper than {MAX_NESTING_DEPTH} levels at line 1" in err
 
 
 @settings(max_examples=12)

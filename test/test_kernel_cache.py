@@ -1,63 +1,104 @@
-"""numba's disk cache of the kernels is dropped when any kernel file changes (kernels call
-each other across files, and numba only watches a function's own file)."""
+"""numba's disk cache of the kernels: one folder per digest of all kernel sources (kernels call
+each other across files, and numba only watches a function's own file), shared by checkouts."""
 
 from __future__ import annotations
 
+import os
+import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
-from grasp_safety_ros.core.kernels._jit import SOURCES_STAMP, VALUE_TYPES, drop_stale_cache
+from grasp_safety_ros.core.kernels import _jit
 from grasp_safety_ros.core.method.ik import compiled_available
 
+PACKAGE = Path(_jit.__file__).resolve().parents[2]
 
-def test_cache_is_dropped_when_any_kernel_file_changes(tmp_path: Path) -> None:
-    (tmp_path / "caller.py").write_text("x = 1\n")
-    (tmp_path / "callee.py").write_text("y = 2\n")
-    cache = tmp_path / "__pycache__"
-    cache.mkdir()
 
-    def cached_files() -> set[str]:
-        return {p.name for p in cache.iterdir() if p.suffix in (".nbi", ".nbc")}
+def test_digest_follows_every_kernel_file_and_not_the_location(tmp_path: Path) -> None:
+    first, second = tmp_path / "a" / "kernels", tmp_path / "b" / "kernels"
+    for folder in (first, second):
+        folder.mkdir(parents=True)
+        (folder / "caller.py").write_text("x = 1\n")
+        (folder / "callee.py").write_text("y = 2\n")
+    assert _jit.sources_digest(first) == _jit.sources_digest(second)  # another checkout
+    (second / "callee.py").write_text("y = 3\n")  # only the callee's file changes
+    assert _jit.sources_digest(first) != _jit.sources_digest(second)
+    (second / "callee.py").write_text("y = 2\n")
+    (second / "new_kernel.py").write_text("z = 0\n")  # a new file counts as a change
+    assert _jit.sources_digest(first) != _jit.sources_digest(second)
 
-    def fill_cache() -> None:
-        for name in ("caller.f-1.py311.nbi", "caller.f-1.py311.1.nbc", "callee.g-1.py311.nbi"):
-            (cache / name).write_bytes(b"compiled")
 
-    fill_cache()
-    assert drop_stale_cache(tmp_path)  # no digest yet: unknown sources, dropped
-    assert cached_files() == set() and (cache / SOURCES_STAMP).is_file()
-    fill_cache()
-    assert not drop_stale_cache(tmp_path)  # sources unchanged: the cache stays
-    assert len(cached_files()) == 3
-    (tmp_path / "callee.py").write_text("y = 3\n")  # only the callee's file changes
-    assert drop_stale_cache(tmp_path)
-    assert cached_files() == set()  # the caller's cache went too
-    (cache / "caller.cpython-311.pyc").write_bytes(b"bytecode")
-    fill_cache()
-    (tmp_path / "new_kernel.py").write_text("z = 0\n")  # a new file counts as a change
-    assert drop_stale_cache(tmp_path)
-    assert cached_files() == set() and (cache / "caller.cpython-311.pyc").is_file()
+def test_cache_folder_is_shared_and_old_ones_are_pruned(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    root = tmp_path / "cache"
+    monkeypatch.setenv("GRASP_SAFETY_NUMBA_CACHE", str(root))
+    kernels = tmp_path / "kernels"
+    kernels.mkdir()
+    used = []
+    for version in range(_jit.KEPT_CACHES + 2):
+        (kernels / "k.py").write_text(f"v = {version}\n")
+        used.append(_jit.cache_folder(kernels))
+        os.utime(used[-1], (version, version))  # distinct ages however fast the loop runs
+    assert all(path is not None and path.parent == root for path in used)
+    assert sorted(root.iterdir()) == sorted(used[-_jit.KEPT_CACHES :])
+
+
+def test_unwritable_shared_root_falls_back_to_pycache(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    blocker = tmp_path / "not_a_folder"
+    blocker.write_text("")
+    monkeypatch.setenv("GRASP_SAFETY_NUMBA_CACHE", str(blocker / "cache"))
+    kernels = tmp_path / "kernels"
+    kernels.mkdir()
+    (kernels / "k.py").write_text("v = 1\n")
+    folder = _jit.cache_folder(kernels)
+    assert folder is not None and folder.parent == kernels / "__pycache__" / "numba"
 
 
 @pytest.mark.skipif(not compiled_available(), reason="numba is not installed")
-def test_installed_kernels_are_stamped() -> None:
-    from grasp_safety_ros.core.kernels import grasp  # imports _jit, which checks the cache
+def test_a_second_checkout_loads_the_first_ones_kernels(tmp_path: Path) -> None:
+    """Two copies of the package at different paths, one cache root: the second compiles
+    nothing (numba's cache hits, no misses)."""
+    probe = (
+        "import numpy as np\n"
+        "from grasp_safety_ros.core.kernels.lie_group import _exp3 as exp3\n"
+        "exp3(0.1, 0.2, 0.3, np.empty((3, 3)))\n"
+        "print(sum(exp3.stats.cache_hits.values()), sum(exp3.stats.cache_misses.values()))\n"
+    )
+    env = {**os.environ, "GRASP_SAFETY_NUMBA_CACHE": str(tmp_path / "cache")}
+    counts = []
+    for checkout in ("one", "two"):
+        copy = tmp_path / checkout
+        shutil.copytree(
+            PACKAGE, copy / "grasp_safety_ros", ignore=shutil.ignore_patterns("__pycache__")
+        )
+        completed = subprocess.run(
+            [sys.executable, "-c", probe],
+            env={**env, "PYTHONPATH": str(copy)},
+            cwd=copy,
+            capture_output=True,
+            text=True,
+            timeout=300,
+            check=True,
+        )
+        counts.append(tuple(int(n) for n in completed.stdout.split()))
+    assert counts[0] == (0, 1)  # compiled in the first checkout
+    assert counts[1] == (1, 0)  # loaded in the second
 
-    assert not drop_stale_cache(Path(grasp.__file__).parent)  # up to date now
 
-
-def test_moving_a_kernel_argument_type_drops_the_cache(tmp_path: Path) -> None:
+def test_moving_a_kernel_argument_type_changes_the_digest(tmp_path: Path) -> None:
     """numba's cache index names the module of each named-tuple argument: a change in
-    method/packed.py (where they live) must drop the cache like a kernel edit."""
-    kernels, packed = tmp_path / "kernels", tmp_path / VALUE_TYPES
-    (kernels / "__pycache__").mkdir(parents=True)
+    method/packed.py (where they live) must give another cache folder, like a kernel edit."""
+    kernels, packed = tmp_path / "kernels", tmp_path / _jit.VALUE_TYPES
+    kernels.mkdir()
     packed.parent.mkdir(parents=True)
     (kernels / "grasp.py").write_text("x = 1\n")
     packed.write_text("class ChainArrays: ...\n")
-    drop_stale_cache(kernels)
-    (kernels / "__pycache__" / "grasp.f-1.py311.nbi").write_bytes(b"compiled")
-    assert not drop_stale_cache(kernels)
+    before = _jit.sources_digest(kernels)
     packed.write_text("class ChainArrays: ...\nclass IKSettings: ...\n")
-    assert drop_stale_cache(kernels)
-    assert not (kernels / "__pycache__" / "grasp.f-1.py311.nbi").exists()
+    assert _jit.sources_digest(kernels) != before

@@ -137,6 +137,9 @@ ROBOTS = {
         serial_arm_urdf(("z", "y", "y", "x"), seed=2), "base_link", "tool"
     ),
     "mixed": lambda: RobotModel.from_urdf(mixed_arm_urdf(), "base_link", "tool"),
+    "geared": lambda: RobotModel.from_urdf(  # armature [kg m^2; kg on the prismatic j3, j5]
+        mixed_arm_urdf(), "base_link", "tool", armature_kgm2=[0.4, 0.3, 2.0, 0.1, 1.5, 0.02]
+    ),
 }
 
 

@@ -457,3 +457,33 @@ def test_interface_show_every_interface(tmp_path: Path) -> None:
         # the definition as written, nested types expanded below their field (indented)
         top_level = [line for line in shown.stdout.splitlines() if not line.startswith("\t")]
         assert top_level == path.read_text().rstrip("\n").splitlines(), name
+
+
+def test_quickstart_service_call_shows_the_order_produced(node: RunningNode) -> None:
+    """The ``ros2 service call`` of docs/ros/quickstart.md, run as shown (with its ``grep``),
+    prints the verdict and the order the page shows (``make docs`` re-captures the page)."""
+    sys.path.insert(0, str(ROOT / "scripts"))
+    import render_docs
+
+    page = (ROOT / "docs" / "ros" / "quickstart.md").read_text()
+    calls = [
+        (command, shown)
+        for block in render_docs.CAPTURED.finditer(page)
+        if block.group("mode") == "node"
+        for command, shown in render_docs.commands(block.group("body"))
+        if command.startswith("ros2 service call ")
+    ]
+    assert calls, "no ros2 service call shown in docs/ros/quickstart.md"
+    for command, shown in calls:
+        done = subprocess.run(
+            ["bash", "-c", command],
+            env=node.env,
+            capture_output=True,
+            text=True,
+            timeout=120,
+            start_new_session=True,
+        )
+        assert done.returncode == 0, done.stdout + done.stderr
+        verdict = [line for line in done.stdout.splitlines() if not line.startswith("score=")]
+        assert verdict == [line for line in shown if not line.startswith("score=")]
+        assert verdict[0] == "success=True" and verdict[1].startswith("order=[")

@@ -529,6 +529,7 @@ def test_report_message_content_drops_only_what_it_is_told(arm6: RobotModel) -> 
                     "direction_is_worst_case",
                     "leading_point_effective_mass_kg",
                     "worst_point_effective_mass_kg",
+                    "links_only_effective_mass_kg",
                 ):
                     setattr(item, name, getattr(GraspEvaluationMsg(), name))  # empty
         assert repr(message) == repr(expected)  # every field; NaN-safe, unlike ==
@@ -633,6 +634,37 @@ def test_report_message_carries_every_analysis(arm6: RobotModel) -> None:
         assert not face.transient_contact_permitted and not face.admissible
         assert math.isnan(face.worst_force_ratio) and math.isnan(face.max_transient_force_n)
         assert face.min_max_permissible_speed_m_s == 0.0 and math.isinf(face.min_duration_s)
+
+
+def test_report_message_carries_the_whole_arm(arm6: RobotModel) -> None:
+    report, request = _report(
+        arm6,
+        rank_by="whole_arm",
+        whole_arm_region="upper_arm_elbow",
+        arm_points_m={"link4": [[0.1, 0, 0]]},
+    )
+    message = report_msg(report, request, "base_link", Time(), 0.0)
+    assert message.rank_by == "whole_arm" and message.whole_arm_region == "upper_arm_elbow"
+    assert list(message.whole_arm_sites) == ["j3", "j4", "j5", "j6", "tool", "link4[0]"]
+    assert list(message.order) == list(report.order)
+    forces = []
+    for k, got in enumerate(message.evaluations):
+        whole = report.whole_arm[k]
+        if not got.feasible:
+            assert math.isnan(got.whole_arm_rank_force_n) and got.whole_arm_worst_site == ""
+            continue
+        elbow = whole.region("upper_arm_elbow")
+        assert got.whole_arm_rank_force_n == elbow.peak_contact_force_n
+        forces.append((got.whole_arm_rank_force_n, k))
+        limiting = whole.region(whole.limiting_region)
+        assert got.whole_arm_limiting_region == whole.limiting_region
+        assert got.whole_arm_worst_force_ratio == limiting.worst_force_ratio
+        assert got.whole_arm_worst_site == whole.site_names[limiting.worst_site]
+        assert got.whole_arm_worst_link == whole.site_links[limiting.worst_site]
+        assert got.whole_arm_min_duration_s == whole.min_duration_s
+        assert got.whole_arm_admissible == whole.admissible_where_permitted
+        assert got.whole_arm_worst_energy_j == whole.worst_energy[0] > 0.0
+    assert list(message.order) == [k for _, k in sorted(forces)]
 
 
 def test_markers_follow_the_given_order_and_flag_iso(arm6: RobotModel) -> None:
@@ -763,6 +795,12 @@ def test_evaluation_messages_equal_the_keyword_constructor_and_share_nothing() -
         score_single_ik=nan,
         score_range_min=nan,
         score_range_max=nan,
+        whole_arm_rank_force_n=nan,
+        whole_arm_worst_force_ratio=nan,
+        whole_arm_min_duration_s=nan,
+        whole_arm_worst_energy_j=nan,
+        links_only_effective_mass_kg=[1.0, 1.5],  # no armature: the same masses
+        links_only_mean_effective_mass_kg=1.25,
     )
     first, second = (conversions.evaluation_msg(evaluation) for _ in range(2))
     assert repr(first) == repr(expected)  # every field; NaN-safe, unlike ==

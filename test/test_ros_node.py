@@ -1256,6 +1256,7 @@ PER_SAMPLE_FIELDS = (
     "direction_is_worst_case",
     "leading_point_effective_mass_kg",
     "worst_point_effective_mass_kg",
+    "links_only_effective_mass_kg",
 )
 
 
@@ -1355,3 +1356,33 @@ def test_response_defaults_send_the_first_grasps_trajectory_and_every_sample() -
     for evaluation in ranking.evaluations:
         assert len(evaluation.effective_mass_kg) == 21  # 2 s / 0.1
         assert len(evaluation.direction_xyz) == 3 * 21
+
+
+def test_rank_by_whole_arm_through_the_service(
+    ros: NodeUnderTest, core_evaluator: GraspSafetyEvaluator, core_ranking: Any
+) -> None:
+    """The node's rank_by whole_arm: default sites and region (chest), the core's order, the
+    response's whole_arm_* fields equal the core's."""
+    results = ros.set_parameters(rank_by="whole_arm")
+    assert all(r.successful for r in results), results
+    try:
+        response = ros.rank(book_request())
+    finally:
+        results = ros.set_parameters(rank_by="safety")
+        assert all(r.successful for r in results), results
+    assert response.success, response.message
+    ranking = response.ranking
+    want = core_report(core_evaluator, core_ranking, rank_by="whole_arm")
+    assert ranking.rank_by == "whole_arm" and ranking.whole_arm_region == "chest"
+    assert want.arm_sites is not None
+    assert tuple(ranking.whole_arm_sites) == want.arm_sites.names
+    assert tuple(ranking.order) == want.order
+    assert tuple(ranking.paper_order) == core_ranking.order
+    for k, evaluation in enumerate(ranking.evaluations):
+        whole = want.whole_arm[k]
+        chest = whole.region("chest")
+        assert evaluation.whole_arm_rank_force_n == pytest.approx(chest.peak_contact_force_n, 1e-9)
+        assert evaluation.whole_arm_limiting_region == whole.limiting_region
+        assert evaluation.whole_arm_min_duration_s == pytest.approx(whole.min_duration_s, 1e-9)
+    forces = [ranking.evaluations[i].whole_arm_rank_force_n for i in ranking.order]
+    assert forces == sorted(forces)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import array
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -50,9 +51,34 @@ def test_params_file_declares_exactly_the_node_parameters() -> None:
 
 
 def test_every_parameter_is_documented() -> None:
-    docs = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    """docs/ros/parameters.md holds the reference rendered from PARAMETERS, as it renders now
+    (a parameter added or changed fails this until ``make docs`` re-renders the page)."""
+    root = Path(__file__).resolve().parents[1]
+    sys.path.insert(0, str(root / "scripts"))
+    import render_docs
+
+    page = (root / "docs" / "ros" / "parameters.md").read_text()
+    blocks = dict(render_docs.generated_blocks(page))
+    assert blocks["parameters"] == render_docs.render_parameters(), "stale: run make docs"
     for name in PARAMETERS:
-        assert f"| `{name}` |" in docs, name
+        assert f"| `{name}` |" in blocks["parameters"], name
+
+
+def test_parameter_reference_gives_type_unit_and_constraints() -> None:
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+    import render_docs
+
+    rows = {
+        line.split(" | ")[0].strip("| `"): line.split(" | ")
+        for line in render_docs.render_parameters().splitlines()[2:]
+    }
+    assert set(rows) == set(PARAMETERS)
+    assert rows["posture.restarts"][1:4] == ["integer", "`8`", "in [0, 1,000]"]
+    assert rows["trajectory.dt_s"][1:5] == ["double", "`0.02`", "> 0", "s"]
+    assert rows["ik_seed"][1] == "double array" and rows["ik_seed"][4] == "rad or m"
+    assert rows["object.inertia_about_com_kgm2"][4] == "kg m²"
+    assert "read-only" in rows["robot_description_timeout_s"][3]
+    assert rows["iso_ts_15066.regions"][1:3] == ["string array", "`[]`"]
 
 
 def test_params_file_is_the_book_scenario() -> None:
@@ -163,7 +189,7 @@ BAD: list[tuple[dict[str, Any], str]] = [
     ({"redundancy.enabled": 1}, r"^redundancy\.enabled: must be true or false"),
     ({"effort.enabled": "yes"}, r"^effort\.enabled: must be true or false"),
     ({"effort.criterion": "max"}, r"^effort\.criterion: must be one of peak_fraction, rms_fr"),
-    ({"rank_by": "quality"}, r"^rank_by: must be one of safety, effort, got 'quality'"),
+    ({"rank_by": "quality"}, r"^rank_by: must be one of safety, effort, whole_arm, got 'quality'"),
     # what the result messages carry
     (
         {"response.joint_trajectories": -1},

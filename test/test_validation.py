@@ -92,6 +92,22 @@ def test_engine_mass_matrix_equals_pinocchio_crba(source: str, request) -> None:
         assert np.abs(got - expected).max() <= TIGHT * np.abs(expected).max()
 
 
+def test_engine_mass_matrix_with_armature_equals_pinocchio_crba(arm7: RobotModel) -> None:
+    armature = [0.5, 0.4, 0.3, 0.2, 0.1, 0.05, 0.02]
+    geared = arm7.with_armature(armature)
+    scene = _robot_scene(geared, ARM7_URDF)
+    np.testing.assert_array_equal(scene.model.dof_armature[scene.arm_dof], armature)
+    rng = np.random.default_rng(4)
+    for _ in range(5):
+        positions = random_positions(arm7, rng)
+        q = arm7.q_from_positions(positions)
+        expected = _symmetric(pin.crba(geared.model, geared.model.createData(), q))
+        links = _symmetric(pin.crba(arm7.model, arm7.model.createData(), q))
+        np.testing.assert_allclose(expected, links + np.diag(armature), atol=1e-12)
+        got = joint_space_inertia(scene, positions)
+        assert np.abs(got - expected).max() <= TIGHT * np.abs(expected).max()
+
+
 def test_engine_mass_matrix_with_object_equals_augmented_crba(baxter: RobotModel) -> None:
     rng = np.random.default_rng(1)
     obj, grasp = _some_object_and_grasp(rng)
@@ -369,3 +385,37 @@ def test_quick_run_waypoint_path(quick_run) -> None:
     assert [c["name"] for c in changes] == [g["name"] for g in straight["grasps"]]
     report = (out / "results.md").read_text(encoding="utf-8")
     assert "## Book along a timed waypoint path" in report
+
+
+def test_quick_run_elbow_impact(quick_run) -> None:
+    """A free impact at the elbow site follows the whole-arm effective mass (MuJoCo's own M and
+    J agree with it), and the tip's effective mass in its place is far off."""
+    results = quick_run[1]
+    elbow = results["elbow_impact"]
+    assert (elbow["site"], elbow["link"]) == ("right_e1", "right_lower_elbow")
+    assert not elbow["stationary"] and not elbow["joint_limit_active"]
+    assert elbow["engine_effective_mass_kg"] == pytest.approx(elbow["effective_mass_kg"], 1e-9)
+    assert elbow["rel_error"] <= 0.005
+    assert elbow["rel_error_with_tip_mass"] >= 1.0
+    assert "elbow impact (right_e1" in format_summary(results)
+    report = (quick_run[0] / "results.md").read_text()
+    assert "- Elbow impact: a free impact at the whole-arm site right_e1" in report
+
+
+def test_free_impacts_with_armature_follow_the_effective_mass_with_it() -> None:
+    """MuJoCo's dof_armature set from the same values: the impulse is (1 + e)·M_eff·v with the
+    armature's effective mass; the links-only prediction misses it by far more."""
+    from grasp_safety_ros.validation.armature_check import armature_impulse_check
+    from grasp_safety_ros.validation.simulation import ImpulseSetup
+
+    result = armature_impulse_check(3, ImpulseSetup(), seed=1)
+    assert result["valid_cases"] >= 2
+    assert result["worst_rel_error"] < 5e-3
+    assert result["links_only_min_rel_error"] > 0.1
+    # The peak force follows the same M_eff: peak / (M_eff v) is one constant with armature.
+    assert result["peak_force_per_mass_spread"] < 1.05
+    assert result["links_only_peak_force_per_mass_spread"] > result["peak_force_per_mass_spread"]
+    for case in result["per_case"]:
+        assert case["engine_effective_mass_kg"] == pytest.approx(
+            case["effective_mass_kg"], rel=1e-9
+        )

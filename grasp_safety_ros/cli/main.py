@@ -6,6 +6,7 @@ import argparse
 import sys
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -48,6 +49,7 @@ def _progress_printer(total_samples: int) -> Callable[[int, int], None] | None:
 def rank_scenario(scenario: Scenario, metric: str | None = None) -> SafetyReport:
     """Load the scenario's robot, rank its grasps and run the analyses the scenario asks for."""
     from ..core.analyses.safety_report import analyse
+    from ..core.analyses.uncertainty import analyse_armature_range
     from ..core.method.posture import select_postures
     from ..core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
 
@@ -69,7 +71,7 @@ def rank_scenario(scenario: Scenario, metric: str | None = None) -> SafetyReport
         ranking,
         scenario.posture,
     )
-    return analyse(
+    report = analyse(
         evaluator,
         scenario.grasps,
         scenario.object_inertia,
@@ -77,10 +79,26 @@ def rank_scenario(scenario: Scenario, metric: str | None = None) -> SafetyReport
         scenario.options,
         ranking=ranking,
     )
+    bounds = scenario.robot.armature_range(robot)
+    if bounds is None or not bounds.is_range:
+        return report
+    spread = analyse_armature_range(
+        robot,
+        ranking.evaluations,
+        scenario.grasps,
+        scenario.object_inertia,
+        bounds.lower_kgm2,
+        bounds.upper_kgm2,
+        ranking.metric,
+    )
+    return replace(report, armature_range=spread)
 
 
 def run_header(scenario: Scenario, report: SafetyReport) -> str:
     """The line printed before the table: robot, problem size and the backend that ran."""
+    from ..core.model.armature import published_for
+    from ..core.model.robot import NO_ARMATURE_NOTE
+
     urdf = scenario.robot.urdf
     if urdf.startswith("example-robot-data:"):
         robot = urdf.split(":", 1)[1]
@@ -88,11 +106,17 @@ def run_header(scenario: Scenario, report: SafetyReport) -> str:
         robot = "(inline URDF)"
     else:
         robot = Path(urdf).name
-    return (
+    header = (
         f"robot {robot} ({scenario.robot.base_frame} -> {scenario.robot.tip_frame}), "
         f"{len(scenario.grasps)} grasps x {scenario.trajectory.num_samples} samples, "
         f"backend {report.ranking.backend}"
     )
+    if not report.ranking.armature_given:
+        header += f"\n{NO_ARMATURE_NOTE}"
+    elif isinstance(scenario.robot.armature_kgm2, str):
+        entry = published_for(scenario.robot.armature_kgm2, scenario.robot.urdf, ())
+        header += f"\narmature: published '{entry.name}' ({entry.status}, {entry.date})"
+    return header
 
 
 def _write_outputs(

@@ -10,9 +10,12 @@ import numpy as np
 
 from ..core.analyses.iso15066 import PowerForceLimitAssessment
 from ..core.analyses.safety_report import SafetyReport
-from ..core.method.executable import joint_velocities_accelerations
+from ..core.analyses.whole_arm import ArmSites, WholeArmEvaluation
+from ..core.method.executable import joint_velocities_accelerations, rates_for_execution
 from ..core.method.posture import PostureSelection
 from ..core.method.ranking import GraspEvaluation, Ranking
+from ..core.model.armature import ArmatureRatio, armature_ratio
+from ..core.model.robot import NO_ARMATURE_NOTE
 
 SCORE_UNITS = {"mean": "kg", "max": "kg", "integral": "kg*s"}
 
@@ -48,10 +51,11 @@ def evaluation_to_dict(evaluation: GraspEvaluation, per_sample: bool = True) -> 
         "score": number(evaluation.score),
         "mean_effective_mass_kg": number(evaluation.mean_effective_mass_kg),
         "peak_effective_mass_kg": number(evaluation.peak_effective_mass_kg),
+        **_links_only_to_dict(evaluation),
     }
     if per_sample:
-        velocities, _ = joint_velocities_accelerations(
-            evaluation.times_s, evaluation.joint_positions
+        velocities, _ = rates_for_execution(
+            evaluation.times_s, evaluation.joint_positions, evaluation.planned_joint_rates
         )
         result["samples"] = {
             "t_s": numbers(evaluation.times_s),
@@ -62,6 +66,7 @@ def evaluation_to_dict(evaluation: GraspEvaluation, per_sample: bool = True) -> 
             "direction_is_worst_case": numbers(evaluation.direction_is_worst_case),
             "tip_speed_m_s": numbers(evaluation.tip_speed_m_s),
             "ik_iterations": numbers(evaluation.ik_iterations),
+            "links_only_effective_mass_kg": numbers(evaluation.links_only_effective_mass_kg),
         }
     return result
 
@@ -92,6 +97,7 @@ def ranking_to_dict(ranking: Ranking, per_sample: bool = True) -> dict[str, Any]
         "metric": ranking.metric,
         "score_unit": SCORE_UNITS[ranking.metric],
         "ranking": list(ranking.order),
+        "armature": armature_to_dict(ranking),
         "grasps": grasps,
     }
 
@@ -154,6 +160,8 @@ def report_to_dict(report: SafetyReport, per_sample: bool = True) -> dict[str, A
             "worst_case_ranking": list(u.worst_case_order),
             "message": u.message,
         }
+    if report.armature_range is not None:
+        result["armature_range"] = armature_range_to_dict(report)
     iso = {a.index: a for a in report.iso}
     for k, grasp in enumerate(result["grasps"]):
         grasp["safety_score"] = number(report.scores[k])
@@ -171,6 +179,10 @@ def report_to_dict(report: SafetyReport, per_sample: bool = True) -> dict[str, A
                 "probability_safest": number(g.probability_safest),
             }
         _add_per_grasp_series(report, k, grasp)
+        if report.whole_arm:
+            grasp["whole_arm"] = whole_arm_to_dict(report.whole_arm[k], per_sample)
+    if report.arm_sites is not None:
+        result["whole_arm"] = whole_arm_sites_to_dict(report.arm_sites, options.whole_arm_region)
     return result
 
 
@@ -229,14 +241,21 @@ def ranking_table(ranking: Ranking) -> str:
     header = (
         f"{'rank':>4}  {'index':>5}  {'name':<16} {score:>14} {'mean [kg]':>10} {'peak [kg]':>10}"
     )
+    if ranking.armature_given:  # with armature; the links-only mean (a lower bound) beside
+        header += f" {'links [kg]':>10}"
     lines = [f"metric: {ranking.metric}", header, "-" * len(header)]
     for rank, index in enumerate(ranking.order, start=1):
         e = ranking.evaluations[index]
         worst = "  (worst-case direction used)" if e.direction_is_worst_case.any() else ""
+        links = ""
+        if ranking.armature_given:
+            links = f" {float(np.mean(e.links_only_effective_mass_kg)):>10.4f}"
         lines.append(
             f"{rank:>4}  {index:>5}  {e.name[:16]:<16} {e.score:>14.4f} "
-            f"{e.mean_effective_mass_kg:>10.4f} {e.peak_effective_mass_kg:>10.4f}{worst}"
+            f"{e.mean_effective_mass_kg:>10.4f} {e.peak_effective_mass_kg:>10.4f}{links}{worst}"
         )
+    if ranking.armature_given:
+        lines.append(armature_line(ranking))
     for e in ranking.evaluations:
         if not e.feasible:
             lines.append(f"{'-':>4}  {e.index:>5}  {e.name[:16]:<16} infeasible: {e.reason}")
@@ -313,6 +332,8 @@ def report_text(report: SafetyReport) -> str:
                 lines.append(f"  {name:<16} no feasible posture ({p.postures_tried} tried)")
     if report.iso:
         lines += _iso_lines(report)
+    if report.whole_arm:
+        lines += whole_arm_lines(report)
     if report.uncertainty is not None:
         lines += ["", f"inertia uncertainty (tip effective mass): {report.uncertainty.message}"]
         for g in report.uncertainty.grasps:
@@ -322,6 +343,8 @@ def report_text(report: SafetyReport) -> str:
                     f"{g.worst_case_score:.4f}  p{report.uncertainty.uncertainty.percentile:g} "
                     f"{g.percentile_score:.4f}  P(safest) {g.probability_safest:.2f}"
                 )
+    if report.armature_range is not None:
+        lines += armature_range_lines(report)
     if report.redundancy:
         lines += ["", "redundancy (null-space) resolution, tip effective mass:"]
         for r in report.redundancy:
@@ -338,3 +361,172 @@ def report_text(report: SafetyReport) -> str:
                     f"{options.effort_criterion} {e.score(options.effort_criterion):.3f}"
                 )
     return "\n".join(lines)
+
+
+def whole_arm_sites_to_dict(sites: ArmSites, rank_region: str) -> dict[str, Any]:
+    """The whole-arm sites (the column order of every grasp's ``whole_arm`` arrays)."""
+    return {
+        "sites": list(sites.names),
+        "links": list(sites.links),
+        "points_in_joint_m": sites.points_in_joint_m.tolist(),
+        "dropped_welded_to_base": list(sites.dropped),
+        "rank_region": rank_region,
+    }
+
+
+def whole_arm_to_dict(whole: WholeArmEvaluation, per_sample: bool = True) -> dict[str, Any]:
+    """One grasp's whole-arm exposure: worst site per body region and by energy, the
+    admissibility over the arm, T_min, and (with ``per_sample``) the (N, K) per-sample arrays
+    (sites as columns)."""
+    if not whole.feasible:
+        return {"feasible": False}
+    times = whole.times_s
+
+    def where(site: int, sample: int) -> dict[str, Any]:
+        return {
+            "site": whole.site_names[site],
+            "link": whole.site_links[site],
+            "time_s": float(times[sample]),
+            "effective_mass_kg": number(whole.effective_mass_kg[sample, site]),
+            "speed_m_s": float(whole.speed_m_s[sample, site]),
+        }
+
+    energy, site, sample = whole.worst_energy
+    result = {
+        "feasible": True,
+        "regions": {
+            r.region: {
+                "worst_force_ratio": number(r.worst_force_ratio),
+                "peak_contact_force_n": r.peak_contact_force_n,
+                "admissible": r.admissible,
+                "min_duration_s": number(r.min_duration_s),
+                **where(r.worst_site, r.worst_sample),
+            }
+            for r in whole.regions
+        },
+        "worst_energy": {"energy_j": energy, **where(site, sample)},
+        "admissible": whole.admissible,
+        "admissible_where_permitted": whole.admissible_where_permitted,
+        "min_duration_s": number(whole.min_duration_s),
+        "limiting_region": whole.limiting_region,
+    }
+    if per_sample:
+        result["effective_mass_kg"] = numbers(whole.effective_mass_kg)
+        result["speed_m_s"] = numbers(whole.speed_m_s)
+        result["stationary"] = numbers(whole.stationary)
+    return result
+
+
+def whole_arm_lines(report: SafetyReport) -> list[str]:
+    """One line per feasible grasp (final order): the worst site of the limiting region, of the
+    ranking region, and by energy, with their links, and T_min over the whole arm."""
+    sites = report.arm_sites
+    region = report.options.whole_arm_region
+    names = ", ".join(sites.names) if sites is not None else ""
+    lines = [
+        "",
+        f"whole arm (sites: {names}; worst over sites and samples; grasps in the final order, "
+        f"rank_by={report.options.rank_by}):",
+    ]
+    by_index = {w.index: w for w in report.whole_arm if w.feasible}
+    for k in report.order:
+        w = by_index.get(k)
+        if w is None:
+            continue
+        energy, e_site, _ = w.worst_energy
+        ranked = w.region(region) if any(r.region == region for r in w.regions) else None
+        text = f"  {w.name[:16]:<16}"
+        if w.limiting_region:
+            limiting = w.region(w.limiting_region)
+            text += (
+                f" {w.limiting_region} F/F_max {_ratio(limiting.worst_force_ratio)} at "
+                f"{w.site_names[limiting.worst_site]} ({w.site_links[limiting.worst_site]}),"
+            )
+        if ranked is not None:
+            text += f" {region} peak {ranked.peak_contact_force_n:.1f} N,"
+        text += (
+            f" energy {energy:.3f} J at {w.site_names[e_site]} ({w.site_links[e_site]}),"
+            f" T_min {w.min_duration_s:.3f} s,"
+            f" ok where allowed {'yes' if w.admissible_where_permitted else 'no'}"
+        )
+        lines.append(text)
+    return lines
+
+
+# --- Armature (reflected rotor inertia): links-only masses and their ratio -------------------
+
+
+def _links_only_to_dict(evaluation: GraspEvaluation) -> dict[str, Any]:
+    """Mean and peak of the links-only effective mass [kg] (NaN: None if infeasible)."""
+    links = evaluation.links_only_effective_mass_kg
+    feasible = evaluation.feasible and len(links) > 0
+    return {
+        "links_only_mean_effective_mass_kg": number(np.mean(links)) if feasible else None,
+        "links_only_peak_effective_mass_kg": number(np.max(links)) if feasible else None,
+    }
+
+
+def _ratio_of(ranking: Ranking) -> ArmatureRatio:
+    feasible = [e for e in ranking.evaluations if e.feasible]
+    return armature_ratio(
+        [e.effective_mass_kg for e in feasible], [e.links_only_effective_mass_kg for e in feasible]
+    )
+
+
+def armature_to_dict(ranking: Ranking) -> dict[str, Any]:
+    """Whether armature was given, and the ratio with armature / links only over the samples."""
+    ratio = _ratio_of(ranking)
+    return {
+        "given": ranking.armature_given,
+        "note": "" if ranking.armature_given else NO_ARMATURE_NOTE,
+        "ratio_median": number(ratio.median),
+        "ratio_p10": number(ratio.p10),
+        "ratio_p90": number(ratio.p90),
+        "ratio_max": number(ratio.maximum),
+    }
+
+
+def armature_line(ranking: Ranking) -> str:
+    """The ratio with armature / links only (under the ranking table), or the note."""
+    if not ranking.armature_given:
+        return NO_ARMATURE_NOTE
+    ratio = _ratio_of(ranking)
+    return (
+        f"effective mass with rotor inertia / links only: median x{ratio.median:.2f} "
+        f"(p10 x{ratio.p10:.2f}, p90 x{ratio.p90:.2f}, max x{ratio.maximum:.2f}, "
+        f"{ratio.samples} samples)"
+    )
+
+
+def armature_range_to_dict(report: SafetyReport) -> dict[str, Any] | None:
+    """Effective-mass range and scores at both ends of the armature ranges, if given."""
+    spread = report.armature_range
+    if spread is None:
+        return None
+    return {
+        "lower_kgm2": spread.lower_kgm2.tolist(),
+        "upper_kgm2": spread.upper_kgm2.tolist(),
+        "effective_mass_range_kg": numbers(spread.effective_mass_range_kg),
+        "scores_lower": numbers(spread.scores_lower),
+        "scores_upper": numbers(spread.scores_upper),
+        "order_lower": list(spread.order_lower),
+        "order_upper": list(spread.order_upper),
+        "ranking_flips": spread.ranking_flips,
+        "message": spread.message,
+    }
+
+
+def armature_range_lines(report: SafetyReport) -> list[str]:
+    """Per grasp the effective-mass range over the armature ranges, and whether it flips."""
+    spread = report.armature_range
+    if spread is None:
+        return []
+    lines = ["", f"armature ranges (tip effective mass): {spread.message}"]
+    for k, e in enumerate(report.ranking.evaluations):
+        if e.feasible:
+            low, high = spread.effective_mass_range_kg[k]
+            scores = f"{spread.scores_lower[k]:.4f}..{spread.scores_upper[k]:.4f}"
+            lines.append(
+                f"  {e.name[:16]:<16} score {scores}  effective mass {low:.3f}..{high:.3f} kg"
+            )
+    return lines

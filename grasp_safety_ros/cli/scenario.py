@@ -14,11 +14,20 @@ import yaml
 from ..core.analyses.exposed_points import box_corners_in_object, cylinder_rim_points_in_object
 from ..core.analyses.safety_report import RANK_BY, AnalysisOptions
 from ..core.analyses.uncertainty import InertiaUncertainty
+from ..core.analyses.whole_arm import DEFAULT_RANK_REGION
 from ..core.exceptions import InvalidInputError
 from ..core.input_checks import finite_array, finite_float, pose_from_position_quat
 from ..core.method.joint_trajectory import PlannedJointTrajectory
 from ..core.method.posture import DEFAULT_RESTARTS, PostureConfig
 from ..core.method.ranking import METRICS, Grasp, check_metric
+from ..core.model.armature import (
+    PUBLISHED,
+    ArmatureRange,
+    PublishedArmature,
+    armature_range,
+    published_for,
+    published_values,
+)
 from ..core.model.inertia import ObjectInertia, solid_box, solid_cylinder, solid_sphere
 from ..core.model.robot import RobotModel
 from ..core.model.trajectory import ObjectTrajectory
@@ -54,6 +63,8 @@ much larger objects make the augmented mass matrix numerically singular)."""
 
 
 _SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml when available
+_PARSER_DEPTH_LIMIT = "exceeded maximum nesting depth"
+"""What libyaml's scanner says when its own nesting limit (1000 flow levels) trips."""
 
 
 def _check_yaml_structure(text: str) -> None:
@@ -102,6 +113,13 @@ def load_yaml(text: str, where: str) -> Any:
     except (yaml.YAMLError, ValueError, OverflowError) as error:
         if isinstance(error, InvalidInputError):
             raise
+        if isinstance(error, yaml.MarkedYAMLError) and _PARSER_DEPTH_LIMIT in str(error.problem):
+            # libyaml (PyYAML >= 6.0.4) has a nesting limit of its own, which its scanner can
+            # reach before our event loop sees MAX_NESTING_DEPTH levels: one message for both.
+            line = error.problem_mark.line + 1 if error.problem_mark else 1
+            raise InvalidInputError(
+                "scenario", f"nesting deeper than {MAX_NESTING_DEPTH} levels at line {line}"
+            ) from None
         reason = " ".join(str(error).split())
         raise InvalidInputError("scenario", f"{where} is not valid YAML: {reason}") from None
 
@@ -115,6 +133,10 @@ class RobotSpec:
         base_frame, tip_frame: Chain ends.
         seed: IK seed for the first sample, chain joint order [rad or m]; None: mid-range.
         locked_joints: Positions of joints off the chain (default: neutral) [rad or m].
+        armature_kgm2: Reflected rotor inertia (core.model.armature): a list in chain order or
+            ``{joint_name: value}``, values or ``[lo, hi]`` ranges [kg m^2, kg if prismatic],
+            or ``published`` / ``published:<entry>``; None: the description's own (MJCF) or
+            none.
     """
 
     urdf: str
@@ -122,12 +144,31 @@ class RobotSpec:
     tip_frame: str
     seed: tuple[float, ...] | None = None
     locked_joints: Mapping[str, float] | None = None
+    armature_kgm2: Any = None
 
     def load(self, relative_to: Path | None = None) -> RobotModel:
-        """Build the chain model."""
-        return RobotModel.from_urdf(
+        """Build the chain model, with the upper ends of armature ranges."""
+        robot = RobotModel.from_urdf(
             self.urdf, self.base_frame, self.tip_frame, self.locked_joints, relative_to
         )
+        bounds = self.armature_range(robot)
+        return robot if bounds is None else robot.with_armature(bounds.upper_kgm2)
+
+    def armature_range(self, robot: RobotModel) -> ArmatureRange | None:
+        """The armature bounds per chain joint of ``robot``; None when not given."""
+        value = self.armature_kgm2
+        if value is None:
+            return None
+        if isinstance(value, str):
+            entry = published_for(value, self.urdf, robot.joint_names)
+            value = published_values(entry, robot.joint_names)
+        return armature_range(value, robot.joint_names)
+
+    def published_armature(self, robot: RobotModel) -> PublishedArmature | None:
+        """The published entry the armature comes from, if any."""
+        if not isinstance(self.armature_kgm2, str):
+            return None
+        return published_for(self.armature_kgm2, self.urdf, robot.joint_names)
 
 
 @dataclass(frozen=True)
@@ -180,7 +221,19 @@ def _check_keys(section: Mapping[str, Any], allowed: set[str], prefix: str) -> N
 def parse_robot(section: Any) -> RobotSpec:
     """Parse the ``robot`` section."""
     robot = _mapping(section, "robot")
-    _check_keys(robot, {"urdf", "base_frame", "tip_frame", "seed", "locked_joints"}, "robot")
+    _check_keys(
+        robot,
+        {"urdf", "base_frame", "tip_frame", "seed", "locked_joints", "armature_kgm2"}
+        | {"exposed_points_m"},  # exposed_points_m: an analysis option
+        "robot",
+    )
+    armature = robot.get("armature_kgm2")
+    if isinstance(armature, str) and armature.partition(":")[0] != PUBLISHED:
+        raise InvalidInputError(
+            "robot.armature_kgm2",
+            f"must be a list, a mapping {{joint_name: value}}, '{PUBLISHED}' or "
+            f"'{PUBLISHED}:<entry>', got {armature!r}",
+        )
     seed = robot.get("seed")
     locked = robot.get("locked_joints")
     if locked is not None:
@@ -199,6 +252,7 @@ def parse_robot(section: Any) -> RobotSpec:
         tip_frame=_string(_required(robot, "tip_frame", "robot"), "robot.tip_frame"),
         seed=seed,
         locked_joints=locked,
+        armature_kgm2=armature,
     )
 
 
@@ -409,6 +463,7 @@ OPTIONAL_SECTIONS = {
     "effort",
     "rank_by",
     "posture",
+    "whole_arm",
 }
 
 
@@ -462,6 +517,9 @@ def parse_options(
         uncertainty = InertiaUncertainty(**renamed)
     effort = _mapping(root.get("effort", {}), "effort")
     _check_keys(effort, {"enabled", "criterion"}, "effort")
+    whole_arm = _mapping(root.get("whole_arm", {}), "whole_arm")
+    _check_keys(whole_arm, {"enabled", "region"}, "whole_arm")
+    arm_points = _mapping(root.get("robot", {}), "robot").get("exposed_points_m")
     rank_by = root.get("rank_by", "safety")
     if rank_by not in RANK_BY:
         raise InvalidInputError("rank_by", f"must be one of {', '.join(RANK_BY)}, got {rank_by!r}")
@@ -483,6 +541,9 @@ def parse_options(
             effort=_flag(effort.get("enabled", True), "effort.enabled"),
             rank_by=rank_by,
             effort_criterion=effort.get("criterion", "peak_fraction"),
+            whole_arm=_flag(whole_arm.get("enabled", False), "whole_arm.enabled"),
+            arm_points_m=arm_points,
+            whole_arm_region=whole_arm.get("region", DEFAULT_RANK_REGION),
         )
     except InvalidInputError as error:  # the core says iso15066.<field>; the file iso_ts_15066
         if not error.field.startswith("iso15066."):

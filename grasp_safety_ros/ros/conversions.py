@@ -30,6 +30,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from ..core.analyses.iso15066 import PowerForceLimitAssessment, RegionAssessment
 from ..core.analyses.safety_report import SafetyReport
+from ..core.analyses.whole_arm import WholeArmEvaluation, whole_arm_score
 from ..core.exceptions import InvalidInputError
 from ..core.input_checks import (
     QUATERNION_NORM_TOLERANCE,
@@ -38,12 +39,13 @@ from ..core.input_checks import (
     quat_xyzw_from_rotation,
     rotation_from_quat_xyzw,
 )
-from ..core.method.executable import joint_velocities_accelerations
+from ..core.method.executable import rates_for_execution
 from ..core.method.joint_trajectory import PlannedJointTrajectory
 from ..core.method.posture import PostureSelection, single_posture
 from ..core.method.ranking import Grasp, GraspEvaluation, Ranking
+from ..core.model.armature import armature_ratio
 from ..core.model.inertia import ObjectInertia
-from ..core.model.robot import RobotModel
+from ..core.model.robot import NO_ARMATURE_NOTE, RobotModel
 from ..core.model.trajectory import ObjectTrajectory
 from ..core.model.waypoint_trajectory import WaypointTrajectory
 from .parameters import ResponseContent, inertia_tensor_from_components
@@ -545,9 +547,14 @@ def evaluation_msg(evaluation: GraspEvaluation, per_sample: bool = True) -> Gras
         mean_effective_mass_kg=float(evaluation.mean_effective_mass_kg),
         safety_score=score,
     )
+    links_only = evaluation.links_only_effective_mass_kg
+    message.links_only_mean_effective_mass_kg = (
+        float(np.mean(links_only)) if evaluation.feasible and len(links_only) else NAN
+    )
     if per_sample:
         message.time_from_start_s = float64_array(evaluation.times_s)
         message.effective_mass_kg = float64_array(evaluation.effective_mass_kg)
+        message.links_only_effective_mass_kg = float64_array(links_only)
         message.direction_xyz = float64_array(evaluation.directions_in_base)  # row-major
         message.direction_is_worst_case = np.asarray(
             evaluation.direction_is_worst_case, bool
@@ -653,6 +660,10 @@ _new_evaluation = _template_constructor(
         score_single_ik=NAN,
         score_range_min=NAN,
         score_range_max=NAN,
+        whole_arm_rank_force_n=NAN,
+        whole_arm_worst_force_ratio=NAN,
+        whole_arm_min_duration_s=NAN,
+        whole_arm_worst_energy_j=NAN,
     )
 )
 """GraspEvaluation messages whose analysis fields say "not computed" (NaN, empty, false)."""
@@ -672,16 +683,21 @@ _DURATION_CHECK_FIELDS = Duration()._check_fields
 
 
 def joint_trajectory_msg(
-    joint_names: Sequence[str], times_s: np.ndarray, joint_positions: np.ndarray, header: Header
+    joint_names: Sequence[str],
+    times_s: np.ndarray,
+    joint_positions: np.ndarray,
+    header: Header,
+    planned_rates: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> JointTrajectory:
     """trajectory_msgs/JointTrajectory of sampled joint positions [rad or m] at times [s]:
-    velocities and accelerations from core.method.executable (C2 spline, at rest at both ends);
-    no points when there are no samples. Give ``header`` a zero stamp: in a JointTrajectory
-    the stamp is when execution starts, and 0 means on receipt."""
+    velocities and accelerations the planner's (``planned_rates``), else from
+    core.method.executable (C2 spline, at rest at both ends); no points when there are no
+    samples. Give ``header`` a zero stamp: in a JointTrajectory the stamp is when execution
+    starts, and 0 means on receipt."""
     message = JointTrajectory(header=header, joint_names=list(joint_names))
     if len(times_s) == 0:
         return message
-    velocities, accelerations = joint_velocities_accelerations(times_s, joint_positions)
+    velocities, accelerations = rates_for_execution(times_s, joint_positions, planned_rates)
     # One point per sample: made by filling the messages' slots when the classes are the
     # ones this was written for (the keyword constructors cost several times more); stamps
     # rounded as duration_msg rounds them.
@@ -766,7 +782,10 @@ def ranking_msg(
         _set_joint_trajectories(
             message,
             ranking.joint_names,
-            {e.index: (e.times_s, e.joint_positions) for e in ranking.evaluations},
+            {
+                e.index: (e.times_s, e.joint_positions, e.planned_joint_rates)
+                for e in ranking.evaluations
+            },
             content.with_joint_trajectory(message.order, len(ranking.evaluations)),
             base_frame,
         )
@@ -802,26 +821,39 @@ def _ranking_msg_without_trajectories(
         effort_criterion="",
         order_stability=NAN,
     )
+    _set_armature(message, ranking)
     postures = ranking.postures or tuple(single_posture(e) for e in ranking.evaluations)
     for item, posture in zip(message.evaluations, postures, strict=True):
         _set_posture(item, posture)
     return message
 
 
+def _set_armature(message: GraspRanking, ranking: Ranking) -> None:
+    """The armature fields of a GraspRanking: given or the note, and the ratio's median."""
+    feasible = [e for e in ranking.evaluations if e.feasible]
+    ratio = armature_ratio(
+        [e.effective_mass_kg for e in feasible], [e.links_only_effective_mass_kg for e in feasible]
+    )
+    message.armature_given = bool(ranking.armature_given)
+    message.armature_note = "" if ranking.armature_given else NO_ARMATURE_NOTE
+    message.armature_ratio_median = float(ratio.median)
+
+
 def _set_joint_trajectories(
     message: GraspRanking,
     joint_names: Sequence[str],
-    motions: Mapping[int, tuple[np.ndarray, np.ndarray]],
+    motions: Mapping[int, tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray] | None]],
     indices: Collection[int],
     base_frame: str,
 ) -> None:
     """Fill ``joint_trajectory`` of the evaluations whose index is in ``indices`` from
-    ``motions`` (index: sample times [s], joint positions); the others keep an empty one."""
+    ``motions`` (index: sample times [s], joint positions, a planner's own rates or None);
+    the others keep an empty one."""
     by_index = {item.index: item for item in message.evaluations}
     for index in sorted(indices):
-        times_s, joint_positions = motions[index]
+        times_s, joint_positions, planned_rates = motions[index]
         by_index[index].joint_trajectory = joint_trajectory_msg(
-            joint_names, times_s, joint_positions, Header(frame_id=base_frame)
+            joint_names, times_s, joint_positions, Header(frame_id=base_frame), planned_rates
         )
 
 
@@ -886,6 +918,25 @@ def _set_iso(message: GraspEvaluationMsg, assessment: PowerForceLimitAssessment)
     message.iso_limiting_region = assessment.limiting_region
 
 
+def _set_whole_arm(message: GraspEvaluationMsg, whole: WholeArmEvaluation, region: str) -> None:
+    """The whole_arm_* fields of one grasp (left at "not computed" when infeasible)."""
+    if not whole.feasible:
+        return
+    if any(r.region == region for r in whole.regions):
+        message.whole_arm_rank_force_n = float(whole_arm_score(whole, region))
+    if whole.limiting_region:
+        limiting = whole.region(whole.limiting_region)
+        message.whole_arm_limiting_region = whole.limiting_region
+        message.whole_arm_worst_force_ratio = float(limiting.worst_force_ratio)
+        message.whole_arm_worst_site = whole.site_names[limiting.worst_site]
+        message.whole_arm_worst_link = whole.site_links[limiting.worst_site]
+    message.whole_arm_admissible = bool(whole.admissible_where_permitted)
+    message.whole_arm_min_duration_s = float(whole.min_duration_s)
+    energy, site, _ = whole.worst_energy
+    message.whole_arm_worst_energy_j = float(energy)
+    message.whole_arm_worst_energy_site = whole.site_names[site]
+
+
 def report_msg(
     report: SafetyReport,
     grasps: PoseArray,
@@ -919,7 +970,10 @@ def _report_msg(
     message = _ranking_msg_without_trajectories(
         report.ranking, grasps, base_frame, stamp, compute_time_s, report.order, per_sample
     )
-    motions = {e.index: (e.times_s, e.joint_positions) for e in report.ranking.evaluations}
+    motions = {
+        e.index: (e.times_s, e.joint_positions, e.planned_joint_rates)
+        for e in report.ranking.evaluations
+    }
     message.metric_point = options.metric_point
     message.rank_by = options.rank_by
     message.safety_order = [int(i) for i in report.safety_order]
@@ -931,12 +985,17 @@ def _report_msg(
         message.order_stability = float(report.uncertainty.order_stability)
         message.worst_case_order = [int(i) for i in report.uncertainty.worst_case_order]
         message.uncertainty_message = report.uncertainty.message
+    if report.arm_sites is not None:
+        message.whole_arm_region = options.whole_arm_region
+        message.whole_arm_sites = list(report.arm_sites.names)
     iso = {a.index: a for a in report.iso}
     pareto = set(message.pareto_set)
     for k, evaluation in enumerate(message.evaluations):
         evaluation.safety_score = float(report.scores[k])
         if k in iso:
             _set_iso(evaluation, iso[k])
+        if report.whole_arm:
+            _set_whole_arm(evaluation, report.whole_arm[k], options.whole_arm_region)
         if per_sample and report.exposed and report.exposed[k].feasible:
             exposed = report.exposed[k]
             evaluation.leading_point_effective_mass_kg = float64_array(
@@ -959,7 +1018,7 @@ def _report_msg(
             evaluation.redundancy_applied = bool(resolution.applied)
             evaluation.score_without_redundancy = float(resolution.original_score)
             if resolution.applied:
-                motions[k] = (resolution.times_s, resolution.joint_positions)
+                motions[k] = (resolution.times_s, resolution.joint_positions, None)
                 if per_sample:
                     evaluation.effective_mass_with_redundancy_kg = float64_array(
                         resolution.effective_mass_kg

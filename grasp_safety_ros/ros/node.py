@@ -3,7 +3,7 @@
 A thin adapter: messages are converted in conversions.py, parameters validated in
 parameters.py, the work is GraspSafetyEvaluator.rank followed by
 core.analyses.safety_report.analyse (metric point, ISO/TS 15066, inertia uncertainty, grasp
-quality, redundancy, effort). See the README for the interface.
+quality, redundancy, effort). See docs/ros/interface.md for the interface.
 
 Threads: a MultiThreadedExecutor with EXECUTOR_THREADS threads. The service sits in its own
 reentrant callback group, the input topics in a mutually exclusive one, everything else
@@ -60,6 +60,7 @@ from ..core.input_checks import finite_array
 from ..core.method.posture import select_postures
 from ..core.method.ranking import check_metric
 from ..core.model.inertia import ObjectInertia
+from ..core.model.robot import NO_ARMATURE_NOTE, RobotModel
 from .conversions import (
     check_frame_id,
     check_grasp_array,
@@ -863,6 +864,7 @@ class GraspSafetyNode(Node):
                 "last_infeasible_grasps": status.last_infeasible,
                 "last_error": status.last_error,
                 "robot_description_error": status.robot_description_error,
+                "armature": _armature_status(bundle.robot) if bundle else "",
             }
         return DiagnosticStatus(
             level=level,
@@ -941,6 +943,16 @@ def _deadline_check(
             )
 
     return check
+
+
+def _armature_status(robot: RobotModel) -> str:
+    """The chain's armature per joint [kg m^2 or kg], or the note that none was given."""
+    if not robot.armature_given:
+        return NO_ARMATURE_NOTE
+    return ", ".join(
+        f"{name} {value:g}"
+        for name, value in zip(robot.joint_names, robot.armature_kgm2, strict=True)
+    )
 
 
 def main(args: list[str] | None = None) -> int:

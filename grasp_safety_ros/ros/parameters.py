@@ -29,6 +29,7 @@ from ..core.input_checks import finite_array, finite_float
 from ..core.method.posture import DEFAULT_RESTARTS, MAX_RESTARTS, PostureConfig
 from ..core.method.ranking import METRICS, EvaluationConfig, GraspSafetyEvaluator
 from ..core.method.warm_up import warm_up
+from ..core.model.armature import PUBLISHED, published_for, published_values
 from ..core.model.inertia import ObjectInertia
 from ..core.model.robot import RobotModel
 
@@ -52,10 +53,32 @@ class ParameterSpec:
 
 PARAMETERS: Mapping[str, ParameterSpec] = {
     "robot_description": ParameterSpec(
-        "", "URDF XML of the robot; takes precedence over urdf and the /robot_description topic"
+        "",
+        "URDF or MJCF XML of the robot; takes precedence over urdf and the /robot_description "
+        "topic",
     ),
     "urdf": ParameterSpec(
-        "", "URDF file path or example-robot-data:<name>; used when robot_description is empty"
+        "",
+        "URDF or MJCF file path or example-robot-data:<name>; used when robot_description is "
+        "empty",
+    ),
+    "robot.armature_kgm2": ParameterSpec(
+        [],
+        "armature (reflected rotor inertia) per chain joint, base to tip, or per joint of "
+        "robot.armature_joint_names [kg m^2; kg for prismatic joints], >= 0; empty: the "
+        "description's own (an MJCF's) or none",
+        item_type=float,
+    ),
+    "robot.armature_joint_names": ParameterSpec(
+        [],
+        "chain joints the values of robot.armature_kgm2 are for (the others: 0); empty: all "
+        "chain joints in order",
+        item_type=str,
+    ),
+    "robot.armature_published": ParameterSpec(
+        "",
+        "published | published:<entry>: the armature of data/armature_published.yaml (see "
+        "docs/arms.md); takes precedence over robot.armature_kgm2; empty: not used",
     ),
     "robot_description_timeout_s": ParameterSpec(
         10.0,
@@ -176,10 +199,12 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
 """Every parameter of the node, by name."""
 
 ROBOT_PARAMETERS = ("robot_description", "urdf", "base_frame", "tip_frame")
+ROBOT_PARAMETERS += ("robot.armature_kgm2", "robot.armature_joint_names")
+ROBOT_PARAMETERS += ("robot.armature_published",)
 """Parameters whose change rebuilds the robot model."""
 
 _STRINGS = ("robot_description", "urdf", "base_frame", "tip_frame", "object_frame", "metric")
-_STRINGS += ("metric_point", "effort.criterion", "rank_by")
+_STRINGS += ("metric_point", "effort.criterion", "rank_by", "robot.armature_published")
 _CHOICES: Mapping[str, Sequence[str]] = {
     "metric": METRICS,
     "metric_point": METRIC_POINTS,
@@ -237,6 +262,8 @@ class NodeSettings:
         response: What the result messages carry (``response.*``).
         ik_seed: The seed parameter, or None when empty (length checked against the robot
             in build_robot).
+        armature_kgm2, armature_joint_names, armature_published: The ``robot.armature_*``
+            parameters (checked against the chain in build_robot).
     """
 
     robot_description: str
@@ -263,6 +290,9 @@ class NodeSettings:
     response: ResponseContent = dataclasses.field(
         default_factory=lambda: ResponseContent(joint_trajectories=1)
     )
+    armature_kgm2: tuple[float, ...] = ()
+    armature_joint_names: tuple[str, ...] = ()
+    armature_published: str = ""
 
     @property
     def robot_source(self) -> str:
@@ -322,6 +352,10 @@ def check_parameter(name: str, value: Any) -> Any:
             )
         if name == "object_frame" and not text:
             raise InvalidInputError(name, "must be a non-empty frame name")
+        if name == "robot.armature_published" and text and text.partition(":")[0] != PUBLISHED:
+            raise InvalidInputError(
+                name, f"must be empty, '{PUBLISHED}' or '{PUBLISHED}:<entry>', got {text!r}"
+            )
         return text
     if name in _FLAGS:
         if not isinstance(value, bool):
@@ -335,6 +369,16 @@ def check_parameter(name: str, value: Any) -> Any:
         return _integer(name, value, 0, MAX_RESTARTS)
     if name == "ik_seed":
         return _numbers(name, value, None)
+    if name == "robot.armature_kgm2":
+        values = _numbers(name, value, None)
+        negative = [k for k, x in enumerate(values) if x < 0.0]
+        if negative:
+            raise InvalidInputError(
+                f"{name}[{negative[0]}]", f"must be >= 0, got {values[negative[0]]:g}"
+            )
+        return values
+    if name == "robot.armature_joint_names":
+        return _names(name, value)
     if name == "object.com_in_object_m":
         return _numbers(name, value, 3)
     if name == "object.inertia_about_com_kgm2":
@@ -377,6 +421,20 @@ def _points(name: str, value: Any) -> tuple[float, ...]:
             name, f"must hold at most {_MAX_POINTS} points, got {len(numbers) // 3}"
         )
     return numbers
+
+
+def _names(name: str, value: Any) -> tuple[str, ...]:
+    """A list of distinct non-empty names."""
+    if value is None:  # an empty list in a params file arrives as NOT_SET
+        value = []
+    if isinstance(value, (str, bytes)) or not isinstance(value, (list, tuple, array.array)):
+        raise InvalidInputError(name, f"must be a list of joint names, got {_show(value)}")
+    names = list(value)
+    if not names:
+        return ()
+    if not all(isinstance(n, str) and n for n in names) or len(set(names)) != len(names):
+        raise InvalidInputError(name, f"must be distinct joint names, got {_show(names)}")
+    return tuple(names)
 
 
 def _regions(name: str, value: Any) -> tuple[str, ...]:
@@ -596,6 +654,9 @@ def settings_from_parameters(values: Mapping[str, Any]) -> NodeSettings:
             joint_trajectories=v["response.joint_trajectories"],
             per_sample=v["response.per_sample"],
         ),
+        armature_kgm2=v["robot.armature_kgm2"],
+        armature_joint_names=v["robot.armature_joint_names"],
+        armature_published=v["robot.armature_published"],
     )
 
 
@@ -633,6 +694,27 @@ def _renamed(error: GraspSafetyError, origin: str) -> GraspSafetyError:
     return InvalidInputError(new_field, message)
 
 
+def _with_armature_parameters(
+    robot: RobotModel, settings: NodeSettings, source: str
+) -> RobotModel:
+    """The chain with the armature of the ``robot.armature_*`` parameters (if any)."""
+    if settings.armature_published:
+        entry = published_for(settings.armature_published, source, robot.joint_names)
+        return robot.with_armature(published_values(entry, robot.joint_names))
+    values = settings.armature_kgm2
+    names = settings.armature_joint_names
+    if not values and not names:
+        return robot
+    if names:
+        if len(names) != len(values):
+            raise InvalidInputError(
+                "robot.armature_joint_names",
+                f"has {len(names)} names for {len(values)} values of robot.armature_kgm2",
+            )
+        return robot.with_armature(dict(zip(names, values, strict=True)))
+    return robot.with_armature(values)
+
+
 def build_robot(settings: NodeSettings, topic_description: str | None) -> RobotBundle | None:
     """Load the robot chain of ``settings`` (parameters first, then the topic's description).
 
@@ -653,6 +735,7 @@ def build_robot(settings: NodeSettings, topic_description: str | None) -> RobotB
         return None
     try:
         robot = RobotModel.from_urdf(source, settings.base_frame, settings.tip_frame)
+        robot = _with_armature_parameters(robot, settings, source)
         seed = None
         if settings.ik_seed is not None:
             seed = tuple(float(x) for x in robot.check_positions(settings.ik_seed, "robot.seed"))

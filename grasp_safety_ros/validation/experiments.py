@@ -36,6 +36,8 @@ from .simulation import (
 )
 
 ROBOT_SOURCE = "example-robot-data:baxter"
+ARMATURE_IMPACTS, ARMATURE_IMPACTS_QUICK = 8, 3
+"""Free impacts of the armature check (validation.armature_check): full and quick runs."""
 BASE_FRAME = "base"
 TIP_FRAME = "right_gripper"
 SEED_POSITIONS = (0.0, -0.55, 0.0, 0.75, 0.0, 1.26, 0.0)

@@ -438,8 +438,44 @@ Change from the straight path, same grasp, impact planned at the same time:
 """
 
 
+def _armature_section(results: dict[str, Any]) -> str:
+    """Free impacts with rotor inertia: the impulse against both predictions."""
+    geared = results.get("impulse_check_armature")
+    if not geared or not geared["valid_cases"]:
+        return ""
+    return f"""## Free impacts with rotor inertia (armature)
+
+{geared["robot"]}, armature {geared["armature_kgm2"]} kg m^2 per joint in MuJoCo
+(`dof_armature`) and in the core: over {geared["valid_cases"]} free impacts at random
+configurations and directions, the measured impulse matches (1 + e)·M_eff·v with the effective
+mass *with* armature to {geared["worst_rel_error"]:.1e} (worst relative error), and exceeds the
+prediction from the links-only effective mass by at least
+{100 * geared["links_only_min_rel_error"]:.1f} % (median
+{100 * geared["links_only_median_rel_error"]:.1f} %). The peak contact force follows the same
+effective mass (MuJoCo's soft contact scales with it): peak force / (M_eff·v) varies by a factor
+{geared["peak_force_per_mass_spread"]:.3f} over the impacts with armature, by
+{geared["links_only_peak_force_per_mass_spread"]:.3f} with the links-only mass.
+
+"""
+
+
 def _signed(value: float) -> str:
     return f"{100.0 * value:+.2f} %"
+
+
+def _elbow_markdown(result: dict[str, Any] | None) -> str:
+    """The results.md bullet of the elbow impact ("" when it was not run)."""
+    if not result:
+        return ""
+    return (
+        f"- Elbow impact: a free impact at the whole-arm site {result['site']} (link "
+        f"{result['link']}), grasp {result['grasp']}, t = {result['time_s']:g} s, "
+        f"{result['speed_m_s']:.2f} m/s along the site's own direction of motion: impulse vs "
+        f"(1 + e)·M_eff·v with the whole-arm M_eff {result['effective_mass_kg']:.3f} kg off by "
+        f"{result['rel_error']:.1e} (MuJoCo's own: {result['engine_effective_mass_kg']:.3f} kg); "
+        f"with the tip's {result['tip_effective_mass_kg']:.3f} kg in its place, by "
+        f"{result['rel_error_with_tip_mass']:.2f}.\n"
+    )
 
 
 def results_markdown(results: dict[str, Any]) -> str:
@@ -484,7 +520,7 @@ in {results["timing_s"]["total"]:.0f} s ({versions}). Everything below is genera
   e measured {impulse["restitution_min"]:.3f} to {impulse["restitution_max"]:.3f}; MuJoCo's own
   1/(uᵀ J M⁻¹ Jᵀ u) differs from the core's by at most
   {impulse["engine_vs_core_effective_mass_max_rel_diff"]:.1e} (relative).
-
+{_elbow_markdown(results.get("elbow_impact"))}
 ## Reading the results
 
 {_reading(results)}
@@ -501,7 +537,7 @@ in {results["timing_s"]["total"]:.0f} s ({versions}). Everything below is genera
 
 {_grasp_table(book, [])}
 {_posture_section(results)}
-{_waypoint_section(results)}## Ablations
+{_waypoint_section(results)}{_armature_section(results)}## Ablations
 
 Each ablation changes one setting and is simulated from
 {setup["variants_simulated_from_to_s"][0]:g} s to {setup["variants_simulated_from_to_s"][1]:g} s,

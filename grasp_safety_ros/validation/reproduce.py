@@ -14,8 +14,13 @@ from typing import Any
 
 import numpy as np
 
+from ..core.method.ranking import Grasp
 from ..core.model.robot import RobotModel
+from .armature_check import armature_impulse_check
+from .elbow import elbow_impact, format_elbow
 from .experiments import (
+    ARMATURE_IMPACTS,
+    ARMATURE_IMPACTS_QUICK,
     BASE_FRAME,
     COMMAND,
     DURATION_S,
@@ -141,6 +146,18 @@ def reproduce(
             [(tensor.key, tensor_runs), (book.key, book_runs)], config.impulse
         ),
         "posture_selection": postures,
+        "elbow_impact": elbow_impact(
+            robot,
+            ROBOT_SOURCE,
+            book.grasps[0].object_inertia,
+            Grasp(book.grasps[0].transform_tip_to_object, book.grasps[0].name),
+            book_runs[0].evaluation,
+            book.trajectory,
+            config.impulse,
+        ),
+        "impulse_check_armature": armature_impulse_check(
+            ARMATURE_IMPACTS_QUICK if quick else ARMATURE_IMPACTS, config.impulse, log=log
+        ),
     }
     low, high = PAPER_BOOK_PEAK_FORCES_N
     results["book"]["paper_gazebo"] = {
@@ -197,6 +214,18 @@ def format_summary(results: dict[str, Any]) -> str:
         f"{impulse['worst_rel_error']:.2e} over {impulse['cases']} free impacts "
         f"(e = {impulse['restitution_min']:.3f}..{impulse['restitution_max']:.3f})",
     ]
+    if results.get("elbow_impact"):
+        lines.append(format_elbow(results["elbow_impact"]))
+    geared = results.get("impulse_check_armature")
+    if geared and geared["valid_cases"]:
+        lines.append(
+            f"  impulse check with rotor inertia (Panda, FR3 armature): worst error "
+            f"{geared['worst_rel_error']:.2e} with armature; the impulse exceeds the links-only "
+            f"prediction by {geared['links_only_min_rel_error']:.1%} or more (median "
+            f"{geared['links_only_median_rel_error']:.1%}, {geared['valid_cases']} free impacts); "
+            f"peak force / (M_eff v) spread x{geared['peak_force_per_mass_spread']:.3f} "
+            f"(links only x{geared['links_only_peak_force_per_mass_spread']:.3f})"
+        )
     postures = results.get("posture_selection")
     if postures:
         changes = ", ".join(

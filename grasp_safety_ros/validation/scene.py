@@ -3,8 +3,9 @@
 The URDF is read as text, stripped of visual and collision elements (MuJoCo cannot read the
 Baxter's COLLADA meshes), and every joint outside the core's chain is made fixed at its
 neutral position (0), which is how ``RobotModel`` locks them; joint damping and friction are
-dropped and armature stays 0, so the engine's joint-space inertia is the core's (a test checks
-it against ``pinocchio.crba``). ``mujoco.MjSpec`` then adds, by code:
+dropped and each chain joint's armature (``dof_armature``) is the core's
+(``RobotModel.armature_kgm2``), so the engine's joint-space inertia is the core's (a test checks
+it against ``pinocchio.crba``, armature included). ``mujoco.MjSpec`` then adds, by code:
 
 - a sphere at the tip frame's origin, the only robot geometry that collides (see
   ``tip_sphere_radius_m``): a sphere centred on the tip makes the contact normal the face
@@ -316,8 +317,11 @@ def base_spec(
     timestep_s: float,
     gravity: bool = True,
 ) -> mujoco.MjSpec:
-    """The robot alone: URDF without meshes, only the chain joints movable, fixed base."""
+    """The robot alone: URDF without meshes, only the chain joints movable, fixed base, the
+    chain joints' armature the core's."""
     spec = mujoco.MjSpec.from_string(arm_urdf_for_mujoco(robot, urdf_source))
+    for name, armature in zip(robot.joint_names, robot.armature_kgm2, strict=True):
+        spec.joint(name).armature = float(armature)
     spec.option.timestep = timestep_s
     spec.option.gravity = [0.0, 0.0, -9.81] if gravity else [0.0, 0.0, 0.0]
     spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC

@@ -435,6 +435,7 @@ class ImpulseCase:
         rel_error: |impulse - predicted| / predicted (inf if the tip never separated).
         duration_s: Contact duration [s].
         limit_active: Whether a joint-limit constraint acted (would spoil the check).
+        peak_force_n: Largest contact normal force during the impact [N].
     """
 
     effective_mass_kg: float
@@ -447,6 +448,7 @@ class ImpulseCase:
     rel_error: float
     duration_s: float
     limit_active: bool
+    peak_force_n: float = 0.0
 
 
 class ImpulseChecker:
@@ -465,17 +467,24 @@ class ImpulseChecker:
         object_inertia: ObjectInertia,
         transform_tip_to_object: pin.SE3,
         setup: ImpulseSetup | None = None,
+        body_name: str | None = None,
     ) -> None:
+        """``body_name``: the link whose origin carries the colliding sphere (default: the
+        tip frame's), e.g. an elbow link for a whole-arm site at its joint's origin."""
         self.robot = robot
         self.setup = setup or ImpulseSetup()
+        body_name = body_name or robot.tip_frame
         rigid = SensorConfig(stiffness_n_m=None)
         spec = base_spec(robot, urdf_source, self.setup.timestep_s, gravity=False)
         add_object(spec, robot.tip_frame, object_inertia, transform_tip_to_object)
-        add_tip_sphere(spec, robot.tip_frame, self.setup.tip_sphere_radius_m, self.setup.contact)
+        add_tip_sphere(spec, body_name, self.setup.tip_sphere_radius_m, self.setup.contact)
         add_obstacle(
             spec, np.array([10.0, 0.0, 0.0]), np.array([1.0, 0.0, 0.0]), self.setup.contact, rigid
         )
         self.scene = compile_scene(spec, robot)
+        self.scene.tip_body = int(
+            mujoco.mj_name2id(self.scene.model, mujoco.mjtObj.mjOBJ_BODY, body_name)
+        )
         self.pillar = int(mujoco.mj_name2id(self.scene.model, mujoco.mjtObj.mjOBJ_BODY, "pillar"))
 
     def run(
@@ -500,7 +509,7 @@ class ImpulseChecker:
         engine_mass = engine_effective_mass(scene, unit)
         speed_before = float(unit @ (tip_translational_jacobian(scene) @ data.qvel))
         steps = round(setup.max_duration_s / setup.timestep_s)
-        impulse = 0.0
+        impulse = peak_force = 0.0
         started = False
         limit_active = False
         duration = 0.0
@@ -513,6 +522,7 @@ class ImpulseChecker:
             )
             if force > 0.0:
                 started = True
+                peak_force = max(peak_force, force)
                 impulse += force * setup.timestep_s
                 duration += setup.timestep_s
             elif started and not _touching(scene):
@@ -533,6 +543,7 @@ class ImpulseChecker:
             rel_error=float(error),
             duration_s=duration,
             limit_active=limit_active,
+            peak_force_n=peak_force,
         )
 
 

@@ -31,7 +31,8 @@ import pinocchio as pin
 
 from ..exceptions import InvalidInputError
 from ..input_checks import read_only
-from ..method.effective_mass import BodyInertias, augmented_inertia_arrays, augmented_model
+from ..method.effective_mass import augmented_inertia_arrays, augmented_model
+from ..method.packed import BodyInertias
 from ..method.ranking import Grasp, GraspEvaluation
 from ..method.terms import SampleTerms
 from ..model.inertia import ObjectInertia

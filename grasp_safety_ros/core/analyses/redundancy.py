@@ -68,7 +68,7 @@ import pinocchio as pin
 from ..exceptions import InvalidInputError
 from ..input_checks import read_only
 from ..method.effective_mass import augmented_model, translational_mobility_in_base
-from ..method.ranking import Grasp, GraspEvaluation, aggregate, check_metric
+from ..method.ranking import Grasp, GraspEvaluation, aggregate, check_metric, positions_along
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
 from ..model.trajectory import Trajectory
@@ -539,7 +539,7 @@ def resolve_redundancy(
     if best.q is q_original:
         positions, result_masses = original, masses
     else:
-        positions = np.array([robot.positions_from_q(q) for q in best.q])
+        positions = positions_along(robot, np.asarray(best.q), original[0])  # unwrapped
         result_masses = best.masses
     errors = np.array(
         [problem.pose_error(q, target)[1:] for q, target in zip(best.q, targets, strict=True)]

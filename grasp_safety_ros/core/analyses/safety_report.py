@@ -8,8 +8,10 @@ the ROS node both serialise a SafetyReport; neither computes anything itself.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -28,13 +30,34 @@ from .exposed_points import (
     evaluate_exposed_points,
     metric_point_series,
 )
-from .iso15066 import PowerForceLimitAssessment, assess_grasp, assess_motions, select_regions
+from .iso15066 import (
+    BODY_REGIONS,
+    PowerForceLimitAssessment,
+    assess_grasp,
+    assess_motions,
+    select_regions,
+)
 from .multi_objective import QualityRanking, rank_with_quality
 from .redundancy import RedundancyConfig, RedundancyResolution, resolve_redundancy
-from .uncertainty import InertiaUncertainty, UncertaintyAnalysis, analyse_inertia_uncertainty
+from .uncertainty import (
+    ArmatureRangeAnalysis,
+    InertiaUncertainty,
+    UncertaintyAnalysis,
+    analyse_inertia_uncertainty,
+)
+from .whole_arm import (
+    DEFAULT_RANK_REGION,
+    ArmSites,
+    WholeArmEvaluation,
+    check_exposed_points_m,
+    evaluate_whole_arm,
+    order_by_whole_arm,
+    resolve_arm_sites,
+)
 
-RANK_BY = ("safety", "effort")
-"""What orders the final ranking: the safety score (with quality, when given) or the effort."""
+RANK_BY = ("safety", "effort", "whole_arm")
+"""What orders the final ranking: the safety score (with quality, when given), the effort, or
+the whole arm's worst predicted force for ``whole_arm_region``."""
 
 
 @dataclass(frozen=True)
@@ -52,8 +75,14 @@ class AnalysisOptions:
         redundancy: Null-space optimisation of the effective mass (arms with > 6 joints);
             when on, the tip score uses the optimised effective mass.
         effort: Compute joint torques along the trajectory.
-        rank_by: ``safety`` or ``effort`` (then ``effort_criterion`` orders the grasps).
+        rank_by: ``safety``, ``effort`` (then ``effort_criterion`` orders the grasps) or
+            ``whole_arm`` (the worst predicted force over the arm's sites for
+            ``whole_arm_region``; turns ``whole_arm`` on).
         effort_criterion: ``peak_fraction`` or ``rms_fraction`` of the torque limits.
+        whole_arm: Assess the arm's own sites (core.analyses.whole_arm).
+        arm_points_m: Extra sites ``{link_name: (P, 3) points [m], link frame}``; giving any
+            turns ``whole_arm`` on.
+        whole_arm_region: Body region ``rank_by: whole_arm`` uses (DEFAULT_RANK_REGION).
     """
 
     metric_point: str = "tip"
@@ -66,6 +95,9 @@ class AnalysisOptions:
     effort: bool = False
     rank_by: str = "safety"
     effort_criterion: str = "peak_fraction"
+    whole_arm: bool = False
+    arm_points_m: Mapping[str, Any] | None = None
+    whole_arm_region: str = DEFAULT_RANK_REGION
 
     def __post_init__(self) -> None:
         check_metric_point(self.metric_point)
@@ -90,6 +122,24 @@ class AnalysisOptions:
         check_effort_criterion(self.effort_criterion, "effort.criterion")
         if self.rank_by == "effort" and not self.effort:
             object.__setattr__(self, "effort", True)
+        if self.arm_points_m is not None:
+            points = check_exposed_points_m(self.arm_points_m)
+            object.__setattr__(self, "arm_points_m", MappingProxyType(points))
+        if self.whole_arm_region not in BODY_REGIONS:
+            raise InvalidInputError(
+                "whole_arm.region",
+                f"unknown body region {self.whole_arm_region!r}; regions: "
+                f"{', '.join(BODY_REGIONS)}",
+            )
+        assessed = self.iso_regions
+        if self.rank_by == "whole_arm" and assessed and self.whole_arm_region not in assessed:
+            raise InvalidInputError(
+                "whole_arm.region",
+                f"{self.whole_arm_region!r} is not among the assessed iso_ts_15066.regions "
+                f"({', '.join(assessed)})",
+            )
+        if self.rank_by == "whole_arm" or self.arm_points_m:
+            object.__setattr__(self, "whole_arm", True)
 
 
 @dataclass(frozen=True)
@@ -109,6 +159,10 @@ class SafetyReport:
         quality: Safety/quality combination and Pareto set (pure safety when no quality).
         redundancy: Null-space resolution per grasp, when on.
         effort: Joint effort per grasp, when on.
+        whole_arm: Exposure of the arm's sites per grasp, when on.
+        arm_sites: The sites assessed (resolved once per report), when on.
+        armature_range: Effective masses and ranking at both ends of armature ranges, when
+            the armature was given as ranges (uncertainty.analyse_armature_range).
     """
 
     ranking: Ranking
@@ -122,6 +176,9 @@ class SafetyReport:
     uncertainty: UncertaintyAnalysis | None = None
     redundancy: tuple[RedundancyResolution, ...] = ()
     effort: tuple[EffortEvaluation, ...] = ()
+    whole_arm: tuple[WholeArmEvaluation, ...] = ()
+    arm_sites: ArmSites | None = None
+    armature_range: ArmatureRangeAnalysis | None = None
 
 
 def analyse(
@@ -153,7 +210,10 @@ def analyse(
     evaluations = ranking.evaluations
     metric = ranking.metric
     per_grasp = (
-        (options.points_in_object_m is not None) + options.redundancy + options.effort
+        (options.points_in_object_m is not None)
+        + options.redundancy
+        + options.effort
+        + options.whole_arm
     ) * len(grasps) + (options.uncertainty is not None)
     done = 0
 
@@ -267,8 +327,33 @@ def analyse(
             )
             step()
         effort = tuple(efforts)
+    whole_arm: tuple[WholeArmEvaluation, ...] = ()
+    arm_sites = None
+    if options.whole_arm:
+        arm_sites = resolve_arm_sites(robot, options.arm_points_m)
+        assessed = []
+        for k, (e, g) in enumerate(zip(evaluations, grasps, strict=True)):
+            assessed.append(
+                evaluate_whole_arm(
+                    robot,
+                    e,
+                    object_inertia,
+                    g,
+                    motions[k],
+                    arm_sites,
+                    options.iso_regions,
+                    model_of(k),
+                    redundancy[k].joint_positions
+                    if redundancy and redundancy[k].applied
+                    else None,
+                )
+            )
+            step()
+        whole_arm = tuple(assessed)
     if options.rank_by == "effort":
         order = order_by_effort(effort, options.effort_criterion)
+    elif options.rank_by == "whole_arm":
+        order = order_by_whole_arm(whole_arm, options.whole_arm_region)
     elif options.grasp_quality is not None:
         order = quality.order
     else:
@@ -285,6 +370,8 @@ def analyse(
         uncertainty=uncertainty,
         redundancy=redundancy,
         effort=effort,
+        whole_arm=whole_arm,
+        arm_sites=arm_sites,
     )
 
 

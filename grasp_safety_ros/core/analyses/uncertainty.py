@@ -397,3 +397,87 @@ def _message(
         f"{best.probability_safest:.1%} of {count} inertia samples (also safest: {others})"
         f"{skipped}"
     )
+
+
+# --- Armature (reflected rotor inertia) ranges ----------------------------------------------
+
+
+@dataclass(frozen=True)
+class ArmatureRangeAnalysis:
+    """How the ranking holds up over per-joint armature ranges.
+
+    The joint-space inertia M + diag(a) grows with every armature a_k, so J M⁻¹ Jᵀ shrinks and
+    every effective mass grows: over the box of ranges the effective masses (and the mean,
+    max or integral scores) are smallest at the lower ends and largest at the upper ends, and
+    those two corners bound them exactly.
+
+    Attributes:
+        lower_kgm2, upper_kgm2: (n,) the ranges' ends per chain joint [kg m^2, kg prismatic].
+        effective_mass_range_kg: (G, 2) per grasp, the smallest (lower ends) and largest
+            (upper ends) per-sample effective mass [kg]; NaN if infeasible.
+        scores_lower, scores_upper: (G,) scores at the lower and upper ends (NaN infeasible).
+        order_lower, order_upper: Feasible grasps by score at each end, safest first.
+        ranking_flips: Whether the two orders differ.
+        message: One sentence saying so.
+    """
+
+    lower_kgm2: np.ndarray
+    upper_kgm2: np.ndarray
+    effective_mass_range_kg: np.ndarray
+    scores_lower: np.ndarray
+    scores_upper: np.ndarray
+    order_lower: tuple[int, ...]
+    order_upper: tuple[int, ...]
+    ranking_flips: bool
+    message: str
+
+
+def analyse_armature_range(
+    robot: RobotModel,
+    evaluations: Sequence[GraspEvaluation],
+    grasps: Sequence[Grasp],
+    object_inertia: ObjectInertia,
+    lower_kgm2: np.ndarray,
+    upper_kgm2: np.ndarray,
+    metric: str = "mean",
+) -> ArmatureRangeAnalysis:
+    """Effective masses and scores at both ends of the armature ranges (the IK does not
+    depend on the armature: the evaluations' joint positions are reused)."""
+    check_metric(metric)
+    ends = (robot.with_armature(lower_kgm2), robot.with_armature(upper_kgm2))
+    count = len(evaluations)
+    scores = np.full((2, count), np.nan)
+    ranges = np.full((count, 2), np.nan)
+    for g, (evaluation, grasp) in enumerate(zip(evaluations, grasps, strict=True)):
+        if not evaluation.feasible:
+            continue
+        for end, chain in enumerate(ends):
+            (masses,) = effective_mass_for_inertias(chain, evaluation, grasp, [object_inertia])
+            scores[end, g] = aggregate(masses, evaluation.times_s, metric)
+            ranges[g, end] = masses.min() if end == 0 else masses.max()
+    orders = []
+    for end in range(2):
+        feasible = [g for g in range(count) if evaluations[g].feasible]
+        orders.append(
+            tuple(evaluations[g].index for g in sorted(feasible, key=lambda g: scores[end, g]))
+        )
+    flips = orders[0] != orders[1]
+    message = (
+        f"ranking flips over the armature ranges: {list(orders[0])} at the lower ends, "
+        f"{list(orders[1])} at the upper ends"
+        if flips
+        else f"ranking stable over the armature ranges: {list(orders[1])}"
+    )
+    for array in (scores, ranges):
+        array.setflags(write=False)
+    return ArmatureRangeAnalysis(
+        lower_kgm2=ends[0].armature_kgm2,
+        upper_kgm2=ends[1].armature_kgm2,
+        effective_mass_range_kg=ranges,
+        scores_lower=scores[0],
+        scores_upper=scores[1],
+        order_lower=orders[0],
+        order_upper=orders[1],
+        ranking_flips=flips,
+        message=message,
+    )

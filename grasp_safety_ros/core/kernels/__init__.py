@@ -15,11 +15,9 @@ one value each, as ``core.method`` builds them: the chain (``ChainArrays``), the
 (``_jit``). They import nothing from the package but ``_jit``; only ``core.method`` imports
 them. They release the GIL (``nogil=True``).
 
-numba's disk cache (``cache=True``, in ``__pycache__``) is invalidated only when a function's
-own file changes, yet the kernels call each other across files. So ``_jit`` keeps a digest of
-all kernel sources in ``__pycache__/kernels.sources`` and, on import, deletes the cached
-``*.nbi`` / ``*.nbc`` files when any kernel file changed (``drop_stale_cache``); ``make setup``
-re-runs the warm-up when a kernel file changes, so the recompiling happens there, not at the
-first request. (A cache numba keeps elsewhere, e.g. ``NUMBA_CACHE_DIR``, is not covered: clear
-it after editing the kernels.)
+numba's disk cache holds one folder per digest of all kernel sources, shared by the checkouts
+of a machine (``_jit``): an edit of any kernel file compiles afresh (numba itself watches only a
+function's own file, yet the kernels call each other across files), and a second checkout of
+the same sources loads the first one's compiled kernels. ``make setup`` runs the warm-up when a
+kernel file changes, so compiling happens there, not at the first request.
 """

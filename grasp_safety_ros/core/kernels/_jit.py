@@ -1,16 +1,27 @@
-"""The jit decorator of the kernels, numba's disk cache kept consistent across kernel files,
-and Pinocchio's Taylor-branch thresholds.
+"""The jit decorator of the kernels, numba's disk cache shared by checkouts and kept
+consistent across kernel files, and Pinocchio's Taylor-branch thresholds.
 
 The kernels are compiled without numba's runtime (``_nrt=False``): they allocate nothing
 (every array, scratch included, comes from the caller, see ``ik.workspace``), so they need no
 reference counting. With it, every array view and every array read from a tuple costs an
 atomic increment and decrement; that was half the fused kernel's time (2.1x, measured).
 Without numba (an optional accelerator) the decorator returns the function unchanged.
+
+numba's disk cache: numba keys a cached function by its own file only, yet the kernels call
+each other across files, and it keeps the cache beside the sources, so every checkout compiles
+again (70-90 s). Here the cache of the kernels lives in one folder per digest of all kernel
+sources and the numba version (``cache_folder``): in ``$GRASP_SAFETY_NUMBA_CACHE``, else
+``$XDG_CACHE_HOME/grasp_safety_ros/numba`` (default ``~/.cache/...``), else, when that is not
+writable, the kernels' ``__pycache__``. An edit of any kernel file selects a new folder (nothing
+stale can load), and a second checkout of the same sources loads the first one's kernels. The
+most recently used ``KEPT_CACHES`` folders are kept, older ones deleted.
 """
 
 from __future__ import annotations
 
 import hashlib
+import os
+import shutil
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -19,56 +30,105 @@ import numpy as np
 
 try:  # optional accelerator
     import numba
+    from numba.core import caching as _numba_caching
 except ImportError:  # pragma: no cover - exercised on machines without numba
     numba = None
 
-SOURCES_STAMP = "kernels.sources"
-"""File in the kernels' ``__pycache__`` holding the digest of the sources it was built from."""
+KERNELS_FOLDER = Path(__file__).resolve().parent
+KEPT_CACHES = 6
+"""Digest folders kept in a cache root (one per kernel version recently used)."""
 
 
 VALUE_TYPES = Path("method") / "packed.py"
 """Where (below ``core``) the named tuples the kernels take are defined: numba's cache index
-names their module, so a change there must drop the cache too."""
+names their module, so a change there must change the digest too."""
 
 
-def drop_stale_cache(folder: Path | None = None) -> bool:
-    """Delete numba's cached kernels (``*.nbi``, ``*.nbc``) in ``folder/__pycache__`` when any
-    ``folder/*.py`` changed since they were written; returns whether it deleted them.
-
-    numba invalidates a cached function only when its own file changes, but the kernels call
-    each other across files: an edit in one file must recompile its callers in the others.
-    ``folder/../method/packed.py`` (VALUE_TYPES), where the kernels' argument types live,
-    counts as one of the sources.
-    """
-    folder = folder or Path(__file__).resolve().parent
-    digest = hashlib.sha256()
+def sources_digest(folder: Path = KERNELS_FOLDER) -> str:
+    """Digest of every ``folder/*.py`` and of ``folder/../method/packed.py`` (VALUE_TYPES)
+    (names and contents) and of the numba version."""
+    digest = hashlib.sha256(numba.__version__.encode() if numba is not None else b"")
     for source in [*sorted(folder.glob("*.py")), folder.parent / VALUE_TYPES]:
         if source.is_file():
-            digest.update(source.name.encode() + b"\0" + source.read_bytes())
-    cache = folder / "__pycache__"
-    stamp = cache / SOURCES_STAMP
+            digest.update(b"\0" + source.name.encode() + b"\0" + source.read_bytes())
+    return digest.hexdigest()[:20]
+
+
+def cache_roots(folder: Path = KERNELS_FOLDER) -> list[Path]:
+    """Where the kernels' cache may live, in order of preference (module docstring)."""
+    shared = os.environ.get("GRASP_SAFETY_NUMBA_CACHE")
+    if not shared:
+        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+        shared = os.path.join(base, "grasp_safety_ros", "numba")
+    return [Path(shared), folder / "__pycache__" / "numba"]
+
+
+def cache_folder(folder: Path = KERNELS_FOLDER) -> Path | None:
+    """The cache folder of the current kernel sources, created and marked as used, in the first
+    writable root; older digest folders beyond KEPT_CACHES are deleted. None: none writable."""
+    digest = sources_digest(folder)
+    for root in cache_roots(folder):
+        path = root / digest
+        try:
+            path.mkdir(parents=True, exist_ok=True)
+            os.utime(path)
+            probe = path / f".probe-{os.getpid()}"
+            probe.write_bytes(b"")
+            probe.unlink()
+        except OSError:
+            continue
+        prune(root)
+        return path
+    return None
+
+
+def prune(root: Path, keep: int = KEPT_CACHES) -> None:
+    """Delete all but the ``keep`` most recently used digest folders of ``root``."""
     try:
-        if stamp.read_text() == digest.hexdigest():
-            return False
+        folders = sorted(
+            (p for p in root.iterdir() if p.is_dir()), key=lambda p: p.stat().st_mtime
+        )
     except OSError:
-        pass
-    try:
-        for pattern in ("*.nbi", "*.nbc"):
-            for path in cache.glob(pattern):
-                path.unlink(missing_ok=True)
-        cache.mkdir(exist_ok=True)
-        stamp.write_text(digest.hexdigest())
-    except OSError:  # pragma: no cover - read-only install: numba caches elsewhere
+        return
+    for stale in folders[:-keep] if keep else folders:
+        shutil.rmtree(stale, ignore_errors=True)
+
+
+def _share_the_cache() -> bool:
+    """Route numba's cache of the kernel files to ``cache_folder()``; False where that cannot
+    be done (no numba, no writable folder, numba's caching internals moved): no disk cache."""
+    caching_impl = getattr(_numba_caching, "CacheImpl", None) or getattr(
+        _numba_caching, "_CacheImpl", None
+    )  # CacheImpl since numba 0.62
+    folder = cache_folder()
+    if caching_impl is None or folder is None:
         return False
+
+    class KernelCacheLocator(
+        _numba_caching._SourceFileBackedLocatorMixin, _numba_caching._CacheLocator
+    ):
+        """numba cache locator of the kernel files (module docstring)."""
+
+        def __init__(self, py_func: Any, py_file: str) -> None:
+            self._py_file = py_file
+            self._lineno = py_func.__code__.co_firstlineno
+
+        def get_cache_path(self) -> str:
+            os.makedirs(folder, exist_ok=True)  # another checkout may have pruned it
+            return str(folder)
+
+        @classmethod
+        def from_function(cls, py_func: Any, py_file: str) -> KernelCacheLocator | None:
+            if Path(py_file).resolve().parent != KERNELS_FOLDER:
+                return None  # not a kernel: numba's own locators take it
+            return cls(py_func, py_file)
+
+    caching_impl._locator_classes.insert(0, KernelCacheLocator)
     return True
 
 
-if numba is not None:
-    drop_stale_cache()
-
-
 _OPTIONS = {
-    "cache": True,
+    "cache": numba is not None and _share_the_cache(),
     "nogil": True,
     "error_model": "numpy",
     "_nrt": False,

@@ -18,6 +18,8 @@ def _mobility_from_frames(chain, bodies, g, ws, out):
     levers[g, k] and rotational inertia about it rotational_inertias[g, k] (joint-k frame,
     symmetric), by the composite-rigid-body algorithm in world axes; M^-1 through its
     Cholesky factor. ``bodies``: BodyInertias of one or more grasps (axis 0), g the grasp.
+    The chain's armature is added to the diagonal of M before the factorisation, as Pinocchio's
+    crba adds ``model.armature``.
     """
     base_rotation, axes, prismatic = chain.base_rotation, chain.axes, chain.prismatic
     masses, levers = bodies.masses[g], bodies.levers[g]
@@ -101,9 +103,9 @@ def _mobility_from_frames(chain, bodies, g, ws, out):
             mass_matrix[k, i] = value  # the lower triangle: all the factorisation reads
     # Cholesky M = L L^T (lower triangle; 1/L_jj in inverse_diagonal), X = L^-1 J^T (in jt),
     # A = X^T X: the three columns of X in one pass, the six sums of A in another.
-    inverse_diagonal = ws[14]  # the IK's step: scratch here
+    inverse_diagonal, armature = ws[14], chain.armature  # ws[14]: the IK's step, scratch here
     for j in range(n):
-        total = mass_matrix[j, j]
+        total = mass_matrix[j, j] + armature[j]
         for k in range(j):
             total -= mass_matrix[j, k] * mass_matrix[j, k]
         inverse = 1.0 / math.sqrt(total)

@@ -92,6 +92,7 @@ def chain_arrays_or_reason(robot: RobotModel) -> ChainArrays | str:
         base_translation=np.array(base.translation),
         lower_q=lower,
         upper_q=upper,
+        armature=np.array(robot.armature_kgm2, dtype=float),
     )
     for array in arrays:
         array.setflags(write=False)

@@ -45,3 +45,15 @@ def joint_velocities_accelerations(
 
     spline = CubicSpline(times, positions, axis=0, bc_type="clamped")
     return spline(times, 1), spline(times, 2)
+
+
+def rates_for_execution(
+    times_s: np.ndarray,
+    joint_positions: np.ndarray,
+    planned_rates: tuple[np.ndarray, np.ndarray] | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """q̇ and q̈ to execute: a planner's own (``planned_rates``, e.g. a GraspEvaluation's
+    ``planned_joint_rates``) when given, else ``joint_velocities_accelerations``."""
+    if planned_rates is not None:
+        return planned_rates
+    return joint_velocities_accelerations(times_s, joint_positions)

@@ -167,6 +167,15 @@ class JointSpaceTrajectory:
         s, ds, dds = quintic_time_scaling(tau)
         return s, ds / self.duration_s, dds / self.duration_s**2
 
+    def joint_rates(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The planner's joint velocities [rad/s or m/s] at the points and the accelerations
+        [rad/s² or m/s²] of their Hermite interpolation, chain order; None when the planner
+        gave no velocities."""
+        if self.planned.velocities is None:
+            return None
+        velocities = self.planned.velocities[:, self.planned.chain_columns(self.robot)]
+        return np.array(velocities), self._spline(self.planned.times_s, 2)
+
     def _joint_states(self, times_s: np.ndarray) -> tuple[np.ndarray, ...]:
         """Chain positions (given ones at the points), velocities, 2nd and 3rd derivatives."""
         times = np.clip(

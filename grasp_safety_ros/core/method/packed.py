@@ -31,6 +31,7 @@ class ChainArrays(NamedTuple):
     base_translation: np.ndarray  # (3,) [m]
     lower_q: np.ndarray  # (nq,) -inf for continuous joints
     upper_q: np.ndarray  # (nq,) +inf for continuous joints
+    armature: np.ndarray  # (n,) reflected rotor inertia [kg m^2, kg if prismatic]
 
 
 class IKSettings(NamedTuple):

@@ -44,7 +44,7 @@ MAX_RESTARTS = 1000
 """Largest number of posture restarts accepted per grasp."""
 
 DEFAULT_RESTARTS = 8
-"""Default restarts of the CLI and the node (README, "Posture selection": cost vs gain)."""
+"""Default restarts of the CLI and the node (docs/analyses.md, "Posture selection")."""
 
 
 @dataclass(frozen=True)

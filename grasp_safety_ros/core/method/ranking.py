@@ -174,7 +174,13 @@ class GraspSafetyEvaluator:
             )
             for k, result in zip(fused_rows, results, strict=True):
                 evaluations[k] = self._from_compiled(
-                    indices[k], grasps[k], result, motion, sampled_trajectory.times_s, metric
+                    indices[k],
+                    grasps[k],
+                    result,
+                    motion,
+                    sampled_trajectory.times_s,
+                    metric,
+                    (object_inertia, seeds[k]),
                 )
         for k, grasp in enumerate(grasps):
             if k not in evaluations:
@@ -191,8 +197,10 @@ class GraspSafetyEvaluator:
         motion: ObjectMotion,
         times: np.ndarray,
         metric: str,
+        inertia_seed: tuple[ObjectInertia, np.ndarray],
     ) -> GraspEvaluation:
-        """The GraspEvaluation of one grasp's ``evaluate_grasps_compiled`` result."""
+        """The GraspEvaluation of one grasp's ``evaluate_grasps_compiled`` result
+        (``inertia_seed``: the object's inertia and the grasp's IK seed q)."""
         if result.reason:
             return _infeasible(index, grasp.name, result.reason, self.robot.num_joints)
         return self._feasible(
@@ -205,6 +213,7 @@ class GraspSafetyEvaluator:
             result.mobilities,
             (result.effective_masses, result.directions, result.worst),
             result.tangent_norms * motion.speed_per_tangent,
+            inertia_seed,
         )
 
     def _evaluate_one(
@@ -239,6 +248,8 @@ class GraspSafetyEvaluator:
                 mobilities,
                 _masses_along(mobilities, tip.tangents),
                 tip.speeds,
+                (object_inertia, seed_q),
+                sampled,
             )
         if object_motion is not None:
             tip = object_motion.tip_motion(grasp.transform_tip_to_object)
@@ -255,7 +266,9 @@ class GraspSafetyEvaluator:
                     seed_q,
                     motion_is_tip=True,
                 )
-                return self._from_compiled(index, grasp, result, motion, times, metric)
+                return self._from_compiled(
+                    index, grasp, result, motion, times, metric, (object_inertia, seed_q)
+                )
         ik = self.ik.solve_trajectory_arrays(
             tip.rotations, tip.positions, times, sampled_trajectory.s_values, seed_q
         )
@@ -274,6 +287,7 @@ class GraspSafetyEvaluator:
             mobilities,
             _masses_along(mobilities, tip.tangents),
             tip.speeds,
+            (object_inertia, seed_q),
         )
 
     def _feasible(
@@ -287,13 +301,27 @@ class GraspSafetyEvaluator:
         mobilities: np.ndarray,
         masses_directions_worst: tuple[np.ndarray, np.ndarray, np.ndarray],
         tip_speeds: np.ndarray,
+        inertia_seed: tuple[ObjectInertia, np.ndarray],
+        planned: JointSpaceTrajectory | None = None,
     ) -> GraspEvaluation:
         """The GraspEvaluation of a feasible grasp: where the tip does not translate
-        (``worst``), the direction of largest effective mass and its mass are filled in."""
+        (``worst``), the direction of largest effective mass and its mass are filled in; with
+        armature, the links-only masses too; joint positions unwrapped from the IK seed
+        (``inertia_seed``: the object's inertia and the seed q), or the ``planned`` ones."""
         masses, directions, worst = masses_directions_worst
         if np.count_nonzero(worst):
             for i in np.flatnonzero(worst):
                 directions[i], masses[i] = worst_direction(mobilities[i])
+        object_inertia, seed_q = inertia_seed
+        links_only = masses
+        if self.robot.armature_given:
+            links_only = self._links_only_masses(grasp, object_inertia, q_all, directions, worst)
+        if planned is not None:
+            positions = np.array(planned.joint_positions)
+            rates = planned.joint_rates()
+        else:
+            seed = self.robot.positions_from_q(seed_q)
+            positions, rates = positions_along(self.robot, q_all, seed), None
         return GraspEvaluation(
             index=index,
             name=grasp.name,
@@ -301,13 +329,41 @@ class GraspSafetyEvaluator:
             reason="",
             score=aggregate(masses, times, metric),
             times_s=times,
-            joint_positions=positions_along(self.robot, q_all),
+            joint_positions=positions,
             directions_in_base=directions,
             effective_mass_kg=masses,
             direction_is_worst_case=worst,
             tip_speed_m_s=tip_speeds,
             ik_iterations=iterations,
+            links_only_effective_mass_kg=links_only,
+            planned_joint_rates=rates,
         )
+
+    def _links_only_masses(
+        self,
+        grasp: Grasp,
+        object_inertia: ObjectInertia,
+        q_all: np.ndarray,
+        directions: np.ndarray,
+        worst: np.ndarray,
+    ) -> np.ndarray:
+        """Effective masses [kg] of the chain without its armature, along ``directions`` (at
+        the ``worst`` samples, along its own worst direction), as a run without armature."""
+        links = self.robot.links_only()
+        chain = self.ik.chain
+        if self.ik.compiled and chain is not None:
+            chain = chain._replace(armature=np.zeros(links.num_joints))
+        else:
+            chain = None
+        mobilities = translational_mobilities_in_base(
+            links, object_inertia, grasp.transform_tip_to_object, q_all, chain
+        )
+        masses = np.empty(len(q_all))
+        moving = ~worst
+        masses[moving] = effective_masses_along(mobilities[moving], directions[moving])
+        for i in np.flatnonzero(worst):
+            masses[i] = worst_direction(mobilities[i])[1]
+        return masses
 
     def rank(
         self,
@@ -367,11 +423,18 @@ class GraspSafetyEvaluator:
             order=order_by_score(evaluations),
             evaluations=tuple(evaluations),
             backend=self.ik.backend_used,
+            armature_given=self.robot.armature_given,
         )
 
 
-def positions_along(robot: RobotModel, q_all: np.ndarray) -> np.ndarray:
-    """``robot.positions_from_q`` of every row of q_all (N, nq), vectorised: (N, joints)."""
+def positions_along(
+    robot: RobotModel, q_all: np.ndarray, start_positions: np.ndarray | None = None
+) -> np.ndarray:
+    """``robot.positions_from_q`` of every row of q_all (N, nq), vectorised: (N, joints).
+
+    Continuous joints come out unwrapped: continuous along the rows (steps below π), the
+    first row within π of ``start_positions`` (chain order; None: in (−π, π]).
+    """
     model = robot.model
     if model.nq == model.nv:  # no continuous joint: positions are q
         return np.asarray(q_all, dtype=float)
@@ -380,10 +443,14 @@ def positions_along(robot: RobotModel, q_all: np.ndarray) -> np.ndarray:
         return np.array([robot.positions_from_q(q) for q in q_all]).reshape(-1, robot.num_joints)
     q_all = np.asarray(q_all, dtype=float).reshape(-1, model.nq)
     columns = []
-    for joint in joints:
+    for k, joint in enumerate(joints):
         index = joint.idx_q
         if joint.nq == 2:  # continuous: (cos, sin)
-            columns.append(np.arctan2(q_all[:, index + 1], q_all[:, index]))
+            angles = np.unwrap(np.arctan2(q_all[:, index + 1], q_all[:, index]))
+            if start_positions is not None and len(angles):
+                turns = np.round((start_positions[k] - angles[0]) / (2.0 * np.pi))
+                angles += 2.0 * np.pi * turns
+            columns.append(angles)
         else:
             columns.append(q_all[:, index])
     return np.stack(columns, axis=1)

@@ -41,13 +41,20 @@ class GraspEvaluation:
         reason: Why not, when infeasible; empty otherwise.
         score: Aggregate of the effective mass (kg, or kg s for ``integral``); NaN if infeasible.
         times_s: Sample times [s].
-        joint_positions: Chain joint positions [rad or m], chain order.
+        joint_positions: Chain joint positions [rad or m], chain order; continuous joints
+            unwrapped (continuous along the motion from the IK seed, or the planner's own).
         directions_in_base: Unit direction of tip motion, base axes.
         effective_mass_kg: Effective mass along that direction [kg].
         direction_is_worst_case: True where the tip does not translate and the direction of
             largest effective mass was used instead.
         tip_speed_m_s: Tip speed along the trajectory [m/s].
         ik_iterations: Gauss-Newton iterations per sample.
+        links_only_effective_mass_kg: Effective mass of the links alone (armature left out, a
+            lower bound) [kg]; the same array as ``effective_mass_kg`` when the chain has no
+            armature (None given: that array).
+        planned_joint_rates: A planned trajectory's own joint velocities [rad/s or m/s] and
+            the accelerations of their Hermite interpolation at the samples; None (IK, or a
+            plan without velocities): rates are fitted for execution (method.executable).
     """
 
     index: int
@@ -62,6 +69,12 @@ class GraspEvaluation:
     direction_is_worst_case: np.ndarray
     tip_speed_m_s: np.ndarray
     ik_iterations: np.ndarray
+    links_only_effective_mass_kg: np.ndarray | None = None
+    planned_joint_rates: tuple[np.ndarray, np.ndarray] | None = None
+
+    def __post_init__(self) -> None:
+        if self.links_only_effective_mass_kg is None:
+            object.__setattr__(self, "links_only_effective_mass_kg", self.effective_mass_kg)
 
     @property
     def peak_effective_mass_kg(self) -> float:
@@ -87,6 +100,8 @@ class Ranking:
             order; empty when posture selection was not run.
         backend: What ran: ``compiled`` or ``python``, with the reason when ``auto`` fell
             back, e.g. ``python (numba not installed)``; empty when not recorded.
+        armature_given: Whether the chain had armature (reflected rotor inertia); False: the
+            effective masses are the links' only (a lower bound, robot.NO_ARMATURE_NOTE).
     """
 
     joint_names: tuple[str, ...]
@@ -95,6 +110,7 @@ class Ranking:
     evaluations: tuple[GraspEvaluation, ...]
     postures: tuple[PostureSelection, ...] = ()
     backend: str = ""
+    armature_given: bool = False
 
 
 @dataclass(frozen=True)

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import contextlib
+import copy
 import importlib.metadata
 import os
+import re
 import sys
 import tempfile
 import threading
@@ -42,6 +44,73 @@ FRAME_TYPES: Mapping[str, pin.FrameType] = dict(pin.FrameType.names)
 
 MASS_MATRIX_RELATIVE_TOLERANCE = 1e-12
 """Smallest accepted eigenvalue ratio of the chain's mass matrix with an object at the tip."""
+
+ARMATURE_FIELD = "robot.armature_kgm2"
+"""Name of the armature input in messages."""
+
+NO_ARMATURE_NOTE = "rotor inertia not given: effective masses are the links' only (a lower bound)"
+"""Said once per result when the chain has no armature (reflected rotor inertia)."""
+
+
+def armature_from_input(
+    value: Sequence[float] | Mapping[str, float] | np.ndarray,
+    joint_names: Sequence[str],
+    field: str = ARMATURE_FIELD,
+) -> np.ndarray:
+    """Armature (reflected rotor inertia, I_rotor N^2) per chain joint, chain order: [kg m^2]
+    for a revolute or continuous joint, [kg] for a prismatic one.
+
+    Args:
+        value: One value per chain joint in chain order, or ``{joint_name: value}`` (joints
+            not named: 0).
+        joint_names: The chain joints, base to tip.
+
+    Raises:
+        InvalidInputError: a wrong count, an unknown joint, or a value not finite and >= 0
+            (the message names the joint).
+    """
+    names = list(joint_names)
+    if isinstance(value, Mapping):
+        values = np.zeros(len(names))
+        for name, entry in value.items():
+            if name not in names:
+                raise InvalidInputError(
+                    field, f"unknown chain joint '{name}'; chain joints: {', '.join(names)}"
+                )
+            values[names.index(name)] = _armature_value(entry, f"{field}.{name}")
+    else:
+        if isinstance(value, (str, bytes)) or not isinstance(value, (Sequence, np.ndarray)):
+            raise InvalidInputError(
+                field,
+                f"must be a list of {len(names)} values (chain order) or a mapping "
+                f"{{joint_name: value}}, got {value!r}",
+            )
+        if len(value) != len(names):
+            raise InvalidInputError(
+                field,
+                f"must have one value per chain joint ({len(names)}: {', '.join(names)}), "
+                f"got {len(value)}",
+            )
+        values = np.array(
+            [_armature_value(v, f"{field}[{k}] (joint '{names[k]}')") for k, v in enumerate(value)]
+        )
+    values.setflags(write=False)
+    return values
+
+
+def _armature_value(value: object, field: str) -> float:
+    """One armature value: finite and >= 0 [kg m^2 or kg]."""
+    if isinstance(value, bool):
+        raise InvalidInputError(field, f"must be a number >= 0, got {value!r}")
+    try:
+        number = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise InvalidInputError(field, f"must be a number >= 0, got {value!r}") from None
+    if not np.isfinite(number) or number < 0.0:
+        raise InvalidInputError(
+            field, f"must be finite and >= 0 [kg m^2, kg if prismatic], got {number:g}"
+        )
+    return number
 
 
 def example_robot_data_dirs() -> list[Path]:
@@ -151,6 +220,8 @@ def load_urdf_model(source: str, relative_to: Path | None = None) -> pin.Model:
     model from it (a malformed ``<inertial>`` would otherwise become a massless link).
     """
     text, is_xml = resolve_urdf(source, relative_to)
+    if _is_mjcf(text, is_xml):
+        return load_mjcf_model(text, is_xml)
     where = "URDF XML" if is_xml else f"'{text}'"
     captured: list[str] = []
     try:
@@ -167,6 +238,66 @@ def load_urdf_model(source: str, relative_to: Path | None = None) -> pin.Model:
     if parser_errors:
         raise InvalidInputError("robot.urdf", f"cannot read {where}: {'; '.join(parser_errors)}")
     return model
+
+
+def _is_mjcf(text: str, is_xml: bool) -> bool:
+    """Whether a description (XML text, or a file path) is MJCF: its root element <mujoco>."""
+    if not is_xml:
+        try:
+            with open(text, "rb") as file:
+                text = file.read(4096).decode("utf-8", errors="replace")
+        except OSError:
+            return False
+    match = re.search(
+        r"<\s*([A-Za-z_][\w.-]*)", re.sub(r"<(\?|!--).*?(\?|--)>", "", text, flags=re.S)
+    )
+    return bool(match) and match.group(1) == "mujoco"
+
+
+def _mjcf_bodies_without_inertial(root: ElementTree.Element) -> list[str]:
+    """Bodies whose inertia MuJoCo would compute from their geoms (no <inertial>, or
+    inertiafromgeom="true"): Pinocchio's MJCF reader does not, so they are refused."""
+    compiler = root.find("compiler")
+    from_geom = compiler.get("inertiafromgeom", "auto") if compiler is not None else "auto"
+    if from_geom == "false":
+        return []
+    return [
+        body.get("name", "(unnamed)")
+        for body in root.iter("body")
+        if body.find("geom") is not None and (from_geom == "true" or body.find("inertial") is None)
+    ]
+
+
+def load_mjcf_model(text: str, is_xml: bool) -> pin.Model:
+    """Build the Pinocchio model (fixed base) of an MJCF (MuJoCo XML) file or text with
+    Pinocchio's MJCF reader; joint ``armature`` comes with it (``model.armature``).
+
+    Meshes are not read: every body with geoms needs an explicit ``<inertial>`` (MuJoCo's
+    ``mj_saveLastXML`` writes a model's compiled inertials), else it is refused.
+    """
+    where = "MJCF XML" if is_xml else f"'{text}'"
+    try:
+        root = ElementTree.fromstring(text) if is_xml else ElementTree.parse(text).getroot()
+    except (ElementTree.ParseError, OSError) as error:
+        raise InvalidInputError("robot.urdf", f"cannot read {where}: {error}") from None
+    missing = _mjcf_bodies_without_inertial(root)
+    if missing:
+        raise InvalidInputError(
+            "robot.urdf",
+            f"MJCF bodies {', '.join(missing[:8])} have geoms but no <inertial> (or "
+            "inertiafromgeom='true'): Pinocchio does not compute inertia from geoms; add "
+            "<inertial> elements (mujoco's mj_saveLastXML writes them)",
+        )
+    try:
+        if is_xml:
+            with tempfile.TemporaryDirectory() as folder:
+                path = Path(folder) / "robot.xml"
+                path.write_text(text)
+                return pin.buildModelFromMJCF(str(path))
+        return pin.buildModelFromMJCF(text)
+    except (RuntimeError, ValueError) as error:
+        message = " ".join(str(error).split()) or "parse error"
+        raise InvalidInputError("robot.urdf", f"cannot read {where}: {message}") from None
 
 
 @dataclass(frozen=True)
@@ -326,6 +457,11 @@ class RobotModel:
         tip_frame_id: Id of the tip frame in ``model``.
         transform_base_to_world: Constant pose of the base frame in the model's world frame.
         joint_names: Chain joint names, base to tip.
+        armature_kgm2: Reflected rotor inertia per chain joint, chain order [kg m^2, kg for
+            prismatic joints]; written to ``model.armature``, so every Pinocchio call on the
+            model or a copy of it (crba, rnea, aba, computeMinverse) includes it.
+        armature_given: Whether the armature was given (explicitly, or non-zero in the
+            description, e.g. an MJCF); False: the effective masses are the links' only.
     """
 
     def __init__(
@@ -335,6 +471,7 @@ class RobotModel:
         tip_frame: str,
         locked_positions: Mapping[str, float] | None = None,
         mimic_joints: Mapping[str, MimicJoint] | None = None,
+        armature_kgm2: Sequence[float] | Mapping[str, float] | np.ndarray | None = None,
     ) -> None:
         base_id = find_frame(full_model, base_frame, "robot.base_frame")
         tip_id = find_frame(full_model, tip_frame, "robot.tip_frame")
@@ -395,6 +532,14 @@ class RobotModel:
         pin.framesForwardKinematics(self.model, data, pin.neutral(self.model))
         self.transform_base_to_world = pin.SE3(data.oMf[self.base_frame_id])
         self.joint_names: tuple[str, ...] = tuple(self.model.names[1:])
+        if armature_kgm2 is None:  # the description's own (an MJCF's; a URDF has none)
+            armature_kgm2 = armature_from_input(
+                np.array(self.model.armature), self.joint_names, "robot.urdf armature"
+            )
+        self.armature_kgm2 = armature_from_input(armature_kgm2, self.joint_names)
+        self.armature_given = bool(np.any(self.armature_kgm2 > 0.0))
+        self.model.armature = np.array(self.armature_kgm2)
+        self._links_only: RobotModel | None = None
         self._continuous = np.array([j.nq == 2 for j in self.model.joints[1:]])
         self._idx_q = np.array([j.idx_q for j in self.model.joints[1:]])
         lower, upper = self.model.lowerPositionLimit, self.model.upperPositionLimit
@@ -444,11 +589,36 @@ class RobotModel:
         tip_frame: str,
         locked_positions: Mapping[str, float] | None = None,
         relative_to: Path | None = None,
+        armature_kgm2: Sequence[float] | Mapping[str, float] | np.ndarray | None = None,
     ) -> RobotModel:
-        """Load from a URDF path, URDF XML or ``example-robot-data:<name>``."""
+        """Load from a URDF or MJCF path, URDF or MJCF XML, or ``example-robot-data:<name>``;
+        an explicit ``armature_kgm2`` replaces an MJCF's joint armature."""
         full_model = load_urdf_model(source, relative_to)
         mimic_joints = load_urdf_mimic_joints(source, relative_to)
-        return cls(full_model, base_frame, tip_frame, locked_positions, mimic_joints)
+        return cls(
+            full_model, base_frame, tip_frame, locked_positions, mimic_joints, armature_kgm2
+        )
+
+    def with_armature(
+        self, armature_kgm2: Sequence[float] | Mapping[str, float] | np.ndarray
+    ) -> RobotModel:
+        """This chain with another armature (validated as in the constructor)."""
+        values = armature_from_input(armature_kgm2, self.joint_names)
+        robot = copy.copy(self)
+        robot.model = self.model.copy()
+        robot.model.armature = np.array(values)
+        robot.armature_kgm2 = values
+        robot.armature_given = bool(np.any(values > 0.0))
+        robot._links_only = None
+        return robot
+
+    def links_only(self) -> RobotModel:
+        """This chain without armature (the links' inertia only): itself when it has none."""
+        if not self.armature_given:
+            return self
+        if self._links_only is None:
+            self._links_only = self.with_armature(np.zeros(self.num_joints))
+        return self._links_only
 
     @property
     def num_joints(self) -> int:

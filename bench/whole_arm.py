@@ -1,0 +1,134 @@
+"""Benchmark section: cost of the whole-arm exposure (core.analyses.whole_arm) per sample.
+
+Per arm workload (bench/workload.py: a box, grasps around it, 2 s at dt 0.01 s), on the
+feasible grasps of one compiled ranking, one core, median over repeats, CPU time of the
+process (less inflated than wall-clock time when other processes share the cores), µs per
+(grasp, sample):
+
+- ``us_per_sample``: ``evaluate_whole_arm`` as the report runs it (Pinocchio per-sample terms:
+  placements, Jacobians, M⁻¹ of the augmented model; q̇; then the vectorised site arrays and
+  ISO/TS 15066 over every body region), default sites (joint origins from the third, the tip);
+- ``us_per_sample_given_terms``: the vectorised part alone (``site_exposure`` + ``assess_sites``)
+  from precomputed terms: what remains once a shared compiled computation provides the terms;
+- ``ranking_us_per_sample``: the compiled ranking of the same candidates (IK + tip effective
+  mass) in the same run, per (grasp, sample) of all candidates, for the ratio.
+
+Run alone: .venv/bin/python bench/whole_arm.py [--arms panda,baxter] [--grasps 10]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from typing import Any
+
+import numpy as np
+from workload import ARMS, ArmWorkload, box_object, grasps_around_box
+
+from grasp_safety_ros.core import EvaluationConfig, GraspSafetyEvaluator
+from grasp_safety_ros.core.analyses.iso15066 import select_regions
+from grasp_safety_ros.core.analyses.whole_arm import (
+    ArmTerms,
+    assess_sites,
+    evaluate_whole_arm,
+    pinocchio_kinematic_terms,
+    resolve_arm_sites,
+    site_exposure,
+    tip_following_joint_velocities,
+    tip_jacobians_world,
+    tip_twists_in_base,
+)
+from grasp_safety_ros.core.method.effective_mass import augmented_model
+
+
+def bench_whole_arm(arm: ArmWorkload, grasps: int = 10, repeats: int = 5) -> dict[str, Any]:
+    """The section's figures for one arm (module docstring)."""
+    robot = arm.robot()
+    trajectory = arm.trajectory(2.0, 0.01)
+    obj = box_object()
+    candidates = grasps_around_box(np.array(arm.approach_from), grasps)
+    evaluator = GraspSafetyEvaluator(robot, EvaluationConfig(workers=1))
+    ranking = evaluator.rank(candidates, obj, trajectory, seed_positions=arm.seed_positions)
+    pairs = [(g, e) for g, e in zip(candidates, ranking.evaluations, strict=True) if e.feasible]
+    samples = sum(len(e.times_s) for _, e in pairs)
+    sites = resolve_arm_sites(robot)
+    regions = select_regions(None)
+    terms = []
+    for grasp, evaluation in pairs:
+        model = augmented_model(robot, obj, grasp.transform_tip_to_object)
+        q_all = np.array([robot.q_from_positions(p) for p in evaluation.joint_positions])
+        kinematics = pinocchio_kinematic_terms(model, q_all)
+        twists = tip_twists_in_base(trajectory, grasp.transform_tip_to_object, evaluation.times_s)
+        rotation = robot.transform_base_to_world.rotation
+        twists = np.concatenate([twists[:, :3] @ rotation.T, twists[:, 3:] @ rotation.T], 1)
+        rates = tip_following_joint_velocities(
+            robot,
+            tip_jacobians_world(robot, kinematics),
+            twists,
+            evaluation.times_s,
+            evaluation.joint_positions,
+        )
+        terms.append(ArmTerms(*kinematics, rates))
+
+    def full() -> None:
+        for grasp, evaluation in pairs:
+            evaluate_whole_arm(robot, evaluation, obj, grasp, trajectory, sites)
+
+    def given_terms() -> None:
+        for term in terms:
+            exposure = site_exposure(sites, term, robot.transform_base_to_world)
+            assess_sites(exposure.speed_m_s, exposure.effective_mass_kg, 2.0, regions)
+
+    def rank() -> None:
+        evaluator.rank(candidates, obj, trajectory, seed_positions=arm.seed_positions)
+
+    timings: dict[str, list[float]] = {"full": [], "given_terms": [], "rank": []}
+    for _ in range(repeats):
+        for key, function, count in (
+            ("full", full, samples),
+            ("given_terms", given_terms, samples),
+            ("rank", rank, len(candidates) * trajectory.num_samples),
+        ):
+            start = time.process_time()
+            function()
+            timings[key].append((time.process_time() - start) / max(count, 1) * 1e6)
+    return {
+        "robot": f"{arm.urdf} {arm.base_frame} -> {arm.tip_frame}",
+        "sites": len(sites),
+        "feasible_grasps": len(pairs),
+        "samples": samples,
+        "us_per_sample": statistics.median(timings["full"]),
+        "us_per_sample_given_terms": statistics.median(timings["given_terms"]),
+        "ranking_us_per_sample": statistics.median(timings["rank"]),
+    }
+
+
+def print_whole_arm(results: dict[str, dict[str, Any]]) -> None:
+    """One line per arm."""
+    for name, r in results.items():
+        print(
+            f"whole arm ({name}, {r['sites']} sites, {r['feasible_grasps']} grasps x 201): "
+            f"{r['us_per_sample']:.1f} us/sample (Pinocchio terms + vectorised), "
+            f"{r['us_per_sample_given_terms']:.1f} us/sample given the terms; the ranking "
+            f"{r['ranking_us_per_sample']:.1f} us/sample (CPU time, median)"
+        )
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--arms", default="panda,baxter")
+    parser.add_argument("--grasps", type=int, default=10)
+    parser.add_argument("--repeats", type=int, default=5)
+    args = parser.parse_args(argv)
+    results = {
+        name: bench_whole_arm(ARMS[name], args.grasps, args.repeats)
+        for name in args.arms.split(",")
+    }
+    print_whole_arm(results)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

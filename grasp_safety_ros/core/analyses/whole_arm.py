@@ -1,0 +1,570 @@
+"""Whole-arm exposure: effective mass and speed at points on the robot's links, per sample.
+
+A *site* is a point fixed on one link: a chain joint id j (the body it rides on) and the point
+in joint j's frame. Sites are resolved once per robot (``resolve_arm_sites``): by default the
+origin of every chain joint frame from the third joint on (elbow, wrist) and the tip; the user
+adds points per link (``robot.exposed_points_m: {link: [[x, y, z], ...]}``, link frame [m]).
+Sites on links welded to the base never move and are dropped.
+
+Per sample, with the world-frame joint Jacobian columns (v_O, ω)_i of the augmented model (the
+object merged into the tip body, the armature in M), a site at world position p on body j has
+the translational Jacobian J_p[:, i] = v_O,i + ω_i × p for the joints i that move body j (0 for
+the others), velocity v = J_p q̇, mobility A = J_p M⁻¹ J_pᵀ [1/kg] and, along its own unit
+velocity u = v/|v|, the effective mass M_eff = 1 / (uᵀ A u) [kg] (mink's collision-avoidance
+pattern: fixed rows per site, each row's Jacobian at its point on its own body). Where a site
+does not move (|v| < STATIONARY_SPEED_M_S) it has no direction: it is flagged ``stationary``,
+its speed is 0 and its effective mass is the largest over the directions it can move in (the
+smallest non-zero eigenvalue of A; inf where A = 0).
+
+Joint velocities q̇ follow the tip's twist ξ exactly, q̇ = J⁺ξ + (I − J⁺J) q̇_s, with q̇_s the
+derivative of the clamped cubic spline through the samples (core.method.executable) for the
+self-motion of a redundant arm; at the trajectory's rest ends every site is stationary.
+
+ISO/TS 15066 (core.analyses.iso15066, Annex A): for each body region, the force ratio
+F/F_tr = v·sqrt(μ k)/F_tr at every (sample, site); the worst over both, the worst site and
+its link, admissibility over the whole arm, and T_min = T · max ratio over the permitted
+regions (a uniform re-timing scales every site speed alike). Energy: ½ M_eff v² [J].
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, NamedTuple
+
+import numpy as np
+import pinocchio as pin
+
+from ..exceptions import InvalidInputError
+from ..input_checks import finite_array, read_only
+from ..method.effective_mass import augmented_model
+from ..method.executable import joint_velocities_accelerations
+from ..method.ranking import Grasp, GraspEvaluation
+from ..model.inertia import ObjectInertia
+from ..model.robot import RobotModel
+from ..model.trajectory import ObjectPath, Trajectory
+from .iso15066 import (
+    ADMISSIBLE_RATIO_TOLERANCE,
+    BodyRegion,
+    select_regions,
+    transient_contact_force_n,
+)
+
+FIRST_DEFAULT_JOINT = 3
+"""Default sites: the origins of chain joints FIRST_DEFAULT_JOINT.. (1-based), and the tip."""
+
+STATIONARY_SPEED_M_S = 1e-9
+"""Below this speed [m/s] a site does not move: flagged, no direction of its own."""
+
+EIGENVALUE_RELATIVE_TOLERANCE = 1e-12
+"""A mobility eigenvalue below this times the largest counts as zero (a direction the site
+cannot move in)."""
+
+MAX_SITES = 1000
+"""Largest number of sites (default plus user points) accepted."""
+
+DEFAULT_RANK_REGION = "chest"
+"""Body region whose worst predicted force ``rank_by: whole_arm`` uses unless told."""
+
+
+@dataclass(frozen=True)
+class ArmSites:
+    """Points on the chain's links, resolved once per robot (K sites, n chain joints).
+
+    Attributes:
+        names: Site names, e.g. ``panda_joint4`` (a joint origin), the tip frame's name, or
+            ``panda_link5[0]`` (the first user point on that link).
+        links: Name of the link carrying each site.
+        joint_ids: (K,) Pinocchio joint id of the body carrying each site (1..n).
+        points_in_joint_m: (K, 3) the point in that joint's frame [m].
+        support: (K, n) True where chain joint i moves the site's body.
+        dropped: Names of user sites dropped because their link is welded to the base.
+    """
+
+    names: tuple[str, ...]
+    links: tuple[str, ...]
+    joint_ids: np.ndarray
+    points_in_joint_m: np.ndarray
+    support: np.ndarray
+    dropped: tuple[str, ...] = ()
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+
+def check_exposed_points_m(
+    value: Any, field: str = "robot.exposed_points_m"
+) -> dict[str, np.ndarray]:
+    """Validate ``{link_name: [[x, y, z], ...]}`` (link frame [m]); returns (P, 3) arrays."""
+    if not isinstance(value, Mapping):
+        raise InvalidInputError(
+            field, f"must be a mapping {{link_name: [[x, y, z], ...]}}, got {value!r}"
+        )
+    checked: dict[str, np.ndarray] = {}
+    for link, points in value.items():
+        if not isinstance(link, str) or not link:
+            raise InvalidInputError(field, f"link names must be non-empty strings, got {link!r}")
+        array = finite_array(points, f"{field}.{link}")
+        if array.ndim == 1 and array.shape == (3,):
+            array = array[None]
+        if array.ndim != 2 or array.shape[1] != 3 or len(array) < 1:
+            raise InvalidInputError(
+                f"{field}.{link}", f"must be a list of [x, y, z] points, got {list(array.shape)}"
+            )
+        checked[link] = read_only(array, copy=True)
+    total = sum(len(points) for points in checked.values())
+    if total > MAX_SITES:
+        raise InvalidInputError(field, f"has {total} points; at most {MAX_SITES} are allowed")
+    return checked
+
+
+def _link_frame(model: pin.Model, link: str, field: str) -> int:
+    """Id of the BODY (link) frame called ``link``; refused with close names suggested."""
+    bodies = [frame.name for frame in model.frames if frame.type == pin.FrameType.BODY]
+    for i, frame in enumerate(model.frames):
+        if frame.type == pin.FrameType.BODY and frame.name == link:
+            return i
+    close = difflib.get_close_matches(link, bodies, n=3, cutoff=0.5)
+    hint = f"did you mean {', '.join(close)}?" if close else f"links: {', '.join(bodies)}"
+    raise InvalidInputError(f"{field}.{link}", f"unknown link '{link}'; {hint}")
+
+
+def _child_link(model: pin.Model, joint_id: int) -> str:
+    """The first link (BODY frame) carried by joint ``joint_id``, or the joint's name."""
+    for frame in model.frames:
+        if frame.type == pin.FrameType.BODY and frame.parentJoint == joint_id:
+            return frame.name
+    return model.names[joint_id]
+
+
+def resolve_arm_sites(
+    robot: RobotModel,
+    exposed_points_m: Mapping[str, Any] | None = None,
+    defaults: bool = True,
+    field: str = "robot.exposed_points_m",
+) -> ArmSites:
+    """The sites of ``robot`` (module docstring): the defaults (unless ``defaults`` is False),
+    then each user link's points in the order given."""
+    model = robot.model
+    names: list[str] = []
+    links: list[str] = []
+    joint_ids: list[int] = []
+    points: list[np.ndarray] = []
+    if defaults:
+        for joint_id in range(FIRST_DEFAULT_JOINT, model.njoints):
+            names.append(model.names[joint_id])
+            links.append(_child_link(model, joint_id))
+            joint_ids.append(joint_id)
+            points.append(np.zeros(3))
+        tip = model.frames[robot.tip_frame_id]
+        names.append(robot.tip_frame)
+        links.append(
+            robot.tip_frame
+            if tip.type == pin.FrameType.BODY
+            else _child_link(model, tip.parentJoint)
+        )
+        joint_ids.append(tip.parentJoint)
+        points.append(np.array(tip.placement.translation))
+    dropped: list[str] = []
+    for link, link_points in check_exposed_points_m(exposed_points_m or {}, field).items():
+        frame = model.frames[_link_frame(model, link, field)]
+        for p, point in enumerate(link_points):
+            name = f"{link}[{p}]"
+            if frame.parentJoint == 0:
+                dropped.append(name)
+                continue
+            names.append(name)
+            links.append(link)
+            joint_ids.append(frame.parentJoint)
+            points.append(frame.placement.act(point))
+    ids = np.array(joint_ids, dtype=int)
+    support = np.zeros((len(ids), model.nv), dtype=bool)
+    for k, joint_id in enumerate(ids):
+        for i in model.supports[int(joint_id)][1:]:
+            support[k, model.joints[i].idx_v] = True
+    return ArmSites(
+        names=tuple(names),
+        links=tuple(links),
+        joint_ids=read_only(ids),
+        points_in_joint_m=read_only(np.array(points, dtype=float).reshape(-1, 3)),
+        support=read_only(support),
+        dropped=tuple(dropped),
+    )
+
+
+class ArmTerms(NamedTuple):
+    """Per-sample terms of a chain (N samples, n = nv joints, world frame of the model).
+
+    The shared per-(grasp, sample) computation can fill these directly.
+    """
+
+    joint_rotations: np.ndarray  # (N, n, 3, 3) joint frames in the world frame
+    joint_translations: np.ndarray  # (N, n, 3) [m] joint origins in the world frame
+    joint_jacobians: np.ndarray  # (N, 6, n) columns (v_O [m/s], ω [rad/s]) per unit rate
+    minv: np.ndarray  # (N, n, n) M⁻¹ of the augmented model, armature included [1/(kg m²)]
+    joint_velocities: np.ndarray  # (N, n) q̇ [rad/s or m/s]
+
+
+def pinocchio_kinematic_terms(
+    model: pin.Model, q_all: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Joint placements, world Jacobian columns and M⁻¹ (ArmTerms' first four fields) per
+    configuration of ``q_all`` (N, nq), with Pinocchio on ``model`` (the augmented model)."""
+    data = model.createData()
+    count, n = len(q_all), model.nv
+    rotations = np.empty((count, n, 3, 3))
+    translations = np.empty((count, n, 3))
+    jacobians = np.empty((count, 6, n))
+    minv = np.empty((count, n, n))
+    upper = np.triu(np.ones((n, n), dtype=bool))
+    for i, q in enumerate(q_all):
+        pin.computeJointJacobians(model, data, q)
+        jacobians[i] = data.J
+        for j in range(1, model.njoints):
+            rotations[i, j - 1] = data.oMi[j].rotation
+            translations[i, j - 1] = data.oMi[j].translation
+        pin.computeMinverse(model, data, q)
+        minv[i] = np.where(upper, data.Minv, data.Minv.T)
+    return rotations, translations, jacobians, minv
+
+
+def site_jacobians(sites: ArmSites, terms: ArmTerms) -> tuple[np.ndarray, np.ndarray]:
+    """World positions (N, K, 3) [m] and translational Jacobians (N, K, 3, n) of the sites."""
+    index = sites.joint_ids - 1
+    positions = (
+        np.einsum("nkab,kb->nka", terms.joint_rotations[:, index], sites.points_in_joint_m)
+        + terms.joint_translations[:, index]
+    )
+    linear, angular = terms.joint_jacobians[:, :3], terms.joint_jacobians[:, 3:]
+    # ω_i × p for every column i: (N, 1, n, 3) x (N, K, 1, 3)
+    cross = np.cross(np.swapaxes(angular, 1, 2)[:, None], positions[:, :, None])
+    jacobians = (linear[:, None] + np.swapaxes(cross, 2, 3)) * sites.support[None, :, None, :]
+    return positions, jacobians
+
+
+class SiteExposure(NamedTuple):
+    """Per (sample, site) results; arrays (N, K), directions and positions (N, K, 3)."""
+
+    positions_in_base_m: np.ndarray
+    directions_in_base: np.ndarray
+    stationary: np.ndarray
+    speed_m_s: np.ndarray
+    effective_mass_kg: np.ndarray
+
+
+def site_exposure(
+    sites: ArmSites, terms: ArmTerms, transform_base_to_world: pin.SE3
+) -> SiteExposure:
+    """Effective mass along each site's own velocity, and its speed, for every sample."""
+    positions, jacobians = site_jacobians(sites, terms)
+    velocities = (jacobians @ terms.joint_velocities[:, None, :, None])[..., 0]
+    mobilities = jacobians @ terms.minv[:, None] @ np.swapaxes(jacobians, 2, 3)
+    speeds = np.sqrt(np.einsum("nka,nka->nk", velocities, velocities))
+    stationary = speeds < STATIONARY_SPEED_M_S
+    directions = velocities / np.where(stationary, 1.0, speeds)[..., None]
+    with np.errstate(divide="ignore"):  # stationary rows (0 direction) are replaced below
+        masses = 1.0 / np.einsum("nka,nkab,nkb->nk", directions, mobilities, directions)
+    if stationary.any():
+        eigenvalues, eigenvectors = np.linalg.eigh(mobilities[stationary])
+        threshold = EIGENVALUE_RELATIVE_TOLERANCE * eigenvalues[:, -1:]
+        movable = eigenvalues > np.maximum(threshold, 0.0)
+        first = np.where(movable.any(axis=1), np.argmax(movable, axis=1), 0)
+        rows = np.arange(len(first))
+        smallest = eigenvalues[rows, first]
+        directions[stationary] = eigenvectors[rows, :, first]
+        can_move = movable.any(axis=1)
+        masses[stationary] = np.where(can_move, 1.0 / np.where(can_move, smallest, 1.0), np.inf)
+    speeds = np.where(stationary, 0.0, speeds)
+    rotation = transform_base_to_world.rotation
+    return SiteExposure(
+        positions_in_base_m=(positions - transform_base_to_world.translation) @ rotation,
+        directions_in_base=directions @ rotation,
+        stationary=stationary,
+        speed_m_s=speeds,
+        effective_mass_kg=masses,
+    )
+
+
+def tip_twists_in_base(
+    trajectory: Trajectory, transform_tip_to_object: pin.SE3, times_s: np.ndarray
+) -> np.ndarray:
+    """Tip twists (N, 6) (linear [m/s], angular [rad/s]), base axes: from the object motion
+    sampled once (ObjectMotion: tangent times speed per tangent) for an object path, else the
+    trajectory's own ``tip_twists``."""
+    if not isinstance(trajectory, ObjectPath):
+        return trajectory.tip_twists(transform_tip_to_object, times_s)[0]
+    motion = trajectory.object_motion(times_s)
+    rate = motion.speed_per_tangent[:, None]
+    tip = motion.tip_motion(transform_tip_to_object)
+    return np.concatenate([tip.tangents * rate, motion.angular_tangents * rate], axis=1)
+
+
+def tip_jacobians_world(robot: RobotModel, terms_kinematics: tuple[np.ndarray, ...]) -> np.ndarray:
+    """(N, 6, n) Jacobians of the tip frame, world axes at the tip origin (LOCAL_WORLD_ALIGNED),
+    from ``pinocchio_kinematic_terms``' placements and world columns."""
+    rotations, translations, jacobians = terms_kinematics[:3]
+    tip = robot.model.frames[robot.tip_frame_id]
+    support = np.zeros(robot.model.nv, dtype=bool)
+    for i in robot.model.supports[tip.parentJoint][1:]:
+        support[robot.model.joints[i].idx_v] = True
+    origin = (
+        rotations[:, tip.parentJoint - 1] @ tip.placement.translation
+        + translations[:, tip.parentJoint - 1]
+    )
+    linear, angular = jacobians[:, :3], jacobians[:, 3:]
+    cross = np.cross(np.swapaxes(angular, 1, 2), origin[:, None])  # (N, n, 3): ω_i × p
+    return np.concatenate([linear + np.swapaxes(cross, 1, 2), angular], axis=1) * support
+
+
+def tip_following_joint_velocities(
+    robot: RobotModel,
+    tip_jacobians: np.ndarray,
+    tip_twists_in_world: np.ndarray,
+    times_s: np.ndarray,
+    joint_positions: np.ndarray,
+) -> np.ndarray:
+    """q̇ (N, n) = J⁺ξ + (I − J⁺J) q̇_s (module docstring) [rad/s or m/s].
+
+    Args:
+        tip_jacobians: (N, 6, n) from ``tip_jacobians_world``.
+        tip_twists_in_world: (N, 6) tip twists (linear [m/s], angular [rad/s]), world axes.
+        times_s, joint_positions: The samples (N,), (N, n); continuous joints are unwrapped.
+    """
+    positions = np.array(joint_positions, dtype=float)
+    continuous = ~np.isfinite(robot.lower_limits)
+    if continuous.any() and len(positions) > 1:
+        positions[:, continuous] = np.unwrap(positions[:, continuous], axis=0)
+    spline_rates, _ = joint_velocities_accelerations(times_s, positions)
+    pseudo_inverse = np.linalg.pinv(tip_jacobians, rcond=1e-10)  # (N, n, 6)
+    residual = tip_twists_in_world - (tip_jacobians @ spline_rates[..., None])[..., 0]
+    return spline_rates + (pseudo_inverse @ residual[..., None])[..., 0]
+
+
+@dataclass(frozen=True)
+class WholeArmRegion:
+    """ISO/TS 15066 transient contact of one body region with any site of the arm.
+
+    Attributes:
+        region: Region name.
+        transient_contact_permitted: False where the TS permits none (ratio inf when moving).
+        worst_force_ratio: max over samples and sites of F/F_tr (0 when nothing moves).
+        worst_site, worst_sample: Where it occurs (first on ties, sample-major).
+        peak_contact_force_n: max over samples and sites of F = v·sqrt(μ k) [N].
+        admissible: worst_force_ratio <= 1 (+ ADMISSIBLE_RATIO_TOLERANCE).
+        min_duration_s: T · worst_force_ratio [s] (0 when nothing moves).
+    """
+
+    region: str
+    transient_contact_permitted: bool
+    worst_force_ratio: float
+    worst_site: int
+    worst_sample: int
+    peak_contact_force_n: float
+    admissible: bool
+    min_duration_s: float
+
+
+def assess_sites(
+    speed_m_s: np.ndarray,
+    effective_mass_kg: np.ndarray,
+    duration_s: float,
+    regions: Sequence[BodyRegion],
+) -> tuple[WholeArmRegion, ...]:
+    """Each region's worst case over (N, K) site speeds [m/s] and effective masses [kg]."""
+    speeds = np.asarray(speed_m_s, dtype=float)
+    assessed = []
+    for region in regions:
+        force = transient_contact_force_n(speeds, effective_mass_kg, region)
+        if region.max_transient_force_n is None:
+            ratio = np.where(speeds > 0.0, np.inf, 0.0)
+        else:
+            ratio = force / region.max_transient_force_n
+        if ratio.size:
+            sample, site = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
+            worst, peak = float(ratio[sample, site]), float(force.max())
+        else:
+            sample = site = 0
+            worst = peak = 0.0
+        assessed.append(
+            WholeArmRegion(
+                region=region.name,
+                transient_contact_permitted=region.transient_contact_permitted,
+                worst_force_ratio=worst,
+                worst_site=int(site),
+                worst_sample=int(sample),
+                peak_contact_force_n=peak,
+                admissible=worst <= 1.0 + ADMISSIBLE_RATIO_TOLERANCE,
+                min_duration_s=duration_s * worst if worst > 0.0 else 0.0,
+            )
+        )
+    return tuple(assessed)
+
+
+@dataclass(frozen=True)
+class WholeArmEvaluation:
+    """Exposure of every site of the arm along one grasp's trajectory (N samples, K sites).
+
+    Attributes:
+        index, name, feasible: As in the grasp's GraspEvaluation (infeasible: empty arrays).
+        site_names, site_links: The sites (ArmSites.names, .links), the column order.
+        times_s: (N,) sample times [s].
+        positions_in_base_m: (N, K, 3) site positions [m], base frame.
+        directions_in_base: (N, K, 3) unit directions of motion (or of largest effective mass
+            where stationary), base axes.
+        stationary: (N, K) True where the site does not move.
+        speed_m_s: (N, K) site speeds [m/s] (0 where stationary).
+        effective_mass_kg: (N, K) effective mass along the direction [kg].
+        energy_j: (N, K) ½ M_eff v² [J].
+        regions: One WholeArmRegion per assessed body region.
+        admissible: Every assessed region admissible at every site.
+        admissible_where_permitted: Every region that permits transient contact admissible.
+        min_duration_s: T · the largest worst ratio over the permitted regions [s] (NaN if
+            none is assessed or infeasible).
+        limiting_region: The permitted region with the largest worst ratio ("" if none).
+    """
+
+    index: int
+    name: str
+    feasible: bool
+    site_names: tuple[str, ...]
+    site_links: tuple[str, ...]
+    times_s: np.ndarray
+    positions_in_base_m: np.ndarray
+    directions_in_base: np.ndarray
+    stationary: np.ndarray
+    speed_m_s: np.ndarray
+    effective_mass_kg: np.ndarray
+    energy_j: np.ndarray
+    regions: tuple[WholeArmRegion, ...]
+    admissible: bool
+    admissible_where_permitted: bool
+    min_duration_s: float
+    limiting_region: str
+
+    def region(self, name: str) -> WholeArmRegion:
+        """The assessment of the region called ``name``."""
+        for assessed in self.regions:
+            if assessed.region == name:
+                return assessed
+        raise InvalidInputError(
+            "whole_arm.region",
+            f"region {name!r} was not assessed; assessed: "
+            f"{', '.join(a.region for a in self.regions)}",
+        )
+
+    @property
+    def worst_energy(self) -> tuple[float, int, int]:
+        """(largest ½ M_eff v² [J], its site, its sample); (0, 0, 0) when empty."""
+        if not self.energy_j.size:
+            return 0.0, 0, 0
+        sample, site = np.unravel_index(int(np.argmax(self.energy_j)), self.energy_j.shape)
+        return float(self.energy_j[sample, site]), int(site), int(sample)
+
+
+def _whole_arm_result(
+    evaluation: GraspEvaluation,
+    sites: ArmSites,
+    times: np.ndarray,
+    exposure: SiteExposure,
+    regions: tuple[BodyRegion, ...],
+    duration_s: float,
+) -> WholeArmEvaluation:
+    assessed = assess_sites(exposure.speed_m_s, exposure.effective_mass_kg, duration_s, regions)
+    permitted = [a for a in assessed if a.transient_contact_permitted]
+    limiting = max(permitted, key=lambda a: a.worst_force_ratio) if permitted else None
+    feasible = evaluation.feasible
+    energy = np.where(
+        exposure.stationary, 0.0, 0.5 * exposure.effective_mass_kg * exposure.speed_m_s**2
+    )
+    return WholeArmEvaluation(
+        index=evaluation.index,
+        name=evaluation.name,
+        feasible=feasible,
+        site_names=sites.names,
+        site_links=sites.links,
+        times_s=read_only(times, copy=True),
+        positions_in_base_m=read_only(exposure.positions_in_base_m),
+        directions_in_base=read_only(exposure.directions_in_base),
+        stationary=read_only(exposure.stationary),
+        speed_m_s=read_only(exposure.speed_m_s),
+        effective_mass_kg=read_only(exposure.effective_mass_kg),
+        energy_j=read_only(energy),
+        regions=assessed if feasible else (),
+        admissible=feasible and all(a.admissible for a in assessed),
+        admissible_where_permitted=feasible and all(a.admissible for a in permitted),
+        min_duration_s=limiting.min_duration_s if feasible and limiting else math.nan,
+        limiting_region=limiting.region if feasible and limiting else "",
+    )
+
+
+def evaluate_whole_arm(
+    robot: RobotModel,
+    evaluation: GraspEvaluation,
+    object_inertia: ObjectInertia,
+    grasp: Grasp,
+    trajectory: Trajectory,
+    sites: ArmSites,
+    regions: Sequence[str | BodyRegion] | None = None,
+    model: pin.Model | None = None,
+    joint_positions: np.ndarray | None = None,
+) -> WholeArmEvaluation:
+    """Effective mass, speed, energy and ISO/TS 15066 ratios at every site, per sample.
+
+    Reuses the evaluation's joint positions (no IK), or ``joint_positions`` (N, n) with the
+    same samples and tip poses (e.g. RedundancyResolution.joint_positions). ``grasp`` and
+    ``trajectory`` must be the ones the evaluation was computed with; ``model``: their
+    ``augmented_model`` when already built (its ``armature`` is used, as everywhere M
+    appears); ``regions``: None for all.
+    """
+    selected = select_regions(None if regions is None else list(regions))
+    count_sites = len(sites)
+    if not evaluation.feasible:
+        empty = np.empty((0, count_sites))
+        exposure = SiteExposure(
+            np.empty((0, count_sites, 3)),
+            np.empty((0, count_sites, 3)),
+            empty.astype(bool),
+            empty,
+            empty,
+        )
+        return _whole_arm_result(evaluation, sites, np.empty(0), exposure, selected, math.nan)
+    times = np.asarray(evaluation.times_s, dtype=float)
+    positions = np.asarray(
+        evaluation.joint_positions if joint_positions is None else joint_positions, dtype=float
+    )
+    if positions.shape != (len(times), robot.num_joints):
+        raise InvalidInputError("evaluation.joint_positions", "must have one row per sample")
+    if model is None:
+        model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
+    q_all = np.array([robot.q_from_positions(p) for p in positions]).reshape(len(times), -1)
+    kinematics = pinocchio_kinematic_terms(model, q_all)
+    twists_in_base = tip_twists_in_base(trajectory, grasp.transform_tip_to_object, times)
+    rotation = robot.transform_base_to_world.rotation
+    twists = np.concatenate(
+        [twists_in_base[:, :3] @ rotation.T, twists_in_base[:, 3:] @ rotation.T], axis=1
+    )
+    velocities = tip_following_joint_velocities(
+        robot, tip_jacobians_world(robot, kinematics), twists, times, positions
+    )
+    exposure = site_exposure(
+        sites, ArmTerms(*kinematics, velocities), robot.transform_base_to_world
+    )
+    return _whole_arm_result(
+        evaluation, sites, times, exposure, selected, float(trajectory.duration_s)
+    )
+
+
+def whole_arm_score(whole_arm: WholeArmEvaluation, region: str) -> float:
+    """Worst predicted transient force [N] over sites and samples for ``region``; NaN if
+    infeasible (``rank_by: whole_arm``: lower is safer)."""
+    if not whole_arm.feasible:
+        return math.nan
+    return whole_arm.region(region).peak_contact_force_n
+
+
+def order_by_whole_arm(whole_arm: Sequence[WholeArmEvaluation], region: str) -> tuple[int, ...]:
+    """Feasible grasps by ``whole_arm_score``, lowest first (ties: input order)."""
+    scored = [(whole_arm_score(w, region), k) for k, w in enumerate(whole_arm) if w.feasible]
+    return tuple(whole_arm[k].index for _, k in sorted(scored))
