@@ -679,7 +679,7 @@ def _terms_case(robot: RobotModel, seed: int) -> tuple:
     return grasp, evaluation, terms, motion
 
 
-TERM_ARMS = ("arm7", "baxter", "prismatic_arm", "continuous_arm")
+TERM_ARMS = ("arm7", "baxter", "prismatic_arm", "continuous_arm", "geared_arm")
 
 
 @pytest.fixture
@@ -688,6 +688,15 @@ def prismatic_arm() -> RobotModel:
         '<joint name="j3" type="revolute"', '<joint name="j3" type="prismatic"'
     )
     return RobotModel.from_urdf(urdf, "base_link", "tool")
+
+
+@pytest.fixture
+def geared_arm() -> RobotModel:
+    """Reflected rotor inertia on every joint: M, M⁻¹ and RNEA include it (once)."""
+    armature = [0.3, 0.25, 0.2, 0.1, 0.05, 0.04, 0.02]
+    return RobotModel.from_urdf(
+        serial_arm_urdf(ARM7_AXES), "base_link", "tool", armature_kgm2=armature
+    )
 
 
 @pytest.fixture
