@@ -2,11 +2,12 @@
 
 Layers, lowest first: ``core.exceptions`` and ``core.input_checks`` <- ``core.model`` <-
 ``core.method`` <- ``core.analyses`` <- the adapters (``cli``, ``ros``, ``validation``,
-``paths``). A module may import its own layer or lower ones. ``core.kernels`` imports only
-itself and is imported only by ``core.method``; ``core`` never imports rclpy, ROS interface
-packages or an adapter. Imports inside functions count. For the layers, those under
-``if TYPE_CHECKING:`` do not (they never run); for cycles they do, at every level (a
-type-only circle still says a value type lives in the wrong module).
+``dataset``, ``paths``). A module may import its own layer or lower ones. ``core.kernels``
+imports only itself and is imported only by ``core.method``; ``core`` never imports rclpy, ROS
+interface packages or an adapter; neither ``core`` nor the ROS node (with all it imports)
+imports the batch's dependencies (BATCH_ONLY). Imports inside functions count. For the
+layers, those under ``if TYPE_CHECKING:`` do not (they never run); for cycles they do, at
+every level (a type-only circle still says a value type lives in the wrong module).
 """
 
 from __future__ import annotations
@@ -23,12 +24,14 @@ LAYERS = (
     ("core.model",),
     ("core.method",),
     ("core.analyses", "core"),  # core/__init__.py re-exports model and method names
-    ("cli", "ros", "validation", "paths"),
+    ("cli", "ros", "validation", "dataset", "paths"),
 )
 """Module prefixes (below the package) of each layer, lowest first."""
 
 KERNELS = "core.kernels"
 ROS_ONLY = ("rclpy", "builtin_interfaces", "rcl_interfaces", "ament_index_python")
+BATCH_ONLY = ("dask", "distributed", "pyarrow", "h5py", "tqdm")
+"""Imported by ``dataset`` (``grasp-safety batch``) only."""
 
 
 def _short(module: str) -> str:
@@ -122,6 +125,8 @@ def layer_violations(graph: Mapping[str, Iterable[str]]) -> list[str]:
             top = target.split(".")[0]
             if in_core and (top in ROS_ONLY or top.endswith("_msgs")):
                 problems.append(f"{module} imports {target}: core must stay free of ROS")
+            if in_core and top in BATCH_ONLY:
+                problems.append(f"{module} imports {target}: core must not need the batch's")
             if top != PACKAGE:
                 continue
             if _matches(module, KERNELS):
@@ -170,6 +175,31 @@ def test_package_imports_follow_the_layers() -> None:
     assert f"{PACKAGE}.core.method.ranking" in graph  # the walk found the package
     problems = layer_violations(graph)
     assert not problems, "\n".join(problems)
+
+
+def reachable(graph: Mapping[str, Iterable[str]], start: str) -> set[str]:
+    """Every module ``start`` imports, directly or through the package's own modules."""
+    seen: set[str] = set()
+    todo = [start]
+    while todo:
+        module = todo.pop()
+        for target in graph.get(module, ()):
+            if target not in seen:
+                seen.add(target)
+                todo.append(target)
+    return seen
+
+
+def test_ros_node_does_not_import_the_batch_dependencies() -> None:
+    graph = package_imports()
+    imported = reachable(graph, f"{PACKAGE}.ros.node")
+    assert f"{PACKAGE}.core.method.ranking" in imported  # the walk follows the package
+    assert not {m for m in imported if m.split(".")[0] in BATCH_ONLY}
+    batch = reachable(graph, f"{PACKAGE}.dataset.batch")
+    assert {"pyarrow", "dask"} <= {m.split(".")[0] for m in batch}  # the check can fail
+    module = f"{PACKAGE}.core.model.inertia"
+    problems = layer_violations({module: {"h5py"}})
+    assert len(problems) == 1 and "batch" in problems[0]
 
 
 def test_package_has_no_import_cycle() -> None:

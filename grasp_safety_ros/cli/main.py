@@ -1,4 +1,4 @@
-"""Command line: ``grasp-safety rank``, ``grasp-safety demo``, ``grasp-safety reproduce``."""
+"""Command line: ``grasp-safety rank``, ``demo``, ``reproduce`` and ``batch``."""
 
 from __future__ import annotations
 
@@ -6,7 +6,6 @@ import argparse
 import sys
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -48,50 +47,13 @@ def _progress_printer(total_samples: int) -> Callable[[int, int], None] | None:
 
 def rank_scenario(scenario: Scenario, metric: str | None = None) -> SafetyReport:
     """Load the scenario's robot, rank its grasps and run the analyses the scenario asks for."""
-    from ..core.analyses.safety_report import analyse
-    from ..core.analyses.uncertainty import analyse_armature_range
-    from ..core.method.posture import select_postures
     from ..core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
+    from .scenario import rank_with_evaluator
 
     robot = scenario.robot.load(scenario.base_dir)
     evaluator = GraspSafetyEvaluator(robot, EvaluationConfig(metric=metric or scenario.metric))
     progress = _progress_printer(len(scenario.grasps) * len(scenario.trajectory.times_s()))
-    ranking = evaluator.rank(
-        scenario.grasps,
-        scenario.object_inertia,
-        scenario.trajectory,
-        seed_positions=scenario.robot.seed,
-        progress=progress,
-    )
-    ranking = select_postures(
-        evaluator,
-        scenario.grasps,
-        scenario.object_inertia,
-        scenario.trajectory,
-        ranking,
-        scenario.posture,
-    )
-    report = analyse(
-        evaluator,
-        scenario.grasps,
-        scenario.object_inertia,
-        scenario.trajectory,
-        scenario.options,
-        ranking=ranking,
-    )
-    bounds = scenario.robot.armature_range(robot)
-    if bounds is None or not bounds.is_range:
-        return report
-    spread = analyse_armature_range(
-        robot,
-        ranking.evaluations,
-        scenario.grasps,
-        scenario.object_inertia,
-        bounds.lower_kgm2,
-        bounds.upper_kgm2,
-        ranking.metric,
-    )
-    return replace(report, armature_range=spread)
+    return rank_with_evaluator(scenario, evaluator, progress)
 
 
 def run_header(scenario: Scenario, report: SafetyReport) -> str:
@@ -184,6 +146,25 @@ def _command_reproduce(args: argparse.Namespace) -> int:
     return 0
 
 
+def _command_batch(args: argparse.Namespace) -> int:
+    try:  # pyarrow, h5py, dask and tqdm are needed by this command only
+        from ..dataset.commands import command_batch
+
+        return command_batch(args)
+    except ImportError as error:
+        missing = error.name or str(error)
+        raise InvalidInputError(
+            "batch", f"needs the package {missing!r}: pip install -r requirements.txt"
+        ) from None
+
+
+def _non_negative_int(text: str) -> int:
+    value = int(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``grasp-safety``."""
     parser = argparse.ArgumentParser(
@@ -213,6 +194,18 @@ def build_parser() -> argparse.ArgumentParser:
     reproduce.add_argument("--out", default="validation_output", help="output folder")
     reproduce.add_argument("--quick", action="store_true", help="a reduced, fast version")
     reproduce.set_defaults(handler=_command_reproduce)
+    batch = commands.add_parser(
+        "batch", help="safety labels for grasp datasets (ACRONYM, GraspGen, scenario files)"
+    )
+    batch.add_argument("spec", help="batch SPEC YAML file (docs/batch.md)")
+    batch.add_argument("--out", type=Path, required=True, help="output folder (Parquet parts)")
+    batch.add_argument("--scheduler", help="Dask scheduler address tcp://HOST:PORT")
+    batch.add_argument(
+        "--workers", type=_non_negative_int, default=0, help="local pool size (0: one per core)"
+    )
+    batch.add_argument("--resume", action="store_true", help="keep parts already written")
+    batch.add_argument("--per-sample", action="store_true", help="add per-sample series")
+    batch.set_defaults(handler=_command_batch)
     return parser
 
 

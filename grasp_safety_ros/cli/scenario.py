@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
-from dataclasses import dataclass, field
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -12,14 +12,14 @@ import numpy as np
 import yaml
 
 from ..core.analyses.exposed_points import box_corners_in_object, cylinder_rim_points_in_object
-from ..core.analyses.safety_report import RANK_BY, AnalysisOptions
-from ..core.analyses.uncertainty import InertiaUncertainty
+from ..core.analyses.safety_report import RANK_BY, AnalysisOptions, SafetyReport, analyse
+from ..core.analyses.uncertainty import InertiaUncertainty, analyse_armature_range
 from ..core.analyses.whole_arm import DEFAULT_RANK_REGION
 from ..core.exceptions import InvalidInputError
 from ..core.input_checks import finite_array, finite_float, pose_from_position_quat
 from ..core.method.joint_trajectory import PlannedJointTrajectory
-from ..core.method.posture import DEFAULT_RESTARTS, PostureConfig
-from ..core.method.ranking import METRICS, Grasp, check_metric
+from ..core.method.posture import DEFAULT_RESTARTS, PostureConfig, select_postures
+from ..core.method.ranking import METRICS, Grasp, GraspSafetyEvaluator, check_metric
 from ..core.model.armature import (
     PUBLISHED,
     ArmatureRange,
@@ -583,24 +583,74 @@ def parse_scenario(data: Any, base_dir: Path) -> Scenario:
     )
 
 
-def load_scenario(path: str | Path) -> Scenario:
-    """Read and validate a scenario YAML file (at most MAX_SCENARIO_BYTES, UTF-8)."""
+def read_yaml_file(path: str | Path, field: str = "scenario") -> Any:
+    """Read and parse a YAML file of at most MAX_SCENARIO_BYTES (UTF-8, bounded structure);
+    errors as one-line InvalidInputError(``field``)."""
     path = Path(path)
     try:
         with path.open("rb") as stream:
             raw = stream.read(MAX_SCENARIO_BYTES + 1)
     except OSError as error:
         reason = error.strerror or str(error)
-        raise InvalidInputError("scenario", f"cannot read '{path}': {reason}") from None
+        raise InvalidInputError(field, f"cannot read '{path}': {reason}") from None
     if len(raw) > MAX_SCENARIO_BYTES:
         raise InvalidInputError(
-            "scenario", f"'{path}' is larger than {MAX_SCENARIO_BYTES} bytes, the limit"
+            field, f"'{path}' is larger than {MAX_SCENARIO_BYTES} bytes, the limit"
         )
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as error:
         raise InvalidInputError(
-            "scenario", f"'{path}' is not UTF-8 text (byte {error.start}: {error.reason})"
+            field, f"'{path}' is not UTF-8 text (byte {error.start}: {error.reason})"
         ) from None
-    data = load_yaml(text, f"'{path}'")
-    return parse_scenario(data, path.resolve().parent)
+    return load_yaml(text, f"'{path}'")
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a scenario YAML file (at most MAX_SCENARIO_BYTES, UTF-8)."""
+    return parse_scenario(read_yaml_file(path), Path(path).resolve().parent)
+
+
+def rank_with_evaluator(
+    scenario: Scenario,
+    evaluator: GraspSafetyEvaluator,
+    progress: Callable[[int, int], None] | None = None,
+) -> SafetyReport:
+    """Rank the scenario's grasps with ``evaluator`` (built for its robot; its metric is the
+    one used), select their postures and run the analyses the scenario asks for."""
+    ranking = evaluator.rank(
+        scenario.grasps,
+        scenario.object_inertia,
+        scenario.trajectory,
+        seed_positions=scenario.robot.seed,
+        progress=progress,
+    )
+    ranking = select_postures(
+        evaluator,
+        scenario.grasps,
+        scenario.object_inertia,
+        scenario.trajectory,
+        ranking,
+        scenario.posture,
+    )
+    report = analyse(
+        evaluator,
+        scenario.grasps,
+        scenario.object_inertia,
+        scenario.trajectory,
+        scenario.options,
+        ranking=ranking,
+    )
+    bounds = scenario.robot.armature_range(evaluator.robot)
+    if bounds is None or not bounds.is_range:
+        return report
+    spread = analyse_armature_range(
+        evaluator.robot,
+        ranking.evaluations,
+        scenario.grasps,
+        scenario.object_inertia,
+        bounds.lower_kgm2,
+        bounds.upper_kgm2,
+        ranking.metric,
+    )
+    return replace(report, armature_range=spread)
