@@ -1,7 +1,8 @@
 # Two commands do everything on a fresh machine: `make demo` and `make test`.
 # Each creates .venv/ and installs what is missing (PyPI wheels, incl. ROS 2 Jazzy), registers
 # the package in the venv's ament prefix and writes .venv/setup.bash; with ../shared/tools/
-# ros2cli/install beside the checkout it also installs the ROS 2 command line (`ros2`).
+# ros2cli/install beside the checkout it also installs the ROS 2 command line (`ros2`), and with
+# ../shared/tools/ros2launch/install too `ros2 launch`.
 # Every pip install of the setup (the interface build's and ../shared/tools' too) takes the
 # exact versions in requirements.lock (PIP_CONSTRAINT); requirements*.txt are the loose
 # specification it is made from by `make lock` (see docs/development.md).
@@ -17,11 +18,13 @@ export PIP_CONSTRAINT := $(if $(filter 0,$(LOCKED)),,$(abspath $(LOCK)))
 IFACE_STAMP := $(VENV)/.interfaces
 KERNELS_STAMP := $(VENV)/.kernels
 KERNELS := grasp_safety_ros/core/kernels
-IFACE_SRC := $(shell find msg_defs -type f 2>/dev/null) scripts/build_interfaces.sh
+IFACE_SRC := $(shell find msg_defs -type f 2>/dev/null) scripts/build_interfaces.sh \
+  requirements-interfaces.txt
 AMENT_STAMP := $(VENV)/.ament
 ROS2CLI_INSTALL := $(wildcard ../shared/tools/ros2cli/install)
 ROS2CLI_STAMP := $(if $(ROS2CLI_INSTALL),$(VENV)/.ros2cli)
 ROS2LAUNCH_INSTALL := $(wildcard ../shared/tools/ros2launch/install)
+ROS2LAUNCH_STAMP := $(if $(and $(ROS2CLI_INSTALL),$(ROS2LAUNCH_INSTALL)),$(VENV)/.ros2launch)
 # some machines' pip.conf names local indexes that do not exist: drop pip's warning about them
 PIP_QUIET := sed -e '/is ignored: it is neither a file nor a directory/d'
 
@@ -29,7 +32,7 @@ PIP_QUIET := sed -e '/is ignored: it is neither a file nor a directory/d'
 
 all: setup
 
-setup: $(IFACE_STAMP) $(AMENT_STAMP) $(ROS2CLI_STAMP) $(KERNELS_STAMP)
+setup: $(IFACE_STAMP) $(AMENT_STAMP) $(ROS2CLI_STAMP) $(ROS2LAUNCH_STAMP) $(KERNELS_STAMP)
 
 $(STAMP): requirements.txt setup.py $(LOCK)
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -39,7 +42,8 @@ $(STAMP): requirements.txt setup.py $(LOCK)
 
 # Compile the kernels, or load them from numba's cache of the same sources, shared by the
 # checkouts of this machine (see core/kernels/_jit.py).
-$(KERNELS_STAMP): $(STAMP) $(wildcard $(KERNELS)/*.py)
+$(KERNELS_STAMP): $(STAMP) $(wildcard $(KERNELS)/*.py) \
+  $(shell grep -rl --include='*.py' NamedTuple grasp_safety_ros/core)
 	$(PY) -c "from grasp_safety_ros.core.method.warm_up import warm_up; print(f'compiled kernels ready ({warm_up():.1f} s)')"
 	touch $@
 
@@ -47,7 +51,9 @@ $(IFACE_STAMP): $(STAMP) $(IFACE_SRC)
 	bash scripts/build_interfaces.sh
 	touch $@
 
-$(AMENT_STAMP): $(STAMP) package.xml resource/grasp_safety_ros scripts/register_ament.sh
+# launch/ and config/ are linked file by file: a new or removed file re-registers
+$(AMENT_STAMP): $(STAMP) package.xml resource/grasp_safety_ros scripts/register_ament.sh \
+  launch $(wildcard launch/*.py) config $(wildcard config/*)
 	bash scripts/register_ament.sh
 	touch $@
 
@@ -55,7 +61,13 @@ $(VENV)/.ros2cli: $(STAMP) $(ROS2CLI_INSTALL)
 	set -o pipefail; bash $(ROS2CLI_INSTALL) $(VENV) 2>&1 | $(PIP_QUIET)
 	touch $@
 
-demo: setup
+# ros2 launch (launch, launch_ros, ros2launch): a ros2 verb, so after the ros2 command line
+$(VENV)/.ros2launch: $(VENV)/.ros2cli $(ROS2LAUNCH_INSTALL)
+	set -o pipefail; bash $(ROS2LAUNCH_INSTALL) $(VENV) 2>&1 | $(PIP_QUIET)
+	touch $@
+
+# the demo needs the Python packages and the kernels only: the ROS 2 parts install with `make test`
+demo: $(KERNELS_STAMP)
 	$(VENV)/bin/grasp-safety demo --out demo_output
 
 test: setup

@@ -6,7 +6,8 @@
 #   ros2 pkg prefix --share grasp_safety_ros
 # It creates, in the venv prefix (the package itself is the editable pip install):
 #   share/ament_index/resource_index/packages/grasp_safety_ros   the ament index marker
-#   share/grasp_safety_ros/{package.xml,config,launch}             symlinks into this checkout
+#   share/grasp_safety_ros/package.xml                            a symlink into this checkout
+#   share/grasp_safety_ros/{config,launch}/<file>                 one symlink per file (folders real)
 #   lib/grasp_safety_ros/grasp_safety_node                        the node's console script
 # and writes <venv>/setup.bash, the one file to source for a shell: the venv's bin first on
 # PATH, AMENT_PREFIX_PATH=<venv>, and ROS 2 discovery kept to this machine unless already set.
@@ -27,8 +28,18 @@ share=$VENV/share/$PKG
 lib=$VENV/lib/$PKG
 mkdir -p "$index" "$share" "$lib"
 cp "resource/$PKG" "$index/$PKG"
-for item in package.xml config launch; do
-  ln -sfn "$ROOT/$item" "$share/$item"
+ln -sfn "$ROOT/package.xml" "$share/package.xml"
+# launch/ and config/: real folders holding one symlink per file, as colcon --symlink-install
+# lays them out (ros2 launch finds launch files with os.walk, which does not enter a symlinked
+# folder). Links to files that are gone are removed; re-run when files are added (make does).
+for item in config launch; do
+  [ -L "$share/$item" ] && rm "$share/$item"  # the earlier layout: one link for the folder
+  mkdir -p "$share/$item"
+  find "$share/$item" -type l -delete
+  (cd "$ROOT/$item" && find . -type f ! -name '*.pyc' ! -path '*/__pycache__/*') | while read -r file; do
+    mkdir -p "$share/$item/$(dirname "$file")"
+    ln -sfn "$ROOT/$item/${file#./}" "$share/$item/${file#./}"
+  done
 done
 ln -sfn "../../bin/$EXE" "$lib/$EXE"
 

@@ -31,6 +31,26 @@ def test_digest_follows_every_kernel_file_and_not_the_location(tmp_path: Path) -
     assert _jit.sources_digest(first) != _jit.sources_digest(second)
 
 
+def test_digest_follows_the_packed_types_handed_to_the_kernels(tmp_path: Path) -> None:
+    """numba keys a NamedTuple argument by its field types only: swapping two fields of the same
+    type in the module that defines it must select another cache folder."""
+    kernels = tmp_path / "core" / "kernels"
+    kernels.mkdir(parents=True)
+    (kernels / "k.py").write_text("x = 1\n")
+    packed = tmp_path / "core" / "method" / "packed.py"
+    packed.parent.mkdir()
+    packed.write_text("class C(NamedTuple):\n    lower: float\n    upper: float\n")
+    (tmp_path / "core" / "method" / "plain.py").write_text("y = 1\n")
+    before = _jit.sources_digest(kernels)
+    (tmp_path / "core" / "method" / "plain.py").write_text("y = 2\n")  # no packed type
+    assert _jit.sources_digest(kernels) == before
+    packed.write_text("class C(NamedTuple):\n    upper: float\n    lower: float\n")
+    assert _jit.sources_digest(kernels) != before
+    assert packed in _jit.kernel_sources(kernels)
+    real = {p.name for p in _jit.kernel_sources()}
+    assert {"compiled.py", "effective_mass.py", "trajectory.py"} <= real or "packed.py" in real
+
+
 def test_cache_folder_is_shared_and_old_ones_are_pruned(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -38,13 +58,23 @@ def test_cache_folder_is_shared_and_old_ones_are_pruned(
     monkeypatch.setenv("GRASP_SAFETY_NUMBA_CACHE", str(root))
     kernels = tmp_path / "kernels"
     kernels.mkdir()
+    other = root / "not_a_digest"
+    other.mkdir(parents=True)
+    os.utime(other, (0, 0))  # old, but not ours: never deleted
     used = []
-    for version in range(_jit.KEPT_CACHES + 2):
+    for version in range(_jit.KEPT_CACHES + 3):
         (kernels / "k.py").write_text(f"v = {version}\n")
         used.append(_jit.cache_folder(kernels))
-        os.utime(used[-1], (version, version))  # distinct ages however fast the loop runs
+        os.utime(used[-1], (1 + version, 1 + version))  # long unused, distinct ages
     assert all(path is not None and path.parent == root for path in used)
-    assert sorted(root.iterdir()) == sorted(used[-_jit.KEPT_CACHES :])
+    _jit.prune(root)
+    assert set(root.iterdir()) == {*used[-_jit.KEPT_CACHES :], other}
+    for path in used[-_jit.KEPT_CACHES :]:
+        os.utime(path)  # used just now, e.g. by a running process of another checkout
+    for version in range(3):
+        (kernels / "k.py").write_text(f"w = {version}\n")
+        used.append(_jit.cache_folder(kernels))
+    assert set(root.iterdir()) == {*used[-_jit.KEPT_CACHES - 3 :], other}  # all recent: kept
 
 
 def test_unwritable_shared_root_falls_back_to_pycache(
@@ -89,16 +119,3 @@ def test_a_second_checkout_loads_the_first_ones_kernels(tmp_path: Path) -> None:
         counts.append(tuple(int(n) for n in completed.stdout.split()))
     assert counts[0] == (0, 1)  # compiled in the first checkout
     assert counts[1] == (1, 0)  # loaded in the second
-
-
-def test_moving_a_kernel_argument_type_changes_the_digest(tmp_path: Path) -> None:
-    """numba's cache index names the module of each named-tuple argument: a change in
-    method/packed.py (where they live) must give another cache folder, like a kernel edit."""
-    kernels, packed = tmp_path / "kernels", tmp_path / _jit.VALUE_TYPES
-    kernels.mkdir()
-    packed.parent.mkdir(parents=True)
-    (kernels / "grasp.py").write_text("x = 1\n")
-    packed.write_text("class ChainArrays: ...\n")
-    before = _jit.sources_digest(kernels)
-    packed.write_text("class ChainArrays: ...\nclass IKSettings: ...\n")
-    assert _jit.sources_digest(kernels) != before

@@ -801,17 +801,48 @@ def test_internal_error_is_answered_not_dropped(
 def test_invalid_parameters_are_refused_with_a_reason(ros: NodeUnderTest) -> None:
     (result,) = ros.set_parameters(object__mass_kg=-1.0)
     assert not result.successful and "object.mass_kg" in result.reason
-    (result,) = ros.set_parameters(tip_frame="no_such_frame")
-    assert not result.successful
-    assert "tip_frame: frame 'no_such_frame' not found" in result.reason
-    (result,) = ros.set_parameters(ik_seed=[0.0, 1.0])
-    assert not result.successful and "ik_seed" in result.reason
     (result,) = ros.set_parameters(metric="median")
     assert not result.successful and "metric" in result.reason
     (result,) = ros.set_parameters(trajectory__dt_s="fast")  # declared a double
     assert not result.successful and "expected 'Type.DOUBLE' got 'Type.STRING'" in result.reason
     response = ros.rank(book_request())  # nothing changed
     assert response.success and response.ranking.metric == "mean"
+
+
+def test_robot_parameters_that_do_not_fit_are_pending_until_the_group_is_consistent(
+    ros: NodeUnderTest,
+) -> None:
+    """A frame or seed that does not fit the other robot parameters is accepted as pending
+    (another parameter of the group may follow: ros2 param load sets them one at a time), the
+    old model serving and /diagnostics saying why; a change that makes the group consistent
+    applies it. A complete group (urdf, base_frame, tip_frame, ik_seed) that does not fit is
+    refused with the reason."""
+    try:
+        (result,) = ros.set_parameters(tip_frame="no_such_frame")
+        assert result.successful, result.reason
+        status = ros.node.diagnostics_status()
+        assert status.level == DiagnosticStatus.WARN
+        assert "robot parameters pending (tip_frame)" in status.message
+        assert "tip_frame: frame 'no_such_frame' not found" in status.message
+        assert status.hardware_id == "base->right_gripper"  # the model that serves
+        assert ros.rank(book_request()).success
+        (result,) = ros.set_parameters(ik_seed=[0.0, 1.0])
+        assert result.successful, result.reason
+        (result,) = ros.set_parameters(base_frame="base")
+        assert result.successful, result.reason
+        (result,) = ros.set_parameters(urdf="example-robot-data:baxter")  # completes the group
+        assert not result.successful
+        pending = "base_frame, ik_seed, tip_frame, urdf"
+        assert f"robot parameters {pending} are not consistent" in result.reason
+        assert "the model from urdf (base -> right_gripper) serves" in result.reason
+        (result,) = ros.set_parameters(tip_frame="right_gripper")  # the seed is still wrong
+        assert result.successful
+        assert "ik_seed: must have shape [7]" in ros.node.diagnostics_status().message
+        (result,) = ros.set_parameters(ik_seed=list(BOOK.robot.seed))  # consistent: applied
+        assert result.successful, result.reason
+        assert "robot parameters" not in ros.node.diagnostics_status().message
+    finally:
+        ros.set_parameters(tip_frame="right_gripper", ik_seed=list(BOOK.robot.seed))
 
 
 def test_valid_parameter_change_applies(ros: NodeUnderTest) -> None:

@@ -185,7 +185,8 @@ STARTUP_ERRORS = {
     ),
     "unknown_tip_frame": (
         ["--params-file", PARAMS, "-p", "tip_frame:=right_flange"],
-        r"start-up failed: tip_frame: frame 'right_flange' not found; available frames: base,",
+        r"start-up failed: tip_frame: frame 'right_flange' not found; did you mean .*"
+        r"'right_gripper'.*\? links: .*; joints: ",
     ),
     "invalid_parameter": (
         ["--params-file", PARAMS, "-p", "object.mass_kg:=-2.0"],

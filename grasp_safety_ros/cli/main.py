@@ -1,4 +1,5 @@
-"""Command line: ``grasp-safety rank``, ``demo``, ``reproduce`` and ``batch``."""
+"""Command line: ``grasp-safety rank``, ``demo``, ``robots``, ``frames``, ``reproduce`` and
+``batch``."""
 
 from __future__ import annotations
 
@@ -70,8 +71,7 @@ def run_header(scenario: Scenario, report: SafetyReport) -> str:
         robot = Path(urdf).name
     header = (
         f"robot {robot} ({scenario.robot.base_frame} -> {scenario.robot.tip_frame}), "
-        f"{len(scenario.grasps)} grasps x {scenario.trajectory.num_samples} samples, "
-        f"backend {report.ranking.backend}"
+        f"{_problem_size(scenario)}, backend {report.ranking.backend}"
     )
     if not report.ranking.armature_given:
         header += f"\n{NO_ARMATURE_NOTE}"
@@ -79,6 +79,26 @@ def run_header(scenario: Scenario, report: SafetyReport) -> str:
         entry = published_for(scenario.robot.armature_kgm2, scenario.robot.urdf, ())
         header += f"\narmature: published '{entry.name}' ({entry.status}, {entry.date})"
     return header
+
+
+def _problem_size(scenario: Scenario) -> str:
+    """``G grasps x N samples``; grasps with a planned joint trajectory are sampled at its
+    points, so their counts are given apart: ``3 grasps: 2 x 41 samples, 1 x 5 (planned)``."""
+    counts: dict[tuple[int, bool], int] = {}
+    for grasp in scenario.grasps:
+        planned = grasp.joint_trajectory
+        key = (scenario.trajectory.num_samples, False)
+        if planned is not None:
+            key = (len(planned.times_s), True)
+        counts[key] = counts.get(key, 0) + 1
+    grasps = f"{len(scenario.grasps)} grasp{'s' if len(scenario.grasps) != 1 else ''}"
+    if len(counts) == 1 and not next(iter(counts))[1]:
+        return f"{grasps} x {scenario.trajectory.num_samples} samples"
+    groups = [
+        f"{count} x {samples} samples{' (planned)' if planned else ''}"
+        for (samples, planned), count in counts.items()
+    ]
+    return f"{grasps}: {', '.join(groups)}"
 
 
 def _write_outputs(
@@ -146,6 +166,20 @@ def _command_reproduce(args: argparse.Namespace) -> int:
     return 0
 
 
+def _command_robots(args: argparse.Namespace) -> int:
+    from .robots import robots_text
+
+    print(robots_text())
+    return 0
+
+
+def _command_frames(args: argparse.Namespace) -> int:
+    from .robots import frames_text
+
+    print(frames_text(args.model))
+    return 0
+
+
 def _command_batch(args: argparse.Namespace) -> int:
     try:  # pyarrow, h5py, dask and tqdm are needed by this command only
         from ..dataset.commands import command_batch
@@ -188,6 +222,17 @@ def build_parser() -> argparse.ArgumentParser:
     demo = commands.add_parser("demo", help="the paper's book experiment on the bundled Baxter")
     demo.add_argument("--out", default="demo_output", help="output folder (default: %(default)s)")
     demo.set_defaults(handler=_command_demo)
+    robots = commands.add_parser(
+        "robots", help="the bundled robots: base and tip frames, DOF and an IK seed that works"
+    )
+    robots.set_defaults(handler=_command_robots)
+    frames = commands.add_parser(
+        "frames", help="a model's frames by kind and the tree of its links (chains)"
+    )
+    frames.add_argument(
+        "model", help="URDF or MJCF file, example-robot-data:<name>, or a robot name"
+    )
+    frames.set_defaults(handler=_command_frames)
     reproduce = commands.add_parser(
         "reproduce", help="validate with simulated impacts in MuJoCo (the paper's experiments)"
     )

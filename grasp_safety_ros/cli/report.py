@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
-from ..core.analyses.iso15066 import PowerForceLimitAssessment
+from ..core.analyses.iso15066 import ADMISSIBLE_RATIO_TOLERANCE, PowerForceLimitAssessment
 from ..core.analyses.safety_report import SafetyReport
 from ..core.analyses.whole_arm import ArmSites, WholeArmEvaluation
 from ..core.method.executable import joint_velocities_accelerations, rates_for_execution
@@ -234,12 +235,23 @@ def _add_per_grasp_series(report: SafetyReport, k: int, grasp: dict[str, Any]) -
                 samples["joint_torques"] = numbers(effort.joint_torques)
 
 
+NAME_WIDTH = 16
+"""Least width of the name columns of the tables; longer names widen them (never cut)."""
+
+
+def name_width(names: Sequence[str]) -> int:
+    """Width of a name column holding ``names`` whole: the longest, at least NAME_WIDTH."""
+    return max([NAME_WIDTH, *(len(name) for name in names)])
+
+
 def ranking_table(ranking: Ranking) -> str:
     """Plain-text table: rank, index, name, score, mean and peak effective mass, or the reason."""
     unit = SCORE_UNITS[ranking.metric]
     score = f"score [{unit}]"
+    width = name_width([e.name for e in ranking.evaluations])
     header = (
-        f"{'rank':>4}  {'index':>5}  {'name':<16} {score:>14} {'mean [kg]':>10} {'peak [kg]':>10}"
+        f"{'rank':>4}  {'index':>5}  {'name':<{width}} {score:>14} {'mean [kg]':>10} "
+        f"{'peak [kg]':>10}"
     )
     if ranking.armature_given:  # with armature; the links-only mean (a lower bound) beside
         header += f" {'links [kg]':>10}"
@@ -251,19 +263,28 @@ def ranking_table(ranking: Ranking) -> str:
         if ranking.armature_given:
             links = f" {float(np.mean(e.links_only_effective_mass_kg)):>10.4f}"
         lines.append(
-            f"{rank:>4}  {index:>5}  {e.name[:16]:<16} {e.score:>14.4f} "
+            f"{rank:>4}  {index:>5}  {e.name:<{width}} {e.score:>14.4f} "
             f"{e.mean_effective_mass_kg:>10.4f} {e.peak_effective_mass_kg:>10.4f}{links}{worst}"
         )
     if ranking.armature_given:
         lines.append(armature_line(ranking))
     for e in ranking.evaluations:
         if not e.feasible:
-            lines.append(f"{'-':>4}  {e.index:>5}  {e.name[:16]:<16} infeasible: {e.reason}")
+            lines.append(f"{'-':>4}  {e.index:>5}  {e.name:<{width}} infeasible: {e.reason}")
     return "\n".join(lines)
 
 
 def _ratio(value: float) -> str:
-    return "n/p" if math.isinf(value) else f"{value:.2f}"
+    """F/F_max with two decimals, or as many more as it takes (up to 9) for the printed number
+    to lie on the same side of 1 as the admissibility verdict (1.0029 is "1.003", not "1.00")."""
+    if math.isinf(value):
+        return "n/p"
+    admissible = value <= 1.0 + ADMISSIBLE_RATIO_TOLERANCE
+    for digits in range(2, 10):
+        text = f"{value:.{digits}f}"
+        if (float(text) <= 1.0) == admissible:
+            return text
+    return text
 
 
 ISO_COLUMNS = 8
@@ -276,23 +297,50 @@ def _iso_lines(report: SafetyReport) -> list[str]:
     shown = [by_index[k] for k in report.order if k in by_index][:ISO_COLUMNS]
     if not shown:
         return []
+    region_width = name_width([r.region.name for r in shown[0].regions])
+    widths = [max(15, len(a.name)) for a in shown]
+
+    def row(label: str, cells: Sequence[str]) -> str:
+        return f"{label:<{region_width}} " + " ".join(
+            f"{cell:>{w}}" for cell, w in zip(cells, widths, strict=True)
+        )
+
     lines = [
         "",
         "ISO/TS 15066 transient contact, worst F/F_max over the trajectory "
         "(n/p: transient contact not permitted; > 1: too fast)",
-        f"{'region':<16} " + " ".join(f"{a.name[:15]:>15}" for a in shown),
+        row("region", [a.name for a in shown]),
     ]
     for j, region in enumerate(shown[0].regions):
-        cells = " ".join(f"{_ratio(a.regions[j].worst_force_ratio):>15}" for a in shown)
-        lines.append(f"{region.region.name[:16]:<16} {cells}")
+        lines.append(
+            row(region.region.name, [_ratio(a.regions[j].worst_force_ratio) for a in shown])
+        )
     lines.append(
-        f"{'ok where allowed':<16} "
-        + " ".join(f"{'yes' if a.admissible_where_permitted else 'no':>15}" for a in shown)
+        row("ok where allowed", ["yes" if a.admissible_where_permitted else "no" for a in shown])
     )
-    lines.append(f"{'T_min [s]':<16} " + " ".join(f"{a.min_duration_s:>15.3f}" for a in shown))
+    lines.append(row("T_min [s]", [f"{a.min_duration_s:.3f}" for a in shown]))
     if len(by_index) > len(shown):
         lines.append(f"({len(by_index) - len(shown)} more feasible grasps in the JSON output)")
     return lines
+
+
+def _posture_summary(p: PostureSelection) -> str:
+    """One grasp's line of the posture selection; an infeasible one counts the IK seeds as the
+    evaluation's reason does (the configured seed and the restarts)."""
+    if p.restarts == 0:  # select_posture keeps a planned joint trajectory's posture as given
+        given = f"score {p.score:.4f}" if p.postures_feasible else "infeasible"
+        return f"planned joint trajectory, posture as given: {given}"
+    if not p.postures_feasible:
+        followed = p.postures_tried
+        return (
+            f"no feasible posture from {p.restarts + 1} IK seeds ({followed} distinct start "
+            f"posture{'s' if followed != 1 else ''} followed)"
+        )
+    return (
+        f"single IK {p.score_single_ik:.4f} -> {p.score:.4f} "
+        f"(range {p.score_range[0]:.4f}..{p.score_range[1]:.4f}, "
+        f"{p.postures_feasible}/{p.postures_tried} postures feasible)"
+    )
 
 
 def report_text(report: SafetyReport) -> str:
@@ -300,6 +348,7 @@ def report_text(report: SafetyReport) -> str:
     options = report.options
     lines = [ranking_table(report.ranking)]
     evaluations = report.ranking.evaluations
+    width = name_width([e.name for e in evaluations])
     if options.metric_point != "tip" or report.redundancy or options.grasp_quality is not None:
         lines.append("")
         what = f"metric point: {options.metric_point}"
@@ -314,22 +363,15 @@ def report_text(report: SafetyReport) -> str:
                 pareto = " pareto" if k in report.quality.pareto_set else ""
                 extra = f"  quality {options.grasp_quality[k]:.3f}{pareto}"
             lines.append(
-                f"{rank:>4}  {k:>5}  {evaluations[k].name[:16]:<16} "
+                f"{rank:>4}  {k:>5}  {evaluations[k].name:<{width}} "
                 f"safety score {report.scores[k]:.4f}{extra}"
             )
     postures = report.ranking.postures
-    if postures and postures[0].restarts > 0:
-        lines += ["", f"posture selection ({postures[0].restarts} IK restarts per grasp):"]
+    restarts = max((p.restarts for p in postures), default=0)
+    if restarts > 0:
+        lines += ["", f"posture selection ({restarts} IK restarts per grasp):"]
         for p in postures:
-            name = evaluations[p.index].name[:16]
-            if p.postures_feasible:
-                lines.append(
-                    f"  {name:<16} single IK {p.score_single_ik:.4f} -> {p.score:.4f} "
-                    f"(range {p.score_range[0]:.4f}..{p.score_range[1]:.4f}, "
-                    f"{p.postures_feasible}/{p.postures_tried} postures feasible)"
-                )
-            else:
-                lines.append(f"  {name:<16} no feasible posture ({p.postures_tried} tried)")
+            lines.append(f"  {evaluations[p.index].name:<{width}} {_posture_summary(p)}")
     if report.iso:
         lines += _iso_lines(report)
     if report.whole_arm:
@@ -339,7 +381,7 @@ def report_text(report: SafetyReport) -> str:
         for g in report.uncertainty.grasps:
             if g.feasible:
                 lines.append(
-                    f"  {g.name[:16]:<16} nominal {g.nominal_score:.4f}  worst case "
+                    f"  {g.name:<{width}} nominal {g.nominal_score:.4f}  worst case "
                     f"{g.worst_case_score:.4f}  p{report.uncertainty.uncertainty.percentile:g} "
                     f"{g.percentile_score:.4f}  P(safest) {g.probability_safest:.2f}"
                 )
@@ -349,15 +391,15 @@ def report_text(report: SafetyReport) -> str:
         lines += ["", "redundancy (null-space) resolution, tip effective mass:"]
         for r in report.redundancy:
             if r.applied:
-                lines.append(f"  {r.name[:16]:<16} score {r.original_score:.4f} -> {r.score:.4f}")
+                lines.append(f"  {r.name:<{width}} score {r.original_score:.4f} -> {r.score:.4f}")
             else:
-                lines.append(f"  {r.name[:16]:<16} not applied: {r.reason}")
+                lines.append(f"  {r.name:<{width}} not applied: {r.reason}")
     if report.effort:
         lines += ["", f"joint effort ({options.effort_criterion} of the torque limits):"]
         for e in report.effort:
             if e.feasible:
                 lines.append(
-                    f"  {e.name[:16]:<16} peak |tau| max {np.max(e.peak_abs_torque):.2f} N m, "
+                    f"  {e.name:<{width}} peak |tau| max {np.max(e.peak_abs_torque):.2f} N m, "
                     f"{options.effort_criterion} {e.score(options.effort_criterion):.3f}"
                 )
     return "\n".join(lines)
@@ -429,13 +471,14 @@ def whole_arm_lines(report: SafetyReport) -> list[str]:
         f"rank_by={report.options.rank_by}):",
     ]
     by_index = {w.index: w for w in report.whole_arm if w.feasible}
+    width = name_width([w.name for w in report.whole_arm])
     for k in report.order:
         w = by_index.get(k)
         if w is None:
             continue
         energy, e_site, _ = w.worst_energy
         ranked = w.region(region) if any(r.region == region for r in w.regions) else None
-        text = f"  {w.name[:16]:<16}"
+        text = f"  {w.name:<{width}}"
         if w.limiting_region:
             limiting = w.region(w.limiting_region)
             text += (
@@ -522,11 +565,12 @@ def armature_range_lines(report: SafetyReport) -> list[str]:
     if spread is None:
         return []
     lines = ["", f"armature ranges (tip effective mass): {spread.message}"]
+    width = name_width([e.name for e in report.ranking.evaluations])
     for k, e in enumerate(report.ranking.evaluations):
         if e.feasible:
             low, high = spread.effective_mass_range_kg[k]
             scores = f"{spread.scores_lower[k]:.4f}..{spread.scores_upper[k]:.4f}"
             lines.append(
-                f"  {e.name[:16]:<16} score {scores}  effective mass {low:.3f}..{high:.3f} kg"
+                f"  {e.name:<{width}} score {scores}  effective mass {low:.3f}..{high:.3f} kg"
             )
     return lines

@@ -76,13 +76,13 @@ from .conversions import (
 from .declaration import declare_node_parameters, typed_parameters
 from .parameters import (
     PARAMETERS,
-    ROBOT_PARAMETERS,
     NodeSettings,
     RobotBundle,
     build_robot,
     check_parameter,
     settings_from_parameters,
 )
+from .robot_group import PENDING_FIELDS, ROBOT_GROUP, group_complete, pending_reason
 
 NODE_NAME = "grasp_safety"
 EXECUTOR_THREADS = 4
@@ -136,6 +136,7 @@ class _Status:
     last_error: str = ""
     last_was_error: bool = False
     robot_description_error: str = ""  # why the last /robot_description was not used
+    robot_parameters_pending: str = ""  # why the robot group is not applied yet
 
 
 @dataclass(frozen=True)
@@ -263,6 +264,7 @@ class GraspSafetyNode(Node):
         self._trajectory: Path | MultiDOFJointTrajectory | None = None
         self._inertia_override: ObjectInertia | None = None
         self._status = _Status()
+        self._pending_robot: dict[str, Any] = {}  # robot group values accepted, not applied
 
         self.add_pre_set_parameters_callback(typed_parameters)
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -445,19 +447,50 @@ class GraspSafetyNode(Node):
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, changes: dict[str, Any]) -> None:
+        """Apply a parameter change (raises GraspSafetyError to refuse it).
+
+        The robot group (ROBOT_GROUP) is applied together. ``ros2 param load`` of a new robot's
+        file sets its parameters one at a time, each alone inconsistent with the others' old
+        values (a frame not in the robot, a seed of another length): such a change is accepted
+        as pending, the old model serving, and the group is applied once a change makes it
+        consistent. A change that completes the group (every one of urdf or
+        robot_description, base_frame, tip_frame, ik_seed pending) and leaves it inconsistent is
+        refused with the reason; the others stay pending (log and /diagnostics say so). Errors
+        of a parameter alone (type, range, an unreadable URDF) are refused as before.
+        """
         changes = {name: value for name, value in changes.items() if name in PARAMETERS}
         if not changes:
             return
         with self._state_lock:
-            values = {**self._values, **changes}
+            robot_changes = {k: v for k, v in changes.items() if k in ROBOT_GROUP}
+            pending = {**self._pending_robot, **robot_changes}
+            values = {**self._values, **pending, **changes}
             settings = settings_from_parameters(values)
-            bundle = self._robot
-            if set(changes) & {*ROBOT_PARAMETERS, "ik_seed"}:
-                bundle = build_robot(settings, self._topic_description)
+            bundle, reason = self._robot, ""
+            if pending:
+                try:
+                    bundle = build_robot(settings, self._topic_description)
+                except GraspSafetyError as error:
+                    if getattr(error, "field", None) not in PENDING_FIELDS:
+                        raise
+                    reason = pending_reason(pending, error, self._robot)
+                    if group_complete(pending):
+                        self._status.robot_parameters_pending = reason
+                        raise InvalidInputError(", ".join(sorted(robot_changes)), reason) from None
+                    others = {k: v for k, v in changes.items() if k not in ROBOT_GROUP}
+                    values, bundle = {**self._values, **others}, self._robot
+                    settings = settings_from_parameters(values)
+                self._pending_robot = pending if reason else {}
+                self._status.robot_parameters_pending = reason
             period_changed = settings.diagnostics_period_s != self._settings.diagnostics_period_s
             robot_changed = bundle is not self._robot
             self._values, self._settings, self._robot = values, settings, bundle
+        if reason:
+            self.get_logger().warning(reason)
+            self._publish_diagnostics()
         self.get_logger().info(f"parameters set: {', '.join(sorted(changes))}")
+        if robot_changed and pending:
+            self._publish_diagnostics()  # the pending state, if any, is cleared
         if robot_changed and bundle is not None:
             self._log_robot(bundle)
         if period_changed:
@@ -841,6 +874,8 @@ class GraspSafetyNode(Node):
             status, settings, bundle = self._status, self._settings, self._robot
             if bundle is None:
                 level, message = DiagnosticStatus.ERROR, "no robot description yet"
+            elif status.robot_parameters_pending:
+                level, message = DiagnosticStatus.WARN, status.robot_parameters_pending
             elif status.last_was_error:
                 level, message = DiagnosticStatus.WARN, f"input refused: {status.last_error}"
             elif status.rankings:
@@ -864,6 +899,7 @@ class GraspSafetyNode(Node):
                 "last_infeasible_grasps": status.last_infeasible,
                 "last_error": status.last_error,
                 "robot_description_error": status.robot_description_error,
+                "robot_parameters_pending": status.robot_parameters_pending,
                 "armature": _armature_status(bundle.robot) if bundle else "",
             }
         return DiagnosticStatus(

@@ -689,7 +689,7 @@ def _renamed(error: GraspSafetyError, origin: str) -> GraspSafetyError:
         return error
     new_field = _CORE_FIELDS[field] or origin
     if isinstance(error, FrameNotFoundError):
-        return FrameNotFoundError(new_field, error.frame, error.available)
+        return error.renamed(new_field)
     message = str(error)[len(field) + 2 :] if str(error).startswith(f"{field}: ") else str(error)
     return InvalidInputError(new_field, message)
 

@@ -68,7 +68,7 @@ class AnalysisOptions:
         metric_point: ``tip`` (the paper), ``leading_point`` or ``worst_point`` of the object.
         points_in_object_m: (K, 3) exposed points of the object [m], object frame; needed for
             the point metrics (the CLI derives them from the object's primitive shape).
-        iso_regions: ISO/TS 15066 body regions to assess (a non-empty list); None: all.
+        iso_regions: ISO/TS 15066 body regions to assess; None: all; empty: no assessment.
         uncertainty: Bounds on the object-inertia error; None: no uncertainty analysis.
         grasp_quality: Quality per candidate (higher is better); None: pure safety ranking.
         safety_weight: w of the weighted sum w·safety + (1 − w)·quality, in [0, 1].
@@ -113,7 +113,7 @@ class AnalysisOptions:
                 f"{self.metric_point!r} needs the object's points (a box or cylinder shape, "
                 "or object.points_m)",
             )
-        if self.iso_regions is not None:
+        if self.iso_regions:
             select_regions(list(self.iso_regions))  # raises on unknown names
         if self.rank_by not in RANK_BY:
             raise InvalidInputError(
@@ -291,7 +291,11 @@ def analyse(
             masses = redundancy[k].effective_mass_kg
         scores[k] = aggregate(masses, evaluation.times_s, metric)
         series[k] = (speeds, masses)
-    iso = _assess_iso(options.iso_regions, evaluations, series, motions)
+    iso = (
+        _assess_iso(options.iso_regions, evaluations, series, motions)
+        if options.iso_regions != ()
+        else []
+    )
     feasible = np.flatnonzero(~np.isnan(scores))
     safety_order = tuple(int(k) for k in sorted(feasible, key=lambda k: (scores[k], k)))
     quality = rank_with_quality(

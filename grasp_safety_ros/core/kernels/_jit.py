@@ -12,16 +12,19 @@ each other across files, and it keeps the cache beside the sources, so every che
 again (70-90 s). Here the cache of the kernels lives in one folder per digest of all kernel
 sources and the numba version (``cache_folder``): in ``$GRASP_SAFETY_NUMBA_CACHE``, else
 ``$XDG_CACHE_HOME/grasp_safety_ros/numba`` (default ``~/.cache/...``), else, when that is not
-writable, the kernels' ``__pycache__``. An edit of any kernel file selects a new folder (nothing
-stale can load), and a second checkout of the same sources loads the first one's kernels. The
-most recently used ``KEPT_CACHES`` folders are kept, older ones deleted.
+writable, the kernels' ``__pycache__``. An edit of any kernel file (or of a core module defining
+the packed NamedTuples they take) selects a new folder (nothing stale can load), and a second
+checkout of the same sources loads the first one's kernels. The most recently used
+``KEPT_CACHES`` folders, and any used within a day, are kept; older digest folders are deleted.
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
+import re
 import shutil
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -37,21 +40,29 @@ except ImportError:  # pragma: no cover - exercised on machines without numba
 KERNELS_FOLDER = Path(__file__).resolve().parent
 KEPT_CACHES = 6
 """Digest folders kept in a cache root (one per kernel version recently used)."""
+KEEP_RECENT_S = 86_400.0
+"""A digest folder used within this time [s] is kept whatever their number (a running process
+may load from it)."""
+DIGEST_LENGTH = 20
+_DIGEST_NAME = re.compile(f"[0-9a-f]{{{DIGEST_LENGTH}}}")
 
 
-VALUE_TYPES = Path("method") / "packed.py"
-"""Where (below ``core``) the named tuples the kernels take are defined: numba's cache index
-names their module, so a change there must change the digest too."""
+def kernel_sources(folder: Path = KERNELS_FOLDER) -> list[Path]:
+    """The kernel files, and the core modules that define NamedTuples (the packed values handed
+    to the kernels): numba keys a NamedTuple argument by its field types, not its field names,
+    so a cached kernel would read a reordered field at its old place."""
+    core = folder.parent
+    typed = {path for path in core.rglob("*.py") if "NamedTuple" in path.read_text("utf-8")}
+    return sorted(set(folder.glob("*.py")) | typed)
 
 
 def sources_digest(folder: Path = KERNELS_FOLDER) -> str:
-    """Digest of every ``folder/*.py`` and of ``folder/../method/packed.py`` (VALUE_TYPES)
-    (names and contents) and of the numba version."""
+    """Digest of ``kernel_sources`` (paths relative to the core, contents) and numba's version."""
     digest = hashlib.sha256(numba.__version__.encode() if numba is not None else b"")
-    for source in [*sorted(folder.glob("*.py")), folder.parent / VALUE_TYPES]:
-        if source.is_file():
-            digest.update(b"\0" + source.name.encode() + b"\0" + source.read_bytes())
-    return digest.hexdigest()[:20]
+    for source in kernel_sources(folder):
+        name = source.relative_to(folder.parent).as_posix().encode()
+        digest.update(b"\0" + name + b"\0" + source.read_bytes())
+    return digest.hexdigest()[:DIGEST_LENGTH]
 
 
 def cache_roots(folder: Path = KERNELS_FOLDER) -> list[Path]:
@@ -83,15 +94,22 @@ def cache_folder(folder: Path = KERNELS_FOLDER) -> Path | None:
 
 
 def prune(root: Path, keep: int = KEPT_CACHES) -> None:
-    """Delete all but the ``keep`` most recently used digest folders of ``root``."""
+    """Delete the digest folders of ``root`` beyond the ``keep`` most recently used, unless used
+    within ``KEEP_RECENT_S``; nothing else in ``root`` is touched."""
     try:
         folders = sorted(
-            (p for p in root.iterdir() if p.is_dir()), key=lambda p: p.stat().st_mtime
+            (p for p in root.iterdir() if p.is_dir() and _DIGEST_NAME.fullmatch(p.name)),
+            key=lambda p: p.stat().st_mtime,
         )
     except OSError:
         return
-    for stale in folders[:-keep] if keep else folders:
-        shutil.rmtree(stale, ignore_errors=True)
+    now = time.time()
+    for stale in folders[: max(len(folders) - keep, 0)]:
+        try:
+            if now - stale.stat().st_mtime > KEEP_RECENT_S:
+                shutil.rmtree(stale, ignore_errors=True)
+        except OSError:
+            continue
 
 
 def _share_the_cache() -> bool:

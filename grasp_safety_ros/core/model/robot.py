@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import difflib
+import functools
 import importlib.metadata
 import os
 import re
@@ -127,12 +129,72 @@ def example_robot_data_dirs() -> list[Path]:
     return [d for d in dirs if d.is_dir()]
 
 
+@functools.lru_cache(maxsize=4)
+def _urdfs_in(folder: Path) -> tuple[str, ...]:
+    """Paths of the ``*.urdf`` files under ``folder``, relative to it, sorted."""
+    return tuple(sorted(str(path.relative_to(folder)) for path in folder.rglob("*.urdf")))
+
+
+def example_robot_data_names() -> dict[str, str]:
+    """Every name ``example-robot-data:<name>`` accepts, with its URDF path relative to the
+    ``robots/`` folder: the names of EXAMPLE_ROBOT_DATA_URDFS, then the file name (without
+    ``.urdf``) of every URDF of the installed data that no other URDF shares."""
+    names = dict(EXAMPLE_ROBOT_DATA_URDFS)
+    stems: dict[str, list[str]] = {}
+    for folder in example_robot_data_dirs():
+        for relative in _urdfs_in(folder):
+            stems.setdefault(Path(relative).stem, []).append(relative)
+    for stem, paths in sorted(stems.items()):
+        if len(set(paths)) == 1:
+            names.setdefault(stem, paths[0])
+    return names
+
+
+def example_robot_data_urdf(name: str) -> Path:
+    """The URDF file of ``example-robot-data:<name>``: a name of example_robot_data_names or a
+    path relative to the ``robots/`` folder (e.g. ``talos_data/robots/talos_left_arm.urdf``).
+
+    Raises:
+        InvalidInputError: no such robot; the message says the closest names and the path form.
+    """
+    folders = example_robot_data_dirs()
+    names = example_robot_data_names()
+    for folder in folders:
+        candidate = folder / names.get(name, name)
+        if candidate.is_file():
+            return candidate
+    if not folders:
+        raise InvalidInputError(
+            "robot.urdf",
+            f"example-robot-data robot '{name}' not found: example-robot-data is not installed "
+            "(pip install example-robot-data)",
+        )
+    shared = sorted(
+        {rel for folder in folders for rel in _urdfs_in(folder) if Path(rel).stem == name}
+    )
+    if shared:
+        forms = " or ".join(f"'{EXAMPLE_ROBOT_DATA_PREFIX}{rel}'" for rel in shared)
+        raise InvalidInputError(
+            "robot.urdf",
+            f"example-robot-data robot '{name}' names {len(shared)} URDFs; give the path form: "
+            f"{forms}",
+        )
+    close = difflib.get_close_matches(name, list(names), n=3, cutoff=0.5)
+    hint = f"did you mean {' or '.join(repr(n) for n in close)}? " if close else ""
+    raise InvalidInputError(
+        "robot.urdf",
+        f"example-robot-data robot '{name}' not found; {hint}bundled names: "
+        f"{', '.join(sorted(EXAMPLE_ROBOT_DATA_URDFS))}; `grasp-safety robots` lists every "
+        f"name; or give a path relative to {folders[0]}: '{EXAMPLE_ROBOT_DATA_PREFIX}<path>'",
+    )
+
+
 def resolve_urdf(source: str, relative_to: Path | None = None) -> tuple[str, bool]:
     """Resolve a robot description to (text, is_xml).
 
     Args:
         source: URDF XML, a path to a URDF file, or ``example-robot-data:<name>`` with a
-            name from EXAMPLE_ROBOT_DATA_URDFS or a path relative to the ``robots/`` folder.
+            name from example_robot_data_names or a path relative to the ``robots/`` folder.
         relative_to: Folder that relative file paths are taken from.
 
     Returns:
@@ -146,17 +208,7 @@ def resolve_urdf(source: str, relative_to: Path | None = None) -> tuple[str, boo
     if text.startswith("<"):
         return text, True
     if text.startswith(EXAMPLE_ROBOT_DATA_PREFIX):
-        name = text[len(EXAMPLE_ROBOT_DATA_PREFIX) :]
-        relative = EXAMPLE_ROBOT_DATA_URDFS.get(name, name)
-        for folder in example_robot_data_dirs():
-            candidate = folder / relative
-            if candidate.is_file():
-                return str(candidate), False
-        raise InvalidInputError(
-            "robot.urdf",
-            f"example-robot-data robot '{name}' not found; bundled names: "
-            f"{', '.join(sorted(EXAMPLE_ROBOT_DATA_URDFS))} (is example-robot-data installed?)",
-        )
+        return str(example_robot_data_urdf(text[len(EXAMPLE_ROBOT_DATA_PREFIX) :])), False
     path = Path(text).expanduser()
     if relative_to is not None and not path.is_absolute():
         path = relative_to / path
@@ -341,6 +393,23 @@ def _describe_frame(model: pin.Model, frame_id: int) -> str:
     return f"{frame.name}@{frame.type.name} (on joint '{model.names[frame.parentJoint]}')"
 
 
+FRAME_KINDS: Mapping[str, tuple[pin.FrameType, ...]] = {
+    "links": (pin.FrameType.BODY,),
+    "joints": (pin.FrameType.JOINT,),
+    "fixed joints": (pin.FrameType.FIXED_JOINT,),
+    "other frames": (pin.FrameType.OP_FRAME, pin.FrameType.SENSOR),
+}
+"""Frame kinds as listed to a user, by the Pinocchio frame types they hold."""
+
+
+def frames_by_kind(model: pin.Model) -> dict[str, list[str]]:
+    """The model's frame names by kind (FRAME_KINDS), in model order."""
+    return {
+        kind: [frame.name for frame in model.frames if frame.type in types]
+        for kind, types in FRAME_KINDS.items()
+    }
+
+
 def find_frame(model: pin.Model, name: str, field: str) -> int:
     """Id of the frame ``name`` or ``name@TYPE`` (TYPE one of FRAME_TYPES).
 
@@ -356,7 +425,9 @@ def find_frame(model: pin.Model, name: str, field: str) -> int:
         base_name, type_name = name, ""
     matches = [i for i, frame in enumerate(model.frames) if frame.name == base_name]
     if not matches:
-        raise FrameNotFoundError(field, base_name, [frame.name for frame in model.frames])
+        kinds = frames_by_kind(model)
+        kinds["joints"] += kinds.pop("fixed joints")  # as URDF has them: links and joints
+        raise FrameNotFoundError(field, base_name, kinds)
     listed = ", ".join(_describe_frame(model, i) for i in matches)
     if type_name:
         wanted = FRAME_TYPES[type_name.upper()]
