@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import json
 import subprocess
 import sys
@@ -133,6 +134,7 @@ def test_json_without_per_sample_keeps_every_per_grasp_result(tmp_path: Path) ->
     full, lean = tmp_path / "full.json", tmp_path / "lean.json"
     assert main(["rank", str(scenario), "--json", str(full)]) == 0
     assert main(["rank", str(scenario), "--json", str(lean), "--no-per-sample"]) == 0
+    assert gc.isenabled()  # paused while writing, then restored
     expected = json.loads(full.read_text())
     for grasp in expected["grasps"]:
         assert len(grasp.pop("samples")["t_s"]) == 21
