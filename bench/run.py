@@ -27,7 +27,10 @@ Measured in one process, interleaved, repeated (median and spread):
   grasp_safety_msgs are importable;
 - whole-arm exposure (bench/whole_arm.py): µs per (grasp, sample), CPU time;
 - posture selection (bench/postures.py): ms per grasp and score gain per restart count on
-  Panda, Baxter and the book; alone: ``bench/run.py --postures-only``.
+  Panda, Baxter and the book; alone: ``bench/run.py --postures-only``;
+- the whole pipeline (bench/pipeline.py): CLI wall time incl. start-up for the book with 100
+  and 1,000 grasps x 201 samples (--json), ``--help``, and posture selection and the default
+  analyses as multiples of the ranking's own time; alone: ``bench/run.py --pipeline-only``.
 
 Usage: .venv/bin/python bench/run.py --json bench/results.json   (not a test; ~2-4 minutes)
 """
@@ -53,6 +56,7 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np
+from pipeline import bench_pipeline, print_pipeline
 from postures import bench_postures, print_postures
 from pykdl_peer import PyKDLPipeline, build_chain, load_pykdl
 from reference import ReferenceIK, reference_effective_masses
@@ -510,7 +514,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="run only the posture-selection section (bench/postures.py, ~1 min)",
     )
     parser.add_argument("--posture-grasps", type=int, default=20)
+    parser.add_argument(
+        "--pipeline-only",
+        action="store_true",
+        help="run only the whole-pipeline section (bench/pipeline.py, ~3 min)",
+    )
     args = parser.parse_args(argv)
+    if args.pipeline_only:
+        pipeline = bench_pipeline()
+        if args.json:
+            args.json.parent.mkdir(parents=True, exist_ok=True)
+            args.json.write_text(json.dumps({"pipeline": pipeline}, indent=2) + "\n")
+        print_pipeline(pipeline)
+        return 0
     if args.postures_only:
         postures = bench_postures(args.posture_grasps)
         if args.json:
@@ -535,6 +551,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     posture_selection = bench_postures(args.posture_grasps)
     print("[whole arm] cost of the whole-arm exposure per sample", file=sys.stderr)
     whole_arm = {name: bench_whole_arm(ARMS[name]) for name in arms}
+    print("[pipeline] CLI, posture selection and analyses vs the ranking", file=sys.stderr)
+    pipeline = bench_pipeline()
     if args.no_service:
         service = {"median_ms": None, "reason": "skipped (--no-service)"}
     else:
@@ -600,6 +618,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "service": service,
         "posture_selection": posture_selection,
         "whole_arm": whole_arm,
+        "pipeline": pipeline,
         "pykdl_unavailable_reason": kdl_reason or None,
         "arms": arms,
         "machine": {
@@ -623,6 +642,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     print_table(results)
     print_postures(posture_selection)
     print_whole_arm(whole_arm)
+    print_pipeline(pipeline)
     return 0
 
 

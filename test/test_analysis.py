@@ -50,7 +50,7 @@ def test_extended_scenario_json(tmp_path: Path) -> None:
     safety = [grasps[k]["safety_score"] for k in result["safety_ranking"]]
     assert safety == sorted(safety)
     for grasp in grasps:
-        masses = [s["leading_point_effective_mass_kg"] for s in grasp["samples"]]
+        masses = grasp["samples"]["leading_point_effective_mass_kg"]
         assert grasp["safety_score"] == pytest.approx(np.mean(masses), rel=1e-12)
         assert set(grasp["iso_ts_15066"]["regions"]) == {
             "chest",
@@ -61,7 +61,7 @@ def test_extended_scenario_json(tmp_path: Path) -> None:
         }
         assert grasp["iso_ts_15066"]["regions"]["face"]["worst_force_ratio"] is None
         assert grasp["redundancy"]["score"] <= grasp["redundancy"]["score_without"] + 1e-9
-        assert len(grasp["samples"][0]["joint_torques"]) == 7
+        assert len(grasp["samples"]["joint_torques"][0]) == 7
         assert grasp["uncertainty"]["worst_case_score"] >= grasp["score"] - 1e-12
     assert result["uncertainty"]["perturbations"] > 8
     pareto = set(result["pareto_set"])
@@ -156,8 +156,10 @@ def test_analyses_share_one_augmented_model_per_grasp(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Exposed points, redundancy and effort all need the robot + object model of a grasp:
-    it is built once per feasible grasp, not once per analysis, and the shared one gives the
-    same report as each analysis building its own."""
+    it is built once per feasible grasp, not once per analysis (on the compiled path only
+    redundancy builds it: exposed points and effort read the shared terms,
+    core.method.terms), and the shared one gives the same report as each analysis building
+    its own."""
     from grasp_safety_ros.core import EvaluationConfig, GraspSafetyEvaluator
     from grasp_safety_ros.core.analyses import effort, exposed_points, redundancy, safety_report
     from grasp_safety_ros.core.method.effective_mass import augmented_model
@@ -194,7 +196,8 @@ def test_analyses_share_one_augmented_model_per_grasp(
     assert len(built) == feasible
     monkeypatch.setattr(safety_report, "augmented_model", lambda *args: None)  # each its own
     separate = run()
-    assert len(built) == 4 * feasible  # 3 more per grasp: exposed points, redundancy, effort
+    # one more per grasp: redundancy's own (exposed points and effort read the shared terms)
+    assert len(built) == 2 * feasible
     np.testing.assert_array_equal(shared.scores, separate.scores)
     for a, b in zip(shared.effort, separate.effort, strict=True):
         np.testing.assert_array_equal(a.joint_torques, b.joint_torques)

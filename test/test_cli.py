@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import json
 import subprocess
 import sys
@@ -25,9 +26,11 @@ def test_demo_runs_and_writes_outputs(tmp_path: Path, capsys: pytest.CaptureFixt
     assert len(result["joint_names"]) == 7
     scores = [result["grasps"][i]["score"] for i in result["ranking"]]
     assert scores == sorted(scores)
-    sample = result["grasps"][0]["samples"][0]
-    assert set(sample) >= {"t_s", "q", "direction_in_base", "effective_mass_kg"}
-    assert len(sample["q"]) == 7
+    assert result["schema_version"] == 2
+    samples = result["grasps"][0]["samples"]  # columnar: one array per field
+    assert set(samples) >= {"t_s", "q", "direction_in_base", "effective_mass_kg"}
+    assert all(len(column) == len(samples["t_s"]) for column in samples.values())
+    assert len(samples["q"][0]) == 7
     assert (tmp_path / "ranking.png").stat().st_size > 10_000
 
 
@@ -40,8 +43,8 @@ def test_rank_json_round_trip(tmp_path: Path) -> None:
     result = json.loads(out.read_text())
     assert result["metric"] == "integral"
     for grasp in result["grasps"]:
-        times = [s["t_s"] for s in grasp["samples"]]
-        masses = [s["effective_mass_kg"] for s in grasp["samples"]]
+        times = grasp["samples"]["t_s"]
+        masses = grasp["samples"]["effective_mass_kg"]
         trapezoid = sum(
             0.5 * (masses[i] + masses[i + 1]) * (times[i + 1] - times[i])
             for i in range(len(times) - 1)
@@ -121,3 +124,32 @@ def test_console_script_has_no_traceback_on_bad_input(tmp_path: Path) -> None:
     )
     assert completed.returncode == 2
     assert completed.stderr.startswith("grasp-safety: error: object.mass_kg")
+
+
+def test_json_without_per_sample_keeps_every_per_grasp_result(tmp_path: Path) -> None:
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text(
+        yaml.safe_dump({**GOOD, "trajectory": {**GOOD["trajectory"], "dt_s": 0.1}})
+    )
+    full, lean = tmp_path / "full.json", tmp_path / "lean.json"
+    assert main(["rank", str(scenario), "--json", str(full)]) == 0
+    assert main(["rank", str(scenario), "--json", str(lean), "--no-per-sample"]) == 0
+    assert gc.isenabled()  # paused while writing, then restored
+    expected = json.loads(full.read_text())
+    for grasp in expected["grasps"]:
+        assert len(grasp.pop("samples")["t_s"]) == 21
+    assert json.loads(lean.read_text()) == expected
+
+
+def test_help_loads_neither_the_core_nor_heavy_libraries() -> None:
+    code = (
+        "import sys\n"
+        "from grasp_safety_ros.cli.main import build_parser\n"
+        "build_parser()\n"
+        "heavy = {'pinocchio', 'scipy', 'matplotlib', 'mujoco', 'numba', 'yaml', 'rclpy'}\n"
+        "print(sorted(heavy & {name.split('.')[0] for name in sys.modules}))\n"
+    )
+    loaded = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=60
+    )
+    assert loaded.stdout.strip() == "[]"

@@ -88,17 +88,17 @@ def test_cli_json_keeps_continuous_joints_unwrapped(tmp_path: Path, kinova: Robo
     path.write_text(yaml.safe_dump(scenario(kinova)))
     assert main(["rank", str(path), "--json", str(out)]) == 0
     ik, planned, with_velocities = json.loads(out.read_text())["grasps"]
-    q = np.array([s["q"] for s in ik["samples"]])
-    qd = np.array([s["qd"] for s in ik["samples"]])
+    q = np.array(ik["samples"]["q"])
+    qd = np.array(ik["samples"]["qd"])
     assert q[0, 0] == pytest.approx(3.0, abs=1e-5) and q[-1, 0] == pytest.approx(3.3, abs=1e-5)
     assert np.max(np.abs(np.diff(q[:, 0]))) < 0.05  # no 2π jump
     assert np.max(np.abs(qd[:, 0])) < 0.5  # 0.3 rad/s over 2 s, at rest at both ends
     for grasp in (planned, with_velocities):
-        q = np.array([s["q"] for s in grasp["samples"]])
+        q = np.array(grasp["samples"]["q"])
         np.testing.assert_array_equal(q[:, 0], JOINT_1)  # the planner's own positions
-    qd = np.array([s["qd"] for s in planned["samples"]])
+    qd = np.array(planned["samples"]["qd"])
     assert np.max(np.abs(qd[:, 0])) < 0.6  # fitted through 2.9 .. 3.4 rad, not 66 rad/s
-    qd = np.array([s["qd"] for s in with_velocities["samples"]])
+    qd = np.array(with_velocities["samples"]["qd"])
     np.testing.assert_array_equal(qd[:, 0], 0.25)  # the planner's own velocities
 
 

@@ -5,8 +5,9 @@ Layers, lowest first: ``core.exceptions`` and ``core.input_checks`` <- ``core.mo
 ``dataset``, ``paths``). A module may import its own layer or lower ones. ``core.kernels``
 imports only itself and is imported only by ``core.method``; ``core`` never imports rclpy, ROS
 interface packages or an adapter; neither ``core`` nor the ROS node (with all it imports)
-imports the batch's dependencies (BATCH_ONLY). Imports inside functions count; those under
-``if TYPE_CHECKING:`` do not (they never run).
+imports the batch's dependencies (BATCH_ONLY). Imports inside functions count. For the
+layers, those under ``if TYPE_CHECKING:`` do not (they never run); for cycles they do, at
+every level (a type-only circle still says a value type lives in the wrong module).
 """
 
 from __future__ import annotations
@@ -63,16 +64,22 @@ def _is_type_checking(test: ast.expr) -> bool:
     )
 
 
-def imports_of(source: str, module: str, is_package: bool, known: Iterable[str]) -> set[str]:
-    """Modules imported anywhere in ``source`` (module level and in functions), except under
-    ``if TYPE_CHECKING:``; relative imports resolved, ``from pkg import submodule`` counted as
-    the submodule when it is one of ``known``."""
+def imports_of(
+    source: str,
+    module: str,
+    is_package: bool,
+    known: Iterable[str],
+    type_checking: bool = False,
+) -> set[str]:
+    """Modules imported anywhere in ``source`` (module level and in functions), those under
+    ``if TYPE_CHECKING:`` only when ``type_checking``; relative imports resolved,
+    ``from pkg import submodule`` counted as the submodule when it is one of ``known``."""
     known = set(known)
     package = module if is_package else module.rpartition(".")[0]
     found: set[str] = set()
 
     def visit(node: ast.AST) -> None:
-        if isinstance(node, ast.If) and _is_type_checking(node.test):
+        if isinstance(node, ast.If) and _is_type_checking(node.test) and not type_checking:
             for child in node.orelse:
                 visit(child)
             return
@@ -95,15 +102,16 @@ def imports_of(source: str, module: str, is_package: bool, known: Iterable[str])
     return found
 
 
-def package_imports() -> dict[str, set[str]]:
-    """Every module of the package -> the modules it imports."""
+def package_imports(type_checking: bool = False) -> dict[str, set[str]]:
+    """Every module of the package -> the modules it imports (with the type-only imports when
+    ``type_checking``)."""
     files = {}
     for path in sorted(ROOT.rglob("*.py")):
         parts = path.relative_to(ROOT.parent).with_suffix("").parts
         is_package = parts[-1] == "__init__"
         files[".".join(parts[:-1] if is_package else parts)] = (path, is_package)
     return {
-        module: imports_of(path.read_text(), module, is_package, files)
+        module: imports_of(path.read_text(), module, is_package, files, type_checking)
         for module, (path, is_package) in files.items()
     }
 
@@ -195,7 +203,7 @@ def test_ros_node_does_not_import_the_batch_dependencies() -> None:
 
 
 def test_package_has_no_import_cycle() -> None:
-    cycle = find_cycle(package_imports())
+    cycle = find_cycle(package_imports(type_checking=True))
     assert cycle is None, "import cycle: " + " -> ".join(cycle or [])
 
 
@@ -218,6 +226,8 @@ def test_checker_sees_lazy_imports_and_skips_type_checking_blocks() -> None:
         f"{PACKAGE}.core.method.ik",
         "rclpy",
     }
+    with_types = imports_of(source, module, False, known, type_checking=True)
+    assert with_types == found | {f"{PACKAGE}.core.method.ranking"}
     problems = layer_violations({module: found})
     assert len(problems) == 2
     assert "upward import" in problems[0] and "free of ROS" in problems[1]

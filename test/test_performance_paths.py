@@ -635,3 +635,172 @@ def test_trajectories_without_object_motion_rank_the_same(arm7: RobotModel) -> N
         expected = evaluator.rank(grasps, BOX, quintic, seed_positions=seed)
         assert len(expected.order) >= 2
         assert_same_ranking(evaluator.rank(grasps, BOX, wrapped, seed_positions=seed), expected)
+
+
+# --- The shared per-(grasp, sample) terms and their consumers ---------------------------------
+
+SHARED_TERMS = 1e-12
+"""Consumers of the shared terms (arrays over samples) vs Pinocchio per sample: the same
+formulas in a different summation order (and the kernels' fused multiply-adds), so equal to
+rounding; the tolerance is relative to each array's largest entry."""
+
+
+def assert_close_to_scale(actual: np.ndarray, expected: np.ndarray, what: str) -> None:
+    scale = max(float(np.max(np.abs(expected))), 1e-300)
+    error = float(np.max(np.abs(np.asarray(actual) - expected))) / scale
+    assert error <= SHARED_TERMS, f"{what}: relative error {error:.2e}"
+
+
+def _terms_case(robot: RobotModel, seed: int) -> tuple:
+    """A grasp along a short reach of ``robot``, its evaluation and its shared terms."""
+    from grasp_safety_ros.core.method.terms import grasp_terms
+
+    rng = np.random.default_rng(seed)
+    evaluator = GraspSafetyEvaluator(robot)
+    for _ in range(20):  # the first random posture whose reach stays within the limits
+        positions = random_positions(robot, rng)
+        start = robot.transform_tip_to_base(positions)
+        grasp = grasps_near_identity(1, seed)[0]
+        trajectory = reach_trajectory(robot, positions)  # the tip's reach; the object's:
+        trajectory = ObjectTrajectory(
+            start * grasp.transform_tip_to_object.inverse(),
+            trajectory.transform_object_to_base_goal * grasp.transform_tip_to_object.inverse(),
+            1.0,
+            0.02,
+        )
+        evaluation = evaluator.evaluate(grasp, BOX, trajectory, seed_positions=positions)
+        if evaluation.feasible:
+            break
+    assert evaluation.feasible, evaluation.reason
+    terms = grasp_terms(
+        robot, evaluator.ik.chain, BOX, grasp.transform_tip_to_object, evaluation.joint_positions
+    )
+    motion = evaluator.trajectory_for(grasp, trajectory)
+    return grasp, evaluation, terms, motion
+
+
+TERM_ARMS = ("arm7", "baxter", "prismatic_arm", "continuous_arm", "geared_arm")
+
+
+@pytest.fixture
+def prismatic_arm() -> RobotModel:
+    urdf = serial_arm_urdf(ARM7_AXES).replace(
+        '<joint name="j3" type="revolute"', '<joint name="j3" type="prismatic"'
+    )
+    return RobotModel.from_urdf(urdf, "base_link", "tool")
+
+
+@pytest.fixture
+def geared_arm() -> RobotModel:
+    """Reflected rotor inertia on every joint: M, M⁻¹ and RNEA include it (once)."""
+    armature = [0.3, 0.25, 0.2, 0.1, 0.05, 0.04, 0.02]
+    return RobotModel.from_urdf(
+        serial_arm_urdf(ARM7_AXES), "base_link", "tool", armature_kgm2=armature
+    )
+
+
+@pytest.fixture
+def continuous_arm() -> RobotModel:
+    return RobotModel.from_urdf(
+        serial_arm_urdf(ARM7_AXES, joint_type="continuous"), "base_link", "tool"
+    )
+
+
+@needs_numba
+@pytest.mark.parametrize("name", TERM_ARMS)
+def test_shared_terms_equal_pinocchio(name: str, request: pytest.FixtureRequest) -> None:
+    robot: RobotModel = request.getfixturevalue(name)
+    grasp, evaluation, terms, _ = _terms_case(robot, 11)
+    model = augmented_model(robot, BOX, grasp.transform_tip_to_object)
+    data = model.createData()
+    for i, positions in enumerate(evaluation.joint_positions):
+        q = robot.q_from_positions(positions)
+        pin.computeMinverse(model, data, q)
+        upper = np.triu(data.Minv)
+        assert_close_to_scale(terms.mass_matrix_inverses[i], upper + np.triu(upper, 1).T, "Minv")
+        pin.computeJointJacobians(model, data, q)
+        tip = pin.updateFramePlacement(model, data, robot.tip_frame_id)
+        jacobian = pin.getFrameJacobian(
+            model, data, robot.tip_frame_id, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+        )
+        assert_close_to_scale(terms.tip_jacobians[i], jacobian, "tip Jacobian")
+        assert_close_to_scale(terms.tip_rotations[i], tip.rotation, "tip rotation")
+        assert_close_to_scale(terms.tip_translations[i], tip.translation, "tip origin")
+        for k in range(robot.num_joints):
+            placement = data.oMi[k + 1]
+            assert_close_to_scale(terms.joint_rotations[i, k], placement.rotation, "joint R")
+            assert_close_to_scale(terms.joint_origins[i, k], placement.translation, "joint p")
+            motion = pin.getJointJacobian(model, data, k + 1, pin.ReferenceFrame.WORLD)[:, k]
+            assert_close_to_scale(terms.joint_motions[i, k], motion, "motion subspace")
+        mobility = translational_mobility_in_base(robot, model, data, q)
+        assert_close_to_scale(terms.tip_mobilities[i], mobility, "tip mobility")
+
+
+@needs_numba
+@pytest.mark.parametrize("name", TERM_ARMS)
+def test_exposed_points_from_shared_terms_equal_pinocchio(
+    name: str, request: pytest.FixtureRequest
+) -> None:
+    from grasp_safety_ros.core.analyses.exposed_points import (
+        box_corners_in_object,
+        evaluate_exposed_points,
+    )
+
+    robot: RobotModel = request.getfixturevalue(name)
+    grasp, evaluation, terms, motion = _terms_case(robot, 12)
+    points = box_corners_in_object([0.08, 0.12, 0.2])
+    reference = evaluate_exposed_points(robot, evaluation, BOX, grasp, motion, points)
+    shared = evaluate_exposed_points(robot, evaluation, BOX, grasp, motion, points, terms=terms)
+    assert_close_to_scale(shared.effective_mass_kg, reference.effective_mass_kg, "masses")
+    assert_close_to_scale(shared.directions_in_base, reference.directions_in_base, "directions")
+    np.testing.assert_array_equal(shared.leading_point_index, reference.leading_point_index)
+    np.testing.assert_array_equal(shared.worst_point_index, reference.worst_point_index)
+
+
+@needs_numba
+@pytest.mark.parametrize("name", TERM_ARMS)
+def test_effort_from_shared_terms_equals_pinocchio(
+    name: str, request: pytest.FixtureRequest
+) -> None:
+    from grasp_safety_ros.core.analyses.effort import evaluate_effort
+
+    robot: RobotModel = request.getfixturevalue(name)
+    grasp, evaluation, terms, motion = _terms_case(robot, 13)
+    reference = evaluate_effort(robot, evaluation, BOX, grasp, motion)
+    shared = evaluate_effort(robot, evaluation, BOX, grasp, motion, terms=terms)
+    for field in ("joint_velocities", "joint_accelerations", "joint_torques"):
+        assert_close_to_scale(getattr(shared, field), getattr(reference, field), field)
+    assert_close_to_scale(shared.peak_abs_torque, reference.peak_abs_torque, "peak")
+
+
+@needs_numba
+@pytest.mark.parametrize("name", TERM_ARMS)
+def test_point_jacobians_from_shared_terms_equal_pinocchio(
+    name: str, request: pytest.FixtureRequest
+) -> None:
+    """A point on each link (0.1 m off its joint origin) and the tip: linear Jacobians from the
+    terms equal Pinocchio's frame Jacobians (LOCAL_WORLD_ALIGNED) of frames placed there."""
+    from grasp_safety_ros.core.method.terms import point_jacobians
+
+    robot: RobotModel = request.getfixturevalue(name)
+    _, evaluation, terms, _ = _terms_case(robot, 14)
+    model = robot.model.copy()
+    offset = pin.SE3(np.eye(3), np.array([0.03, -0.05, 0.1]))
+    frames = [
+        model.addFrame(pin.Frame(f"site{k}", k + 1, 0, offset, pin.FrameType.OP_FRAME))
+        for k in range(robot.num_joints)
+    ]
+    data = model.createData()
+    tip = point_jacobians(terms, robot.num_joints - 1, terms.tip_translations[:, None])
+    assert_close_to_scale(tip[:, 0], terms.tip_jacobians[:, :3], "tip as a point")
+    for i, positions in enumerate(evaluation.joint_positions[::10]):
+        q = robot.q_from_positions(positions)
+        pin.computeJointJacobians(model, data, q)
+        pin.updateFramePlacements(model, data)
+        for k, frame in enumerate(frames):
+            point = data.oMf[frame].translation
+            ours = point_jacobians(terms, k, point[None, None])  # every sample, one point
+            expected = pin.getFrameJacobian(
+                model, data, frame, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+            )[:3]
+            assert_close_to_scale(ours[10 * i, 0], expected, f"site on link {k}")

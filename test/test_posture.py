@@ -321,9 +321,9 @@ def test_scenario_posture_section_and_cli_json() -> None:
     assert result["paper_ranking"] == list(paper.order)
     for grasp, e in zip(result["grasps"], paper.evaluations, strict=True):
         assert grasp["score"] == e.score and grasp["posture"]["restarts"] == 0
-        assert [s["q"] for s in grasp["samples"]] == e.joint_positions.tolist()
+        assert grasp["samples"]["q"] == e.joint_positions.tolist()
         qd, _ = joint_velocities_accelerations(e.times_s, e.joint_positions)
-        assert [s["qd"] for s in grasp["samples"]] == qd.tolist()
+        assert grasp["samples"]["qd"] == qd.tolist()
 
 
 def test_selection_by_the_whole_arm(baxter_book) -> None:

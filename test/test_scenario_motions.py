@@ -31,14 +31,14 @@ def test_waypoint_scenario_ranks_and_samples_the_waypoints(tmp_path: Path) -> No
     planned = WAYPOINTS["grasps"][3]["joint_trajectory"]
     assert sorted(result["ranking"]) == [0, 1, 2, 3]
     for grasp in result["grasps"][:3]:
-        times = [s["t_s"] for s in grasp["samples"]]
+        times = grasp["samples"]["t_s"]
         assert set(waypoint_times) <= set(times)
         assert len(times) == 126  # 0..2.5 s every 0.02 s; 1.2 s is on that grid
-        assert grasp["samples"][0]["tip_speed_m_s"] == 0.0
+        assert grasp["samples"]["tip_speed_m_s"][0] == 0.0
     samples = result["grasps"][3]["samples"]
-    assert [s["t_s"] for s in samples] == [p["time_s"] for p in planned["points"]]
-    assert [s["q"] for s in samples] == [p["positions"] for p in planned["points"]]
-    assert all(s["ik_iterations"] == 0 for s in samples)
+    assert samples["t_s"] == [p["time_s"] for p in planned["points"]]
+    assert samples["q"] == [p["positions"] for p in planned["points"]]
+    assert all(iterations == 0 for iterations in samples["ik_iterations"])
 
 
 def test_two_waypoints_rank_exactly_as_start_goal(tmp_path: Path) -> None:

@@ -4,20 +4,22 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from ..core.analyses.safety_report import SafetyReport
 from ..core.exceptions import GraspSafetyError, InvalidInputError
-from ..core.method.ranking import METRICS, EvaluationConfig, GraspSafetyEvaluator
-from ..core.model.armature import published_for
-from ..core.model.robot import NO_ARMATURE_NOTE
+from ..core.method.metrics import METRICS
 from ..paths import config_file
-from .report import report_text, report_to_dict
-from .scenario import Scenario, load_scenario, rank_with_evaluator
+
+if TYPE_CHECKING:
+    from ..core.analyses.safety_report import SafetyReport
+    from .scenario import Scenario
+
+# The commands import the core, the scenario reader and the report writer when they run, so
+# ``grasp-safety --help`` and argument errors stay fast (docs/performance_pipeline.md).
 
 EXIT_BAD_INPUT = 2
 DEMO_SCENARIO = "book_baxter.yaml"
@@ -46,6 +48,9 @@ def _progress_printer(total_samples: int) -> Callable[[int, int], None] | None:
 
 def rank_scenario(scenario: Scenario, metric: str | None = None) -> SafetyReport:
     """Load the scenario's robot, rank its grasps and run the analyses the scenario asks for."""
+    from ..core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
+    from .scenario import rank_with_evaluator
+
     robot = scenario.robot.load(scenario.base_dir)
     evaluator = GraspSafetyEvaluator(robot, EvaluationConfig(metric=metric or scenario.metric))
     progress = _progress_printer(len(scenario.grasps) * len(scenario.trajectory.times_s()))
@@ -54,6 +59,9 @@ def rank_scenario(scenario: Scenario, metric: str | None = None) -> SafetyReport
 
 def run_header(scenario: Scenario, report: SafetyReport) -> str:
     """The line printed before the table: robot, problem size and the backend that ran."""
+    from ..core.model.armature import published_for
+    from ..core.model.robot import NO_ARMATURE_NOTE
+
     urdf = scenario.robot.urdf
     if urdf.startswith("example-robot-data:"):
         robot = urdf.split(":", 1)[1]
@@ -94,10 +102,16 @@ def _problem_size(scenario: Scenario) -> str:
 
 
 def _write_outputs(
-    report: SafetyReport, json_path: Path | None, plot_path: Path | None, title: str
+    report: SafetyReport,
+    json_path: Path | None,
+    plot_path: Path | None,
+    title: str,
+    per_sample: bool = True,
 ) -> None:
     if json_path is not None:
-        text = json.dumps(report_to_dict(report), indent=1, allow_nan=False)
+        from .report import report_json
+
+        text = report_json(report, per_sample)
         try:
             json_path.parent.mkdir(parents=True, exist_ok=True)
             json_path.write_text(text, encoding="utf-8")
@@ -118,15 +132,21 @@ def _write_outputs(
 
 
 def _command_rank(args: argparse.Namespace) -> int:
+    from .report import report_text
+    from .scenario import load_scenario
+
     scenario = load_scenario(args.scenario)
     report = rank_scenario(scenario, args.metric)
     print(run_header(scenario, report))
     print(report_text(report))
-    _write_outputs(report, args.json, args.plot, Path(args.scenario).name)
+    _write_outputs(report, args.json, args.plot, Path(args.scenario).name, args.per_sample)
     return 0
 
 
 def _command_demo(args: argparse.Namespace) -> int:
+    from .report import report_text
+    from .scenario import load_scenario
+
     path = config_file(DEMO_SCENARIO)
     print(f"demo: the paper's book experiment on Baxter ({path})")
     scenario = load_scenario(path)
@@ -190,6 +210,12 @@ def build_parser() -> argparse.ArgumentParser:
     rank = commands.add_parser("rank", help="rank the grasps of a scenario file")
     rank.add_argument("scenario", help="scenario YAML file")
     rank.add_argument("--json", type=Path, help="write the full result as JSON")
+    rank.add_argument(
+        "--no-per-sample",
+        dest="per_sample",
+        action="store_false",
+        help="leave the per-sample arrays out of the JSON (per-grasp results only)",
+    )
     rank.add_argument("--plot", type=Path, help="write the heatmap and curves as PNG")
     rank.add_argument("--metric", choices=METRICS, help="override the scenario's metric")
     rank.set_defaults(handler=_command_rank)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import gc
+import json
 import math
 from collections.abc import Sequence
 from typing import Any
@@ -19,6 +21,10 @@ from ..core.model.robot import NO_ARMATURE_NOTE
 
 SCORE_UNITS = {"mean": "kg", "max": "kg", "integral": "kg*s"}
 
+SCHEMA_VERSION = 2
+"""Version of the JSON layout: 2 holds each grasp's ``samples`` as one array per field
+(columnar; 1, before it, held one object per sample)."""
+
 
 def number(value: float) -> float | None:
     """A finite float, or None (JSON null) for NaN and inf."""
@@ -26,34 +32,20 @@ def number(value: float) -> float | None:
     return value if math.isfinite(value) else None
 
 
-def numbers(values: np.ndarray) -> list[Any]:
-    """Nested lists of finite floats, with None for NaN and inf."""
-    array = np.asarray(values, dtype=float)
-    if array.ndim == 0:
-        return number(array)  # type: ignore[return-value]
-    return [numbers(row) for row in array] if array.ndim > 1 else [number(v) for v in array]
+def numbers(values: np.ndarray) -> Any:
+    """Nested lists of an array (one ``tolist``), with None for NaN and inf floats."""
+    array = np.asarray(values)
+    if array.dtype.kind == "f" and not np.isfinite(array).all():
+        patched = array.astype(object)
+        patched[~np.isfinite(array)] = None
+        return patched.tolist()
+    return array.tolist()
 
 
-def evaluation_to_dict(evaluation: GraspEvaluation) -> dict[str, Any]:
-    """One grasp of the paper's ranking (samples carry q and qd in joint_names order)."""
-    velocities, _ = rates_for_execution(
-        evaluation.times_s, evaluation.joint_positions, evaluation.planned_joint_rates
-    )
-    samples = [
-        {
-            "t_s": float(evaluation.times_s[i]),
-            "q": evaluation.joint_positions[i].tolist(),
-            "qd": velocities[i].tolist(),
-            "direction_in_base": evaluation.directions_in_base[i].tolist(),
-            "effective_mass_kg": float(evaluation.effective_mass_kg[i]),
-            "direction_is_worst_case": bool(evaluation.direction_is_worst_case[i]),
-            "tip_speed_m_s": float(evaluation.tip_speed_m_s[i]),
-            "ik_iterations": int(evaluation.ik_iterations[i]),
-            "links_only_effective_mass_kg": float(evaluation.links_only_effective_mass_kg[i]),
-        }
-        for i in range(len(evaluation.times_s))
-    ]
-    return {
+def evaluation_to_dict(evaluation: GraspEvaluation, per_sample: bool = True) -> dict[str, Any]:
+    """One grasp of the paper's ranking; with ``per_sample``, its ``samples``: one array per
+    field, one entry per sample (q and qd rows in joint_names order)."""
+    result: dict[str, Any] = {
         "index": evaluation.index,
         "name": evaluation.name,
         "feasible": evaluation.feasible,
@@ -62,8 +54,23 @@ def evaluation_to_dict(evaluation: GraspEvaluation) -> dict[str, Any]:
         "mean_effective_mass_kg": number(evaluation.mean_effective_mass_kg),
         "peak_effective_mass_kg": number(evaluation.peak_effective_mass_kg),
         **_links_only_to_dict(evaluation),
-        "samples": samples,
     }
+    if per_sample:
+        velocities, _ = rates_for_execution(
+            evaluation.times_s, evaluation.joint_positions, evaluation.planned_joint_rates
+        )
+        result["samples"] = {
+            "t_s": numbers(evaluation.times_s),
+            "q": numbers(evaluation.joint_positions),
+            "qd": numbers(velocities),
+            "direction_in_base": numbers(evaluation.directions_in_base),
+            "effective_mass_kg": numbers(evaluation.effective_mass_kg),
+            "direction_is_worst_case": numbers(evaluation.direction_is_worst_case),
+            "tip_speed_m_s": numbers(evaluation.tip_speed_m_s),
+            "ik_iterations": numbers(evaluation.ik_iterations),
+            "links_only_effective_mass_kg": numbers(evaluation.links_only_effective_mass_kg),
+        }
+    return result
 
 
 def posture_to_dict(posture: PostureSelection) -> dict[str, Any]:
@@ -84,13 +91,15 @@ def posture_to_dict(posture: PostureSelection) -> dict[str, Any]:
     return result
 
 
-def ranking_to_dict(ranking: Ranking) -> dict[str, Any]:
-    """The paper's ranking: joint names, metric, ranking (indices), per-grasp results and the
-    backend that ran (``compiled`` or ``python``, with the reason of a fallback)."""
-    grasps = [evaluation_to_dict(e) for e in ranking.evaluations]
+def ranking_to_dict(ranking: Ranking, per_sample: bool = True) -> dict[str, Any]:
+    """The paper's ranking: joint names, metric, ranking (indices), per-grasp results (with
+    their per-sample arrays when ``per_sample``) and the backend that ran (``compiled`` or
+    ``python``, with the reason of a fallback)."""
+    grasps = [evaluation_to_dict(e, per_sample) for e in ranking.evaluations]
     for grasp, posture in zip(grasps, ranking.postures, strict=False):
         grasp["posture"] = posture_to_dict(posture)
     return {
+        "schema_version": SCHEMA_VERSION,
         "backend": ranking.backend,
         "joint_names": list(ranking.joint_names),
         "metric": ranking.metric,
@@ -124,13 +133,14 @@ def iso_to_dict(assessment: PowerForceLimitAssessment) -> dict[str, Any]:
     }
 
 
-def report_to_dict(report: SafetyReport) -> dict[str, Any]:
+def report_to_dict(report: SafetyReport, per_sample: bool = True) -> dict[str, Any]:
     """The CLI's JSON: the paper's ranking plus every analysis the options asked for.
 
     ``ranking`` is the final order (safety, safety + quality, or effort); ``safety_ranking``
-    orders by the safety score alone (with the chosen ``metric_point``).
+    orders by the safety score alone (with the chosen ``metric_point``). Without
+    ``per_sample``, the grasps have no ``samples`` (per-grasp summaries only).
     """
-    result = ranking_to_dict(report.ranking)
+    result = ranking_to_dict(report.ranking, per_sample)
     options = report.options
     result.update(
         {
@@ -178,24 +188,41 @@ def report_to_dict(report: SafetyReport) -> dict[str, Any]:
             }
         _add_per_grasp_series(report, k, grasp)
         if report.whole_arm:
-            grasp["whole_arm"] = whole_arm_to_dict(report.whole_arm[k])
+            grasp["whole_arm"] = whole_arm_to_dict(report.whole_arm[k], per_sample)
     if report.arm_sites is not None:
         result["whole_arm"] = whole_arm_sites_to_dict(report.arm_sites, options.whole_arm_region)
     return result
 
 
+def report_json(report: SafetyReport, per_sample: bool = True) -> str:
+    """``report_to_dict`` as compact, strict JSON text (no NaN or inf).
+
+    The garbage collector is paused meanwhile: the millions of lists and floats of the
+    per-sample arrays would trigger full collections that find nothing to free (half the time
+    of 1,000 grasps x 201 samples, docs/performance_pipeline.md).
+    """
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        result = report_to_dict(report, per_sample)
+        return json.dumps(result, allow_nan=False, separators=(",", ":"))
+    finally:
+        if enabled:
+            gc.enable()
+
+
 def _add_per_grasp_series(report: SafetyReport, k: int, grasp: dict[str, Any]) -> None:
-    samples = grasp["samples"]
+    """The analyses' per-grasp results, and their per-sample arrays into ``grasp["samples"]``
+    when it is there."""
+    samples = grasp.get("samples")
     if report.exposed:
         exposed = report.exposed[k]
-        grasp["exposed_points_in_object_m"] = exposed.points_in_object_m.tolist()
-        for i, sample in enumerate(samples):
-            sample["leading_point_index"] = int(exposed.leading_point_index[i])
-            sample["leading_point_effective_mass_kg"] = number(
-                exposed.leading_effective_mass_kg[i]
-            )
-            sample["worst_point_index"] = int(exposed.worst_point_index[i])
-            sample["worst_point_effective_mass_kg"] = number(exposed.worst_effective_mass_kg[i])
+        grasp["exposed_points_in_object_m"] = numbers(exposed.points_in_object_m)
+        if samples is not None:
+            samples["leading_point_index"] = numbers(exposed.leading_point_index)
+            samples["leading_point_effective_mass_kg"] = numbers(exposed.leading_effective_mass_kg)
+            samples["worst_point_index"] = numbers(exposed.worst_point_index)
+            samples["worst_point_effective_mass_kg"] = numbers(exposed.worst_effective_mass_kg)
     if report.redundancy:
         resolution = report.redundancy[k]
         grasp["redundancy"] = {
@@ -204,28 +231,27 @@ def _add_per_grasp_series(report: SafetyReport, k: int, grasp: dict[str, Any]) -
             "score": number(resolution.score),
             "score_without": number(resolution.original_score),
         }
-        if resolution.applied:
+        if resolution.applied and samples is not None:
             velocities, _ = joint_velocities_accelerations(
                 resolution.times_s, resolution.joint_positions
             )
-            for i, sample in enumerate(samples):
-                sample["q_redundancy"] = resolution.joint_positions[i].tolist()
-                sample["qd_redundancy"] = velocities[i].tolist()
-                sample["effective_mass_redundancy_kg"] = float(resolution.effective_mass_kg[i])
+            samples["q_redundancy"] = numbers(resolution.joint_positions)
+            samples["qd_redundancy"] = numbers(velocities)
+            samples["effective_mass_redundancy_kg"] = numbers(resolution.effective_mass_kg)
     if report.effort:
         effort = report.effort[k]
         if effort.feasible:
             grasp["effort"] = {
-                "peak_abs_torque": effort.peak_abs_torque.tolist(),
-                "rms_torque": effort.rms_torque.tolist(),
+                "peak_abs_torque": numbers(effort.peak_abs_torque),
+                "rms_torque": numbers(effort.rms_torque),
                 "effort_limits": numbers(effort.effort_limits),
                 "peak_fraction_of_limit": numbers(effort.peak_fraction_of_limit),
                 "rms_fraction_of_limit": numbers(effort.rms_fraction_of_limit),
                 "score": number(effort.score(report.options.effort_criterion)),
                 "criterion": report.options.effort_criterion,
             }
-            for i, sample in enumerate(samples):
-                sample["joint_torques"] = effort.joint_torques[i].tolist()
+            if samples is not None:
+                samples["joint_torques"] = numbers(effort.joint_torques)
 
 
 NAME_WIDTH = 16
@@ -412,9 +438,10 @@ def whole_arm_sites_to_dict(sites: ArmSites, rank_region: str) -> dict[str, Any]
     }
 
 
-def whole_arm_to_dict(whole: WholeArmEvaluation) -> dict[str, Any]:
+def whole_arm_to_dict(whole: WholeArmEvaluation, per_sample: bool = True) -> dict[str, Any]:
     """One grasp's whole-arm exposure: worst site per body region and by energy, the
-    admissibility over the arm, T_min, and the (N, K) per-sample arrays (sites as columns)."""
+    admissibility over the arm, T_min, and (with ``per_sample``) the (N, K) per-sample arrays
+    (sites as columns)."""
     if not whole.feasible:
         return {"feasible": False}
     times = whole.times_s
@@ -429,7 +456,7 @@ def whole_arm_to_dict(whole: WholeArmEvaluation) -> dict[str, Any]:
         }
 
     energy, site, sample = whole.worst_energy
-    return {
+    result = {
         "feasible": True,
         "regions": {
             r.region: {
@@ -446,10 +473,12 @@ def whole_arm_to_dict(whole: WholeArmEvaluation) -> dict[str, Any]:
         "admissible_where_permitted": whole.admissible_where_permitted,
         "min_duration_s": number(whole.min_duration_s),
         "limiting_region": whole.limiting_region,
-        "effective_mass_kg": numbers(whole.effective_mass_kg),
-        "speed_m_s": whole.speed_m_s.tolist(),
-        "stationary": whole.stationary.tolist(),
     }
+    if per_sample:
+        result["effective_mass_kg"] = numbers(whole.effective_mass_kg)
+        result["speed_m_s"] = numbers(whole.speed_m_s)
+        result["stationary"] = numbers(whole.stationary)
+    return result
 
 
 def whole_arm_lines(report: SafetyReport) -> list[str]:

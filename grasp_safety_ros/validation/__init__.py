@@ -5,6 +5,8 @@ with impacts into a force sensor, plus free impacts that check the effective mas
 writes results.json, results.md and PNG figures. Only this subpackage imports mujoco.
 """
 
-from .experiments import FULL, QUICK, RunConfig, format_summary, reproduce
+from .experiments import FULL, QUICK
+from .records import RunConfig
+from .reproduce import format_summary, reproduce
 
 __all__ = ["FULL", "QUICK", "RunConfig", "format_summary", "reproduce"]

@@ -27,6 +27,7 @@ from ..exceptions import InvalidInputError
 from ..input_checks import finite_array, finite_float, read_only
 from ..method.effective_mass import STATIONARY_TANGENT_M, augmented_model
 from ..method.ranking import Grasp, GraspEvaluation, aggregate, check_metric
+from ..method.terms import SampleTerms
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
 from ..model.trajectory import ObjectPath, Trajectory
@@ -118,12 +119,19 @@ def point_jacobian_in_base(
 def _point_jacobians(
     robot: RobotModel, jacobian_world: np.ndarray, rotation_tip: np.ndarray, points: np.ndarray
 ) -> np.ndarray:
-    levers = points @ rotation_tip.T  # (K, 3): tip -> point, world axes
-    linear, angular = jacobian_world[:3], jacobian_world[3:]
-    # r × (J_ω col) for every column: J_p = J_v − r̂ J_ω = J_v + J_ω-columns × r
-    cross = np.cross(angular.T[None, :, :], levers[:, None, :])  # (K, nv, 3): ω_j × r
-    jacobians = linear[None] + np.transpose(cross, (0, 2, 1))
-    return np.einsum("ab,kbn->kan", robot.transform_base_to_world.rotation.T, jacobians)
+    """(..., K, 3, nv) Jacobians of the K tip-fixed ``points`` (tip frame [m]) from tip
+    Jacobians (..., 6, nv) and tip rotations (..., 3, 3), world; base axes."""
+    levers = points @ np.swapaxes(rotation_tip, -1, -2)  # (..., K, 3): tip -> point, world
+    linear, angular = jacobian_world[..., :3, :], jacobian_world[..., 3:, :]
+    # J_p = J_v − r̂ J_ω: row a of r̂ J_ω is r_b J_ω,c − r_c J_ω,b ((a, b, c) cyclic)
+    r = levers[..., :, :, None]  # (..., K, 3, 1)
+    w = angular[..., None, :, :]  # (..., 1, 3, nv)
+    jacobians = np.empty((*np.broadcast_shapes(r.shape[:-2], w.shape[:-2]), 3, linear.shape[-1]))
+    for a, b, c in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        jacobians[..., a, :] = linear[..., None, a, :] - (
+            r[..., b, :] * w[..., c, :] - r[..., c, :] * w[..., b, :]
+        )
+    return robot.transform_base_to_world.rotation.T @ jacobians
 
 
 def point_mobility_in_base(
@@ -213,12 +221,15 @@ def evaluate_exposed_points(
     trajectory: Trajectory,
     points_in_object_m: Any,
     model: pin.Model | None = None,
+    terms: SampleTerms | None = None,
 ) -> ExposedPointsEvaluation:
     """Effective mass, speed and direction of motion at each object point, per sample.
 
     Reuses the evaluation's joint positions (no IK). ``grasp`` and ``trajectory`` must be the
     ones the evaluation was computed with; ``model``: their ``augmented_model``, when already
-    built (shared across analyses).
+    built (shared across analyses); ``terms``: the grasp's ``method.terms.SampleTerms`` at
+    the evaluation's joint positions (then the mobilities come from its Jacobians and M⁻¹ on
+    arrays; None: Pinocchio per sample, the reference, equal to rounding).
     """
     points = check_points_in_object(points_in_object_m)
     count_points = len(points)
@@ -261,13 +272,20 @@ def evaluate_exposed_points(
         positions[:, k] = motion.positions
         tangents[:, k] = motion.tangents
         speeds[:, k] = motion.speeds
-    if model is None:
-        model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
-    data = model.createData()
-    mobilities = np.empty((count, count_points, 3, 3))
-    for i, positions_i in enumerate(evaluation.joint_positions):
-        q = robot.q_from_positions(positions_i)
-        mobilities[i] = point_mobility_in_base(robot, model, data, q, points_in_tip)
+    if terms is not None:
+        jacobians = _point_jacobians(
+            robot, terms.tip_jacobians, terms.tip_rotations, points_in_tip
+        )  # (N, K, 3, nv)
+        minv = terms.mass_matrix_inverses[:, None]  # (N, 1, nv, nv)
+        mobilities = jacobians @ minv @ np.swapaxes(jacobians, -1, -2)
+    else:
+        if model is None:
+            model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
+        data = model.createData()
+        mobilities = np.empty((count, count_points, 3, 3))
+        for i, positions_i in enumerate(evaluation.joint_positions):
+            q = robot.q_from_positions(positions_i)
+            mobilities[i] = point_mobility_in_base(robot, model, data, q, points_in_tip)
     norms = np.linalg.norm(tangents, axis=2)
     stationary = norms < STATIONARY_TANGENT_M
     directions = tangents / np.where(stationary, 1.0, norms)[..., None]

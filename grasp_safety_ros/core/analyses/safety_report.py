@@ -19,6 +19,7 @@ import pinocchio as pin
 from ..exceptions import InvalidInputError
 from ..method.effective_mass import augmented_model
 from ..method.ranking import Grasp, GraspEvaluation, GraspSafetyEvaluator, Ranking, aggregate
+from ..method.terms import SampleTerms, grasp_terms
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
 from ..model.trajectory import Trajectory
@@ -237,10 +238,24 @@ def analyse(
         if progress is not None:
             progress(done, per_grasp)
 
-    # Shared by every analysis: each grasp's motion, and the augmented model of a feasible
-    # grasp when one needs it (an infeasible grasp's analyses need none).
+    # Shared by every analysis: each grasp's motion, and for a feasible grasp the terms along
+    # its joint path (compiled chains) or else its augmented model (an infeasible grasp's
+    # analyses need neither).
     motions = [evaluator.trajectory_for(g, trajectory) for g in grasps]
     models: dict[int, pin.Model] = {}
+    chain = evaluator.ik.chain if evaluator.ik.compiled else None
+    terms: dict[int, SampleTerms] = {}
+
+    def terms_of(k: int, joint_positions: np.ndarray | None = None) -> SampleTerms | None:
+        """Grasp k's terms along its evaluated joint path (or along ``joint_positions``)."""
+        if chain is None or not evaluations[k].feasible:
+            return None
+        if joint_positions is not None:
+            transform = grasps[k].transform_tip_to_object
+            return grasp_terms(robot, chain, object_inertia, transform, joint_positions)
+        if k not in terms:
+            terms[k] = terms_of(k, evaluations[k].joint_positions)
+        return terms[k]
 
     def model_of(k: int) -> pin.Model | None:
         if not evaluations[k].feasible:
@@ -253,6 +268,7 @@ def analyse(
     if options.points_in_object_m is not None:
         exposed_list = []
         for k, (e, g) in enumerate(zip(evaluations, grasps, strict=True)):
+            shared = terms_of(k)
             exposed_list.append(
                 evaluate_exposed_points(
                     robot,
@@ -261,7 +277,8 @@ def analyse(
                     g,
                     motions[k],
                     options.points_in_object_m,
-                    model_of(k),
+                    None if shared is not None else model_of(k),
+                    shared,
                 )
             )
             step()
@@ -314,8 +331,18 @@ def analyse(
             resolved = (
                 redundancy[k].joint_positions if redundancy and redundancy[k].applied else None
             )
+            shared = terms_of(k, resolved)
             efforts.append(
-                evaluate_effort(robot, e, object_inertia, g, motions[k], resolved, model_of(k))
+                evaluate_effort(
+                    robot,
+                    e,
+                    object_inertia,
+                    g,
+                    motions[k],
+                    resolved,
+                    None if shared is not None else model_of(k),
+                    shared,
+                )
             )
             step()
         effort = tuple(efforts)

@@ -1,7 +1,7 @@
 """Translational mobility J M^-1 J^T at the tip (composite-rigid-body mass matrix and a
 Cholesky factor), compiled.
 
-``bodies`` is ``method.effective_mass.BodyInertias`` (mass, centre of mass and rotational inertia
+``bodies`` is ``method.packed.BodyInertias`` (mass, centre of mass and rotational inertia
 of each body, the object merged into the last), one value passed as a whole."""
 
 import math

@@ -82,7 +82,7 @@ def _evaluate_grasp(
     found by the caller's restarts). object_twists: the object's motion between samples
     (``_relative_twists`` of its poses); the tip's is its adjoint by the grasp inverse,
     log6(G^-1 X G) = Ad_{G^-1} log6(X), no log per grasp. out:
-    ``method.compiled.GraspBuffers``; the world-frame targets, the tip's twists and tangents
+    ``method.packed.GraspBuffers``; the world-frame targets, the tip's twists and tangents
     are written first. ws: ``ik.workspace(n)``.
 
     Returns:

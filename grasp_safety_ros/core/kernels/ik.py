@@ -1,7 +1,7 @@
 """IK of the tip pose, compiled: one pose (``solve_pose``) and a whole trajectory
 (``solve_trajectory``), with the predictor warm start between samples (as ``IKSolver``).
 
-``settings`` is ``method.compiled.IKSettings`` (tolerances, iteration and step limits, the
+``settings`` is ``method.packed.IKSettings`` (tolerances, iteration and step limits, the
 velocity check), one value passed as a whole."""
 
 import math
@@ -173,7 +173,7 @@ def _reset_predictor(ws):
 def _trajectory_step(chain, settings, target_rotations, target_translations, times, i, out, g, ws):
     """Sample i >= 1 of IKSolver._trajectory_python: (status, joint, value); status 0 is OK.
 
-    Grasp g's rows of ``out`` (``method.compiled.GraspBuffers``): q_all, iterations, q_fail
+    Grasp g's rows of ``out`` (``method.packed.GraspBuffers``): q_all, iterations, q_fail
     (the iterate, kept when it fails), guess (scratch) and tip_twists (the predictor's xi of
     each sample, filled by the caller). ws must hold the joint and tip
     poses at q_all[i - 1] (for the predictor); on return it holds those at q_all[i] (or at

@@ -6,7 +6,7 @@ import math
 from ._jit import _jit_inline
 
 # ----------------------------------------------------------------------------- kinematics
-# Conventions: a chain is ``method.compiled.ChainArrays`` (one value, passed as a whole): n
+# Conventions: a chain is ``method.packed.ChainArrays`` (one value, passed as a whole): n
 # joints of one degree of freedom each, joint k at q[q_index[k]]; a continuous joint holds
 # (cos, sin) of its angle in q[q_index[k]], q[q_index[k] + 1] (Pinocchio's nq = 2, nv = 1).
 # Poses are (rotation, translation) pairs in the world (= model root) frame. ws is the

@@ -1,108 +1,22 @@
 """Bridge between the method and the compiled kernels: the chain as flat arrays
-(``chain_arrays``) and batches of grasps through the fused kernel
-(``evaluate_grasps_compiled``).
+(``chain_arrays``), the augmented bodies of a batch of grasps (``augmented_bodies``) and a
+dispatcher-free kernel call (``call_kernel``); batches of grasps through the fused kernel are
+in ``batch``, the packed values in ``packed``.
 
 The kernels (``core.kernels``, numba) are imported only when first called.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
-from ..exceptions import GraspSafetyError
+from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
-from ..model.trajectory import ObjectMotion
-from .effective_mass import STATIONARY_TANGENT_M, BodyInertias, robot_inertia_arrays
-
-if TYPE_CHECKING:
-    from ..model.inertia import ObjectInertia
-    from .ik import IKConfig, IKSolver
-
-
-class ChainArrays(NamedTuple):
-    """A serial chain of one-degree-of-freedom joints as flat arrays, for the compiled kernels
-    (one value, passed to them as a whole).
-
-    Joint k (chain order) moves in the frame ``placement_k`` of joint k-1 (of the world for
-    k = 0): rotation about, or translation along, the unit ``axis_k`` (joint frame). Its
-    position is q[q_index[k]]; a continuous joint holds (cos, sin) of its angle in
-    q[q_index[k]], q[q_index[k] + 1] (Pinocchio's representation, nq = 2, nv = 1).
-    """
-
-    placement_rotations: np.ndarray  # (n, 3, 3)
-    placement_translations: np.ndarray  # (n, 3) [m]
-    axes: np.ndarray  # (n, 3), unit
-    prismatic: np.ndarray  # (n,) 1.0 for prismatic joints, 0.0 for revolute ones
-    continuous: np.ndarray  # (n,) bool: revolute without limits, (cos, sin) in q
-    q_index: np.ndarray  # (n,) int64: first entry of joint k in q
-    tip_rotation: np.ndarray  # (3, 3): tip frame in the last joint's frame
-    tip_translation: np.ndarray  # (3,) [m]
-    base_rotation: np.ndarray  # (3, 3): base frame in the world frame
-    base_translation: np.ndarray  # (3,) [m]
-    lower_q: np.ndarray  # (nq,) -inf for continuous joints
-    upper_q: np.ndarray  # (nq,) +inf for continuous joints
-    armature: np.ndarray  # (n,) reflected rotor inertia [kg m^2, kg if prismatic]
-
-
-class IKSettings(NamedTuple):
-    """IKConfig and the velocity limits as the compiled IK reads them (one value)."""
-
-    position_tolerance: float  # [m]
-    orientation_tolerance: float  # [rad]
-    max_iterations: int
-    max_iteration_step: float
-    max_joint_step: float
-    predictor_max_ratio: float  # ik.PREDICTOR_MAX_RATIO
-    any_velocity_check: bool
-    check_velocity: np.ndarray  # (n,) bool: joint speed checked against velocity_limits
-    velocity_limits: np.ndarray  # (n,) [rad/s or m/s]
-
-
-class GraspBuffers(NamedTuple):
-    """Outputs and scratch of the fused kernel for G grasps of N samples (one value; axis 0
-    is the grasp)."""
-
-    target_rotations: np.ndarray  # (G, N, 3, 3) tip targets, world frame
-    target_translations: np.ndarray  # (G, N, 3) [m]
-    tangents: np.ndarray  # (G, N, 3) [m] tip tangents, base axes (ObjectMotion's scale)
-    tangent_norms: np.ndarray  # (G, N) their norms [m]
-    q_all: np.ndarray  # (G, N, nq)
-    iterations: np.ndarray  # (G, N) int64
-    q_fail: np.ndarray  # (G, nq) last iterate of a failed sample
-    guess: np.ndarray  # (G, nq) predictor scratch
-    tip_twists: np.ndarray  # (G, N, 6) log6(T_{i-1}^-1 T_i) of the tip targets, tip frame
-    mobilities: np.ndarray  # (G, N, 3, 3) [1/kg], base axes
-    effective_masses: np.ndarray  # (G, N) [kg]
-    directions: np.ndarray  # (G, N, 3) unit, base axes
-    worst: np.ndarray  # (G, N) bool: tip not translating
-    outcomes: np.ndarray  # (G, 3) int64: status, sample, joint (kernels.grasp)
-    outcome_values: np.ndarray  # (G,) the value of a failed check (jump [rad], speed [rad/s])
-
-
-def grasp_buffers(grasps: int, count: int, nq: int) -> GraspBuffers:
-    """Fresh GraspBuffers for ``grasps`` grasps of count samples of a chain with nq
-    configuration entries."""
-    return GraspBuffers(
-        np.empty((grasps, count, 3, 3)),
-        np.empty((grasps, count, 3)),
-        np.empty((grasps, count, 3)),
-        np.empty((grasps, count)),
-        np.empty((grasps, count, nq)),
-        np.zeros((grasps, count), dtype=np.int64),
-        np.empty((grasps, nq)),
-        np.empty((grasps, nq)),
-        np.empty((grasps, count, 6)),
-        np.empty((grasps, count, 3, 3)),
-        np.empty((grasps, count)),
-        np.empty((grasps, count, 3)),
-        np.zeros((grasps, count), dtype=np.bool_),
-        np.zeros((grasps, 3), dtype=np.int64),
-        np.zeros(grasps),
-    )
+from .effective_mass import robot_inertia_arrays
+from .packed import BodyInertias, ChainArrays
 
 
 def _is_continuous(joint: Any) -> bool:
@@ -185,43 +99,6 @@ def chain_arrays_or_reason(robot: RobotModel) -> ChainArrays | str:
     return arrays
 
 
-def ik_settings(
-    config: IKConfig, velocity_limits: np.ndarray, predictor_max_ratio: float
-) -> IKSettings:
-    """IKSettings of an IKConfig, the chain's velocity limits (per joint) and the predictor's
-    largest defect growth (``ik.PREDICTOR_MAX_RATIO``)."""
-    velocity_limits = np.array(velocity_limits, dtype=float)
-    check_velocity = np.array(
-        config.check_velocity_limits & np.isfinite(velocity_limits) & (velocity_limits > 0),
-        dtype=np.bool_,
-    )
-    return IKSettings(
-        float(config.position_tolerance_m),
-        float(config.orientation_tolerance_rad),
-        int(config.max_iterations),
-        float(config.max_iteration_step),
-        float(config.max_joint_step),
-        float(predictor_max_ratio),
-        bool(check_velocity.any()),
-        check_velocity,
-        velocity_limits,
-    )
-
-
-class CompiledGraspResult(NamedTuple):
-    """One grasp's result of ``evaluate_grasps_compiled``: arrays have one row per sample if
-    feasible (up to the failing sample otherwise)."""
-
-    reason: str
-    q: np.ndarray
-    iterations: np.ndarray
-    mobilities: np.ndarray
-    effective_masses: np.ndarray
-    directions: np.ndarray
-    worst: np.ndarray
-    tangent_norms: np.ndarray
-
-
 _ENTRY_POINTS: dict[Any, Any] = {}
 """The compiled overload of each kernel called through ``call_kernel``."""
 
@@ -281,141 +158,3 @@ def plain_array(array: Any) -> np.ndarray:
     """A C-contiguous, writable float64 array of ``array`` (copied only when needed)."""
     array = np.ascontiguousarray(array, dtype=float)
     return array if array.flags.writeable else array.copy()
-
-
-def evaluate_grasps_compiled(
-    solver: IKSolver,
-    object_inertia: ObjectInertia,
-    transforms_tip_to_object: Sequence[Any],
-    motion: ObjectMotion,
-    times_s: np.ndarray,
-    seeds_q: np.ndarray,
-    motion_is_tip: bool = False,
-) -> list[CompiledGraspResult]:
-    """Grasps with the fused kernel ``evaluate_grasps``, in one call (solver.compiled must be
-    true); one result per grasp, in order.
-
-    Args:
-        transforms_tip_to_object: The grasps (the object's inertia moves with the tip).
-        seeds_q: The IK seed of sample 0: (nq,) for every grasp, or (G, nq) one per grasp.
-        motion: The object's motion at the sample times (``object_motion`` of the
-            trajectory), which the kernel composes with each grasp; with ``motion_is_tip``,
-            the tip's own motion (composed with the identity; then one grasp).
-
-    Directions and effective masses of samples where the tip does not translate (``worst``)
-    are left for the caller. Random restarts of sample 0 run here, as in ``solve_first``.
-    """
-    from ..kernels.grasp import evaluate_grasps  # imports numba: only when first needed
-    from ..kernels.ik import solve_pose, thread_workspace
-
-    chain, settings, robot = solver.chain, solver.settings, solver.robot
-    if chain is None or settings is None:
-        raise GraspSafetyError("the compiled kernels do not support this chain")
-    grasps = [pin.SE3(transform) for transform in transforms_tip_to_object]
-    rotations = np.array([grasp.rotation for grasp in grasps]).reshape(-1, 3, 3)
-    translations = np.array([grasp.translation for grasp in grasps]).reshape(-1, 3)
-    bodies = augmented_bodies(robot, object_inertia, rotations, translations)
-    if motion_is_tip:
-        rotations = np.repeat(np.eye(3)[None], len(grasps), axis=0)
-        translations = np.zeros((len(grasps), 3))
-    count = len(grasps)
-    times_s = plain_array(times_s)
-    nq = robot.model.nq
-    out = grasp_buffers(count, len(times_s), nq)
-    ws = thread_workspace(robot.model.nv)
-    motion = ObjectMotion(*(plain_array(array) for array in motion))
-    seeds = plain_array(np.broadcast_to(seeds_q, (count, nq)))
-    fixed = (chain, settings)
-    shared = (motion, rotations, translations, times_s)
-    object_twists = np.empty((len(times_s), 6))
-    call_kernel(
-        evaluate_grasps,
-        *fixed,
-        bodies,
-        *shared,
-        seeds,
-        np.zeros(count, dtype=np.bool_),
-        STATIONARY_TANGENT_M,
-        object_twists,
-        out,
-        ws,
-    )
-    reasons = [""] * count
-    for g in np.flatnonzero(out.outcomes[:, 0] == 4):  # sample 0 failed from the seed
-        total = int(out.iterations[g, 0])
-        converged = False
-        q_fail = out.q_fail[g]
-        for restart in solver.restarts():  # deterministic random restarts
-            q0 = np.empty(nq)
-            converged, restart_iterations = call_kernel(
-                solve_pose,
-                *fixed,
-                out.target_rotations[g, 0],
-                out.target_translations[g, 0],
-                plain_array(restart),
-                q0,
-                ws,
-            )
-            total += int(restart_iterations)
-            if converged:
-                break
-            q_fail = q0
-        if not converged:
-            reasons[g] = solver.first_sample_reason(q_fail, times_s)
-            continue
-        row = slice(g, g + 1)
-        call_kernel(
-            evaluate_grasps,
-            *fixed,
-            BodyInertias(*(array[row] for array in bodies)),
-            motion,
-            rotations[row],
-            translations[row],
-            times_s,
-            q0[None],
-            np.ones(1, dtype=np.bool_),
-            STATIONARY_TANGENT_M,
-            object_twists,
-            GraspBuffers(*(array[row] for array in out)),
-            ws,
-        )
-        out.iterations[g, 0] = total
-    results = []
-    for g in range(count):
-        status, index, joint = (int(value) for value in out.outcomes[g])
-        if reasons[g]:
-            results.append(_no_samples(reasons[g], nq))
-            continue
-        if status != 0:
-            value = float(out.outcome_values[g])
-            reasons[g] = solver.failure_reason(status, index, joint, value, out.q_fail[g], times_s)
-        else:
-            index = len(times_s)
-        results.append(
-            CompiledGraspResult(
-                reasons[g],
-                out.q_all[g, :index],
-                out.iterations[g, :index],
-                out.mobilities[g, :index],
-                out.effective_masses[g, :index],
-                out.directions[g, :index],
-                out.worst[g, :index],
-                out.tangent_norms[g, :index],
-            )
-        )
-    return results
-
-
-def _no_samples(reason: str, nq: int) -> CompiledGraspResult:
-    """The result of a grasp whose first sample has no IK solution."""
-    empty = np.empty(0)
-    return CompiledGraspResult(
-        reason,
-        np.empty((0, nq)),
-        np.zeros(0, dtype=np.int64),
-        np.empty((0, 3, 3)),
-        empty,
-        np.empty((0, 3)),
-        np.zeros(0, dtype=bool),
-        empty,
-    )

@@ -14,16 +14,13 @@ rounding.
 from __future__ import annotations
 
 import weakref
-from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 import pinocchio as pin
 
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
-
-if TYPE_CHECKING:
-    from .compiled import ChainArrays
+from .packed import BodyInertias, ChainArrays
 
 STATIONARY_TANGENT_M = 1e-9
 """Below this |d p_tip / ds| [m] the tip does not translate and the worst direction is used."""
@@ -45,14 +42,6 @@ def augmented_model(
     inertia_in_joint = transform_object_to_joint.act(object_inertia.spatial_inertia_in_object())
     model.inertias[tip.parentJoint] = model.inertias[tip.parentJoint] + inertia_in_joint
     return model
-
-
-class BodyInertias(NamedTuple):
-    """The bodies of a chain as arrays (one value, as the compiled kernels take it)."""
-
-    masses: np.ndarray  # (n,) [kg]
-    levers: np.ndarray  # (n, 3) centre of mass in the joint frame [m]
-    rotational_inertias: np.ndarray  # (n, 3, 3) about the centre of mass, joint axes [kg m^2]
 
 
 _ROBOT_INERTIAS: weakref.WeakKeyDictionary[RobotModel, BodyInertias] = weakref.WeakKeyDictionary()

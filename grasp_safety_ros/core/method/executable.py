@@ -15,7 +15,6 @@ against J⁺·V of the minimum-norm IK, and q̈ against wider second differences
 from __future__ import annotations
 
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from ..exceptions import InvalidInputError
 
@@ -42,6 +41,8 @@ def joint_velocities_accelerations(
         return np.zeros_like(positions), np.zeros_like(positions)
     if not np.all(np.diff(times) > 0):
         raise InvalidInputError("times_s", "must be strictly increasing")
+    from scipy.interpolate import CubicSpline  # imported when first needed (start-up time)
+
     spline = CubicSpline(times, positions, axis=0, bc_type="clamped")
     return spline(times, 1), spline(times, 2)
 

@@ -38,14 +38,8 @@ import pinocchio as pin
 
 from ..exceptions import InvalidInputError
 from ..model.robot import RobotModel
-from .compiled import (
-    ChainArrays,
-    call_kernel,
-    chain_arrays_or_reason,
-    grasp_buffers,
-    ik_settings,
-    plain_array,
-)
+from .compiled import call_kernel, chain_arrays_or_reason, plain_array
+from .packed import ChainArrays, IKSettings, grasp_buffers
 
 
 def _numba_installed() -> bool:
@@ -103,6 +97,29 @@ class IKConfig:
         }.items():
             if not isinstance(value, int) or isinstance(value, bool) or value < 0:
                 raise InvalidInputError(name, f"must be an integer >= 0, got {value!r}")
+
+
+def ik_settings(
+    config: IKConfig, velocity_limits: np.ndarray, predictor_max_ratio: float
+) -> IKSettings:
+    """IKSettings of an IKConfig, the chain's velocity limits (per joint) and the predictor's
+    largest defect growth (``ik.PREDICTOR_MAX_RATIO``)."""
+    velocity_limits = np.array(velocity_limits, dtype=float)
+    check_velocity = np.array(
+        config.check_velocity_limits & np.isfinite(velocity_limits) & (velocity_limits > 0),
+        dtype=np.bool_,
+    )
+    return IKSettings(
+        float(config.position_tolerance_m),
+        float(config.orientation_tolerance_rad),
+        int(config.max_iterations),
+        float(config.max_iteration_step),
+        float(config.max_joint_step),
+        float(predictor_max_ratio),
+        bool(check_velocity.any()),
+        check_velocity,
+        velocity_limits,
+    )
 
 
 @dataclass(frozen=True)

@@ -33,7 +33,6 @@ from typing import Any, Protocol
 
 import numpy as np
 import pinocchio as pin
-from scipy.stats import qmc
 
 from ..exceptions import InvalidInputError
 from ..model.inertia import ObjectInertia
@@ -41,14 +40,12 @@ from ..model.trajectory import ObjectTrajectory
 from .pool import evaluate_jobs, executor_for
 from .ranking import (
     BATCH_GRASPS,
-    Grasp,
-    GraspEvaluation,
     GraspSafetyEvaluator,
-    Ranking,
     SampledTrajectory,
     order_by_score,
     sample_trajectory,
 )
+from .results import SCORE_CRITERION, Grasp, GraspEvaluation, PostureSelection, Ranking
 
 MAX_RESTARTS = 1000
 """Largest number of posture restarts accepted per grasp."""
@@ -116,47 +113,6 @@ class PostureCriterion(Protocol):
         ...
 
 
-SCORE_CRITERION = "score"
-"""PostureSelection.criterion of selection by the tip score (the default)."""
-
-
-@dataclass(frozen=True)
-class PostureSelection:
-    """How one grasp's posture was chosen.
-
-    Attributes:
-        index: Position in the candidate list.
-        restarts: Restarts asked for (besides the single IK).
-        score: Score of the kept posture (the evaluation's score); NaN if infeasible.
-        score_single_ik: Score of the paper's single IK from the configured seed; NaN when
-            that one is infeasible.
-        score_range: (lowest, highest) score over the feasible postures found; NaN if none.
-        start_positions: (n,) joint positions at t = 0 of the kept posture [rad or m], chain
-            order; empty if infeasible.
-        postures_tried: Distinct start postures followed along the trajectory (the single
-            IK's counts as one, also when it fails).
-        postures_feasible: Of those, the ones whose whole trajectory is feasible.
-        selected: Which of the tried postures was kept (0: the single IK's); -1 if none.
-        criterion: What chose the posture: SCORE_CRITERION or a PostureCriterion's name.
-        criterion_value: The kept posture's value of it (its score for SCORE_CRITERION; the
-            criterion's unit, e.g. N); NaN if infeasible.
-        criterion_single_ik: The single IK's value of it; NaN when that one is infeasible.
-    """
-
-    index: int
-    restarts: int
-    score: float
-    score_single_ik: float
-    score_range: tuple[float, float]
-    start_positions: np.ndarray
-    postures_tried: int
-    postures_feasible: int
-    selected: int
-    criterion: str = SCORE_CRITERION
-    criterion_value: float = math.nan
-    criterion_single_ik: float = math.nan
-
-
 def restart_seeds(evaluator: GraspSafetyEvaluator, config: PostureConfig) -> np.ndarray:
     """The (restarts, n) IK seeds of posture selection [rad or m], chain order, deterministic."""
     robot = evaluator.robot
@@ -164,6 +120,8 @@ def restart_seeds(evaluator: GraspSafetyEvaluator, config: PostureConfig) -> np.
         return np.empty((0, robot.num_joints))
     lower = np.where(np.isfinite(robot.lower_limits), robot.lower_limits, -np.pi)
     upper = np.where(np.isfinite(robot.upper_limits), robot.upper_limits, np.pi)
+    from scipy.stats import qmc  # scipy.stats takes ~0.5 s to import: only when restarting
+
     unit = qmc.Halton(d=robot.num_joints, scramble=True, seed=config.seed).random(config.restarts)
     return lower + unit * (upper - lower)
 

@@ -4,16 +4,14 @@ from __future__ import annotations
 
 from collections.abc import Callable, Generator, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
-import pinocchio as pin
 
 from ..exceptions import InvalidInputError
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
 from ..model.trajectory import ObjectMotion, ObjectPath, TipMotion, Trajectory
-from .compiled import CompiledGraspResult, evaluate_grasps_compiled
+from .batch import evaluate_grasps_compiled
 from .effective_mass import (
     STATIONARY_TANGENT_M,
     effective_masses_along,
@@ -21,34 +19,16 @@ from .effective_mass import (
     worst_direction,
 )
 from .ik import IKConfig, IKSolver, check_backend
-from .joint_trajectory import JointSpaceTrajectory, PlannedJointTrajectory
+from .joint_trajectory import JointSpaceTrajectory
+from .metrics import METRICS as METRICS  # imported from here by ros.parameters
+from .metrics import aggregate, check_metric
+from .packed import CompiledGraspResult
 from .pool import evaluate_jobs, executor_for
-
-if TYPE_CHECKING:
-    from .posture import PostureSelection
+from .results import Grasp, GraspEvaluation, Ranking
 
 BATCH_GRASPS = 16
 """Grasps per call of the fused kernel in ``rank``: one job of the worker pool (its results,
 and the ``progress`` calls, come together)."""
-
-METRICS = ("mean", "max", "integral")
-"""Aggregates of the per-sample effective mass: mean [kg], max [kg], integral [kg s]."""
-
-
-@dataclass(frozen=True)
-class Grasp:
-    """A candidate grasp.
-
-    Attributes:
-        transform_tip_to_object: Pose of the tip frame in the object frame.
-        name: Optional label.
-        joint_trajectory: A planned arm joint trajectory to evaluate instead of following
-            the object trajectory by IK (see ``joint_trajectory``); None: IK.
-    """
-
-    transform_tip_to_object: pin.SE3
-    name: str = ""
-    joint_trajectory: PlannedJointTrajectory | None = None
 
 
 @dataclass(frozen=True)
@@ -81,109 +61,6 @@ class EvaluationConfig:
         ):
             if not isinstance(value, int) or isinstance(value, bool) or value < 0:
                 raise InvalidInputError(name, f"must be an integer >= 0, got {value!r}")
-
-
-def check_metric(metric: str, field_name: str = "metric") -> str:
-    """Return ``metric`` if it is one of METRICS, else raise InvalidInputError."""
-    if metric not in METRICS:
-        raise InvalidInputError(field_name, f"must be one of {', '.join(METRICS)}, got {metric!r}")
-    return metric
-
-
-@dataclass(frozen=True)
-class GraspEvaluation:
-    """Effective mass of one grasp along the trajectory.
-
-    Per-sample arrays have one row per sample when feasible, none when infeasible.
-
-    Attributes:
-        index: Position in the candidate list.
-        name: Label of the grasp.
-        feasible: Whether the tip trajectory can be followed.
-        reason: Why not, when infeasible; empty otherwise.
-        score: Aggregate of the effective mass (kg, or kg s for ``integral``); NaN if infeasible.
-        times_s: Sample times [s].
-        joint_positions: Chain joint positions [rad or m], chain order; continuous joints
-            unwrapped (continuous along the motion from the IK seed, or the planner's own).
-        directions_in_base: Unit direction of tip motion, base axes.
-        effective_mass_kg: Effective mass along that direction [kg].
-        direction_is_worst_case: True where the tip does not translate and the direction of
-            largest effective mass was used instead.
-        tip_speed_m_s: Tip speed along the trajectory [m/s].
-        ik_iterations: Gauss-Newton iterations per sample.
-        links_only_effective_mass_kg: Effective mass of the links alone (armature left out, a
-            lower bound) [kg]; the same array as ``effective_mass_kg`` when the chain has no
-            armature (None given: that array).
-        planned_joint_rates: A planned trajectory's own joint velocities [rad/s or m/s] and
-            the accelerations of their Hermite interpolation at the samples; None (IK, or a
-            plan without velocities): rates are fitted for execution (method.executable).
-    """
-
-    index: int
-    name: str
-    feasible: bool
-    reason: str
-    score: float
-    times_s: np.ndarray
-    joint_positions: np.ndarray
-    directions_in_base: np.ndarray
-    effective_mass_kg: np.ndarray
-    direction_is_worst_case: np.ndarray
-    tip_speed_m_s: np.ndarray
-    ik_iterations: np.ndarray
-    links_only_effective_mass_kg: np.ndarray | None = None
-    planned_joint_rates: tuple[np.ndarray, np.ndarray] | None = None
-
-    def __post_init__(self) -> None:
-        if self.links_only_effective_mass_kg is None:
-            object.__setattr__(self, "links_only_effective_mass_kg", self.effective_mass_kg)
-
-    @property
-    def peak_effective_mass_kg(self) -> float:
-        """Largest per-sample effective mass [kg]; NaN if infeasible."""
-        return float(self.effective_mass_kg.max()) if self.feasible else float("nan")
-
-    @property
-    def mean_effective_mass_kg(self) -> float:
-        """Mean per-sample effective mass [kg]; NaN if infeasible."""
-        return float(self.effective_mass_kg.mean()) if self.feasible else float("nan")
-
-
-@dataclass(frozen=True)
-class Ranking:
-    """Grasps ranked by score, safest (lowest) first.
-
-    Attributes:
-        joint_names: Chain joint names, the column order of ``joint_positions``.
-        metric: The aggregate used.
-        order: Indices of the feasible grasps, safest first (ties keep input order).
-        evaluations: One per candidate, in candidate order.
-        postures: How each candidate's posture was chosen (core.method.posture), in candidate
-            order; empty when posture selection was not run.
-        backend: What ran: ``compiled`` or ``python``, with the reason when ``auto`` fell
-            back, e.g. ``python (numba not installed)``; empty when not recorded.
-        armature_given: Whether the chain had armature (reflected rotor inertia); False: the
-            effective masses are the links' only (a lower bound, robot.NO_ARMATURE_NOTE).
-    """
-
-    joint_names: tuple[str, ...]
-    metric: str
-    order: tuple[int, ...]
-    evaluations: tuple[GraspEvaluation, ...]
-    postures: tuple[PostureSelection, ...] = ()
-    backend: str = ""
-    armature_given: bool = False
-
-
-def aggregate(effective_mass_kg: np.ndarray, times_s: np.ndarray, metric: str) -> float:
-    """Score of per-sample effective masses: mean [kg], max [kg] or trapezoid integral [kg s]."""
-    check_metric(metric)
-    if metric == "mean":
-        masses = np.asarray(effective_mass_kg)
-        return float(masses.sum() / len(masses))  # = np.mean, without its overhead
-    if metric == "max":
-        return float(np.max(effective_mass_kg))
-    return float(np.trapezoid(effective_mass_kg, times_s)) if len(times_s) > 1 else 0.0
 
 
 def order_by_score(evaluations: Sequence[GraspEvaluation]) -> tuple[int, ...]:

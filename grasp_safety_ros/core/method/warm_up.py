@@ -12,6 +12,7 @@ from ..model.robot import RobotModel
 from ..model.trajectory import ObjectTrajectory
 from .effective_mass import translational_mobilities_in_base
 from .ranking import Grasp, GraspSafetyEvaluator
+from .terms import grasp_terms
 
 _WARM_UP_URDF = """<robot name="warm_up"><link name="base"/>
 <link name="a"><inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01"
@@ -57,4 +58,6 @@ def warm_up(evaluator: GraspSafetyEvaluator | None = None) -> float:
         translational_mobilities_in_base(
             robot, box, pin.SE3.Identity(), np.array([seed_q]), evaluator.ik.chain
         )
+        positions = np.array([robot.default_seed_positions()])
+        grasp_terms(robot, evaluator.ik.chain, box, pin.SE3.Identity(), positions)
     return time.perf_counter() - start

@@ -236,19 +236,17 @@ class ObjectTrajectory:
         grasp = pin.SE3(transform_tip_to_object)
         times = np.asarray(times_s, dtype=float)
         s_values, s_rate, s_accel = self.path_parameter(times)
-        _, tangents = self.tip_path(grasp, s_values)
         omega = self.rotation_log_in_object  # object angular velocity per unit s, object axes
-        curvature_in_object = np.cross(omega, np.cross(omega, grasp.translation))
-        twist = np.empty((len(times), 6))
-        twist_rate = np.empty((len(times), 6))
-        for i, s in enumerate(s_values):
-            rotation = self.transform_object_to_base(float(s)).rotation
-            angular = rotation @ omega
-            second = rotation @ curvature_in_object  # d² p_tip / ds²
-            twist[i, :3] = tangents[i] * s_rate[i]
-            twist[i, 3:] = angular * s_rate[i]
-            twist_rate[i, :3] = second * s_rate[i] ** 2 + tangents[i] * s_accel[i]
-            twist_rate[i, 3:] = angular * s_accel[i]
+        start = self.transform_object_to_base_start
+        linear = self.transform_object_to_base_goal.translation - start.translation
+        rotations = np.matmul(start.rotation, exp3_batch(s_values[:, None] * omega))
+        # d p_tip / ds (as tip_path), the angular tangent and d² p_tip / ds², base axes.
+        tangents = linear + rotations @ np.cross(omega, grasp.translation)
+        angular = rotations @ omega
+        second = rotations @ np.cross(omega, np.cross(omega, grasp.translation))
+        rate, accel = s_rate[:, None], s_accel[:, None]
+        twist = np.concatenate([tangents * rate, angular * rate], axis=1)
+        twist_rate = np.concatenate([second * rate**2 + tangents * accel, angular * accel], axis=1)
         return twist, twist_rate
 
 

@@ -1,0 +1,173 @@
+"""Benchmark section: the whole pipeline at the core's speed (issue 21), each figure beside the
+core's own figure of the same run.
+
+Workload: the paper's book on Baxter (config/book_baxter.yaml) with G grasps spread evenly
+over the spine (y from -0.1 to +0.1 m), dt 0.01 s (201 samples), the scenario's defaults
+(8 posture restarts, exposed points of the box, ISO/TS 15066, effort). Measured:
+
+- CLI wall time incl. start-up: ``grasp-safety rank <scenario> --json <file>`` in a fresh
+  process, 100 and 1,000 grasps (and 1,000 with ``--no-per-sample``), with the JSON size;
+  ``grasp-safety --help``;
+- in one process, one core (workers=1), median over repeats: the paper's ranking (single IK),
+  posture selection after it, and every default analysis (``safety_report.analyse``) on the
+  shared compiled terms and on the Pinocchio per-sample reference path; as ratios to the
+  ranking's own time and as µs per (grasp, sample).
+
+Run alone: .venv/bin/python bench/run.py --pipeline-only [--json bench/results_pipeline.json]
+"""
+
+from __future__ import annotations
+
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from grasp_safety_ros.paths import config_file
+
+SPINE_Y_M = (-0.1, 0.1)
+"""Range of the grasps along the book's spine [m] (object y axis)."""
+DT_S = 0.01
+CLI = Path(sys.executable).with_name("grasp-safety")
+
+
+def book_scenario(grasps: int, folder: Path) -> Path:
+    """The book scenario with ``grasps`` grasps along the spine at dt 0.01 s, written to
+    ``folder``; returns its path."""
+    data = yaml.safe_load(config_file("book_baxter.yaml").read_text())
+    data["trajectory"]["dt_s"] = DT_S
+    low, high = SPINE_Y_M
+    data["grasps"] = [
+        {
+            "name": f"spine_{k}",
+            "position_m": [-0.075, low + (high - low) * k / max(grasps - 1, 1), 0.0],
+            "quat_xyzw": [0, 0, 0, 1],
+        }
+        for k in range(grasps)
+    ]
+    path = folder / f"book_{grasps}.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def _wall(command: list[str]) -> float:
+    start = time.perf_counter()
+    subprocess.run(command, check=True, stdout=subprocess.DEVNULL, timeout=1800)
+    return time.perf_counter() - start
+
+
+def bench_cli(folder: Path, repeats: int = 3) -> dict[str, Any]:
+    """Median wall times [s] of the CLI in fresh processes, and the JSON sizes [bytes]."""
+    results: dict[str, Any] = {
+        "help_s": statistics.median(_wall([str(CLI), "--help"]) for _ in range(repeats))
+    }
+    for grasps, flags in ((100, ()), (1000, ()), (1000, ("--no-per-sample",))):
+        scenario = book_scenario(grasps, folder)
+        out = folder / f"out_{grasps}.json"
+        key = f"rank_{grasps}" + ("_no_per_sample" if flags else "")
+        times = [
+            _wall([str(CLI), "rank", str(scenario), "--json", str(out), *flags])
+            for _ in range(repeats if grasps <= 100 else 1)
+        ]
+        results[key] = {"wall_s": statistics.median(times), "json_bytes": out.stat().st_size}
+    return results
+
+
+def bench_in_process(grasps: int, folder: Path, repeats: int = 3) -> dict[str, Any]:
+    """Ranking, posture selection and analyses of the book scenario in this process (one
+    core), medians [s], and their ratios to the ranking's time."""
+    from grasp_safety_ros.cli.scenario import load_scenario
+    from grasp_safety_ros.core.analyses.safety_report import analyse
+    from grasp_safety_ros.core.method.posture import select_postures
+    from grasp_safety_ros.core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
+
+    scenario = load_scenario(book_scenario(grasps, folder))
+    robot = scenario.robot.load(scenario.base_dir)
+    evaluator = GraspSafetyEvaluator(robot, EvaluationConfig(metric=scenario.metric, workers=1))
+    reference_evaluator = GraspSafetyEvaluator(
+        robot, EvaluationConfig(metric=scenario.metric, workers=1, backend="python")
+    )
+    args = (scenario.grasps, scenario.object_inertia, scenario.trajectory)
+
+    def rank() -> Any:
+        return evaluator.rank(*args, seed_positions=scenario.robot.seed)
+
+    ranking = rank()  # warm: kernels loaded, restart seeds computed below
+    selected = select_postures(evaluator, *args, ranking, scenario.posture)
+    timings: dict[str, list[float]] = {"ranking": [], "postures": [], "analyses": []}
+    reference: list[float] = []
+    for repeat in range(repeats):
+        start = time.perf_counter()
+        ranking = rank()
+        timings["ranking"].append(time.perf_counter() - start)
+        start = time.perf_counter()
+        selected = select_postures(evaluator, *args, ranking, scenario.posture)
+        timings["postures"].append(time.perf_counter() - start)
+        start = time.perf_counter()
+        analyse(evaluator, *args, scenario.options, ranking=selected)
+        timings["analyses"].append(time.perf_counter() - start)
+        if repeat == 0:  # the Pinocchio per-sample reference path, once
+            start = time.perf_counter()
+            analyse(reference_evaluator, *args, scenario.options, ranking=selected)
+            reference.append(time.perf_counter() - start)
+    samples = grasps * len(scenario.trajectory.times_s())
+    medians = {name: statistics.median(values) for name, values in timings.items()}
+    return {
+        "grasps": grasps,
+        "samples": len(scenario.trajectory.times_s()),
+        "seconds": medians,
+        "analyses_reference_s": reference[0],
+        "core_us_per_sample": 1e6 * medians["ranking"] / samples,
+        "postures_vs_ranking": medians["postures"] / medians["ranking"],
+        "analyses_vs_ranking": medians["analyses"] / medians["ranking"],
+        "reference_analyses_vs_ranking": reference[0] / medians["ranking"],
+        "postures_tried": sum(p.postures_tried for p in selected.postures),
+    }
+
+
+def bench_pipeline(repeats: int = 3) -> dict[str, Any]:
+    """Every figure of the section (module docstring)."""
+    with tempfile.TemporaryDirectory() as folder:
+        return {
+            "in_process": bench_in_process(100, Path(folder), repeats),
+            "cli": bench_cli(Path(folder), repeats),
+        }
+
+
+def print_pipeline(results: dict[str, Any]) -> None:
+    """The section's table (docs/performance_pipeline.md)."""
+    core = results["in_process"]
+    seconds = core["seconds"]
+    cli = results["cli"]
+    ranking_ms = 1e3 * seconds["ranking"]
+    print(f"\nWhole pipeline, book on Baxter, {core['grasps']} grasps x {core['samples']} samples")
+    print(
+        f"  core ranking (single IK, one core): {ranking_ms:.1f} ms, "
+        f"{core['core_us_per_sample']:.2f} us per (grasp, sample)"
+    )
+    print(
+        f"  posture selection (8 restarts, {core['postures_tried']} postures): "
+        f"{1e3 * seconds['postures']:.1f} ms = x{core['postures_vs_ranking']:.1f} the ranking"
+    )
+    print(
+        f"  default analyses on the shared terms: {1e3 * seconds['analyses']:.1f} ms = "
+        f"x{core['analyses_vs_ranking']:.1f} the ranking (Pinocchio per sample: "
+        f"{1e3 * core['analyses_reference_s']:.0f} ms = "
+        f"x{core['reference_analyses_vs_ranking']:.0f})"
+    )
+    print(f"  CLI --help: {cli['help_s']:.2f} s")
+    for key, label in (
+        ("rank_100", "CLI 100 x 201 --json"),
+        ("rank_1000", "CLI 1,000 x 201 --json"),
+        ("rank_1000_no_per_sample", "CLI 1,000 x 201 --json --no-per-sample"),
+    ):
+        row = cli[key]
+        print(
+            f"  {label}: {row['wall_s']:.2f} s wall incl. start-up, "
+            f"JSON {row['json_bytes'] / 1e6:.1f} MB"
+        )

@@ -1,0 +1,67 @@
+"""The per-(grasp, sample) terms every analysis shares, compiled: joint and tip poses, the tip
+Jacobian and the inverse joint-space inertia of the augmented chain (``method.terms``).
+
+M is the one ``_mobility_from_frames`` builds and factorises for the ranking, so the ranking and
+the analyses read the same mass matrix (whatever it includes: object, armature)."""
+
+from ._jit import _jit
+from .effective_mass import _mobility_from_frames
+from .kinematics import _forward_kinematics, _joint_axis_in_world
+
+
+@_jit
+def sample_terms(chain, bodies, q_all, counts, out, lower_inverse, ws):
+    """For each grasp g (axis 0 of q_all (G, N, nq), of ``bodies`` and of ``out``) and its
+    samples i < counts[g]: joint poses, axes and motion subspaces, tip pose, tip Jacobian,
+    tip mobility and M^-1 into ``out`` (``method.terms.SampleTerms``); rows from counts[g]
+    on are left untouched.
+    lower_inverse: (n, n) scratch; ws: ``ik.workspace(n)``."""
+    axes, prismatic = chain.axes, chain.prismatic
+    n = axes.shape[0]
+    jr, jp, fr, ft = ws[0], ws[1], ws[2], ws[3]
+    inverse_diagonal, factor = ws[14], ws[15]
+    for g in range(q_all.shape[0]):
+        for i in range(counts[g]):
+            _forward_kinematics(chain, q_all[g, i], ws)
+            _mobility_from_frames(chain, bodies, g, ws, out.tip_mobilities[g, i])
+            joint_rotations, joint_origins = out.joint_rotations[g, i], out.joint_origins[g, i]
+            joint_axes, jacobian = out.joint_axes[g, i], out.tip_jacobians[g, i]
+            motions = out.joint_motions[g, i]
+            for a in range(3):
+                out.tip_translations[g, i, a] = ft[a]
+                for b in range(3):
+                    out.tip_rotations[g, i, a, b] = fr[a, b]
+            for k in range(n):
+                u0, u1, u2, w0, w1, w2, slide = _joint_axis_in_world(axes, prismatic, jr, k)
+                joint_axes[k, 0], joint_axes[k, 1], joint_axes[k, 2] = u0, u1, u2
+                p0, p1, p2 = jp[k, 0], jp[k, 1], jp[k, 2]
+                motions[k, 0] = (p1 * w2 - p2 * w1) + slide * u0
+                motions[k, 1] = (p2 * w0 - p0 * w2) + slide * u1
+                motions[k, 2] = (p0 * w1 - p1 * w0) + slide * u2
+                motions[k, 3], motions[k, 4], motions[k, 5] = w0, w1, w2
+                for a in range(3):
+                    joint_origins[k, a] = jp[k, a]
+                    for b in range(3):
+                        joint_rotations[k, a, b] = jr[k, a, b]
+                dx, dy, dz = ft[0] - jp[k, 0], ft[1] - jp[k, 1], ft[2] - jp[k, 2]
+                jacobian[0, k] = (w1 * dz - w2 * dy) + slide * u0
+                jacobian[1, k] = (w2 * dx - w0 * dz) + slide * u1
+                jacobian[2, k] = (w0 * dy - w1 * dx) + slide * u2
+                jacobian[3, k], jacobian[4, k], jacobian[5, k] = w0, w1, w2
+            # M = L L^T (L's strict lower triangle in ``factor``, 1/L_jj in inverse_diagonal):
+            # L^-1 by forward substitution, then M^-1 = L^-T L^-1.
+            for j in range(n):
+                lower_inverse[j, j] = inverse_diagonal[j]
+                for r in range(j + 1, n):
+                    total = 0.0
+                    for k in range(j, r):
+                        total -= factor[r, k] * lower_inverse[k, j]
+                    lower_inverse[r, j] = total * inverse_diagonal[r]
+            minv = out.mass_matrix_inverses[g, i]
+            for a in range(n):
+                for b in range(a, n):
+                    total = 0.0
+                    for r in range(b, n):
+                        total += lower_inverse[r, a] * lower_inverse[r, b]
+                    minv[a, b] = total
+                    minv[b, a] = total

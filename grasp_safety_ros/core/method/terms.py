@@ -1,0 +1,126 @@
+"""The per-(grasp, sample) terms the analyses share, computed once along each grasp's joint
+path: joint and tip poses, the tip Jacobian and the inverse joint-space inertia of the augmented
+chain (robot + object), by the compiled kernel ``kernels.terms.sample_terms``.
+
+It is the one traversal every analysis reads from (pinocchio's ``computeAllTerms`` pattern):
+exposed points (``analyses.exposed_points``), effort (``analyses.effort``) and whole-arm
+points take Jacobians, poses and M⁻¹ from a ``SampleTerms`` instead of rerunning kinematics per
+sample. M is the ranking's own (``kernels.effective_mass._mobility_from_frames``), so whatever
+the ranking's M includes, the analyses' does too. Chains the kernels do not support have no
+terms; the analyses then run Pinocchio per sample, their
+reference path (``test_performance_paths`` holds both equal).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+import pinocchio as pin
+
+from ..model.inertia import ObjectInertia
+from ..model.robot import RobotModel
+from .compiled import augmented_bodies, call_kernel, plain_array
+from .packed import ChainArrays
+
+
+class SampleTerms(NamedTuple):
+    """Terms of G grasps x N samples (axis 0 the grasp, axis 1 the sample; ``of_grasp``
+    drops axis 0) of a chain of n joints, world frame (Pinocchio's model root) unless said.
+
+    The Jacobian is Pinocchio's LOCAL_WORLD_ALIGNED one at the tip: rows [linear; angular],
+    world axes, linear part the velocity of the tip origin. A joint's motion subspace is its
+    unit twist at the world origin, [p × w + slide u; w] (u its axis, p its origin, w = u for
+    a revolute joint and 0 for a prismatic one, slide = 1 - |w|).
+    """
+
+    joint_rotations: np.ndarray  # (G, N, n, 3, 3) joint frames
+    joint_origins: np.ndarray  # (G, N, n, 3) [m]
+    joint_axes: np.ndarray  # (G, N, n, 3) unit joint axes
+    joint_motions: np.ndarray  # (G, N, n, 6) motion subspaces at the world origin [m; 1]
+    tip_rotations: np.ndarray  # (G, N, 3, 3) tip frame
+    tip_translations: np.ndarray  # (G, N, 3) [m]
+    tip_jacobians: np.ndarray  # (G, N, 6, n) [m/rad or 1; rad/rad or rad/m]
+    tip_mobilities: np.ndarray  # (G, N, 3, 3) [1/kg] J_v M^-1 J_v^T, base axes
+    mass_matrix_inverses: np.ndarray  # (G, N, n, n) M^-1 of the augmented chain [1/kg, ...]
+
+    def of_grasp(self, g: int, count: int | None = None) -> SampleTerms:
+        """Grasp g's terms (axis 0 dropped), its first ``count`` samples (all: None)."""
+        return SampleTerms(*(array[g, :count] for array in self))
+
+
+def sample_terms_buffers(grasps: int, count: int, n: int) -> SampleTerms:
+    """Uninitialised SampleTerms for ``grasps`` grasps of ``count`` samples, n joints."""
+    return SampleTerms(
+        np.empty((grasps, count, n, 3, 3)),
+        np.empty((grasps, count, n, 3)),
+        np.empty((grasps, count, n, 3)),
+        np.empty((grasps, count, n, 6)),
+        np.empty((grasps, count, 3, 3)),
+        np.empty((grasps, count, 3)),
+        np.empty((grasps, count, 6, n)),
+        np.empty((grasps, count, 3, 3)),
+        np.empty((grasps, count, n, n)),
+    )
+
+
+def configurations(robot: RobotModel, joint_positions: np.ndarray) -> np.ndarray:
+    """Pinocchio configurations (..., nq) of chain joint positions (..., n) [rad or m]: a
+    continuous joint's angle as (cos, sin), as ``RobotModel.q_from_positions``."""
+    positions = np.asarray(joint_positions, dtype=float)
+    model = robot.model
+    if model.nq == model.nv:
+        return positions.copy()
+    q = np.empty((*positions.shape[:-1], model.nq))
+    for k, joint in enumerate(list(model.joints)[1:]):
+        if joint.nq == 2:
+            q[..., joint.idx_q] = np.cos(positions[..., k])
+            q[..., joint.idx_q + 1] = np.sin(positions[..., k])
+        else:
+            q[..., joint.idx_q] = positions[..., k]
+    return q
+
+
+def grasp_terms(
+    robot: RobotModel,
+    chain: ChainArrays,
+    object_inertia: ObjectInertia,
+    transform_tip_to_object: pin.SE3,
+    joint_positions: np.ndarray,
+) -> SampleTerms:
+    """The terms of one grasp along its joint path ((N, n) positions, chain order), axis 0
+    dropped. ``chain``: ``compiled.chain_arrays(robot)`` (numba must be installed)."""
+    from ..kernels.ik import thread_workspace
+    from ..kernels.terms import sample_terms
+
+    grasp = pin.SE3(transform_tip_to_object)
+    bodies = augmented_bodies(robot, object_inertia, grasp.rotation[None], grasp.translation[None])
+    q_all = plain_array(configurations(robot, joint_positions)[None])
+    n = robot.model.nv
+    out = sample_terms_buffers(1, q_all.shape[1], n)
+    counts = np.array([q_all.shape[1]], dtype=np.int64)
+    lower_inverse = np.empty((n, n))
+    ws = thread_workspace(n)
+    call_kernel(sample_terms, chain, bodies, q_all, counts, out, lower_inverse, ws)
+    return out.of_grasp(0)
+
+
+def point_jacobians(terms: SampleTerms, joint: int, points_in_world_m: np.ndarray) -> np.ndarray:
+    """Linear Jacobians (..., K, 3, n) of points fixed to the body of chain joint ``joint``
+    (0-based), world axes, from a grasp's terms (leading axes as in ``terms``, e.g. (N,)).
+
+    ``points_in_world_m`` (..., K, 3) [m]: the points' world positions at each sample. Column
+    k <= joint is joint k's motion subspace moved to the point, v + w × p (S = (v, w) at the
+    world origin); the columns of the joints after ``joint`` are zero. For the whole-arm
+    analysis: a link site's Jacobian, then J M⁻¹ Jᵀ with ``mass_matrix_inverses``.
+    """
+    motions = terms.joint_motions[..., None, :, :]  # (..., 1, n, 6)
+    points = np.asarray(points_in_world_m, dtype=float)[..., :, None, :]  # (..., K, 1, 3)
+    linear, angular = motions[..., :3], motions[..., 3:]
+    columns = np.empty(np.broadcast_shapes(linear.shape, points.shape))  # (..., K, n, 3)
+    for a, b, c in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):  # v + w × p, row a
+        columns[..., a] = linear[..., a] + (
+            angular[..., b] * points[..., c] - angular[..., c] * points[..., b]
+        )
+    columns[..., joint + 1 :, :] = 0.0
+    return np.swapaxes(columns, -1, -2)
