@@ -584,3 +584,34 @@ def test_the_docs_spec_example_is_valid(tmp_path: Path) -> None:
     spec = parse_spec(yaml.safe_load(example.group(1)), tmp_path)
     assert [s.format for s in spec.sources] == ["acronym", "graspgen", "scenarios"]
     assert spec.trajectory is not None and spec.trajectory.num_samples == 51
+
+
+def _heavier(urdf: str) -> str:
+    """The URDF with every link of mass 2 kg."""
+    import re
+
+    return re.sub(r'<mass value="[^"]*"/>', '<mass value="2.0"/>', urdf)
+
+
+def test_evaluator_cache_keys_on_armature_and_description_bytes(
+    dataset: Dataset, tmp_path: Path
+) -> None:
+    from dataclasses import replace
+
+    from grasp_safety_ros.dataset import batch
+
+    scenario = load_scenario(dataset.root / "scenarios" / "d.yaml")
+    plain = batch._evaluator(scenario, 1)
+    geared = batch._evaluator(
+        replace(scenario, robot=replace(scenario.robot, armature_kgm2=[0.05] * 6)), 1
+    )
+    assert not plain.robot.armature_given and geared.robot.armature_given
+    assert np.allclose(geared.robot.armature_kgm2, 0.05, rtol=0, atol=0)
+    # the same file name with other content (a long-lived worker re-running): another model
+    urdf = tmp_path / "arm.urdf"
+    urdf.write_text(serial_arm_urdf(ARM6_AXES))
+    moved = replace(scenario, robot=replace(scenario.robot, urdf=str(urdf)))
+    before = batch._evaluator(moved, 1)
+    urdf.write_text(_heavier(serial_arm_urdf(ARM6_AXES)))
+    after = batch._evaluator(moved, 1)
+    assert after is not before

@@ -10,6 +10,7 @@ computed again with ``resume``. Local and Dask runs give identical part files.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import os
@@ -32,6 +33,7 @@ from ..cli.scenario import Scenario, rank_with_evaluator, read_yaml_file
 from ..core.exceptions import GraspSafetyError, InvalidInputError
 from ..core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
 from ..core.method.warm_up import warm_up
+from ..core.model.robot import resolve_urdf
 from .rows import block_columns
 from .schema import SCHEMA_VERSION, grasp_schema, table
 from .sources import Failure, GraspBlock, SourceFile, discover, load_block
@@ -117,6 +119,13 @@ _SPECS: dict[str, BatchSpec] = {}
 _EVALUATORS: dict[tuple[str, ...], GraspSafetyEvaluator] = {}
 
 
+def description_sha256(urdf: str, base_dir: Path | None) -> str:
+    """SHA-256 of a robot description: of its file's bytes when ``urdf`` names a file (so an
+    edited file counts as another robot), else of the XML text."""
+    text, is_xml = resolve_urdf(urdf, base_dir)
+    return hashlib.sha256(text.encode() if is_xml else Path(text).read_bytes()).hexdigest()
+
+
 def _warm_up_once() -> None:
     """Compile (or load) the numba kernels once per process, not per task."""
     global _WARMED
@@ -137,10 +146,8 @@ def _evaluator(scenario: Scenario, workers: int) -> GraspSafetyEvaluator:
     """The process's evaluator for the scenario's robot and metric (URDF parsed once)."""
     robot = scenario.robot
     key = (
-        robot.urdf,
-        robot.base_frame,
-        robot.tip_frame,
-        json.dumps(robot.locked_joints, sort_keys=True),
+        json.dumps(dataclasses.asdict(robot), sort_keys=True, default=str),
+        description_sha256(robot.urdf, scenario.base_dir),
         str(scenario.base_dir),
         scenario.metric,
         str(workers),
