@@ -615,3 +615,29 @@ def test_evaluator_cache_keys_on_armature_and_description_bytes(
     urdf.write_text(_heavier(serial_arm_urdf(ARM6_AXES)))
     after = batch._evaluator(moved, 1)
     assert after is not before
+
+
+def test_dask_task_keys_differ_between_batches(dataset: Dataset, tmp_path: Path) -> None:
+    """Two batches sharing a scheduler must not share task keys (they would get each other's
+    results): the keys are the chunks' content hashes."""
+    from distributed import Client, LocalCluster
+
+    keys: list[set[str]] = []
+    with (
+        LocalCluster(
+            n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None
+        ) as cluster,
+        Client(cluster) as client,
+    ):
+        compute = client.compute
+
+        def recording(tasks: list[Any], **kwargs: Any) -> Any:
+            keys.append({str(t.key) for t in tasks})
+            return compute(tasks, **kwargs)
+
+        client.compute = recording  # type: ignore[method-assign]
+        spec = dict(dataset.spec, sources=[dataset.spec["sources"][0]])
+        for metric in ("mean", "max"):
+            path = dataset.write_spec(f"keys_{metric}.yaml", dict(spec, metric=metric))
+            run_batch(path, tmp_path / metric, client=client)
+    assert len(keys) == 2 and len(keys[0]) == 4 and not keys[0] & keys[1]

@@ -295,7 +295,7 @@ def _run_dask(payload: SpecPayload, chunks: Sequence[Chunk], client: Any) -> Ite
     shared = dask.delayed(payload, pure=True)
     tasks = [
         dask.delayed(evaluate_chunk, pure=True)(
-            shared, chunk, 1, dask_key_name=f"chunk-{chunk.index}"
+            shared, chunk, 1, dask_key_name=f"chunk-{chunk.content_hash}"
         )
         for chunk in chunks
     ]
