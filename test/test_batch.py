@@ -641,3 +641,34 @@ def test_dask_task_keys_differ_between_batches(dataset: Dataset, tmp_path: Path)
             path = dataset.write_spec(f"keys_{metric}.yaml", dict(spec, metric=metric))
             run_batch(path, tmp_path / metric, client=client)
     assert len(keys) == 2 and len(keys[0]) == 4 and not keys[0] & keys[1]
+
+
+def test_failed_rerun_leaves_no_manifest_and_foreign_parts_are_refused(
+    dataset: Dataset, local_run: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from grasp_safety_ros.dataset import batch
+
+    out = tmp_path / "rerun"
+    shutil.copytree(local_run, out)
+    calls = 0
+    evaluate = batch.evaluate_chunk
+
+    def failing(*args: Any) -> Any:
+        nonlocal calls
+        calls += 1
+        if calls > 2:
+            raise RuntimeError("worker lost")
+        return evaluate(*args)
+
+    monkeypatch.setattr(batch, "evaluate_chunk", failing)
+    changed = dict(dataset.spec, metric="max")
+    with pytest.raises(RuntimeError):
+        run_batch(dataset.write_spec("rerun.yaml", changed), out, workers=1)
+    # two new parts beside six old ones: no manifest to trust
+    assert not (out / "manifest.json").exists()
+    with pytest.raises(InvalidInputError, match=r"manifest\.json.*did not finish"):
+        read_batch(out)
+    # an old manifest with a part another run wrote: refused by its stored hash
+    shutil.copy(local_run / "manifest.json", out / "manifest.json")
+    with pytest.raises(InvalidInputError, match=r"parts/part-00000\.parquet.*another chunk"):
+        read_batch(out)

@@ -2,10 +2,11 @@
 written as one Parquet part (atomically), on the package's own pool or a Dask cluster.
 
 Output folder: ``parts/part-00000.parquet`` ... (one per chunk, in plan order, each with its
-chunk's content hash in the file metadata), ``manifest.json`` (versions, the parts in order)
-and ``summary.json`` (counts, failures by reason, throughput). A part whose stored hash
-equals its chunk's (same SPEC, same source bytes, same range, same code version) is not
-computed again with ``resume``. Local and Dask runs give identical part files.
+chunk's content hash in the file metadata), ``manifest.json`` (versions, the parts in order;
+written last, removed when a run starts) and ``summary.json`` (counts, failures by reason,
+throughput). A part whose stored hash equals its chunk's (same SPEC, same source bytes, same
+range, same code version) is not computed again with ``resume``. Local and Dask runs give
+identical part files.
 """
 
 from __future__ import annotations
@@ -41,6 +42,9 @@ from .spec import BatchSpec, parse_spec
 
 PARTS = "parts"
 """Subfolder of the part files."""
+
+MANIFEST = "manifest.json"
+"""File of a finished batch's parts in order (what ``read_batch`` reads)."""
 
 HASH_KEY = b"grasp_safety.chunk_hash"
 """Parquet metadata key of a part's chunk content hash."""
@@ -243,14 +247,25 @@ def read_batch(out_dir: str | Path, columns: Sequence[str] | None = None) -> pa.
     """The grasp table of a finished batch (its parts in manifest order), all columns or
     ``columns``."""
     out_dir = Path(out_dir)
-    manifest = json.loads((out_dir / "manifest.json").read_text(encoding="utf-8"))
+    try:
+        manifest = json.loads((out_dir / MANIFEST).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InvalidInputError(
+            MANIFEST, f"missing in '{out_dir}': the batch did not finish; run it again"
+        ) from None
     schema = grasp_schema(manifest["per_sample"])
     if columns is not None:
         schema = pa.schema([schema.field(name) for name in columns])
-    tables = [
-        pq.read_table(out_dir / PARTS / part["file"], columns=columns).replace_schema_metadata()
-        for part in manifest["parts"]
-    ]
+    tables = []
+    for part in manifest["parts"]:
+        rows = pq.read_table(out_dir / PARTS / part["file"], columns=columns)
+        if (rows.schema.metadata or {}).get(HASH_KEY) != part["chunk_hash"].encode():
+            raise InvalidInputError(
+                f"{PARTS}/{part['file']}",
+                f"is not the part {MANIFEST} lists (another chunk hash): the batch in "
+                f"'{out_dir}' is incomplete or was changed; run it again",
+            )
+        tables.append(rows.replace_schema_metadata())
     return pa.concat_tables(tables) if tables else schema.empty_table()
 
 
@@ -374,6 +389,7 @@ def run_batch(
     spec = parse_spec(data, spec_path.resolve().parent)
     out_dir = Path(out_dir)
     (out_dir / PARTS).mkdir(parents=True, exist_ok=True)
+    (out_dir / MANIFEST).unlink(missing_ok=True)  # until this run has written every part
     files, failures = discover(spec)
     chunks = plan_chunks(spec, files, per_sample)
     todo = [c for c in chunks if not (resume and part_is_done(out_dir, c))]
@@ -423,7 +439,7 @@ def run_batch(
             for c in chunks
         ],
     }
-    _write_json(out_dir / "manifest.json", manifest)
+    _write_json(out_dir / MANIFEST, manifest)
     summary = summarise(out_dir, failures)
     summary.update(
         {
