@@ -672,3 +672,25 @@ def test_failed_rerun_leaves_no_manifest_and_foreign_parts_are_refused(
     shutil.copy(local_run / "manifest.json", out / "manifest.json")
     with pytest.raises(InvalidInputError, match=r"parts/part-00000\.parquet.*another chunk"):
         read_batch(out)
+
+
+def test_resume_recomputes_when_code_or_a_scenarios_urdf_changes(
+    dataset: Dataset, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from grasp_safety_ros.dataset import batch
+
+    root = tmp_path / "data"
+    (root / "scenarios").mkdir(parents=True)
+    shutil.copy(dataset.root / "arm.urdf", root / "arm.urdf")
+    shutil.copy(dataset.root / "scenarios" / "d.yaml", root / "scenarios" / "d.yaml")
+    spec = {"chunk_grasps": 3, "sources": [{"format": "scenarios", "path": "scenarios/*.yaml"}]}
+    spec_path = root / "spec.yaml"
+    spec_path.write_text(yaml.safe_dump(spec))
+    out = tmp_path / "out"
+    assert run_batch(spec_path, out, workers=1)["chunks_computed"] == 2
+    assert run_batch(spec_path, out, workers=1, resume=True)["chunks_computed"] == 0
+    urdf = root / "arm.urdf"
+    urdf.write_text(_heavier(urdf.read_text()))
+    assert run_batch(spec_path, out, workers=1, resume=True)["chunks_computed"] == 2
+    monkeypatch.setattr(batch, "code_sha256", lambda: "other package sources")
+    assert run_batch(spec_path, out, workers=1, resume=True)["chunks_computed"] == 2

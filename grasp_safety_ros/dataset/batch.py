@@ -4,14 +4,15 @@ written as one Parquet part (atomically), on the package's own pool or a Dask cl
 Output folder: ``parts/part-00000.parquet`` ... (one per chunk, in plan order, each with its
 chunk's content hash in the file metadata), ``manifest.json`` (versions, the parts in order;
 written last, removed when a run starts) and ``summary.json`` (counts, failures by reason,
-throughput). A part whose stored hash equals its chunk's (same SPEC, same source bytes, same
-range, same code version) is not computed again with ``resume``. Local and Dask runs give
-identical part files.
+throughput). A part whose stored hash equals its chunk's (same SPEC, same source bytes and
+robot description, same range, same package sources) is not computed again with ``resume``.
+Local and Dask runs give identical part files.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 import os
@@ -37,7 +38,7 @@ from ..core.method.warm_up import warm_up
 from ..core.model.robot import resolve_urdf
 from .rows import block_columns
 from .schema import SCHEMA_VERSION, grasp_schema, table
-from .sources import Failure, GraspBlock, SourceFile, discover, load_block
+from .sources import Failure, GraspBlock, SourceFile, discover, load_block, scenario_of
 from .spec import BatchSpec, parse_spec
 
 PARTS = "parts"
@@ -102,14 +103,42 @@ class ChunkResult:
     worker: int
 
 
+@functools.cache
+def code_sha256() -> str:
+    """SHA-256 of the package's Python sources (names and bytes), once per process: a part
+    computed by other code is not resumed."""
+    root = Path(__file__).resolve().parents[1]
+    digest = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        digest.update(path.relative_to(root).as_posix().encode() + b"\0")
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def _robot_sha256(source: SourceFile) -> str:
+    """For a scenario file, the digest of the robot description it points to ("" if it
+    cannot be read: its rows say why); "" for other formats (the SPEC's robot is in its
+    hash)."""
+    if source.format != "scenarios":
+        return ""
+    try:
+        scenario = scenario_of(source)
+        return description_sha256(scenario.robot.urdf, scenario.base_dir)
+    except (GraspSafetyError, OSError):
+        return ""
+
+
 def plan_chunks(spec: BatchSpec, files: Sequence[SourceFile], per_sample: bool) -> list[Chunk]:
     """Chunks of at most ``spec.chunk_grasps`` grasps, file by file, in order."""
     chunks: list[Chunk] = []
     for source in files:
+        robot = _robot_sha256(source)
         for start in range(0, source.num_grasps, spec.chunk_grasps):
             stop = min(start + spec.chunk_grasps, source.num_grasps)
             inputs = (spec.content_hash, per_sample, source.format, source.name, source.sha256)
-            key = json.dumps([SCHEMA_VERSION, __version__, *inputs, start, stop])
+            key = json.dumps(
+                [SCHEMA_VERSION, __version__, code_sha256(), *inputs, robot, start, stop]
+            )
             digest = hashlib.sha256(key.encode()).hexdigest()
             chunks.append(Chunk(len(chunks), source, start, stop, digest))
     return chunks
