@@ -376,6 +376,10 @@ def test_cli_whole_arm_bad_input(tmp_path, capsys: pytest.CaptureFixture[str]) -
         ),
         ({"robot__exposed_points_m": {"right_lower_forearm": [[0, 0]]}}, "must be a list of"),
         ({"whole_arm__region": "elbow"}, "whole_arm.region: unknown body region 'elbow'"),
+        (
+            {"whole_arm__region": ["chest"]},
+            "whole_arm.region: must be one body region name, got ['chest']; regions: ",
+        ),
         ({"whole_arm__enabled": "yes"}, "whole_arm.enabled: must be true or false"),
     ):
         assert main(["rank", _scenario(tmp_path, **changes)]) == 2
