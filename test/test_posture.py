@@ -313,3 +313,24 @@ def test_scenario_posture_section_and_cli_json() -> None:
         assert [s["q"] for s in grasp["samples"]] == e.joint_positions.tolist()
         qd, _ = joint_velocities_accelerations(e.times_s, e.joint_positions)
         assert [s["qd"] for s in grasp["samples"]] == qd.tolist()
+
+
+def test_a_kept_restart_posture_holds_no_kernel_buffer(baxter_book) -> None:
+    """Every per-sample array of a posture kept from a restart owns its memory (a view would
+    keep the batch's whole kernel buffer alive), the links-only masses too."""
+    evaluator, grasps, trajectory, ranking = baxter_book
+    selected = select_postures(
+        evaluator, grasps, BOOK, trajectory, ranking, PostureConfig(restarts=12)
+    )
+    pairs = zip(selected.postures, selected.evaluations, strict=True)
+    kept = [e for p, e in pairs if p.selected > 0]
+    assert kept
+    for e in kept:
+        for name in (
+            "joint_positions",
+            "effective_mass_kg",
+            "links_only_effective_mass_kg",
+            "tip_speed_m_s",
+        ):
+            assert getattr(e, name).base is None, name
+        assert np.array_equal(e.links_only_effective_mass_kg, e.effective_mass_kg)
