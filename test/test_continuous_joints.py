@@ -118,16 +118,11 @@ def test_a_seed_a_turn_away_starts_the_output_there(tmp_path: Path, kinova: Robo
     assert np.max(np.abs(np.diff(q[:, 0]))) < 0.05
 
 
-def test_node_joint_trajectory_keeps_continuous_joints_unwrapped(kinova: RobotModel) -> None:
-    from builtin_interfaces.msg import Duration
-    from geometry_msgs.msg import Pose, PoseArray
-    from grasp_safety_msgs.srv import RankGrasps
-    from std_msgs.msg import Header
-    from test_ros_motions import planned_message
-    from test_ros_node import NodeUnderTest, book_path
-    from trajectory_msgs.msg import JointTrajectoryPoint
+def kinova_node(**parameters: object):
+    """A node on the Kinova chain (no joint-state seed, a small object, no restarts)."""
+    from test_ros_node import NodeUnderTest
 
-    harness = NodeUnderTest(
+    return NodeUnderTest(
         {
             "urdf": KINOVA[0],
             "base_frame": KINOVA[1],
@@ -136,9 +131,21 @@ def test_node_joint_trajectory_keeps_continuous_joints_unwrapped(kinova: RobotMo
             "object.mass_kg": 0.2,
             "object.inertia_about_com_kgm2": [1e-4, 0.0, 0.0, 1e-4, 0.0, 1e-4],
             "posture.restarts": 0,
-            "response.joint_trajectories": 2,
+            **parameters,
         }
     )
+
+
+def test_node_joint_trajectory_keeps_continuous_joints_unwrapped(kinova: RobotModel) -> None:
+    from builtin_interfaces.msg import Duration
+    from geometry_msgs.msg import Pose, PoseArray
+    from grasp_safety_msgs.srv import RankGrasps
+    from std_msgs.msg import Header
+    from test_ros_motions import planned_message
+    from test_ros_node import book_path
+    from trajectory_msgs.msg import JointTrajectoryPoint
+
+    harness = kinova_node(**{"response.joint_trajectories": 2})
     try:
         request = RankGrasps.Request()
         request.grasps = PoseArray(header=Header(frame_id="object"), poses=[Pose(), Pose()])
@@ -178,22 +185,10 @@ def test_node_seed_a_turn_away_starts_the_joint_trajectory_there(kinova: RobotMo
     from grasp_safety_msgs.srv import RankGrasps
     from nav_msgs.msg import Path as PathMsg
     from std_msgs.msg import Header
-    from test_ros_node import NodeUnderTest, pose_from_yaml
+    from test_ros_node import pose_from_yaml
 
     seed = [3.0 + 2.0 * math.pi, *OTHERS]
-    harness = NodeUnderTest(
-        {
-            "urdf": KINOVA[0],
-            "base_frame": KINOVA[1],
-            "tip_frame": KINOVA[2],
-            "use_joint_states_seed": False,
-            "ik_seed": seed,
-            "object.mass_kg": 0.2,
-            "object.inertia_about_com_kgm2": [1e-4, 0.0, 0.0, 1e-4, 0.0, 1e-4],
-            "posture.restarts": 0,
-            "response.joint_trajectories": 1,
-        }
-    )
+    harness = kinova_node(**{"ik_seed": seed, "response.joint_trajectories": 1})
     try:
         request = RankGrasps.Request()
         request.grasps = PoseArray(header=Header(frame_id="object"), poses=[Pose()])
