@@ -584,3 +584,113 @@ def test_the_docs_spec_example_is_valid(tmp_path: Path) -> None:
     spec = parse_spec(yaml.safe_load(example.group(1)), tmp_path)
     assert [s.format for s in spec.sources] == ["acronym", "graspgen", "scenarios"]
     assert spec.trajectory is not None and spec.trajectory.num_samples == 51
+
+
+def _heavier(urdf: str) -> str:
+    """The URDF with every link of mass 2 kg."""
+    import re
+
+    return re.sub(r'<mass value="[^"]*"/>', '<mass value="2.0"/>', urdf)
+
+
+def test_evaluator_cache_keys_on_armature_and_description_bytes(
+    dataset: Dataset, tmp_path: Path
+) -> None:
+    from dataclasses import replace
+
+    from grasp_safety_ros.dataset import batch
+
+    scenario = load_scenario(dataset.root / "scenarios" / "d.yaml")
+    plain = batch._evaluator(scenario, 1)
+    geared = batch._evaluator(
+        replace(scenario, robot=replace(scenario.robot, armature_kgm2=[0.05] * 6)), 1
+    )
+    assert not plain.robot.armature_given and geared.robot.armature_given
+    assert np.allclose(geared.robot.armature_kgm2, 0.05, rtol=0, atol=0)
+    # the same file name with other content (a long-lived worker re-running): another model
+    urdf = tmp_path / "arm.urdf"
+    urdf.write_text(serial_arm_urdf(ARM6_AXES))
+    moved = replace(scenario, robot=replace(scenario.robot, urdf=str(urdf)))
+    before = batch._evaluator(moved, 1)
+    urdf.write_text(_heavier(serial_arm_urdf(ARM6_AXES)))
+    after = batch._evaluator(moved, 1)
+    assert after is not before
+
+
+def test_dask_task_keys_differ_between_batches(dataset: Dataset, tmp_path: Path) -> None:
+    """Two batches sharing a scheduler must not share task keys (they would get each other's
+    results): the keys are the chunks' content hashes."""
+    from distributed import Client, LocalCluster
+
+    keys: list[set[str]] = []
+    with (
+        LocalCluster(
+            n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None
+        ) as cluster,
+        Client(cluster) as client,
+    ):
+        compute = client.compute
+
+        def recording(tasks: list[Any], **kwargs: Any) -> Any:
+            keys.append({str(t.key) for t in tasks})
+            return compute(tasks, **kwargs)
+
+        client.compute = recording  # type: ignore[method-assign]
+        spec = dict(dataset.spec, sources=[dataset.spec["sources"][0]])
+        for metric in ("mean", "max"):
+            path = dataset.write_spec(f"keys_{metric}.yaml", dict(spec, metric=metric))
+            run_batch(path, tmp_path / metric, client=client)
+    assert len(keys) == 2 and len(keys[0]) == 4 and not keys[0] & keys[1]
+
+
+def test_failed_rerun_leaves_no_manifest_and_foreign_parts_are_refused(
+    dataset: Dataset, local_run: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from grasp_safety_ros.dataset import batch
+
+    out = tmp_path / "rerun"
+    shutil.copytree(local_run, out)
+    calls = 0
+    evaluate = batch.evaluate_chunk
+
+    def failing(*args: Any) -> Any:
+        nonlocal calls
+        calls += 1
+        if calls > 2:
+            raise RuntimeError("worker lost")
+        return evaluate(*args)
+
+    monkeypatch.setattr(batch, "evaluate_chunk", failing)
+    changed = dict(dataset.spec, metric="max")
+    with pytest.raises(RuntimeError):
+        run_batch(dataset.write_spec("rerun.yaml", changed), out, workers=1)
+    # two new parts beside six old ones: no manifest to trust
+    assert not (out / "manifest.json").exists()
+    with pytest.raises(InvalidInputError, match=r"manifest\.json.*did not finish"):
+        read_batch(out)
+    # an old manifest with a part another run wrote: refused by its stored hash
+    shutil.copy(local_run / "manifest.json", out / "manifest.json")
+    with pytest.raises(InvalidInputError, match=r"parts/part-00000\.parquet.*another chunk"):
+        read_batch(out)
+
+
+def test_resume_recomputes_when_code_or_a_scenarios_urdf_changes(
+    dataset: Dataset, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from grasp_safety_ros.dataset import batch
+
+    root = tmp_path / "data"
+    (root / "scenarios").mkdir(parents=True)
+    shutil.copy(dataset.root / "arm.urdf", root / "arm.urdf")
+    shutil.copy(dataset.root / "scenarios" / "d.yaml", root / "scenarios" / "d.yaml")
+    spec = {"chunk_grasps": 3, "sources": [{"format": "scenarios", "path": "scenarios/*.yaml"}]}
+    spec_path = root / "spec.yaml"
+    spec_path.write_text(yaml.safe_dump(spec))
+    out = tmp_path / "out"
+    assert run_batch(spec_path, out, workers=1)["chunks_computed"] == 2
+    assert run_batch(spec_path, out, workers=1, resume=True)["chunks_computed"] == 0
+    urdf = root / "arm.urdf"
+    urdf.write_text(_heavier(urdf.read_text()))
+    assert run_batch(spec_path, out, workers=1, resume=True)["chunks_computed"] == 2
+    monkeypatch.setattr(batch, "code_sha256", lambda: "other package sources")
+    assert run_batch(spec_path, out, workers=1, resume=True)["chunks_computed"] == 2

@@ -102,16 +102,27 @@ def test_cli_json_keeps_continuous_joints_unwrapped(tmp_path: Path, kinova: Robo
     np.testing.assert_array_equal(qd[:, 0], 0.25)  # the planner's own velocities
 
 
-def test_node_joint_trajectory_keeps_continuous_joints_unwrapped(kinova: RobotModel) -> None:
-    from builtin_interfaces.msg import Duration
-    from geometry_msgs.msg import Pose, PoseArray
-    from grasp_safety_msgs.srv import RankGrasps
-    from std_msgs.msg import Header
-    from test_ros_motions import planned_message
-    from test_ros_node import NodeUnderTest, book_path
-    from trajectory_msgs.msg import JointTrajectoryPoint
+def test_a_seed_a_turn_away_starts_the_output_there(tmp_path: Path, kinova: RobotModel) -> None:
+    """A seed of 3.0 + 2π on the continuous joint 1 (the controller's reading after a turn):
+    q starts at 3.0 + 2π, not at 3.0 (which would spin the arm a full turn back)."""
+    data = scenario(kinova)
+    data["robot"]["seed"] = [3.0 + 2.0 * math.pi, *OTHERS]
+    data["grasps"] = data["grasps"][:1]
+    path, out = tmp_path / "turned.yaml", tmp_path / "turned.json"
+    path.write_text(yaml.safe_dump(data))
+    assert main(["rank", str(path), "--json", str(out)]) == 0
+    (ik,) = json.loads(out.read_text())["grasps"]
+    q = np.array([s["q"] for s in ik["samples"]])
+    assert q[0, 0] == pytest.approx(3.0 + 2.0 * math.pi, abs=1e-5)
+    assert q[-1, 0] == pytest.approx(3.3 + 2.0 * math.pi, abs=1e-5)
+    assert np.max(np.abs(np.diff(q[:, 0]))) < 0.05
 
-    harness = NodeUnderTest(
+
+def kinova_node(**parameters: object):
+    """A node on the Kinova chain (no joint-state seed, a small object, no restarts)."""
+    from test_ros_node import NodeUnderTest
+
+    return NodeUnderTest(
         {
             "urdf": KINOVA[0],
             "base_frame": KINOVA[1],
@@ -120,9 +131,21 @@ def test_node_joint_trajectory_keeps_continuous_joints_unwrapped(kinova: RobotMo
             "object.mass_kg": 0.2,
             "object.inertia_about_com_kgm2": [1e-4, 0.0, 0.0, 1e-4, 0.0, 1e-4],
             "posture.restarts": 0,
-            "response.joint_trajectories": 2,
+            **parameters,
         }
     )
+
+
+def test_node_joint_trajectory_keeps_continuous_joints_unwrapped(kinova: RobotModel) -> None:
+    from builtin_interfaces.msg import Duration
+    from geometry_msgs.msg import Pose, PoseArray
+    from grasp_safety_msgs.srv import RankGrasps
+    from std_msgs.msg import Header
+    from test_ros_motions import planned_message
+    from test_ros_node import book_path
+    from trajectory_msgs.msg import JointTrajectoryPoint
+
+    harness = kinova_node(**{"response.joint_trajectories": 2})
     try:
         request = RankGrasps.Request()
         request.grasps = PoseArray(header=Header(frame_id="object"), poses=[Pose(), Pose()])
@@ -151,5 +174,38 @@ def test_node_joint_trajectory_keeps_continuous_joints_unwrapped(kinova: RobotMo
         values = {v.key: v.value for v in harness.node.diagnostics_status().values}
         assert values["armature"] == NO_ARMATURE_NOTE  # Kinova without armature: said once
         assert response.ranking.armature_note == NO_ARMATURE_NOTE
+    finally:
+        harness.close()
+
+
+def test_node_seed_a_turn_away_starts_the_joint_trajectory_there(kinova: RobotModel) -> None:
+    """The node's ik_seed of 3.0 + 2π on joint 1: the JointTrajectory starts at 3.0 + 2π."""
+    from builtin_interfaces.msg import Time
+    from geometry_msgs.msg import Pose, PoseArray, PoseStamped
+    from grasp_safety_msgs.srv import RankGrasps
+    from nav_msgs.msg import Path as PathMsg
+    from std_msgs.msg import Header
+    from test_ros_node import pose_from_yaml
+
+    seed = [3.0 + 2.0 * math.pi, *OTHERS]
+    harness = kinova_node(**{"ik_seed": seed, "response.joint_trajectories": 1})
+    try:
+        request = RankGrasps.Request()
+        request.grasps = PoseArray(header=Header(frame_id="object"), poses=[Pose()])
+        request.object_trajectory = PathMsg(
+            header=Header(frame_id=KINOVA[1]),
+            poses=[
+                PoseStamped(
+                    header=Header(stamp=Time(sec=sec)),
+                    pose=pose_from_yaml(pose_entry(kinova, [angle, *OTHERS])),
+                )
+                for sec, angle in ((0, 3.0), (2, 3.3))
+            ],
+        )
+        response = harness.rank(request)
+        assert response.success, response.message
+        points = response.ranking.evaluations[0].joint_trajectory.points
+        assert points[0].positions[0] == pytest.approx(seed[0], abs=1e-5)
+        assert points[-1].positions[0] == pytest.approx(3.3 + 2.0 * math.pi, abs=1e-5)
     finally:
         harness.close()

@@ -177,3 +177,27 @@ def test_posture_selection_keeps_a_planned_motion_as_given(baxter) -> None:
     assert selected.postures[0].postures_tried == 1
     np.testing.assert_array_equal(planned_result.joint_positions, positions)
     assert selected.postures[1].postures_tried >= 1
+
+
+def test_a_plan_without_velocities_exports_the_analysed_splines_rates(baxter) -> None:
+    """Joint positions of a cubic polynomial in time: the analysed (not-a-knot) spline is
+    that polynomial, so the exported q̇, q̈ are its derivatives, also at the ends where the
+    plan is not at rest (a clamped spline would say q̇ = 0 there)."""
+    from grasp_safety_ros.core.method.executable import rates_for_execution
+
+    times = np.linspace(0.0, 2.0, 9)
+    coefficients = np.array([0.05, -0.04, 0.03, 0.02, -0.05, 0.04, 0.01])
+    positions = np.array(BAXTER_SEED) + np.outer(
+        times - 0.3 * times**2 + 0.1 * times**3, coefficients
+    )
+    velocities = np.outer(1.0 - 0.6 * times + 0.3 * times**2, coefficients)
+    accelerations = np.outer(-0.6 + 0.6 * times, coefficients)
+    planned = PlannedJointTrajectory(baxter.joint_names, times, positions)
+    evaluator = GraspSafetyEvaluator(baxter)
+    joint = evaluator.evaluate(Grasp(GRASP, joint_trajectory=planned), BOOK, book_trajectory())
+    assert joint.feasible, joint.reason
+    rates, seconds = rates_for_execution(
+        joint.times_s, joint.joint_positions, joint.planned_joint_rates
+    )
+    np.testing.assert_allclose(rates, velocities, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(seconds, accelerations, rtol=0, atol=1e-12)

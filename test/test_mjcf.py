@@ -91,7 +91,47 @@ def test_mjcf_text_and_file_load_with_their_armature_and_missing_meshes(tmp_path
         np.testing.assert_array_equal(robot.armature_kgm2, ARMATURE)
         assert robot.armature_given
     override = RobotModel.from_urdf(arm_mjcf(), "base_link", "tool", armature_kgm2={"j1": 1.0})
-    np.testing.assert_array_equal(override.armature_kgm2, [1.0, 0, 0, 0])
+    np.testing.assert_array_equal(override.armature_kgm2, [1.0, *ARMATURE[1:]])
+
+
+def test_a_partial_armature_mapping_keeps_the_mjcf_armature_of_the_other_joints(
+    tmp_path: Path,
+) -> None:
+    """Naming one joint must not zero the others' rotor inertia (that would lower every
+    effective mass): in the model, a scenario (value and range) and the node parameters."""
+    from grasp_safety_ros.cli.scenario import parse_robot
+    from grasp_safety_ros.ros.parameters import build_robot, settings_from_parameters
+
+    kept = [*ARMATURE[:3], 0.1]
+    robot = RobotModel.from_urdf(arm_mjcf(), "base_link", "tool")
+    np.testing.assert_array_equal(robot.with_armature({"j4": 0.1}).armature_kgm2, kept)
+    (tmp_path / "arm.xml").write_text(arm_mjcf())
+    for armature, lower in (({"j4": 0.1}, kept), ({"j4": [0.0, 0.1]}, [*ARMATURE[:3], 0.0])):
+        spec = parse_robot(
+            {
+                "urdf": "arm.xml",
+                "base_frame": "base_link",
+                "tip_frame": "tool",
+                "armature_kgm2": armature,
+            }
+        )
+        loaded = spec.load(tmp_path)
+        np.testing.assert_array_equal(loaded.armature_kgm2, kept)
+        bounds = spec.armature_range(loaded)
+        np.testing.assert_array_equal(bounds.lower_kgm2, lower)
+        np.testing.assert_array_equal(bounds.upper_kgm2, kept)
+    settings = settings_from_parameters(
+        {
+            "robot_description": arm_mjcf(),
+            "base_frame": "base_link",
+            "tip_frame": "tool",
+            "robot.armature_kgm2": [0.1],
+            "robot.armature_joint_names": ["j4"],
+        }
+    )
+    bundle = build_robot(settings, None)
+    assert bundle is not None
+    np.testing.assert_array_equal(bundle.robot.armature_kgm2, kept)
 
 
 def test_mjcf_equals_urdf_with_armature_to_1e_12() -> None:

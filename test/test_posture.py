@@ -372,3 +372,24 @@ def test_selection_by_the_whole_arm(baxter_book) -> None:
         assert whole_arm_score(whole, region) == pytest.approx(
             by_arm.postures[k].criterion_value, rel=1e-12
         )
+
+
+def test_a_kept_restart_posture_holds_no_kernel_buffer(baxter_book) -> None:
+    """Every per-sample array of a posture kept from a restart owns its memory (a view would
+    keep the batch's whole kernel buffer alive), the links-only masses too."""
+    evaluator, grasps, trajectory, ranking = baxter_book
+    selected = select_postures(
+        evaluator, grasps, BOOK, trajectory, ranking, PostureConfig(restarts=12)
+    )
+    pairs = zip(selected.postures, selected.evaluations, strict=True)
+    kept = [e for p, e in pairs if p.selected > 0]
+    assert kept
+    for e in kept:
+        for name in (
+            "joint_positions",
+            "effective_mass_kg",
+            "links_only_effective_mass_kg",
+            "tip_speed_m_s",
+        ):
+            assert getattr(e, name).base is None, name
+        assert np.array_equal(e.links_only_effective_mass_kg, e.effective_mass_kg)

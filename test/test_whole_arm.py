@@ -4,6 +4,8 @@ site resolution, ISO/TS 15066 over sites and the whole-arm ranking."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -16,7 +18,7 @@ from grasp_safety_ros.core import (
     RobotModel,
     solid_box,
 )
-from grasp_safety_ros.core.analyses.iso15066 import BODY_REGIONS, assess_motion
+from grasp_safety_ros.core.analyses.iso15066 import BODY_REGIONS, BodyRegion, assess_motion
 from grasp_safety_ros.core.analyses.whole_arm import (
     ArmTerms,
     assess_sites,
@@ -291,6 +293,28 @@ def test_whole_arm_ranking(book: tuple) -> None:
     assert order_by_whole_arm(whole, "upper_arm_elbow") == tuple(np.argsort(forces, kind="stable"))
 
 
+def test_a_site_that_cannot_move_against_an_immovable_region_has_no_force(book: tuple) -> None:
+    """m_h = inf and m_r = inf (a site at rest that cannot move): F = 0·v, not 0·inf = NaN;
+    the whole-arm order stays total (a NaN score, if any, goes last)."""
+    from dataclasses import replace
+
+    wall = BodyRegion("wall", 100.0, 200.0, 50_000.0, math.inf)
+    speeds = np.array([[0.0, 0.5], [0.0, 0.2]])
+    masses = np.array([[math.inf, 2.0], [math.inf, 3.0]])
+    (assessed,) = assess_sites(speeds, masses, 1.0, [wall])
+    expected = 0.5 * math.sqrt(2.0 * 50_000.0)  # μ = m_r where m_h = inf
+    assert assessed.peak_contact_force_n == pytest.approx(expected, rel=1e-12)
+    assert assessed.worst_site == 1 and assessed.admissible == (expected <= 200.0)
+    _, _, _, whole = book
+    region = "upper_arm_elbow"
+    assert whole[0].feasible
+    unknown = tuple(replace(r, peak_contact_force_n=math.nan) for r in whole[0].regions)
+    rest = [w for w in whole[1:] if w.feasible]
+    order = order_by_whole_arm([replace(whole[0], regions=unknown), *rest], region)
+    by_force = sorted(rest, key=lambda w: whole_arm_score(w, region))
+    assert order == (*(w.index for w in by_force), whole[0].index)
+
+
 def test_sites_resolved_once(arm7: RobotModel) -> None:
     sites = resolve_arm_sites(arm7, {"link3": [[0.1, 0.0, 0.0]], "base_link": [[0, 0, 0]]})
     assert sites.names == ("j3", "j4", "j5", "j6", "j7", "tool", "link3[0]")
@@ -376,6 +400,10 @@ def test_cli_whole_arm_bad_input(tmp_path, capsys: pytest.CaptureFixture[str]) -
         ),
         ({"robot__exposed_points_m": {"right_lower_forearm": [[0, 0]]}}, "must be a list of"),
         ({"whole_arm__region": "elbow"}, "whole_arm.region: unknown body region 'elbow'"),
+        (
+            {"whole_arm__region": ["chest"]},
+            "whole_arm.region: must be one body region name, got ['chest']; regions: ",
+        ),
         ({"whole_arm__enabled": "yes"}, "whole_arm.enabled: must be true or false"),
     ):
         assert main(["rank", _scenario(tmp_path, **changes)]) == 2

@@ -140,7 +140,8 @@ class RobotSpec:
         seed: IK seed for the first sample, chain joint order [rad or m]; None: mid-range.
         locked_joints: Positions of joints off the chain (default: neutral) [rad or m].
         armature_kgm2: Reflected rotor inertia (core.model.armature): a list in chain order or
-            ``{joint_name: value}``, values or ``[lo, hi]`` ranges [kg m^2, kg if prismatic],
+            ``{joint_name: value}`` (the joints not named keep the description's own),
+            values or ``[lo, hi]`` ranges [kg m^2, kg if prismatic],
             or ``published`` / ``published:<entry>``; None: the description's own (MJCF) or
             none.
     """
@@ -168,7 +169,7 @@ class RobotSpec:
         if isinstance(value, str):
             entry = published_for(value, self.urdf, robot.joint_names)
             value = published_values(entry, robot.joint_names)
-        return armature_range(value, robot.joint_names)
+        return armature_range(value, robot.joint_names, robot.armature_kgm2)
 
     def published_armature(self, robot: RobotModel) -> PublishedArmature | None:
         """The published entry the armature comes from, if any."""

@@ -2,14 +2,17 @@
 written as one Parquet part (atomically), on the package's own pool or a Dask cluster.
 
 Output folder: ``parts/part-00000.parquet`` ... (one per chunk, in plan order, each with its
-chunk's content hash in the file metadata), ``manifest.json`` (versions, the parts in order)
-and ``summary.json`` (counts, failures by reason, throughput). A part whose stored hash
-equals its chunk's (same SPEC, same source bytes, same range, same code version) is not
-computed again with ``resume``. Local and Dask runs give identical part files.
+chunk's content hash in the file metadata), ``manifest.json`` (versions, the parts in order;
+written last, removed when a run starts) and ``summary.json`` (counts, failures by reason,
+throughput). A part whose stored hash equals its chunk's (same SPEC, same source bytes and
+robot description, same range, same package sources) is not computed again with ``resume``.
+Local and Dask runs give identical part files.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import hashlib
 import json
 import os
@@ -32,13 +35,17 @@ from ..cli.scenario import Scenario, rank_with_evaluator, read_yaml_file
 from ..core.exceptions import GraspSafetyError, InvalidInputError
 from ..core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
 from ..core.method.warm_up import warm_up
+from ..core.model.robot import resolve_urdf
 from .rows import block_columns
 from .schema import SCHEMA_VERSION, grasp_schema, table
-from .sources import Failure, GraspBlock, SourceFile, discover, load_block
+from .sources import Failure, GraspBlock, SourceFile, discover, load_block, scenario_of
 from .spec import BatchSpec, parse_spec
 
 PARTS = "parts"
 """Subfolder of the part files."""
+
+MANIFEST = "manifest.json"
+"""File of a finished batch's parts in order (what ``read_batch`` reads)."""
 
 HASH_KEY = b"grasp_safety.chunk_hash"
 """Parquet metadata key of a part's chunk content hash."""
@@ -96,14 +103,42 @@ class ChunkResult:
     worker: int
 
 
+@functools.cache
+def code_sha256() -> str:
+    """SHA-256 of the package's Python sources (names and bytes), once per process: a part
+    computed by other code is not resumed."""
+    root = Path(__file__).resolve().parents[1]
+    digest = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        digest.update(path.relative_to(root).as_posix().encode() + b"\0")
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def _robot_sha256(source: SourceFile) -> str:
+    """For a scenario file, the digest of the robot description it points to ("" if it
+    cannot be read: its rows say why); "" for other formats (the SPEC's robot is in its
+    hash)."""
+    if source.format != "scenarios":
+        return ""
+    try:
+        scenario = scenario_of(source)
+        return description_sha256(scenario.robot.urdf, scenario.base_dir)
+    except (GraspSafetyError, OSError):
+        return ""
+
+
 def plan_chunks(spec: BatchSpec, files: Sequence[SourceFile], per_sample: bool) -> list[Chunk]:
     """Chunks of at most ``spec.chunk_grasps`` grasps, file by file, in order."""
     chunks: list[Chunk] = []
     for source in files:
+        robot = _robot_sha256(source)
         for start in range(0, source.num_grasps, spec.chunk_grasps):
             stop = min(start + spec.chunk_grasps, source.num_grasps)
             inputs = (spec.content_hash, per_sample, source.format, source.name, source.sha256)
-            key = json.dumps([SCHEMA_VERSION, __version__, *inputs, start, stop])
+            key = json.dumps(
+                [SCHEMA_VERSION, __version__, code_sha256(), *inputs, robot, start, stop]
+            )
             digest = hashlib.sha256(key.encode()).hexdigest()
             chunks.append(Chunk(len(chunks), source, start, stop, digest))
     return chunks
@@ -115,6 +150,13 @@ _LOCK = threading.Lock()
 _WARMED = False
 _SPECS: dict[str, BatchSpec] = {}
 _EVALUATORS: dict[tuple[str, ...], GraspSafetyEvaluator] = {}
+
+
+def description_sha256(urdf: str, base_dir: Path | None) -> str:
+    """SHA-256 of a robot description: of its file's bytes when ``urdf`` names a file (so an
+    edited file counts as another robot), else of the XML text."""
+    text, is_xml = resolve_urdf(urdf, base_dir)
+    return hashlib.sha256(text.encode() if is_xml else Path(text).read_bytes()).hexdigest()
 
 
 def _warm_up_once() -> None:
@@ -137,10 +179,8 @@ def _evaluator(scenario: Scenario, workers: int) -> GraspSafetyEvaluator:
     """The process's evaluator for the scenario's robot and metric (URDF parsed once)."""
     robot = scenario.robot
     key = (
-        robot.urdf,
-        robot.base_frame,
-        robot.tip_frame,
-        json.dumps(robot.locked_joints, sort_keys=True),
+        json.dumps(dataclasses.asdict(robot), sort_keys=True, default=str),
+        description_sha256(robot.urdf, scenario.base_dir),
         str(scenario.base_dir),
         scenario.metric,
         str(workers),
@@ -236,14 +276,25 @@ def read_batch(out_dir: str | Path, columns: Sequence[str] | None = None) -> pa.
     """The grasp table of a finished batch (its parts in manifest order), all columns or
     ``columns``."""
     out_dir = Path(out_dir)
-    manifest = json.loads((out_dir / "manifest.json").read_text(encoding="utf-8"))
+    try:
+        manifest = json.loads((out_dir / MANIFEST).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InvalidInputError(
+            MANIFEST, f"missing in '{out_dir}': the batch did not finish; run it again"
+        ) from None
     schema = grasp_schema(manifest["per_sample"])
     if columns is not None:
         schema = pa.schema([schema.field(name) for name in columns])
-    tables = [
-        pq.read_table(out_dir / PARTS / part["file"], columns=columns).replace_schema_metadata()
-        for part in manifest["parts"]
-    ]
+    tables = []
+    for part in manifest["parts"]:
+        rows = pq.read_table(out_dir / PARTS / part["file"], columns=columns)
+        if (rows.schema.metadata or {}).get(HASH_KEY) != part["chunk_hash"].encode():
+            raise InvalidInputError(
+                f"{PARTS}/{part['file']}",
+                f"is not the part {MANIFEST} lists (another chunk hash): the batch in "
+                f"'{out_dir}' is incomplete or was changed; run it again",
+            )
+        tables.append(rows.replace_schema_metadata())
     return pa.concat_tables(tables) if tables else schema.empty_table()
 
 
@@ -288,7 +339,7 @@ def _run_dask(payload: SpecPayload, chunks: Sequence[Chunk], client: Any) -> Ite
     shared = dask.delayed(payload, pure=True)
     tasks = [
         dask.delayed(evaluate_chunk, pure=True)(
-            shared, chunk, 1, dask_key_name=f"chunk-{chunk.index}"
+            shared, chunk, 1, dask_key_name=f"chunk-{chunk.content_hash}"
         )
         for chunk in chunks
     ]
@@ -367,6 +418,7 @@ def run_batch(
     spec = parse_spec(data, spec_path.resolve().parent)
     out_dir = Path(out_dir)
     (out_dir / PARTS).mkdir(parents=True, exist_ok=True)
+    (out_dir / MANIFEST).unlink(missing_ok=True)  # until this run has written every part
     files, failures = discover(spec)
     chunks = plan_chunks(spec, files, per_sample)
     todo = [c for c in chunks if not (resume and part_is_done(out_dir, c))]
@@ -416,7 +468,7 @@ def run_batch(
             for c in chunks
         ],
     }
-    _write_json(out_dir / "manifest.json", manifest)
+    _write_json(out_dir / MANIFEST, manifest)
     summary = summarise(out_dir, failures)
     summary.update(
         {

@@ -326,6 +326,11 @@ def _scenario(path: Path, sha256: str) -> Scenario:
     return load_scenario(path)
 
 
+def scenario_of(source: SourceFile) -> Scenario:
+    """The scenario of a scenario-format source file (parsed once per content)."""
+    return _scenario(source.path, source.sha256)
+
+
 def _scenario_block(source: SourceFile, start: int, stop: int) -> GraspBlock:
     scenario = _scenario(source.path, source.sha256)
     quality = scenario.options.grasp_quality

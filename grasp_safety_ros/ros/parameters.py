@@ -73,8 +73,8 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
     ),
     "robot.armature_joint_names": ParameterSpec(
         [],
-        "chain joints the values of robot.armature_kgm2 are for (the others: 0); empty: all "
-        "chain joints in order",
+        "chain joints the values of robot.armature_kgm2 are for (the others keep the "
+        "description's own: an MJCF's, else 0); empty: all chain joints in order",
         item_type=str,
     ),
     "robot.armature_published": ParameterSpec(

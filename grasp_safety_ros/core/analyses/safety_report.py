@@ -127,6 +127,12 @@ class AnalysisOptions:
         if self.arm_points_m is not None:
             points = check_exposed_points_m(self.arm_points_m)
             object.__setattr__(self, "arm_points_m", MappingProxyType(points))
+        if not isinstance(self.whole_arm_region, str):
+            raise InvalidInputError(
+                "whole_arm.region",
+                f"must be one body region name, got {self.whole_arm_region!r}; regions: "
+                f"{', '.join(BODY_REGIONS)}",
+            )
         if self.whole_arm_region not in BODY_REGIONS:
             raise InvalidInputError(
                 "whole_arm.region",

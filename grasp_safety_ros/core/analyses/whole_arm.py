@@ -376,7 +376,9 @@ def assess_sites(
     speeds = np.asarray(speed_m_s, dtype=float)
     assessed = []
     for region in regions:
-        force = transient_contact_force_n(speeds, effective_mass_kg, region)
+        with np.errstate(divide="ignore", invalid="ignore"):  # m_h = m_r = inf: μ = inf
+            force = transient_contact_force_n(speeds, effective_mass_kg, region)
+        force = np.where(speeds > 0.0, force, 0.0)  # a site at rest: no force (not 0·inf)
         if region.max_transient_force_n is None:
             ratio = np.where(speeds > 0.0, np.inf, 0.0)
         else:
@@ -565,9 +567,14 @@ def whole_arm_score(whole_arm: WholeArmEvaluation, region: str) -> float:
 
 
 def order_by_whole_arm(whole_arm: Sequence[WholeArmEvaluation], region: str) -> tuple[int, ...]:
-    """Feasible grasps by ``whole_arm_score``, lowest first (ties: input order)."""
-    scored = [(whole_arm_score(w, region), k) for k, w in enumerate(whole_arm) if w.feasible]
-    return tuple(whole_arm[k].index for _, k in sorted(scored))
+    """Feasible grasps by ``whole_arm_score``, lowest first (ties: input order; a NaN score
+    last, so the order is total)."""
+    scored = []
+    for k, w in enumerate(whole_arm):
+        if w.feasible:
+            score = whole_arm_score(w, region)
+            scored.append((math.isnan(score), 0.0 if math.isnan(score) else score, k))
+    return tuple(whole_arm[k].index for *_, k in sorted(scored))
 
 
 @dataclass(frozen=True)

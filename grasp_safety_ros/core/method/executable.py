@@ -52,8 +52,9 @@ def rates_for_execution(
     joint_positions: np.ndarray,
     planned_rates: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """q̇ and q̈ to execute: a planner's own (``planned_rates``, e.g. a GraspEvaluation's
-    ``planned_joint_rates``) when given, else ``joint_velocities_accelerations``."""
+    """q̇ and q̈ to execute: a planned trajectory's, of the interpolation its analysis used
+    (``planned_rates``, e.g. a GraspEvaluation's ``planned_joint_rates``) when given, else
+    ``joint_velocities_accelerations``."""
     if planned_rates is not None:
         return planned_rates
     return joint_velocities_accelerations(times_s, joint_positions)

@@ -167,12 +167,13 @@ class JointSpaceTrajectory:
         s, ds, dds = quintic_time_scaling(tau)
         return s, ds / self.duration_s, dds / self.duration_s**2
 
-    def joint_rates(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """The planner's joint velocities [rad/s or m/s] at the points and the accelerations
-        [rad/s² or m/s²] of their Hermite interpolation, chain order; None when the planner
-        gave no velocities."""
+    def joint_rates(self) -> tuple[np.ndarray, np.ndarray]:
+        """The joint velocities [rad/s or m/s] and accelerations [rad/s² or m/s²] at the
+        points, chain order, of the interpolation the analyses use: the planner's velocities
+        and their Hermite interpolation's accelerations, or without velocities the
+        derivatives of the (not-a-knot) cubic spline through the positions."""
         if self.planned.velocities is None:
-            return None
+            return self._spline(self.planned.times_s, 1), self._spline(self.planned.times_s, 2)
         velocities = self.planned.velocities[:, self.planned.chain_columns(self.robot)]
         return np.array(velocities), self._spline(self.planned.times_s, 2)
 

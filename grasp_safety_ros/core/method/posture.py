@@ -328,12 +328,18 @@ def select_postures(
 
 def _detached(evaluation: GraspEvaluation) -> GraspEvaluation:
     """The evaluation with its per-sample arrays copied: a kept posture must not hold the
-    kernel buffers of every candidate of its batch."""
+    kernel buffers of every candidate of its batch (the links-only masses are the masses
+    themselves without armature: one copy for both then)."""
+    masses = np.array(evaluation.effective_mass_kg)
+    links_only = evaluation.links_only_effective_mass_kg
     return replace(
         evaluation,
         joint_positions=np.array(evaluation.joint_positions),
         directions_in_base=np.array(evaluation.directions_in_base),
-        effective_mass_kg=np.array(evaluation.effective_mass_kg),
+        effective_mass_kg=masses,
+        links_only_effective_mass_kg=(
+            masses if links_only is evaluation.effective_mass_kg else np.array(links_only)
+        ),
         direction_is_worst_case=np.array(evaluation.direction_is_worst_case),
         tip_speed_m_s=np.array(evaluation.tip_speed_m_s),
         ik_iterations=np.array(evaluation.ik_iterations),

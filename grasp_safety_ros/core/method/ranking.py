@@ -104,13 +104,16 @@ class GraspSafetyEvaluator:
         self.config = config or EvaluationConfig()
         self.ik = IKSolver(robot, self.config.ik, self.config.backend)
 
-    def seed_q(self, seed_positions: Sequence[float] | np.ndarray | None) -> np.ndarray:
-        """Pinocchio configuration of an IK seed given in chain joint order (or the default)."""
+    def seed(
+        self, seed_positions: Sequence[float] | np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """An IK seed given in chain joint order (or the default), checked: its Pinocchio
+        configuration and its positions as given (continuous joints not wrapped)."""
         if seed_positions is None:
-            return self.robot.q_from_positions(self.robot.default_seed_positions())
-        return self.robot.q_from_positions(
-            self.robot.check_positions(seed_positions, "robot.seed")
-        )
+            positions = np.asarray(self.robot.default_seed_positions(), dtype=float)
+        else:
+            positions = self.robot.check_positions(seed_positions, "robot.seed")
+        return self.robot.q_from_positions(positions), np.asarray(positions, dtype=float)
 
     def trajectory_for(self, grasp: Grasp, trajectory: Trajectory) -> Trajectory:
         """The motion a grasp is evaluated along: its planned joint trajectory if it has one
@@ -132,13 +135,15 @@ class GraspSafetyEvaluator:
     ) -> GraspEvaluation:
         """Evaluate one grasp: IK along its tip trajectory, then effective mass per sample."""
         metric = check_metric(metric or self.config.metric)
+        seed_q, start = self.seed(seed_positions)
         return self.evaluate_batch(
             (index,),
             (grasp,),
             object_inertia,
             sample_trajectory(trajectory),
             metric,
-            self.seed_q(seed_positions),
+            seed_q,
+            start,
         )[0]
 
     def evaluate_batch(
@@ -149,13 +154,20 @@ class GraspSafetyEvaluator:
         sampled_trajectory: SampledTrajectory,
         metric: str,
         seed_q: np.ndarray,
+        seed_positions: np.ndarray | None = None,
     ) -> list[GraspEvaluation]:
         """``evaluate`` of several grasps along a trajectory sampled once
         (``sample_trajectory``), with a checked metric. ``indices``: their positions in the
         candidate list; ``seed_q``: the IK seed as a Pinocchio configuration, one for all
-        (nq,) or one per grasp (G, nq). With the compiled kernels, the grasps that follow the
+        (nq,) or one per grasp (G, nq); ``seed_positions``: the same seed in chain order,
+        continuous joints unwrapped, where the output joint positions start from (None: from
+        ``seed_q``, in (−π, π]). With the compiled kernels, the grasps that follow the
         object's motion by IK run in one kernel call."""
         seeds = np.broadcast_to(seed_q, (len(grasps), seed_q.shape[-1]))
+        if seed_positions is None:
+            starts = np.array([self.robot.positions_from_q(q) for q in seeds])
+        else:
+            starts = np.broadcast_to(seed_positions, (len(grasps), self.robot.num_joints))
         motion = sampled_trajectory.object_motion
         fused_rows = [
             k
@@ -180,12 +192,17 @@ class GraspSafetyEvaluator:
                     motion,
                     sampled_trajectory.times_s,
                     metric,
-                    (object_inertia, seeds[k]),
+                    (object_inertia, starts[k]),
                 )
         for k, grasp in enumerate(grasps):
             if k not in evaluations:
                 evaluations[k] = self._evaluate_one(
-                    indices[k], grasp, object_inertia, sampled_trajectory, metric, seeds[k]
+                    indices[k],
+                    grasp,
+                    object_inertia,
+                    sampled_trajectory,
+                    metric,
+                    (seeds[k], starts[k]),
                 )
         return [evaluations[k] for k in range(len(grasps))]
 
@@ -200,7 +217,7 @@ class GraspSafetyEvaluator:
         inertia_seed: tuple[ObjectInertia, np.ndarray],
     ) -> GraspEvaluation:
         """The GraspEvaluation of one grasp's ``evaluate_grasps_compiled`` result
-        (``inertia_seed``: the object's inertia and the grasp's IK seed q)."""
+        (``inertia_seed``: the object's inertia and the grasp's seed positions)."""
         if result.reason:
             return _infeasible(index, grasp.name, result.reason, self.robot.num_joints)
         return self._feasible(
@@ -223,11 +240,13 @@ class GraspSafetyEvaluator:
         object_inertia: ObjectInertia,
         sampled_trajectory: SampledTrajectory,
         metric: str,
-        seed_q: np.ndarray,
+        seed: tuple[np.ndarray, np.ndarray],
     ) -> GraspEvaluation:
         """One grasp outside the batched kernel: a planned joint trajectory, the Python
-        backend, or a trajectory type without an ObjectMotion."""
+        backend, or a trajectory type without an ObjectMotion (``seed``: the IK seed q and
+        its positions)."""
         robot = self.robot
+        seed_q, start = seed
         trajectory, times = sampled_trajectory.trajectory, sampled_trajectory.times_s
         object_motion = sampled_trajectory.object_motion
         sampled = self.trajectory_for(grasp, trajectory)
@@ -248,7 +267,7 @@ class GraspSafetyEvaluator:
                 mobilities,
                 _masses_along(mobilities, tip.tangents),
                 tip.speeds,
-                (object_inertia, seed_q),
+                (object_inertia, start),
                 sampled,
             )
         if object_motion is not None:
@@ -267,7 +286,7 @@ class GraspSafetyEvaluator:
                     motion_is_tip=True,
                 )
                 return self._from_compiled(
-                    index, grasp, result, motion, times, metric, (object_inertia, seed_q)
+                    index, grasp, result, motion, times, metric, (object_inertia, start)
                 )
         ik = self.ik.solve_trajectory_arrays(
             tip.rotations, tip.positions, times, sampled_trajectory.s_values, seed_q
@@ -287,7 +306,7 @@ class GraspSafetyEvaluator:
             mobilities,
             _masses_along(mobilities, tip.tangents),
             tip.speeds,
-            (object_inertia, seed_q),
+            (object_inertia, start),
         )
 
     def _feasible(
@@ -307,12 +326,13 @@ class GraspSafetyEvaluator:
         """The GraspEvaluation of a feasible grasp: where the tip does not translate
         (``worst``), the direction of largest effective mass and its mass are filled in; with
         armature, the links-only masses too; joint positions unwrapped from the IK seed
-        (``inertia_seed``: the object's inertia and the seed q), or the ``planned`` ones."""
+        (``inertia_seed``: the object's inertia and the seed's positions, chain order), or
+        the ``planned`` ones."""
         masses, directions, worst = masses_directions_worst
         if np.count_nonzero(worst):
             for i in np.flatnonzero(worst):
                 directions[i], masses[i] = worst_direction(mobilities[i])
-        object_inertia, seed_q = inertia_seed
+        object_inertia, start = inertia_seed
         links_only = masses
         if self.robot.armature_given:
             links_only = self._links_only_masses(grasp, object_inertia, q_all, directions, worst)
@@ -320,8 +340,7 @@ class GraspSafetyEvaluator:
             positions = np.array(planned.joint_positions)
             rates = planned.joint_rates()
         else:
-            seed = self.robot.positions_from_q(seed_q)
-            positions, rates = positions_along(self.robot, q_all, seed), None
+            positions, rates = positions_along(self.robot, q_all, start), None
         return GraspEvaluation(
             index=index,
             name=grasp.name,
@@ -385,7 +404,7 @@ class GraspSafetyEvaluator:
                 batches already running).
         """
         metric = check_metric(metric or self.config.metric)
-        seed_q = self.seed_q(seed_positions)  # validate once, before any work
+        seed_q, start_positions = self.seed(seed_positions)  # validate once, before any work
         grasps = list(grasps)
         sampled = sample_trajectory(trajectory)  # once for every grasp
         for grasp in grasps:
@@ -399,6 +418,7 @@ class GraspSafetyEvaluator:
                 sampled,
                 metric,
                 seed_q,
+                start_positions,
             )
             for start in range(0, len(grasps), BATCH_GRASPS)
         ]

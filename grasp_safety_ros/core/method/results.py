@@ -53,9 +53,10 @@ class GraspEvaluation:
         links_only_effective_mass_kg: Effective mass of the links alone (armature left out, a
             lower bound) [kg]; the same array as ``effective_mass_kg`` when the chain has no
             armature (None given: that array).
-        planned_joint_rates: A planned trajectory's own joint velocities [rad/s or m/s] and
-            the accelerations of their Hermite interpolation at the samples; None (IK, or a
-            plan without velocities): rates are fitted for execution (method.executable).
+        planned_joint_rates: A planned trajectory's joint velocities [rad/s or m/s] and
+            accelerations at the samples, of the interpolation the analysis used (its own
+            velocities, else the cubic spline through its positions); None (IK): rates are
+            fitted for execution (method.executable).
     """
 
     index: int

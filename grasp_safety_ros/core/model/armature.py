@@ -116,14 +116,18 @@ class ArmatureRange:
         return bool(np.any(self.lower_kgm2 < self.upper_kgm2))
 
 
-def armature_range(value: Any, joint_names: Sequence[str]) -> ArmatureRange:
+def armature_range(
+    value: Any, joint_names: Sequence[str], base: np.ndarray | None = None
+) -> ArmatureRange:
     """Bounds of a ``robot.armature_kgm2`` list or mapping whose entries are numbers or
-    ``[lo, hi]`` ranges (0 <= lo <= hi, finite); refused naming the joint."""
+    ``[lo, hi]`` ranges (0 <= lo <= hi, finite); refused naming the joint. The joints a
+    mapping does not name keep ``base`` (the description's own armature; None: 0)."""
     names = list(joint_names)
     if isinstance(value, Mapping):
         pairs = {name: _bounds(v, f"{ARMATURE_FIELD}.{name}") for name, v in value.items()}
-        lower = armature_from_input({k: lo for k, (lo, _) in pairs.items()}, names)
-        upper = armature_from_input({k: hi for k, (_, hi) in pairs.items()}, names)
+        lows, highs = ({k: p[i] for k, p in pairs.items()} for i in (0, 1))
+        lower = armature_from_input(lows, names, base=base)
+        upper = armature_from_input(highs, names, base=base)
     else:
         if isinstance(value, (str, bytes)) or not isinstance(value, (Sequence, np.ndarray)):
             return ArmatureRange(*(armature_from_input(value, names),) * 2)  # refused there

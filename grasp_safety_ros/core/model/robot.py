@@ -58,14 +58,16 @@ def armature_from_input(
     value: Sequence[float] | Mapping[str, float] | np.ndarray,
     joint_names: Sequence[str],
     field: str = ARMATURE_FIELD,
+    base: np.ndarray | None = None,
 ) -> np.ndarray:
     """Armature (reflected rotor inertia, I_rotor N^2) per chain joint, chain order: [kg m^2]
     for a revolute or continuous joint, [kg] for a prismatic one.
 
     Args:
         value: One value per chain joint in chain order, or ``{joint_name: value}`` (joints
-            not named: 0).
+            not named keep ``base``).
         joint_names: The chain joints, base to tip.
+        base: The armature a mapping overrides, chain order (the description's own); None: 0.
 
     Raises:
         InvalidInputError: a wrong count, an unknown joint, or a value not finite and >= 0
@@ -73,7 +75,7 @@ def armature_from_input(
     """
     names = list(joint_names)
     if isinstance(value, Mapping):
-        values = np.zeros(len(names))
+        values = np.zeros(len(names)) if base is None else np.array(base, dtype=float)
         for name, entry in value.items():
             if name not in names:
                 raise InvalidInputError(
@@ -603,11 +605,12 @@ class RobotModel:
         pin.framesForwardKinematics(self.model, data, pin.neutral(self.model))
         self.transform_base_to_world = pin.SE3(data.oMf[self.base_frame_id])
         self.joint_names: tuple[str, ...] = tuple(self.model.names[1:])
-        if armature_kgm2 is None:  # the description's own (an MJCF's; a URDF has none)
-            armature_kgm2 = armature_from_input(
-                np.array(self.model.armature), self.joint_names, "robot.urdf armature"
-            )
-        self.armature_kgm2 = armature_from_input(armature_kgm2, self.joint_names)
+        own = armature_from_input(  # the description's own (an MJCF's; a URDF has none)
+            np.array(self.model.armature), self.joint_names, "robot.urdf armature"
+        )
+        self.armature_kgm2 = armature_from_input(
+            own if armature_kgm2 is None else armature_kgm2, self.joint_names, base=own
+        )
         self.armature_given = bool(np.any(self.armature_kgm2 > 0.0))
         self.model.armature = np.array(self.armature_kgm2)
         self._links_only: RobotModel | None = None
@@ -663,7 +666,8 @@ class RobotModel:
         armature_kgm2: Sequence[float] | Mapping[str, float] | np.ndarray | None = None,
     ) -> RobotModel:
         """Load from a URDF or MJCF path, URDF or MJCF XML, or ``example-robot-data:<name>``;
-        an explicit ``armature_kgm2`` replaces an MJCF's joint armature."""
+        an explicit ``armature_kgm2`` replaces an MJCF's joint armature (a mapping: of the
+        joints it names)."""
         full_model = load_urdf_model(source, relative_to)
         mimic_joints = load_urdf_mimic_joints(source, relative_to)
         return cls(
@@ -673,8 +677,9 @@ class RobotModel:
     def with_armature(
         self, armature_kgm2: Sequence[float] | Mapping[str, float] | np.ndarray
     ) -> RobotModel:
-        """This chain with another armature (validated as in the constructor)."""
-        values = armature_from_input(armature_kgm2, self.joint_names)
+        """This chain with another armature (validated as in the constructor; a mapping
+        changes the joints it names, the others keep this chain's)."""
+        values = armature_from_input(armature_kgm2, self.joint_names, base=self.armature_kgm2)
         robot = copy.copy(self)
         robot.model = self.model.copy()
         robot.model.armature = np.array(values)
