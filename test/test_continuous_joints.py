@@ -112,7 +112,7 @@ def test_a_seed_a_turn_away_starts_the_output_there(tmp_path: Path, kinova: Robo
     path.write_text(yaml.safe_dump(data))
     assert main(["rank", str(path), "--json", str(out)]) == 0
     (ik,) = json.loads(out.read_text())["grasps"]
-    q = np.array([s["q"] for s in ik["samples"]])
+    q = np.array(ik["samples"]["q"])  # JSON schema 2: per-sample columns
     assert q[0, 0] == pytest.approx(3.0 + 2.0 * math.pi, abs=1e-5)
     assert q[-1, 0] == pytest.approx(3.3 + 2.0 * math.pi, abs=1e-5)
     assert np.max(np.abs(np.diff(q[:, 0]))) < 0.05
