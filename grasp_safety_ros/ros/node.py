@@ -19,12 +19,15 @@ have had a subscriber; a late transient-local subscriber gets the latest (_OnDem
 
 from __future__ import annotations
 
+import signal
 import sys
 import threading
 import time
 import traceback
+from collections import deque
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -36,8 +39,17 @@ from grasp_safety_msgs.srv import RankGrasps
 from nav_msgs.msg import Path
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
-from rclpy.event_handler import PublisherEventCallbacks, QoSPublisherMatchedInfo
-from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.clock import Clock, ClockType
+from rclpy.event_handler import (
+    PublisherEventCallbacks,
+    QoSMessageLostInfo,
+    QoSPublisherMatchedInfo,
+    SubscriptionEventCallbacks,
+)
+from rclpy.exceptions import (
+    InvalidParameterTypeException,
+    InvalidParameterValueException,
+)
 from rclpy.executors import Executor, ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -48,7 +60,10 @@ from rclpy.qos import (
     ReliabilityPolicy,
     qos_profile_sensor_data,
 )
+from rclpy.service_introspection import ServiceIntrospectionState
+from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
+from service_msgs.msg import ServiceEventInfo
 from std_msgs.msg import Float64MultiArray, Header, String
 from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 from visualization_msgs.msg import MarkerArray
@@ -73,6 +88,9 @@ from .conversions import (
     trajectory_from_msg,
 )
 from .declaration import declare_node_parameters, typed_parameters
+from .executor import NodeExecutor, request_header
+from .memory import memory_kib, release_free_heap
+from .message_checks import check_finite_result, check_no_subnormals
 from .parameters import (
     PARAMETERS,
     ROBOT_PARAMETERS,
@@ -82,6 +100,7 @@ from .parameters import (
     check_parameter,
     settings_from_parameters,
 )
+from .ranking_job import ClientWatch, FairComputeLock
 
 NODE_NAME = "grasp_safety"
 EXECUTOR_THREADS = 4
@@ -91,7 +110,11 @@ LATCHED = QoSProfile(
     depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
 )
 """Results: late subscribers (RViz, ``ros2 topic echo``) get the last ranking."""
-INPUT = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+INPUT = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
+"""Candidate grasps, their quality, the object trajectory and inertia: every message counts
+(the pairing rules follow their order), so none is overwritten in the node's queue (keep the
+last 10 dropped the oldest of a burst unreported); a reliable publisher is slowed down
+instead, and what the middleware still loses is counted (``lost.<topic>`` on /diagnostics)."""
 SERVICE = QoSProfile(
     history=HistoryPolicy.KEEP_ALL,
     reliability=ReliabilityPolicy.RELIABLE,
@@ -99,6 +122,9 @@ SERVICE = QoSProfile(
 )
 """Requests wait in the service's queue until a thread takes them; the default (keep the last
 10) silently dropped the oldest when more than EXECUTOR_THREADS + 10 were in flight."""
+MAX_ABS_GRASP_QUALITY = 1e9
+"""Grasp qualities beyond +/-1e9 are refused: the min-max normalisation of the combined score
+overflowed (1.8e308 and -1.8e308 gave a NaN combined score, ranked first)."""
 _STANDARD_OVERRIDES = ("use_sim_time", "qos_overrides.", "start_type_description_service")
 
 
@@ -122,6 +148,10 @@ class ShuttingDownError(GraspSafetyError):
     """The node is shutting down: the ranking was abandoned."""
 
 
+class ClientGoneError(GraspSafetyError):
+    """Every client that could have sent the request left: the ranking was abandoned."""
+
+
 @dataclass
 class _Status:
     """What /diagnostics reports (guarded by the node's state lock)."""
@@ -135,6 +165,10 @@ class _Status:
     last_error: str = ""
     last_was_error: bool = False
     robot_description_error: str = ""  # why the last /robot_description was not used
+    abandoned: int = 0  # rankings abandoned at shut-down
+    ignored_descriptions: int = 0  # /robot_description messages ignored (parameters rule)
+    refused_by_source: dict[str, int] = field(default_factory=dict)
+    lost_by_source: dict[str, int] = field(default_factory=dict)  # the middleware's count
 
 
 @dataclass(frozen=True)
@@ -145,6 +179,10 @@ class _Snapshot:
     bundle: RobotBundle | None
     joint_state: tuple[Sequence[str], Sequence[float]] | None
     inertia_override: ObjectInertia | None
+
+
+SERVICE_EVENTS_KEPT = 1024
+"""Request arrivals (client GID, sequence number, time) kept to identify a request's client."""
 
 
 GRAPH_CHECK_PERIOD_S = 0.02
@@ -247,7 +285,7 @@ class GraspSafetyNode(Node):
 
     def _setup(self) -> None:
         self._state_lock = threading.Lock()
-        self._compute_lock = threading.Lock()
+        self._compute_lock = FairComputeLock()
         self._stopping = threading.Event()  # set by abandon_rankings at shut-down
         self._started = False
         self._startup_rejection = ""
@@ -262,6 +300,8 @@ class GraspSafetyNode(Node):
         self._trajectory: Path | MultiDOFJointTrajectory | None = None
         self._inertia_override: ObjectInertia | None = None
         self._status = _Status()
+        self._arrivals: deque[tuple[int, int, bytes]] = deque(maxlen=SERVICE_EVENTS_KEPT)
+        self._trim_pending = False
 
         self.add_pre_set_parameters_callback(typed_parameters)
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -280,77 +320,76 @@ class GraspSafetyNode(Node):
         self._warn_unknown_overrides()
 
         self._service_group = ReentrantCallbackGroup()
-        self._topic_group = MutuallyExclusiveCallbackGroup()
+        self._topic_group = topics = MutuallyExclusiveCallbackGroup()
         self._ranking_pub = _OnDemandPublisher(self, GraspRanking, "~/ranking")
         self._ranked_pub = self.create_publisher(PoseArray, "~/ranked_grasps", LATCHED)
         self._markers_pub = _OnDemandPublisher(self, MarkerArray, "~/markers")
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self.create_service(
+        self._service = self.create_service(
             RankGrasps,
             "~/rank_grasps",
             self._on_rank_grasps,
             qos_profile=SERVICE,
             callback_group=self._service_group,
         )
-        self.create_subscription(
-            PoseArray,
-            "~/candidate_grasps",
-            self._guarded("candidate_grasps", self._on_candidates),
-            INPUT,
-            callback_group=self._topic_group,
+        # Which client sent a request: the service's introspection events (metadata only)
+        # carry the client's GID and the request's sequence number.
+        # rcl keeps a pointer to the clock: it must live as long as the service
+        self._event_clock = Clock(clock_type=ClockType.SYSTEM_TIME)
+        self._service.configure_introspection(
+            self._event_clock, SERVICE, ServiceIntrospectionState.METADATA
         )
         self.create_subscription(
-            Float64MultiArray,
-            "~/candidate_grasp_quality",
-            self._guarded("candidate_grasp_quality", self._on_quality),
-            INPUT,
-            callback_group=self._topic_group,
+            RankGrasps.Event,
+            f"{self._service.service_name}/_service_event",
+            self._on_service_event,
+            SERVICE,
         )
-        self.create_subscription(
-            Path,
-            "~/object_trajectory",
-            self._guarded("object_trajectory", self._on_trajectory),
-            INPUT,
-            callback_group=self._topic_group,
+        inputs = (
+            (PoseArray, "~/candidate_grasps", self._on_candidates, INPUT, topics),
+            (Float64MultiArray, "~/candidate_grasp_quality", self._on_quality, INPUT, topics),
+            (Path, "~/object_trajectory", self._on_trajectory, INPUT, topics),
+            (
+                MultiDOFJointTrajectory,
+                "~/object_multi_dof_trajectory",
+                self._on_trajectory,
+                INPUT,
+                topics,
+            ),
+            (InertiaStamped, "~/object_inertia", self._on_inertia, INPUT, topics),
+            (JointState, "/joint_states", self._on_joint_states, qos_profile_sensor_data, None),
+            (String, "/robot_description", self._on_robot_description, LATCHED, None),
         )
-        self.create_subscription(
-            MultiDOFJointTrajectory,
-            "~/object_multi_dof_trajectory",
-            self._on_trajectory,
-            INPUT,
-            callback_group=self._topic_group,
-        )
-        self.create_subscription(
-            InertiaStamped,
-            "~/object_inertia",
-            self._guarded("object_inertia", self._on_inertia),
-            INPUT,
-            callback_group=self._topic_group,
-        )
-        self.create_subscription(
-            JointState,
-            "/joint_states",
-            self._guarded("/joint_states", self._on_joint_states),
-            qos_profile_sensor_data,
-        )
-        self.create_subscription(
-            String,
-            "/robot_description",
-            self._guarded("/robot_description", self._on_robot_description),
-            LATCHED,
-        )
+        for msg_type, topic, callback, qos, group in inputs:
+            source = topic.removeprefix("~/")
+            self.create_subscription(
+                msg_type,
+                topic,
+                self._guarded(source, callback),
+                qos,
+                callback_group=group,
+                event_callbacks=SubscriptionEventCallbacks(
+                    message_lost=partial(self._on_message_lost, source)
+                ),
+            )
         self._diagnostics_timer = self.create_timer(
-            self._settings.diagnostics_period_s, self._publish_diagnostics
+            self._settings.diagnostics_period_s, self._on_diagnostics_timer
         )
         self._started = True
         if self._robot is not None:
             self._log_robot(self._robot)
 
     def _guarded(self, source: str, callback: Callable[[Any], None]) -> Callable[[Any], None]:
-        """``callback`` for a topic; an unexpected exception (a bug) is logged and reported on
+        """``callback`` for a topic, after refusing a message with a subnormal float (an int
+        sent as a float); an unexpected exception (a bug) is logged and reported on
         /diagnostics instead of stopping the executor."""
 
         def guarded(msg: Any) -> None:
+            try:
+                check_no_subnormals(msg, source)
+            except GraspSafetyError as error:
+                self._report_error(source, error)
+                return
             try:
                 callback(msg)
             except Exception as error:  # last resort: keep serving
@@ -359,10 +398,27 @@ class GraspSafetyNode(Node):
 
         return guarded
 
+    def _on_message_lost(self, source: str, info: QoSMessageLostInfo) -> None:
+        """The middleware reports messages of a topic lost before the node took them."""
+        with self._state_lock:
+            lost = self._status.lost_by_source
+            lost[source] = lost.get(source, 0) + info.total_count_change
+        self.get_logger().warning(
+            f"{source}: {info.total_count_change} message(s) lost before the node took them "
+            f"({info.total_count} in all)"
+        )
+
     def abandon_rankings(self) -> None:
         """Make the running ranking (and any later one) stop at its next progress check: for
         shut-down, so that no executor thread outlives the node."""
         self._stopping.set()
+        self._compute_lock.stop()
+
+    @property
+    def abandoned_rankings(self) -> int:
+        """Rankings abandoned because the node is shutting down."""
+        with self._state_lock:
+            return self._status.abandoned
 
     def _warn_unknown_overrides(self) -> None:
         for name in sorted(self._parameter_overrides):
@@ -463,7 +519,7 @@ class GraspSafetyNode(Node):
             self._diagnostics_timer.cancel()
             self.destroy_timer(self._diagnostics_timer)
             self._diagnostics_timer = self.create_timer(
-                settings.diagnostics_period_s, self._publish_diagnostics
+                settings.diagnostics_period_s, self._on_diagnostics_timer
             )
 
     # --- Robot description and joint states --------------------------------------------------
@@ -473,7 +529,17 @@ class GraspSafetyNode(Node):
             self._topic_description = msg.data
             settings = self._settings
         if settings.robot_source:
-            self.get_logger().debug("/robot_description ignored: parameters give the robot")
+            given_by = "robot_description" if settings.robot_description else "urdf"
+            reason = (
+                f"ignored: the parameter {given_by} gives the robot (empty robot_description "
+                "and urdf to take it from the topic)"
+            )
+            with self._state_lock:
+                self._status.ignored_descriptions += 1
+                first = self._status.robot_description_error != reason
+                self._status.robot_description_error = reason
+            if first:  # once, not per message
+                self.get_logger().info(f"/robot_description {reason}")
             return
         try:
             if not msg.data.lstrip().startswith("<"):  # never a file path or a package name
@@ -513,6 +579,7 @@ class GraspSafetyNode(Node):
         self, request: RankGrasps.Request, response: RankGrasps.Response
     ) -> RankGrasps.Response:
         try:
+            check_no_subnormals(request)
             response.ranking = self._rank(
                 request.grasps,
                 object_trajectory_of_request(
@@ -526,8 +593,16 @@ class GraspSafetyNode(Node):
                 metric_point=request.metric_point,
                 quality_field="grasp_quality",
                 joint_trajectories=request.joint_trajectories,
+                client_watch=ClientWatch(
+                    self._service_clients, partial(self._client_of, request_header())
+                ),
             )
             response.success = True
+        except ShuttingDownError as error:  # answered, not reported: the node is going
+            response.success = False
+            response.message = str(error)
+            with self._state_lock:
+                self._status.abandoned += 1
         except GraspSafetyError as error:
             response.success = False
             response.message = str(error)
@@ -538,6 +613,36 @@ class GraspSafetyNode(Node):
             response.message = _internal_error(error)
             self._report_error("rank_grasps", error)
         return response
+
+    def _service_clients(self) -> list[bytes]:
+        """GIDs of the rank_grasps clients' endpoints in the ROS graph (request writers and
+        response readers, on the DDS topics ``rq/<service>Request`` and ``rr/<service>Reply``;
+        none where the middleware names them otherwise)."""
+        name = self._service.service_name.lstrip("/")
+        writers = self.get_publishers_info_by_topic(f"rq/{name}Request", no_mangle=True)
+        readers = self.get_subscriptions_info_by_topic(f"rr/{name}Reply", no_mangle=True)
+        return [bytes(endpoint.endpoint_gid) for endpoint in (*writers, *readers)]
+
+    def _on_service_event(self, event: Any) -> None:
+        info = event.info
+        if info.event_type == ServiceEventInfo.REQUEST_RECEIVED:
+            stamp_ns = info.stamp.sec * 1_000_000_000 + info.stamp.nanosec
+            with self._state_lock:
+                self._arrivals.append((info.sequence_number, stamp_ns, bytes(info.client_gid)))
+
+    def _client_of(self, header: Any) -> bytes | None:
+        """The GID of the client that sent the request of ``header`` (same sequence number,
+        the arrival closest in time, within a second), or None when not known (yet)."""
+        if header is None:
+            return None
+        number, received_ns = header.request_id.sequence_number, header.received_timestamp
+        with self._state_lock:
+            matches = [
+                (abs(stamp_ns - received_ns), gid)
+                for seq, stamp_ns, gid in self._arrivals
+                if seq == number and abs(stamp_ns - received_ns) < 1_000_000_000
+            ]
+        return min(matches)[1] if matches else None
 
     # --- Topics ------------------------------------------------------------------------------
 
@@ -662,6 +767,8 @@ class GraspSafetyNode(Node):
             with self._state_lock:
                 self._candidates_pending = True  # retried with the next trajectory
             self._report_error("topics", error)
+        except ShuttingDownError:
+            pass  # the node is going: nothing to report
         except GraspSafetyError as error:
             self._report_error("topics", error)
 
@@ -685,6 +792,7 @@ class GraspSafetyNode(Node):
         metric_point: str = "",
         quality_field: str = "grasp_quality",
         joint_trajectories: Sequence[JointTrajectory] = (),
+        client_watch: ClientWatch | None = None,
     ) -> GraspRanking:
         """Convert, rank, analyse, publish; return the GraspRanking. Raises GraspSafetyError.
 
@@ -692,6 +800,8 @@ class GraspSafetyNode(Node):
             quality: One grasp quality per grasp (higher is better), or None.
             metric_point: The request's metric point; empty: the parameter's.
             joint_trajectories: One planned joint trajectory per grasp, or none (IK).
+            client_watch: The service's clients at the request's arrival: the ranking stops
+                when they are all gone.
         """
         state = self._snapshot()
         settings, bundle = state.settings, state.bundle
@@ -715,7 +825,9 @@ class GraspSafetyNode(Node):
             settings.max_grasps,
             grasps_field,
         )
-        grasps = grasps_with_joint_trajectories(grasps, joint_trajectories)
+        grasps = grasps_with_joint_trajectories(
+            grasps, joint_trajectories, max_samples=settings.max_samples
+        )
         samples = len(trajectory.times_s())
         total = sum(
             samples if g.joint_trajectory is None else len(g.joint_trajectory.times_s)
@@ -746,14 +858,16 @@ class GraspSafetyNode(Node):
             seed = seed_from_joint_state(*state.joint_state, bundle.robot)
 
         if not self._compute_lock.acquire(timeout=settings.service_busy_timeout_s):
+            if self._stopping.is_set():
+                raise ShuttingDownError("ranking not started: the node is shutting down")
             raise BusyError(
                 f"busy: another ranking has been running for more than "
                 f"service_busy_timeout_s={settings.service_busy_timeout_s:g} s; try again"
             )
         try:
             started = time.perf_counter()
-            deadline_check = _deadline_check(
-                started + settings.max_compute_time_s, settings, self._stopping
+            deadline_check = _progress_check(
+                settings, self._stopping, self._compute_lock, client_watch
             )
             ranking = bundle.evaluator.rank(
                 grasps,
@@ -789,6 +903,7 @@ class GraspSafetyNode(Node):
         result = report_msg(
             report, grasps_msg, settings.base_frame, stamp, compute_time_s, settings.response
         )
+        check_finite_result(result)  # no NaN or inf ranks a grasp
         self._ranking_pub.publish(lambda: result)
         self._ranked_pub.publish(result.ranked_grasps)
         self._markers_pub.publish(
@@ -814,6 +929,7 @@ class GraspSafetyNode(Node):
             status.last_infeasible = len(ranking.evaluations) - feasible
             status.last_source = source
             status.last_was_error = False
+            self._trim_pending = True
         # Debug, not info: an rclpy log call that is emitted costs about 2 ms here (its caller
         # lookup, inspect.getmodule, scans every loaded module); /diagnostics has the counts.
         self.get_logger().debug(
@@ -828,6 +944,8 @@ class GraspSafetyNode(Node):
     def _report_error(self, source: str, error: BaseException | str) -> None:
         with self._state_lock:
             self._status.refused += 1
+            by_source = self._status.refused_by_source
+            by_source[source] = by_source.get(source, 0) + 1
             self._status.last_error = f"{source}: {error}"
             self._status.last_source = source
             self._status.last_was_error = True
@@ -863,6 +981,10 @@ class GraspSafetyNode(Node):
                 "last_infeasible_grasps": status.last_infeasible,
                 "last_error": status.last_error,
                 "robot_description_error": status.robot_description_error,
+                "ignored_robot_descriptions": status.ignored_descriptions,
+                **{f"refused.{k}": n for k, n in sorted(status.refused_by_source.items())},
+                **{f"lost.{k}": n for k, n in sorted(status.lost_by_source.items())},
+                **{f"memory.{k}": n for k, n in memory_kib().items()},
             }
         return DiagnosticStatus(
             level=level,
@@ -871,6 +993,18 @@ class GraspSafetyNode(Node):
             hardware_id=f"{settings.base_frame}->{settings.tip_frame}",
             values=[KeyValue(key=k, value=str(v)) for k, v in values.items()],
         )
+
+    def _on_diagnostics_timer(self) -> None:
+        """Give the heap freed by the last rankings back to the system while none runs (the
+        allocator keeps its high-water mark otherwise), then publish the status."""
+        with self._state_lock:
+            trim, self._trim_pending = self._trim_pending, False
+        if trim and not self._compute_lock.locked():
+            release_free_heap()
+        elif trim:
+            with self._state_lock:
+                self._trim_pending = True  # next time
+        self._publish_diagnostics()
 
     def _publish_diagnostics(self) -> None:
         if self._diagnostics_pub.get_subscription_count() == 0:
@@ -889,10 +1023,19 @@ def _robot_key(settings: NodeSettings) -> tuple[Any, ...]:
 
 
 def _quality(values: Sequence[float], field: str) -> tuple[float, ...] | None:
-    """Grasp qualities of a message array (finite); None when empty (pure safety ranking)."""
+    """Grasp qualities of a message array (finite, |q| <= MAX_ABS_GRASP_QUALITY); None when
+    empty (pure safety ranking)."""
     if len(values) == 0:
         return None
-    return tuple(float(v) for v in finite_array(np.asarray(values, dtype=float), field))
+    checked = finite_array(np.asarray(values, dtype=float), field)
+    largest = float(np.max(np.abs(checked)))
+    if largest > MAX_ABS_GRASP_QUALITY:
+        raise InvalidInputError(
+            field,
+            f"must be within +/-{MAX_ABS_GRASP_QUALITY:g} (any unit, higher is better), got "
+            f"a value of magnitude {largest:g}",
+        )
+    return tuple(float(v) for v in checked)
 
 
 def _analysis_options(
@@ -922,58 +1065,103 @@ def _internal_error(error: BaseException) -> str:
     return f"internal error: {type(error).__name__}: {error}"
 
 
-def _deadline_check(
-    deadline: float, settings: NodeSettings, stopping: threading.Event
+def _progress_check(
+    settings: NodeSettings,
+    stopping: threading.Event,
+    lock: FairComputeLock,
+    client_watch: ClientWatch | None,
 ) -> Callable[[int, int], None]:
-    """A progress callback for rank() and analyse() that abandons the work after the deadline
-    or when the node shuts down."""
+    """A progress callback for rank() and analyse(): abandons the work when the node shuts
+    down, after max_compute_time_s of computing (time queued behind other rankings not
+    counted), or when the request's clients are gone; between steps it shares the compute
+    lock with waiting requests (FairComputeLock.share)."""
+    deadline = time.perf_counter() + settings.max_compute_time_s
 
     def check(done: int, total: int) -> None:
-        if done < total and stopping.is_set():
+        nonlocal deadline
+        if done >= total:
+            return
+        if stopping.is_set():
             raise ShuttingDownError(
                 f"ranking abandoned after {done} of {total} steps: the node is shutting down"
             )
-        if done < total and time.perf_counter() > deadline:
+        if time.perf_counter() > deadline:
             raise ComputeTimeExceededError(
                 f"ranking abandoned after {done} of {total} steps: longer than "
                 f"max_compute_time_s={settings.max_compute_time_s:g} s; send fewer grasps or "
                 "raise trajectory.dt_s"
             )
+        if client_watch is not None and client_watch.gone():
+            raise ClientGoneError(
+                f"ranking abandoned after {done} of {total} steps: its client left"
+            )
+        deadline += lock.share()
 
     return check
 
 
+class _Stop(Exception):  # noqa: N818  (a signal, not an error)
+    """SIGINT or SIGTERM arrived: raised in the main thread by the node's signal handler."""
+
+
+def _raise_stop(signal_number: int, frame: Any) -> None:
+    raise _Stop(signal.Signals(signal_number).name)
+
+
 def main(args: list[str] | None = None) -> int:
-    """Run the node until shut down. Exit status 1 on a start-up error (one log line)."""
+    """Run the node until SIGINT or SIGTERM. Exit status 1 on a start-up error (one log line).
+
+    The node handles the signals itself (rclpy's handlers would shut the context down at
+    once, under the running callbacks: their responses and log lines then failed with "Failed
+    to publish log message to rosout" and "exception was never retrieved"): the executor spins
+    in a thread, the main thread waits; at a signal the rankings are abandoned, their requests
+    answered, the callbacks joined, the node destroyed, and one last line logged.
+    """
     logger = rclpy.logging.get_logger(NODE_NAME)
     try:
-        rclpy.init(args=args)
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except RuntimeError as error:  # rclpy's RCLError: bad --ros-args or params file
         first_line = str(error).strip().splitlines()[0] if str(error).strip() else "rcl error"
         logger.error(f"start-up failed: {first_line}")
         return 1
+    previous = {n: signal.signal(n, _raise_stop) for n in (signal.SIGINT, signal.SIGTERM)}
     node: GraspSafetyNode | None = None
     executor: MultiThreadedExecutor | None = None
-    status = 0
+    spinner: threading.Thread | None = None
+    status, reason = 0, "the context was shut down"
     try:
         node = GraspSafetyNode()
-        executor = MultiThreadedExecutor(num_threads=EXECUTOR_THREADS)
+        executor = NodeExecutor(num_threads=EXECUTOR_THREADS)
         executor.add_node(node)
         node.wait_for_robot(executor)
-        executor.spin()
+        spinner = threading.Thread(target=executor.spin, name="executor", daemon=True)
+        spinner.start()
+        spinner.join()  # interrupted by the signal handler's exception
     except StartupError as error:
         logger.error(f"start-up failed: {error}")
         status = 1
+    except _Stop as stop:
+        reason = str(stop)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        for number, handler in previous.items():  # a second signal no longer interrupts
+            signal.signal(number, signal.SIG_IGN if handler is _raise_stop else handler)
         if node is not None:
             node.abandon_rankings()
         if executor is not None:
             executor.shutdown()
+            if spinner is not None:
+                spinner.join(timeout=10.0)
             _join_callbacks(executor)
         if node is not None:
+            abandoned = node.abandoned_rankings
             node.destroy_node()
+            if status == 0:
+                logger.info(
+                    f"shut down ({reason}); {abandoned} ranking(s) abandoned, their requests "
+                    "answered"
+                )
         rclpy.try_shutdown()
     return status
 
