@@ -393,6 +393,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             rss_peak = rss_kib(node.pid, "VmHWM")
             if sizes:
                 memory_per_request(clients, memory, sizes, args.dt_s)
+                print(memory.row("them"))
             alive = node.poll() is None
         finally:
             if clients is not None:

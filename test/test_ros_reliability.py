@@ -249,7 +249,9 @@ def test_client_watch_follows_the_requests_client(monkeypatch: pytest.MonkeyPatc
     present = [b"a", b"b"]
     known: list[bytes | None] = [None]
     watch = ClientWatch(lambda: list(present), lambda: known[0])
-    assert not watch.gone()
+    present[:] = []
+    assert not watch.gone() and not watch.gone()  # not identified yet: nothing judged
+    present[:] = [b"a", b"b"]
     known[0] = b"a"  # identified (its introspection event arrived)
     present[:] = [b"a", b"c"]  # another client left: not ours
     assert not watch.gone() and not watch.gone()
@@ -265,13 +267,13 @@ def test_client_watch_without_identity_needs_every_client_gone(
 
     monkeypatch.setattr(ranking_job, "CLIENT_CHECK_PERIOD_S", 0.0)
     present = [b"a", b"b"]
-    watch = ClientWatch(lambda: list(present), lambda: None)
+    watch = ClientWatch(lambda: list(present))
     present[:] = [b"b", b"c"]  # one of them left: maybe ours is b
     assert not watch.gone() and not watch.gone()
     present[:] = [b"c"]
     assert not watch.gone()
     assert watch.gone()
-    assert not ClientWatch(lambda: [], lambda: None).gone()  # none at arrival: never gone
+    assert not ClientWatch(lambda: []).gone()  # none at arrival: never gone
 
 
 def test_a_paused_pooled_ranking_leaves_the_workers_to_others() -> None:

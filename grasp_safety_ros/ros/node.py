@@ -5,14 +5,16 @@ parameters.py, the work is GraspSafetyEvaluator.rank followed by
 core.analyses.safety_report.analyse (metric point, ISO/TS 15066, inertia uncertainty, grasp
 quality, redundancy, effort). See the README for the interface.
 
-Threads: a MultiThreadedExecutor with EXECUTOR_THREADS threads. The service sits in its own
-reentrant callback group, the input topics in a mutually exclusive one, everything else
-(parameters, /robot_description, /joint_states, the diagnostics timer) in the default group.
-One ranking runs at a time (the compute lock: the core's solvers keep scratch data); a request
-that cannot get the lock within ``service_busy_timeout_s`` is answered busy, and a ranking
-longer than ``max_compute_time_s`` is abandoned, so a slow request never blocks the next one
-for ever (checked after every grasp of the ranking, also on the worker pool; the analyses
-after it run to the end). The GIL still makes a long ranking share the CPU with the other
+Threads: a NodeExecutor (a MultiThreadedExecutor) with EXECUTOR_THREADS threads. The service
+sits in its own reentrant callback group, the input topics in a mutually exclusive one,
+everything else (parameters, /robot_description, /joint_states, the diagnostics timer) in the
+default group. One ranking computes at a time (the compute lock: the core's solvers keep
+scratch data), in arrival order and in slices: a ranking hands the lock to waiting requests
+after 0.2 s at its next progress check (ranking_job.FairComputeLock), so a small request does
+not wait for a large one; a request that cannot get the lock within
+``service_busy_timeout_s`` is answered busy, a ranking longer than ``max_compute_time_s``
+(time queued not counted) or whose client has left the ROS graph is abandoned
+(docs/ros/reliability.md). The GIL still makes a long ranking share the CPU with the other
 callbacks. The markers are built, and the ranking published (serialised), only once they
 have had a subscriber; a late transient-local subscriber gets the latest (_OnDemandPublisher).
 """
@@ -73,7 +75,7 @@ from ..core.analyses.safety_report import AnalysisOptions, analyse
 from ..core.exceptions import GraspSafetyError, InvalidInputError
 from ..core.input_checks import finite_array
 from ..core.method.posture import select_postures
-from ..core.method.ranking import check_metric
+from ..core.method.ranking import Ranking, check_metric
 from ..core.model.inertia import ObjectInertia
 from .conversions import (
     check_frame_id,
@@ -149,7 +151,7 @@ class ShuttingDownError(GraspSafetyError):
 
 
 class ClientGoneError(GraspSafetyError):
-    """Every client that could have sent the request left: the ranking was abandoned."""
+    """The request's client left the ROS graph: the ranking was abandoned."""
 
 
 @dataclass
@@ -593,9 +595,7 @@ class GraspSafetyNode(Node):
                 metric_point=request.metric_point,
                 quality_field="grasp_quality",
                 joint_trajectories=request.joint_trajectories,
-                client_watch=ClientWatch(
-                    self._service_clients, partial(self._client_of, request_header())
-                ),
+                client_watch=self._client_watch(request_header()),
             )
             response.success = True
         except ShuttingDownError as error:  # answered, not reported: the node is going
@@ -613,6 +613,13 @@ class GraspSafetyNode(Node):
             response.message = _internal_error(error)
             self._report_error("rank_grasps", error)
         return response
+
+    def _client_watch(self, header: Any) -> ClientWatch:
+        """The watch on the client of the request of ``header`` (None: not run by
+        NodeExecutor, the clients present now stand in)."""
+        if header is None:
+            return ClientWatch(self._service_clients)
+        return ClientWatch(self._service_clients, partial(self._client_of, header))
 
     def _service_clients(self) -> list[bytes]:
         """GIDs of the rank_grasps clients' endpoints in the ROS graph (request writers and
@@ -633,8 +640,6 @@ class GraspSafetyNode(Node):
     def _client_of(self, header: Any) -> bytes | None:
         """The GID of the client that sent the request of ``header`` (same sequence number,
         the arrival closest in time, within a second), or None when not known (yet)."""
-        if header is None:
-            return None
         number, received_ns = header.request_id.sequence_number, header.received_timestamp
         with self._state_lock:
             matches = [
@@ -906,18 +911,23 @@ class GraspSafetyNode(Node):
         check_finite_result(result)  # no NaN or inf ranks a grasp
         self._ranking_pub.publish(lambda: result)
         self._ranked_pub.publish(result.ranked_grasps)
+        # The markers may be built later (on demand): keep what they need only, not the
+        # report and its per-sample arrays (0.5 GB kept after a 1,000 x 481 request)
+        labels, order, scores = _labels_only(ranking), report.order, report.scores
+        not_admissible = {
+            a.index for a in report.iso if a.feasible and not a.admissible_where_permitted
+        }
+        tips = [replace(g, joint_trajectory=None) if g.joint_trajectory else g for g in grasps]
         self._markers_pub.publish(
             lambda: markers_msg(
-                ranking,
-                grasps,
+                labels,
+                tips,
                 trajectory,
                 settings.base_frame,
                 stamp,
-                order=report.order,
-                scores=report.scores,
-                not_admissible={
-                    a.index for a in report.iso if a.feasible and not a.admissible_where_permitted
-                },
+                order=order,
+                scores=scores,
+                not_admissible=not_admissible,
             )
         )
         feasible = sum(1 for e in ranking.evaluations if e.feasible)
@@ -1015,6 +1025,29 @@ class GraspSafetyNode(Node):
                 status=[self.diagnostics_status()],
             )
         )
+
+
+def _labels_only(ranking: Ranking) -> Ranking:
+    """``ranking`` without its per-sample arrays and postures: what the markers read (index,
+    name, feasibility, score, order, metric)."""
+    empty = np.empty(0)
+    arrays = dict.fromkeys(
+        (
+            "times_s",
+            "joint_positions",
+            "directions_in_base",
+            "effective_mass_kg",
+            "direction_is_worst_case",
+            "tip_speed_m_s",
+            "ik_iterations",
+        ),
+        empty,
+    )
+    return replace(
+        ranking,
+        postures=(),
+        evaluations=tuple(replace(e, **arrays) for e in ranking.evaluations),
+    )
 
 
 def _robot_key(settings: NodeSettings) -> tuple[Any, ...]:

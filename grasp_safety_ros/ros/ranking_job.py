@@ -100,23 +100,27 @@ class FairComputeLock:
 class ClientWatch:
     """Whether the client that sent a request is still in the ROS graph.
 
-    ``identify()`` gives the client's GID once known (the node learns it from its service's
-    introspection events, when it runs in NodeExecutor); ``clients()`` the GIDs of the
-    service's clients now. The request is orphaned once its client is missing from the
-    graph for CLIENT_ABSENT_CHECKS consecutive checks, CLIENT_CHECK_PERIOD_S apart. When the
-    client cannot be identified, the clients present at the request's arrival stand in: the
-    request is orphaned once none of them is left. A client that exits (or is stopped by
-    SIGINT/SIGTERM) leaves the graph at once; one killed with SIGKILL when the middleware's
-    liveliness lease runs out (Fast DDS: 20 s).
+    ``clients()`` gives the GIDs of the service's clients now. With ``identify`` (a callable
+    giving the request's client GID once known: the node learns it from its service's
+    introspection events when it runs in NodeExecutor), the request is orphaned once that
+    client is missing from the graph for CLIENT_ABSENT_CHECKS consecutive checks,
+    CLIENT_CHECK_PERIOD_S apart; while it is not known, nothing is judged. Without
+    ``identify``, the clients present at the request's arrival stand in: the request is
+    orphaned once none of them is left. A client that exits (or is stopped by SIGINT/SIGTERM)
+    leaves the graph at once; one killed with SIGKILL when the middleware's liveliness lease
+    runs out (Fast DDS: 20 s). The graph is read only by checks, so a request shorter than
+    CLIENT_CHECK_PERIOD_S costs nothing (identified) or one graph read (not).
     """
 
     def __init__(
-        self, clients: Callable[[], Iterable[bytes]], identify: Callable[[], bytes | None]
+        self,
+        clients: Callable[[], Iterable[bytes]],
+        identify: Callable[[], bytes | None] | None = None,
     ) -> None:
         self._clients = clients
         self._identify = identify
         self._client: bytes | None = None
-        self._at_arrival = frozenset(clients())
+        self._at_arrival = frozenset() if identify is not None else frozenset(clients())
         self._next_check = time.monotonic() + CLIENT_CHECK_PERIOD_S
         self._absent = 0
 
@@ -126,8 +130,10 @@ class ClientWatch:
         if time.monotonic() < self._next_check:
             return False
         self._next_check = time.monotonic() + CLIENT_CHECK_PERIOD_S
-        if self._client is None:
+        if self._identify is not None and self._client is None:
             self._client = self._identify()
+            if self._client is None:
+                return False
         present = set(self._clients())
         if self._client is not None:
             missing = self._client not in present
