@@ -1161,13 +1161,17 @@ def main(args: list[str] | None = None) -> int:
     node: GraspSafetyNode | None = None
     executor: MultiThreadedExecutor | None = None
     spinner: threading.Thread | None = None
+    spinning = threading.Event()
+    spinning.set()
     status, reason = 0, "the context was shut down"
     try:
         node = GraspSafetyNode()
         executor = NodeExecutor(num_threads=EXECUTOR_THREADS)
         executor.add_node(node)
         node.wait_for_robot(executor)
-        spinner = threading.Thread(target=executor.spin, name="executor", daemon=True)
+        spinner = threading.Thread(
+            target=_spin_until, args=(executor, spinning), name="executor", daemon=True
+        )
         spinner.start()
         spinner.join()  # interrupted by the signal handler's exception
     except StartupError as error:
@@ -1183,9 +1187,10 @@ def main(args: list[str] | None = None) -> int:
         if node is not None:
             node.abandon_rankings()
         if executor is not None:
-            executor.shutdown()
+            spinning.clear()  # the spin thread leaves its wait before the executor goes
             if spinner is not None:
                 spinner.join(timeout=10.0)
+            executor.shutdown()
             _join_callbacks(executor)
         if node is not None:
             abandoned = node.abandoned_rankings
@@ -1197,6 +1202,21 @@ def main(args: list[str] | None = None) -> int:
                 )
         rclpy.try_shutdown()
     return status
+
+
+SPIN_PERIOD_S = 0.1
+"""How often the spin thread of main() looks whether it should stop [s]."""
+
+
+def _spin_until(executor: Executor, spinning: threading.Event) -> None:
+    """Spin ``executor`` while ``spinning`` is set. Executor.shutdown destroys its guard
+    condition at once, so it must not run while another thread waits in spin()
+    (std::terminate at exit)."""
+    try:
+        while spinning.is_set() and executor.context.ok():
+            executor.spin_once(timeout_sec=SPIN_PERIOD_S)
+    except ExternalShutdownException:  # rclpy.shutdown() elsewhere: main() then stops
+        pass
 
 
 def _join_callbacks(executor: MultiThreadedExecutor) -> None:

@@ -99,7 +99,9 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
     ),
     "max_mass_kg": ParameterSpec(1000.0, "largest object mass accepted [kg]"),
     "max_compute_time_s": ParameterSpec(
-        60.0, "a ranking still running after this long is abandoned (success=false) [s]"
+        60.0,
+        "a ranking that has computed this long is abandoned (success=false); time queued "
+        "behind other rankings does not count [s]",
     ),
     "service_busy_timeout_s": ParameterSpec(
         10.0, "how long a request waits for a ranking in progress before answering busy [s]"
