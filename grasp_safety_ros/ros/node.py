@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 import rclpy
+import rclpy.utilities
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Inertia, InertiaStamped, PoseArray
 from grasp_safety_msgs.msg import GraspRanking
@@ -1201,6 +1202,10 @@ def main(args: list[str] | None = None) -> int:
                     "answered"
                 )
         rclpy.try_shutdown()
+        # The middleware's participant goes now, not in the interpreter's teardown (where its
+        # threads were sometimes destroyed still running: "terminate called without an
+        # active exception", exit by SIGABRT)
+        rclpy.utilities.get_default_context().destroy()
     return status
 
 
