@@ -9,12 +9,15 @@ followed by phases with 1, 4 and 16 concurrent clients.
 
 Prints, per phase and in total: requests sent / answered (ranked) / refused with a reason
 naming the expected field / refused otherwise / busy answers / lost (sent, never answered),
-latency median and p99, and the node's RSS before and after warm-up and at the end. Targets:
-0 lost, 0 crashes (the node still runs and exits 0 on SIGINT), RSS growth < 5 % after
-warm-up.
+latency median and p99; the node's memory after each phase: RSS, its peak (VmHWM), and what
+the node reports on /diagnostics (C heap in use and free inside the RSS, glibc mallinfo2);
+then the memory one request of N grasps x S samples needs (the rise of the peak RSS over
+the RSS before it, --sizes). Targets: 0 lost, 0 crashes (the node still runs and exits 0
+on SIGINT), RSS growth < 5 % after warm-up.
 
     .venv/bin/python bench/soak.py                    # 10^4 requests after a warm-up
     .venv/bin/python bench/soak.py --requests 500     # short run
+    .venv/bin/python bench/soak.py --clients 16 --requests 2000   # one phase, 16 clients
 """
 
 from __future__ import annotations
@@ -41,6 +44,7 @@ sys.path.insert(0, str(ROOT / "test"))
 import rclpy  # noqa: E402
 import yaml  # noqa: E402
 from builtin_interfaces.msg import Time  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from geometry_msgs.msg import Point, Pose, PoseArray, PoseStamped, Quaternion  # noqa: E402
 from grasp_safety_msgs.srv import RankGrasps  # noqa: E402
 from nav_msgs.msg import Path as PathMsg  # noqa: E402
@@ -153,12 +157,73 @@ HEADER = (
 )
 
 
-def rss_kib(pid: int) -> int:
-    """Resident set size of process ``pid`` [KiB] (Linux /proc)."""
+def rss_kib(pid: int, field: str = "VmRSS") -> int:
+    """Resident set size (``VmRSS``) or its peak (``VmHWM``) of process ``pid`` [KiB]."""
     for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
+        if line.startswith(f"{field}:"):
             return int(line.split()[1])
-    raise RuntimeError(f"no VmRSS for process {pid}")
+    raise RuntimeError(f"no {field} for process {pid}")
+
+
+def reset_peak(pid: int) -> None:
+    """Reset the process's VmHWM to its current RSS (Linux: clear_refs 5)."""
+    Path(f"/proc/{pid}/clear_refs").write_text("5")
+
+
+class NodeMemory:
+    """The node's memory figures: /proc, and the memory.* values of its /diagnostics."""
+
+    def __init__(self, clients: Clients, pid: int) -> None:
+        self.pid = pid
+        self.reported: dict[str, str] = {}
+        self._subscription = clients.nodes[0].create_subscription(
+            DiagnosticArray, "/diagnostics", self._on_diagnostics, 10
+        )
+
+    def _on_diagnostics(self, message: DiagnosticArray) -> None:
+        for status in message.status:
+            if status.name.startswith("grasp_safety"):
+                self.reported = {kv.key: kv.value for kv in status.values}
+
+    def row(self, name: str) -> str:
+        time.sleep(2.5)  # two diagnostics periods: the node trims its heap while idle
+        heap = self.reported.get("memory.heap_in_use_kib", "nan")
+        free = self.reported.get("memory.heap_free_kib", "nan")
+        return (
+            f"  memory after {name}: RSS {rss_kib(self.pid) / 1024:.1f} MiB, peak "
+            f"{rss_kib(self.pid, 'VmHWM') / 1024:.1f} MiB, heap in use {float(heap) / 1024:.1f}"
+            f" MiB, free in the heap {float(free) / 1024:.1f} MiB"
+        )
+
+
+def sized_request(grasps: int, samples: int, dt_s: float) -> RankGrasps.Request:
+    """``grasps`` copies of the book's grasps on the book's motion lasting (samples - 1) dt."""
+    request = good_request()
+    poses = request.grasps.poses
+    request.grasps.poses = [poses[k % len(poses)] for k in range(grasps)]
+    duration_ns = round((samples - 1) * dt_s * 1e9)
+    request.object_trajectory.poses[1].header.stamp = Time(
+        sec=duration_ns // 1_000_000_000, nanosec=duration_ns % 1_000_000_000
+    )
+    return request
+
+
+def memory_per_request(
+    clients: Clients, memory: NodeMemory, sizes: Sequence[tuple[int, int]], dt_s: float
+) -> None:
+    """Per size: the rise of the node's peak RSS during one request over the RSS before it."""
+    print("memory per request (peak RSS rise during one request):")
+    for grasps, samples in sizes:
+        time.sleep(2.5)  # trimmed after the previous one
+        before = rss_kib(memory.pid)
+        reset_peak(memory.pid)
+        response, latency = call(clients.clients[0], sized_request(grasps, samples, dt_s))
+        rise = rss_kib(memory.pid, "VmHWM") - before
+        ok = response is not None and response.success
+        print(
+            f"  {grasps:>5} x {samples:<5} {'ranked' if ok else 'FAILED'} in {latency:6.2f} s:"
+            f" +{rise / 1024:7.1f} MiB, {1024 * rise / (grasps * samples):6.0f} B per grasp-sample"
+        )
 
 
 class Clients:
@@ -274,7 +339,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--warm-up", type=int, default=None, help="default: requests / 10")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--dt-s", type=float, default=0.1, help="node parameter trajectory.dt_s")
+    parser.add_argument(
+        "--clients",
+        type=int,
+        nargs="+",
+        default=list(CLIENT_COUNTS),
+        help="client counts, one phase each (the requests are shared among the phases)",
+    )
+    parser.add_argument(
+        "--sizes",
+        nargs="*",
+        default=["10x101", "100x201", "1000x201", "1000x481"],
+        help="grasps x samples of the memory-per-request figures (none: skip)",
+    )
     args = parser.parse_args(argv)
+    sizes = [tuple(int(v) for v in size.split("x")) for size in args.sizes]
     warm_up = args.warm_up if args.warm_up is not None else max(20, args.requests // 10)
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     started = time.perf_counter()
@@ -285,7 +364,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         rclpy.init(context=context, domain_id=claim.domain_id)
         clients: Clients | None = None
         try:
-            clients = Clients(context, max(CLIENT_COUNTS))
+            clients = Clients(context, max(args.clients))
+            memory = NodeMemory(clients, node.pid)
             rss_start = rss_kib(node.pid)
             first, _ = call(clients.clients[0], good_request())
             if first is None or not first.success:
@@ -293,16 +373,27 @@ def main(argv: Sequence[str] | None = None) -> int:
             reference = list(first.ranking.order)
             total = Tally()
             print(HEADER)
-            warm = run_phase(clients, 4, warm_up, args.seed, reference)
-            print(warm.row("warm-up x4"))
+            warm = run_phase(clients, min(4, max(args.clients)), warm_up, args.seed, reference)
+            print(warm.row("warm-up"))
+            print(memory.row("warm-up"))
             rss_warm = rss_kib(node.pid)
-            shares = [args.requests // 3 + (1 if k < args.requests % 3 else 0) for k in range(3)]
-            for phase, (count, share) in enumerate(zip(CLIENT_COUNTS, shares, strict=True)):
+            reset_peak(node.pid)
+            phases = len(args.clients)
+            shares = [
+                args.requests // phases + (1 if k < args.requests % phases else 0)
+                for k in range(phases)
+            ]
+            for phase, (count, share) in enumerate(zip(args.clients, shares, strict=True)):
                 tally = run_phase(clients, count, share, args.seed + 1 + phase, reference)
                 print(tally.row(f"{count} client{'s' if count > 1 else ''}"))
+                print(memory.row(f"{count} client{'s' if count > 1 else ''}"))
                 total.add(tally)
             print(total.row("total"))
             rss_end = rss_kib(node.pid)
+            rss_peak = rss_kib(node.pid, "VmHWM")
+            if sizes:
+                memory_per_request(clients, memory, sizes, args.dt_s)
+                print(memory.row("them"))
             alive = node.poll() is None
         finally:
             if clients is not None:
@@ -318,7 +409,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     growth = (rss_end - rss_warm) / rss_warm
     print(
         f"node RSS: {rss_start / 1024:.1f} MiB at start, {rss_warm / 1024:.1f} MiB after "
-        f"warm-up, {rss_end / 1024:.1f} MiB at the end ({100 * growth:+.2f} % after warm-up)"
+        f"warm-up, {rss_end / 1024:.1f} MiB at the end ({100 * growth:+.2f} % after warm-up), "
+        f"peak after warm-up {rss_peak / 1024:.1f} MiB"
     )
     print(
         f"node alive at the end: {alive}; exit status on SIGINT: {node.returncode}; "

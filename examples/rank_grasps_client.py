@@ -7,13 +7,23 @@ Start the node first (config/grasp_safety_node.yaml is the book on Baxter), then
         --metric-point leading_point                          # with grasp quality
 Exit status 0 when the node ranked the grasps, 1 otherwise.
 
-Note: write float literals (1.0, not 1) in float64 message fields: rclpy accepts an int there
-but puts garbage on the wire. The client waits with rclpy's EventsExecutor: on Jazzy's rclpy,
+Two habits of a robust client (docs/ros/reliability.md):
+- ROS_PYTHON_CHECK_FIELDS=1, set below before any message module is imported: with it rclpy
+  refuses an int in a float64 field at once (``Point(x=1)`` raises); without it, Jazzy's
+  rclpy serialises that 1 as 5e-324 (and -1 as NaN), which the node refuses, naming the field.
+- Re-send when no answer comes: right after ``wait_for_service`` the node may not have matched
+  the client's response reader yet, and Fast DDS then drops the response (rmw_fastrtps#706).
+  A ranking is a pure function of the request, so sending it again is safe.
+The client waits with rclpy's EventsExecutor: on Jazzy's rclpy,
 ``rclpy.spin_until_future_complete`` returns milliseconds after the answer has arrived (see
 docs/ros/client.md).
 """
 
 from __future__ import annotations
+
+import os
+
+os.environ.setdefault("ROS_PYTHON_CHECK_FIELDS", "1")  # before the message modules are imported
 
 import argparse
 import math
@@ -34,6 +44,7 @@ except ImportError:  # an rclpy without it
     EventsExecutor = None
 
 SERVICE = "/grasp_safety/rank_grasps"
+ATTEMPTS = 3
 
 
 def wait_for(node: rclpy.node.Node, future: rclpy.task.Future, timeout_s: float) -> None:
@@ -53,6 +64,23 @@ def wait_for(node: rclpy.node.Node, future: rclpy.task.Future, timeout_s: float)
         while not future.done() and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=1.0)
     executor.shutdown()
+
+
+def call(
+    node: rclpy.node.Node,
+    client: rclpy.client.Client,
+    request: RankGrasps.Request,
+    timeout_s: float,
+) -> RankGrasps.Response | None:
+    """Send ``request`` and wait up to ``timeout_s`` for the answer; re-send (at most ATTEMPTS
+    times in all) when none comes: a response the middleware dropped is not lost for good."""
+    for _ in range(ATTEMPTS):
+        future = client.call_async(request)
+        wait_for(node, future, timeout_s)
+        if future.done():
+            return future.result()
+        client.remove_pending_request(future)
+    return None
 
 
 def pose(position_m: tuple[float, float, float], quat_xyzw: tuple[float, ...]) -> Pose:
@@ -88,6 +116,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quality", type=float, nargs=3, help="grasp quality of the 3 grasps")
     parser.add_argument("--metric-point", default="", help="tip | leading_point | worst_point")
+    parser.add_argument(
+        "--timeout", type=float, default=60.0, help="wait per attempt for the answer [s]"
+    )
     options, ros_args = parser.parse_known_args(argv)
     request = book_request()
     request.grasp_quality = [float(q) for q in options.quality or []]
@@ -99,11 +130,9 @@ def main(argv: list[str] | None = None) -> int:
         if not client.wait_for_service(timeout_sec=10.0):
             print(f"no service {SERVICE}: is the node running (same ROS_DOMAIN_ID)?")
             return 1
-        future = client.call_async(request)
-        wait_for(node, future, 120.0)
-        response = future.result()
+        response = call(node, client, request, options.timeout)
         if response is None:
-            print("no answer within 120 s")
+            print(f"no answer to {ATTEMPTS} requests within {options.timeout:g} s each")
             return 1
         if not response.success:
             print(f"refused: {response.message}")

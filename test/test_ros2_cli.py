@@ -395,7 +395,7 @@ def test_param_describe_explains_every_parameter(node: RunningNode) -> None:
         assert f"\n  Description: {spec.description}\n" in block, block
         assert ("Read only: true" in block) == spec.read_only, block
     assert "Min value: 0.0\n    Max value: 1.0" in blocks["safety_weight"]
-    assert "Min value: 1\n    Max value: 1000000000\n    Step: 1" in blocks["max_grasps"]
+    assert "Min value: 1\n    Max value: 10000\n    Step: 1" in blocks["max_grasps"]
     assert "Additional constraints: one of: mean, max, integral" in blocks["metric"]
     assert "Additional constraints: > 0" in blocks["trajectory.dt_s"]
 

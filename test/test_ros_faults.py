@@ -132,13 +132,15 @@ def test_client_killed_in_the_middle_of_a_long_request(ros: NodeUnderTest, tmp_p
         finally:
             if client.poll() is None:
                 client.kill()
-        # The node finishes (or abandons) the orphaned ranking and serves the next request.
+        # The node serves the next request meanwhile (the orphaned ranking shares the compute
+        # lock) and finishes or abandons the orphaned one.
         deadline = time.monotonic() + 60.0
         response = ros.rank(book_request())
         while response.message.startswith("busy:") and time.monotonic() < deadline:
             response = ros.rank(book_request())
         assert response.success, response.message
-        assert handled(ros) >= before + 2  # the orphaned request was answered too
+        # the orphaned request is answered too
+        assert ros.spin_until(lambda: handled(ros) >= before + 2, 60.0)
         assert ros.thread.is_alive()
     finally:
         results = ros.set_parameters(
@@ -257,7 +259,7 @@ def test_signal_during_a_ranking_shuts_down_cleanly(
     process = subprocess.Popen(
         command(
             *("--params-file", PARAMS, "-p", "use_joint_states_seed:=false"),
-            *("-p", "max_total_samples:=20000000"),
+            *("-p", "max_total_samples:=10000000"),
         ),
         env=ros_env,
         stdout=subprocess.PIPE,
@@ -274,14 +276,14 @@ def test_signal_during_a_ranking_shuts_down_cleanly(
         assert client.wait_for_service(timeout_sec=90.0), "service did not appear"
         warm = first_answer(executor, client, book_request(with_inertia=False), process)
         assert warm.success, warm.message
-        # ~1000 grasps x 10001 samples: minutes of work, abandoned at the signal
-        future = client.call_async(long_request(grasps=1000, duration_s=200.0))
+        # 1000 grasps x 9951 samples: minutes of work, abandoned at the signal
+        future = client.call_async(long_request(grasps=1000, duration_s=199.0))
         executor.spin_until_future_complete(future, timeout_sec=2.0)  # the ranking runs
         assert not future.done(), future.result()
         signalled = time.monotonic()
         process.send_signal(signal_number)
         try:
-            _, stderr = process.communicate(timeout=30)
+            stdout, stderr = process.communicate(timeout=30)
         except subprocess.TimeoutExpired:
             process.kill()
             _, stderr = process.communicate()
@@ -296,3 +298,178 @@ def test_signal_during_a_ranking_shuts_down_cleanly(
     assert process.returncode == 0, stderr
     assert "Traceback" not in stderr, stderr
     assert exit_time_s < 20.0
+    # Nothing but the node's own last line after the signal (the lines before it are the
+    # start-up's): no "Failed to publish log message to rosout", no "exception was never
+    # retrieved", no warning about the abandoned ranking.
+    lines = [line for line in (stdout + stderr).splitlines() if line.strip()]
+    name = signal.Signals(signal_number).name
+    assert lines[-1].startswith("[INFO]"), lines
+    assert f"[grasp_safety]: shut down ({name}); 1 ranking(s) abandoned" in lines[-1], lines
+    assert all(line.startswith("[INFO]") and "robot from" in line for line in lines[:-1]), lines
+
+
+# --- Sharing the node: a small request during a large one, a client that leaves ----------------
+
+
+def set_long_request_limits(ros: NodeUnderTest, compute_time_s: float) -> None:
+    results = ros.set_parameters(
+        max_grasps=1000, max_total_samples=2_000_000, max_compute_time_s=compute_time_s
+    )
+    assert all(r.successful for r in results), results
+
+
+def restore_limits(ros: NodeUnderTest) -> None:
+    results = ros.set_parameters(
+        max_grasps=NODE_PARAMETERS["max_grasps"],
+        max_total_samples=NODE_PARAMETERS["max_total_samples"],
+        max_compute_time_s=NODE_PARAMETERS["max_compute_time_s"],
+    )
+    assert all(r.successful for r in results), results
+
+
+def test_small_request_during_a_large_one_is_answered_before_it(ros: NodeUnderTest) -> None:
+    """The large ranking hands the compute lock over after a slice: the small request is
+    ranked (exactly as alone) while the large one still runs, not answered busy after
+    service_busy_timeout_s (0.3 s here) as when it waited for the whole ranking."""
+    reference = ros.rank(book_request())
+    assert reference.success, reference.message
+    set_long_request_limits(ros, 120.0)
+    try:
+        large = ros.rank_client.call_async(long_request(grasps=200, duration_s=50.0))
+        assert ros.spin_until(lambda: ros.node._compute_lock.locked(), 30.0)
+        small = ros.rank(book_request())
+        large_done_first = large.done()
+        assert small.success, small.message
+        assert same_ranking(small.ranking, reference.ranking)
+        assert not large_done_first, "the large request ended first: make it larger"
+        assert ros.spin_until(large.done, 120.0), "the large request never ended"
+        assert large.result().success, large.result().message
+    finally:
+        restore_limits(ros)
+
+
+LEAVING_CLIENT = """
+import signal
+import sys
+sys.path.insert(0, sys.argv[1])
+import rclpy
+from rclpy.signals import SignalHandlerOptions
+from grasp_safety_msgs.srv import RankGrasps
+from test_ros_faults import long_request
+
+def stop(number, frame):
+    raise KeyboardInterrupt
+
+signal.signal(signal.SIGTERM, stop)  # SIGINT raises KeyboardInterrupt already
+rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+node = rclpy.create_node("leaving_client")
+client = node.create_client(RankGrasps, "/grasp_safety/rank_grasps")
+assert client.wait_for_service(timeout_sec=30.0)
+future = client.call_async(long_request(1000, 190.0))
+print("sent", flush=True)
+try:
+    while not future.done():
+        rclpy.spin_once(node, timeout_sec=0.1)
+except KeyboardInterrupt:  # stopped as by Ctrl-C: leave cleanly
+    node.destroy_node()
+    rclpy.shutdown()
+"""
+
+
+def last_error(harness: NodeUnderTest) -> str:
+    return {kv.key: kv.value for kv in harness.node.diagnostics_status().values}["last_error"]
+
+
+@pytest.mark.parametrize("signal_number", [signal.SIGINT, signal.SIGTERM], ids=["INT", "TERM"])
+def test_ranking_stops_soon_after_its_client_leaves(
+    ros: NodeUnderTest, signal_number: int
+) -> None:
+    """A client process stopped in the middle of a long request (as by Ctrl-C): the node
+    abandons the ranking within seconds (here it would run for minutes) and serves the next
+    request at once."""
+    set_long_request_limits(ros, 600.0)
+    try:
+        env = {**os.environ, "ROS_DOMAIN_ID": str(ros.context.get_domain_id())}
+        client = subprocess.Popen(
+            [sys.executable, "-c", LEAVING_CLIENT, str(TEST_DIR)],
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,
+            text=True,
+        )
+        try:
+            assert client.stdout is not None
+            assert client.stdout.readline().strip() == "sent"
+            assert ros.spin_until(lambda: ros.node._compute_lock.locked(), 30.0)
+            time.sleep(1.0)  # the ranking runs
+            client.send_signal(signal_number)
+            client.wait(timeout=30)
+        finally:
+            if client.poll() is None:
+                client.kill()
+            client.communicate()
+        assert ros.spin_until(lambda: "its client left" in last_error(ros), 20.0), last_error(ros)
+        assert last_error(ros).startswith("rank_grasps: ranking abandoned after ")
+        assert ros.spin_until(lambda: not ros.node._compute_lock.locked(), 5.0)
+        response = ros.rank(book_request())
+        assert response.success, response.message
+    finally:
+        restore_limits(ros)
+
+
+# --- An int where a float is expected (issue 19) ---------------------------------------------
+
+INT_CLIENT = """
+import sys
+sys.path.insert(0, sys.argv[1])
+import rclpy
+from grasp_safety_msgs.srv import RankGrasps
+from test_ros_node import book_request
+request = book_request()
+try:
+    request.grasps.poses[1].position.x = 1  # an int in a float64 field
+except AssertionError as error:  # ROS_PYTHON_CHECK_FIELDS=1: refused in the client
+    print(f"client refused: {error}", flush=True)
+    sys.exit(0)
+rclpy.init()
+node = rclpy.create_node("int_client")
+client = node.create_client(RankGrasps, "/grasp_safety/rank_grasps")
+assert client.wait_for_service(timeout_sec=30.0)
+for _ in range(3):  # re-sent when no answer comes (rmw_fastrtps#706)
+    future = client.call_async(request)
+    rclpy.spin_until_future_complete(node, future, timeout_sec=30.0)
+    if future.done():
+        print(future.result().message, flush=True)
+        break
+    client.remove_pending_request(future)
+"""
+
+
+@pytest.mark.parametrize("check_fields", ["", "1"], ids=["unchecked", "checked"])
+def test_an_int_sent_as_a_float_is_refused_with_the_hint(
+    ros: NodeUnderTest, check_fields: str
+) -> None:
+    """Jazzy's rclpy serialises the int 1 in a float64 field as 5e-324 unless the client sets
+    ROS_PYTHON_CHECK_FIELDS=1 (then the assignment fails in the client): the node refuses the
+    subnormal, naming the field and the likely cause."""
+    env = {**os.environ, "ROS_DOMAIN_ID": str(ros.context.get_domain_id())}
+    env.pop("ROS_PYTHON_CHECK_FIELDS", None)
+    if check_fields:
+        env["ROS_PYTHON_CHECK_FIELDS"] = check_fields
+    completed = subprocess.run(
+        [sys.executable, "-c", INT_CLIENT, str(TEST_DIR)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert completed.returncode == 0, completed.stderr
+    answer = completed.stdout.strip().splitlines()[-1]
+    if check_fields:
+        assert answer.startswith("client refused: The 'x' field must be of type 'float'"), answer
+    else:
+        assert answer == (
+            "grasps.poses[1].position.x: holds the subnormal number 5e-324: an integer where "
+            "a float is expected? set ROS_PYTHON_CHECK_FIELDS=1 in the client"
+        )

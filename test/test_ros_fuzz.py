@@ -1,11 +1,13 @@
 """Fuzzing the node: random malformed RankGrasps requests and topic messages.
 
 Every malformed input is answered (service: success=false; topics: a refusal on /diagnostics)
-with a message that starts with the offending field; inputs that are odd but valid (denormal
-numbers, huge but finite positions, Paths of several poses) are either ranked or refused
-naming a field; nothing crashes. A known-good request is sent after each one and its answer
-must stay exactly the first answer. Bounded: a fixed number of examples per test; with CI set,
-the "ci" settings profile makes the examples deterministic (derandomize).
+with a message that starts with the offending field; subnormal numbers (what an int sent as a
+float becomes) are refused with the ROS_PYTHON_CHECK_FIELDS hint; inputs that are odd but
+valid (huge but finite positions, Paths of several poses) are either ranked or refused naming
+a field; nothing crashes, and no success carries a NaN or infinite score for a grasp it
+orders. A known-good request is sent after each one and its answer must stay exactly the first
+answer. Bounded: a fixed number of examples per test; with CI set, the "ci" settings profile
+makes the examples deterministic (derandomize).
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from __future__ import annotations
 import copy
 import math
 import os
+import sys
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -28,6 +31,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.errors import InvalidArgument
 from nav_msgs.msg import Path
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, Header, String
 from test_ros_node import (  # noqa: F401  (_localhost_only: autouse fixture)
@@ -39,6 +43,7 @@ from test_ros_node import (  # noqa: F401  (_localhost_only: autouse fixture)
     book_request,
     same_messages,
 )
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from grasp_safety_ros.core.exceptions import InvalidInputError
 from grasp_safety_ros.core.input_checks import QUATERNION_NORM_TOLERANCE
@@ -59,8 +64,11 @@ FUZZ = settings(
 )
 REFUSE, ACCEPT, EITHER = "refuse", "accept", "either"
 BAD_FLOATS = (math.nan, math.inf, -math.inf)
-ODD_FLOATS = (5e-324, -5e-324, 2.2250738585072014e-308, 0.0, -0.0, 1e300, -1e300)
+SUBNORMALS = (5e-324, -5e-324, 1e-310)
+ODD_FLOATS = (*SUBNORMALS, sys.float_info.min, 0.0, -0.0, 1e300, -1e300, sys.float_info.max)
+MAX_ABS_QUALITY = 1e9  # the node's MAX_ABS_GRASP_QUALITY
 MAX_MASS_KG = 1000.0  # the parameter's default
+MAX_SAMPLES = 20_000  # the parameter's default
 TEXT = st.text(
     alphabet=st.characters(blacklist_categories=("Cs",), blacklist_characters="\x00"),
     max_size=24,
@@ -78,12 +86,20 @@ class Parts:
     quality: list[float]
     metric: str
     metric_point: str
+    joint_trajectories: list[JointTrajectory]
 
     @classmethod
     def good(cls) -> Parts:
         request = book_request()
         return cls(
-            request.grasps, request.object_trajectory, request.object_inertia, "object", [], "", ""
+            request.grasps,
+            request.object_trajectory,
+            request.object_inertia,
+            "object",
+            [],
+            "",
+            "",
+            [],
         )
 
     def request(self) -> RankGrasps.Request:
@@ -94,6 +110,7 @@ class Parts:
             grasp_quality=self.quality,
             metric=self.metric,
             metric_point=self.metric_point,
+            joint_trajectories=self.joint_trajectories,
         )
 
 
@@ -149,6 +166,8 @@ def pose_value(draw: st.DrawFn) -> Mutation:
             pose, field = poses[k].pose, f"object_trajectory.poses[{k}].pose.{part}"
         target = getattr(pose, part)
         setattr(target, component, value)
+        if is_subnormal(value):
+            return f"{field}.{component}", REFUSE
         if part == "orientation":
             return field, _quaternion_expectation(target)
         if not math.isfinite(value) or abs(value) > MAX_ABS_POSITION_M:
@@ -277,6 +296,10 @@ def inertia(draw: st.DrawFn) -> Mutation:
 
     def apply(parts: Parts) -> tuple[str, str]:
         i = parts.inertia
+        if is_subnormal(value) and kind in ("mass", "com", "component"):
+            target, name = {"mass": (i, "m"), "com": (i.com, "y"), "component": (i, "ixz")}[kind]
+            setattr(target, name, value)
+            return "object_inertia", REFUSE
         if kind == "mass":
             i.m = value
             if value == 0.0:
@@ -299,7 +322,9 @@ def inertia(draw: st.DrawFn) -> Mutation:
                 return "object_inertia.com", REFUSE
             return "object_inertia", ACCEPT if abs(value) < 1.0 else EITHER
         i.ixz = value
-        return "object_inertia", REFUSE if not math.isfinite(value) or abs(value) > 1.0 else EITHER
+        if not math.isfinite(value) or abs(value) > 1.0:
+            return "object_inertia", REFUSE
+        return "object_inertia", EITHER
 
     return Mutation(f"inertia {kind} {value!r}", 1, apply, "inertia")
 
@@ -317,7 +342,11 @@ def quality(draw: st.DrawFn) -> Mutation:
         parts.quality = list(values)
         if not values:
             return "grasp_quality", ACCEPT
-        if len(values) != len(parts.grasps.poses) or not all(math.isfinite(v) for v in values):
+        if (
+            len(values) != len(parts.grasps.poses)
+            or not all(math.isfinite(v) and abs(v) <= MAX_ABS_QUALITY for v in values)
+            or any(is_subnormal(v) for v in values)
+        ):
             return "grasp_quality", REFUSE
         return "grasp_quality", EITHER  # e.g. identical qualities
 
@@ -338,7 +367,34 @@ def strings(draw: st.DrawFn) -> Mutation:
     return Mutation(f"{which}={value!r}", 1, apply, which)
 
 
+@st.composite
+def joint_trajectories(draw: st.DrawFn) -> Mutation:
+    """Planned joint trajectories: none per grasp (IK), the wrong number, more points than
+    max_samples, or a point holding a subnormal (an int sent as a float)."""
+    kind = draw(st.sampled_from(("empty", "count", "too_many_points", "subnormal")))
+    which = draw(st.integers(0, 2))
+
+    def apply(parts: Parts) -> tuple[str, str]:
+        count = len(parts.grasps.poses)
+        parts.joint_trajectories = [JointTrajectory() for _ in range(count)]
+        if kind == "empty":
+            return "joint_trajectories", ACCEPT if count else EITHER
+        if kind == "count" or count == 0:
+            parts.joint_trajectories.append(JointTrajectory())
+            return "joint_trajectories", REFUSE
+        k = which % count
+        if kind == "too_many_points":
+            point = JointTrajectoryPoint(positions=[0.0] * 7)
+            parts.joint_trajectories[k].points = [point] * (MAX_SAMPLES + 1)
+            return f"joint_trajectories[{k}].points", REFUSE
+        parts.joint_trajectories[k].points = [JointTrajectoryPoint(positions=[0.0, 5e-324])]
+        return f"joint_trajectories[{k}].points[0].positions[1]", REFUSE
+
+    return Mutation(f"joint trajectories {kind} {which}", 1, apply, "joint trajectories")
+
+
 MUTATIONS = st.one_of(
+    joint_trajectories(),
     pose_value(),
     quaternion_scale(),
     grasp_count(),
@@ -355,6 +411,10 @@ def mutated(mutations: list[Mutation]) -> tuple[Parts, list[tuple[str, str]]]:
     parts = Parts.good()
     expectations = [m.apply(parts) for m in sorted(mutations, key=lambda m: m.stage)]
     return parts, expectations
+
+
+def is_subnormal(value: float) -> bool:
+    return value != 0.0 and abs(value) < 2.2250738585072014e-308
 
 
 def names_a_field(message: str, fields: list[str]) -> bool:
@@ -394,6 +454,21 @@ def reference(node: NodeUnderTest) -> GraspRanking:
     return response.ranking
 
 
+def assert_finite_scores(ranking: GraspRanking) -> None:
+    """No grasp of an order has a NaN or infinite score; the scores of the analyses that ran
+    are finite for it too; no evaluation has an infinite score."""
+    ordered = {*ranking.order, *ranking.safety_order, *ranking.paper_order}
+    names = ["score", "safety_score", "peak_effective_mass_kg", "mean_effective_mass_kg"]
+    if math.isfinite(ranking.safety_weight):  # a quality was given
+        names += ["combined_score", "grasp_quality"]
+    for index in ordered:
+        for name in names:
+            value = getattr(ranking.evaluations[index], name)
+            assert math.isfinite(value), (index, name, value)
+    for evaluation in ranking.evaluations:
+        assert not any(math.isinf(getattr(evaluation, name)) for name in names)
+
+
 def assert_exact(got: RankGrasps.Response, reference: GraspRanking) -> None:
     """The known-good answer is exactly the first one (all fields but stamp and time)."""
     assert got.success, got.message
@@ -412,6 +487,9 @@ def test_malformed_requests_are_refused_naming_the_field(
     kinds = {kind for _, kind in expectations}
     response = node.rank(parts.request())
     assert not response.message.startswith("internal error"), response.message
+    assert not response.message.startswith("result:"), response.message  # the final guard
+    if response.success:
+        assert_finite_scores(response.ranking)
     if REFUSE in kinds:
         assert not response.success, f"accepted: {mutations}"
         assert names_a_field(response.message, fields), (response.message, fields)
@@ -638,3 +716,53 @@ def test_garbage_robot_description_keeps_the_working_model(
         ),
         10.0,
     )
+
+
+# --- Bursts and ignored messages on /diagnostics ----------------------------------------------
+
+
+def diagnostics_values(node: NodeUnderTest) -> dict[str, str]:
+    return {kv.key: kv.value for kv in node.node.diagnostics_status().values}
+
+
+def test_a_burst_of_bad_topic_messages_is_counted_in_full(node: NodeUnderTest) -> None:
+    """Every message of a burst reaches the node (its input queues keep all) and each
+    refusal is counted per topic on /diagnostics; the default depth of 10 dropped most of a
+    burst unreported."""
+    count = 300
+    keep_all = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
+    publisher = node.client.create_publisher(PoseArray, "/grasp_safety/candidate_grasps", keep_all)
+    try:
+        assert node.spin_until(lambda: publisher.get_subscription_count() > 0)
+        before = int(diagnostics_values(node).get("refused.candidate_grasps", "0"))
+        bad = PoseArray(header=Header(frame_id="nowhere"), poses=book_request().grasps.poses)
+        for _ in range(count):
+            publisher.publish(bad)
+
+        def refused() -> int:
+            return int(diagnostics_values(node).get("refused.candidate_grasps", "0")) - before
+
+        assert node.spin_until(lambda: refused() >= count, 60.0), refused()
+        assert refused() == count
+        assert diagnostics_values(node).get("lost.candidate_grasps", "0") == "0"
+    finally:
+        node.client.destroy_publisher(publisher)
+
+
+def test_an_ignored_robot_description_says_why(
+    node: NodeUnderTest, reference: GraspRanking
+) -> None:
+    publisher = node.client.create_publisher(String, "/robot_description", LATCHED)
+    try:
+        publisher.publish(String(data=GOOD_URDF))
+        assert node.spin_until(
+            lambda: int(diagnostics_values(node)["ignored_robot_descriptions"]) >= 1, 10.0
+        )
+        assert diagnostics_values(node)["robot_description_error"] == (
+            "ignored: the parameter urdf gives the robot (empty robot_description and urdf to "
+            "take it from the topic)"
+        )
+        assert diagnostics_values(node)["robot_source"] == "urdf"
+        assert_exact(node.rank(book_request()), reference)
+    finally:
+        node.client.destroy_publisher(publisher)

@@ -338,9 +338,11 @@ def grasps_with_joint_trajectories(
     grasps: Sequence[Grasp],
     joint_trajectories: Sequence[JointTrajectory],
     field: str = "joint_trajectories",
+    max_samples: int | None = None,
 ) -> list[Grasp]:
     """Attach one planned joint trajectory per grasp (empty list: IK for all; an entry
-    without points: IK for that grasp)."""
+    without points: IK for that grasp); each has at most ``max_samples`` points (its samples),
+    checked before any is converted."""
     if not joint_trajectories:
         return list(grasps)
     if len(joint_trajectories) != len(grasps):
@@ -349,6 +351,12 @@ def grasps_with_joint_trajectories(
             f"must have one entry per grasp ({len(grasps)}) or none, got "
             f"{len(joint_trajectories)}",
         )
+    for i, message in enumerate(joint_trajectories):
+        if max_samples is not None and len(message.points) > max_samples:
+            raise InvalidInputError(
+                f"{field}[{i}].points",
+                f"has {len(message.points)} points; at most max_samples={max_samples} are allowed",
+            )
     return [
         replace(grasp, joint_trajectory=planned_from_joint_trajectory(message, f"{field}[{i}]"))
         for i, (grasp, message) in enumerate(zip(grasps, joint_trajectories, strict=True))
@@ -444,7 +452,7 @@ def object_inertia_from_msg(
             f"{[float(v) for v in com]}",
         )
     components = [inertia.ixx, inertia.ixy, inertia.ixz, inertia.iyy, inertia.iyz, inertia.izz]
-    tensor = inertia_tensor_from_components(components, f"{field}.ixx..izz")
+    tensor = inertia_tensor_from_components(components, f"{field}.ixx..izz", mass)
     try:
         return ObjectInertia(mass, np.array(com), tensor)
     except InvalidInputError as error:

@@ -5,30 +5,36 @@ parameters.py, the work is GraspSafetyEvaluator.rank followed by
 core.analyses.safety_report.analyse (metric point, ISO/TS 15066, inertia uncertainty, grasp
 quality, redundancy, effort). See docs/ros/interface.md for the interface.
 
-Threads: a MultiThreadedExecutor with EXECUTOR_THREADS threads. The service sits in its own
-reentrant callback group, the input topics in a mutually exclusive one, everything else
-(parameters, /robot_description, /joint_states, the diagnostics timer) in the default group.
-One ranking runs at a time (the compute lock: the core's solvers keep scratch data); a request
-that cannot get the lock within ``service_busy_timeout_s`` is answered busy, and a ranking
-longer than ``max_compute_time_s`` is abandoned, so a slow request never blocks the next one
-for ever (checked after every grasp of the ranking, also on the worker pool; the analyses
-after it run to the end). The GIL still makes a long ranking share the CPU with the other
+Threads: a NodeExecutor (a MultiThreadedExecutor) with EXECUTOR_THREADS threads. The service
+sits in its own reentrant callback group, the input topics in a mutually exclusive one,
+everything else (parameters, /robot_description, /joint_states, the diagnostics timer) in the
+default group. One ranking computes at a time (the compute lock: the core's solvers keep
+scratch data), in arrival order and in slices: a ranking hands the lock to waiting requests
+after 0.2 s at its next progress check (ranking_job.FairComputeLock), so a small request does
+not wait for a large one; a request that cannot get the lock within
+``service_busy_timeout_s`` is answered busy, a ranking longer than ``max_compute_time_s``
+(time queued not counted) or whose client has left the ROS graph is abandoned
+(docs/ros/reliability.md). The GIL still makes a long ranking share the CPU with the other
 callbacks. The markers are built, and the ranking published (serialised), only once they
 have had a subscriber; a late transient-local subscriber gets the latest (_OnDemandPublisher).
 """
 
 from __future__ import annotations
 
+import signal
 import sys
 import threading
 import time
 import traceback
+from collections import deque
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
+from functools import partial
 from typing import Any
 
 import numpy as np
 import rclpy
+import rclpy.utilities
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Inertia, InertiaStamped, PoseArray
 from grasp_safety_msgs.msg import GraspRanking
@@ -36,8 +42,17 @@ from grasp_safety_msgs.srv import RankGrasps
 from nav_msgs.msg import Path
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
-from rclpy.event_handler import PublisherEventCallbacks, QoSPublisherMatchedInfo
-from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.clock import Clock, ClockType
+from rclpy.event_handler import (
+    PublisherEventCallbacks,
+    QoSMessageLostInfo,
+    QoSPublisherMatchedInfo,
+    SubscriptionEventCallbacks,
+)
+from rclpy.exceptions import (
+    InvalidParameterTypeException,
+    InvalidParameterValueException,
+)
 from rclpy.executors import Executor, ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -48,7 +63,10 @@ from rclpy.qos import (
     ReliabilityPolicy,
     qos_profile_sensor_data,
 )
+from rclpy.service_introspection import ServiceIntrospectionState
+from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
+from service_msgs.msg import ServiceEventInfo
 from std_msgs.msg import Float64MultiArray, Header, String
 from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 from visualization_msgs.msg import MarkerArray
@@ -58,7 +76,7 @@ from ..core.analyses.safety_report import AnalysisOptions, analyse, posture_crit
 from ..core.exceptions import GraspSafetyError, InvalidInputError
 from ..core.input_checks import finite_array
 from ..core.method.posture import select_postures
-from ..core.method.ranking import check_metric
+from ..core.method.ranking import Ranking, check_metric
 from ..core.model.inertia import ObjectInertia
 from ..core.model.robot import NO_ARMATURE_NOTE, RobotModel
 from .arm_points import check_arm_point_links
@@ -75,6 +93,9 @@ from .conversions import (
     trajectory_from_msg,
 )
 from .declaration import declare_node_parameters, typed_parameters
+from .executor import NodeExecutor, request_header
+from .memory import memory_kib, release_free_heap
+from .message_checks import check_finite_result, check_no_subnormals
 from .parameters import (
     PARAMETERS,
     NodeSettings,
@@ -83,6 +104,7 @@ from .parameters import (
     check_parameter,
     settings_from_parameters,
 )
+from .ranking_job import ClientWatch, FairComputeLock
 from .robot_group import PENDING_FIELDS, ROBOT_GROUP, group_complete, pending_reason
 
 NODE_NAME = "grasp_safety"
@@ -93,7 +115,11 @@ LATCHED = QoSProfile(
     depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
 )
 """Results: late subscribers (RViz, ``ros2 topic echo``) get the last ranking."""
-INPUT = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+INPUT = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
+"""Candidate grasps, their quality, the object trajectory and inertia: every message counts
+(the pairing rules follow their order), so none is overwritten in the node's queue (keep the
+last 10 dropped the oldest of a burst unreported); a reliable publisher is slowed down
+instead, and what the middleware still loses is counted (``lost.<topic>`` on /diagnostics)."""
 SERVICE = QoSProfile(
     history=HistoryPolicy.KEEP_ALL,
     reliability=ReliabilityPolicy.RELIABLE,
@@ -101,6 +127,9 @@ SERVICE = QoSProfile(
 )
 """Requests wait in the service's queue until a thread takes them; the default (keep the last
 10) silently dropped the oldest when more than EXECUTOR_THREADS + 10 were in flight."""
+MAX_ABS_GRASP_QUALITY = 1e9
+"""Grasp qualities beyond +/-1e9 are refused: the min-max normalisation of the combined score
+overflowed (1.8e308 and -1.8e308 gave a NaN combined score, ranked first)."""
 _STANDARD_OVERRIDES = ("use_sim_time", "qos_overrides.", "start_type_description_service")
 
 
@@ -124,6 +153,10 @@ class ShuttingDownError(GraspSafetyError):
     """The node is shutting down: the ranking was abandoned."""
 
 
+class ClientGoneError(GraspSafetyError):
+    """The request's client left the ROS graph: the ranking was abandoned."""
+
+
 @dataclass
 class _Status:
     """What /diagnostics reports (guarded by the node's state lock)."""
@@ -138,6 +171,10 @@ class _Status:
     last_was_error: bool = False
     robot_description_error: str = ""  # why the last /robot_description was not used
     robot_parameters_pending: str = ""  # why the robot group is not applied yet
+    abandoned: int = 0  # rankings abandoned at shut-down
+    ignored_descriptions: int = 0  # /robot_description messages ignored (parameters rule)
+    refused_by_source: dict[str, int] = field(default_factory=dict)
+    lost_by_source: dict[str, int] = field(default_factory=dict)  # the middleware's count
 
 
 @dataclass(frozen=True)
@@ -148,6 +185,10 @@ class _Snapshot:
     bundle: RobotBundle | None
     joint_state: tuple[Sequence[str], Sequence[float]] | None
     inertia_override: ObjectInertia | None
+
+
+SERVICE_EVENTS_KEPT = 1024
+"""Request arrivals (client GID, sequence number, time) kept to identify a request's client."""
 
 
 GRAPH_CHECK_PERIOD_S = 0.02
@@ -250,7 +291,7 @@ class GraspSafetyNode(Node):
 
     def _setup(self) -> None:
         self._state_lock = threading.Lock()
-        self._compute_lock = threading.Lock()
+        self._compute_lock = FairComputeLock()
         self._stopping = threading.Event()  # set by abandon_rankings at shut-down
         self._started = False
         self._startup_rejection = ""
@@ -266,6 +307,8 @@ class GraspSafetyNode(Node):
         self._inertia_override: ObjectInertia | None = None
         self._status = _Status()
         self._pending_robot: dict[str, Any] = {}  # robot group values accepted, not applied
+        self._arrivals: deque[tuple[int, int, bytes]] = deque(maxlen=SERVICE_EVENTS_KEPT)
+        self._trim_pending = False
 
         self.add_pre_set_parameters_callback(typed_parameters)
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -284,77 +327,76 @@ class GraspSafetyNode(Node):
         self._warn_unknown_overrides()
 
         self._service_group = ReentrantCallbackGroup()
-        self._topic_group = MutuallyExclusiveCallbackGroup()
+        self._topic_group = topics = MutuallyExclusiveCallbackGroup()
         self._ranking_pub = _OnDemandPublisher(self, GraspRanking, "~/ranking")
         self._ranked_pub = self.create_publisher(PoseArray, "~/ranked_grasps", LATCHED)
         self._markers_pub = _OnDemandPublisher(self, MarkerArray, "~/markers")
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self.create_service(
+        self._service = self.create_service(
             RankGrasps,
             "~/rank_grasps",
             self._on_rank_grasps,
             qos_profile=SERVICE,
             callback_group=self._service_group,
         )
-        self.create_subscription(
-            PoseArray,
-            "~/candidate_grasps",
-            self._guarded("candidate_grasps", self._on_candidates),
-            INPUT,
-            callback_group=self._topic_group,
+        # Which client sent a request: the service's introspection events (metadata only)
+        # carry the client's GID and the request's sequence number.
+        # rcl keeps a pointer to the clock: it must live as long as the service
+        self._event_clock = Clock(clock_type=ClockType.SYSTEM_TIME)
+        self._service.configure_introspection(
+            self._event_clock, SERVICE, ServiceIntrospectionState.METADATA
         )
         self.create_subscription(
-            Float64MultiArray,
-            "~/candidate_grasp_quality",
-            self._guarded("candidate_grasp_quality", self._on_quality),
-            INPUT,
-            callback_group=self._topic_group,
+            RankGrasps.Event,
+            f"{self._service.service_name}/_service_event",
+            self._on_service_event,
+            SERVICE,
         )
-        self.create_subscription(
-            Path,
-            "~/object_trajectory",
-            self._guarded("object_trajectory", self._on_trajectory),
-            INPUT,
-            callback_group=self._topic_group,
+        inputs = (
+            (PoseArray, "~/candidate_grasps", self._on_candidates, INPUT, topics),
+            (Float64MultiArray, "~/candidate_grasp_quality", self._on_quality, INPUT, topics),
+            (Path, "~/object_trajectory", self._on_trajectory, INPUT, topics),
+            (
+                MultiDOFJointTrajectory,
+                "~/object_multi_dof_trajectory",
+                self._on_trajectory,
+                INPUT,
+                topics,
+            ),
+            (InertiaStamped, "~/object_inertia", self._on_inertia, INPUT, topics),
+            (JointState, "/joint_states", self._on_joint_states, qos_profile_sensor_data, None),
+            (String, "/robot_description", self._on_robot_description, LATCHED, None),
         )
-        self.create_subscription(
-            MultiDOFJointTrajectory,
-            "~/object_multi_dof_trajectory",
-            self._on_trajectory,
-            INPUT,
-            callback_group=self._topic_group,
-        )
-        self.create_subscription(
-            InertiaStamped,
-            "~/object_inertia",
-            self._guarded("object_inertia", self._on_inertia),
-            INPUT,
-            callback_group=self._topic_group,
-        )
-        self.create_subscription(
-            JointState,
-            "/joint_states",
-            self._guarded("/joint_states", self._on_joint_states),
-            qos_profile_sensor_data,
-        )
-        self.create_subscription(
-            String,
-            "/robot_description",
-            self._guarded("/robot_description", self._on_robot_description),
-            LATCHED,
-        )
+        for msg_type, topic, callback, qos, group in inputs:
+            source = topic.removeprefix("~/")
+            self.create_subscription(
+                msg_type,
+                topic,
+                self._guarded(source, callback),
+                qos,
+                callback_group=group,
+                event_callbacks=SubscriptionEventCallbacks(
+                    message_lost=partial(self._on_message_lost, source)
+                ),
+            )
         self._diagnostics_timer = self.create_timer(
-            self._settings.diagnostics_period_s, self._publish_diagnostics
+            self._settings.diagnostics_period_s, self._on_diagnostics_timer
         )
         self._started = True
         if self._robot is not None:
             self._log_robot(self._robot)
 
     def _guarded(self, source: str, callback: Callable[[Any], None]) -> Callable[[Any], None]:
-        """``callback`` for a topic; an unexpected exception (a bug) is logged and reported on
+        """``callback`` for a topic, after refusing a message with a subnormal float (an int
+        sent as a float); an unexpected exception (a bug) is logged and reported on
         /diagnostics instead of stopping the executor."""
 
         def guarded(msg: Any) -> None:
+            try:
+                check_no_subnormals(msg, source)
+            except GraspSafetyError as error:
+                self._report_error(source, error)
+                return
             try:
                 callback(msg)
             except Exception as error:  # last resort: keep serving
@@ -363,10 +405,27 @@ class GraspSafetyNode(Node):
 
         return guarded
 
+    def _on_message_lost(self, source: str, info: QoSMessageLostInfo) -> None:
+        """The middleware reports messages of a topic lost before the node took them."""
+        with self._state_lock:
+            lost = self._status.lost_by_source
+            lost[source] = lost.get(source, 0) + info.total_count_change
+        self.get_logger().warning(
+            f"{source}: {info.total_count_change} message(s) lost before the node took them "
+            f"({info.total_count} in all)"
+        )
+
     def abandon_rankings(self) -> None:
         """Make the running ranking (and any later one) stop at its next progress check: for
         shut-down, so that no executor thread outlives the node."""
         self._stopping.set()
+        self._compute_lock.stop()
+
+    @property
+    def abandoned_rankings(self) -> int:
+        """Rankings abandoned because the node is shutting down."""
+        with self._state_lock:
+            return self._status.abandoned
 
     def _warn_unknown_overrides(self) -> None:
         for name in sorted(self._parameter_overrides):
@@ -502,7 +561,7 @@ class GraspSafetyNode(Node):
             self._diagnostics_timer.cancel()
             self.destroy_timer(self._diagnostics_timer)
             self._diagnostics_timer = self.create_timer(
-                settings.diagnostics_period_s, self._publish_diagnostics
+                settings.diagnostics_period_s, self._on_diagnostics_timer
             )
 
     # --- Robot description and joint states --------------------------------------------------
@@ -512,7 +571,17 @@ class GraspSafetyNode(Node):
             self._topic_description = msg.data
             settings = self._settings
         if settings.robot_source:
-            self.get_logger().debug("/robot_description ignored: parameters give the robot")
+            given_by = "robot_description" if settings.robot_description else "urdf"
+            reason = (
+                f"ignored: the parameter {given_by} gives the robot (empty robot_description "
+                "and urdf to take it from the topic)"
+            )
+            with self._state_lock:
+                self._status.ignored_descriptions += 1
+                first = self._status.robot_description_error != reason
+                self._status.robot_description_error = reason
+            if first:  # once, not per message
+                self.get_logger().info(f"/robot_description {reason}")
             return
         try:
             if not msg.data.lstrip().startswith("<"):  # never a file path or a package name
@@ -552,6 +621,7 @@ class GraspSafetyNode(Node):
         self, request: RankGrasps.Request, response: RankGrasps.Response
     ) -> RankGrasps.Response:
         try:
+            check_no_subnormals(request)
             response.ranking = self._rank(
                 request.grasps,
                 object_trajectory_of_request(
@@ -565,8 +635,14 @@ class GraspSafetyNode(Node):
                 metric_point=request.metric_point,
                 quality_field="grasp_quality",
                 joint_trajectories=request.joint_trajectories,
+                client_watch=self._client_watch(request_header()),
             )
             response.success = True
+        except ShuttingDownError as error:  # answered, not reported: the node is going
+            response.success = False
+            response.message = str(error)
+            with self._state_lock:
+                self._status.abandoned += 1
         except GraspSafetyError as error:
             response.success = False
             response.message = str(error)
@@ -577,6 +653,41 @@ class GraspSafetyNode(Node):
             response.message = _internal_error(error)
             self._report_error("rank_grasps", error)
         return response
+
+    def _client_watch(self, header: Any) -> ClientWatch:
+        """The watch on the client of the request of ``header`` (None: not run by
+        NodeExecutor, the clients present now stand in)."""
+        if header is None:
+            return ClientWatch(self._service_clients)
+        return ClientWatch(self._service_clients, partial(self._client_of, header))
+
+    def _service_clients(self) -> list[bytes]:
+        """GIDs of the rank_grasps clients' endpoints in the ROS graph (request writers and
+        response readers, on the DDS topics ``rq/<service>Request`` and ``rr/<service>Reply``;
+        none where the middleware names them otherwise)."""
+        name = self._service.service_name.lstrip("/")
+        writers = self.get_publishers_info_by_topic(f"rq/{name}Request", no_mangle=True)
+        readers = self.get_subscriptions_info_by_topic(f"rr/{name}Reply", no_mangle=True)
+        return [bytes(endpoint.endpoint_gid) for endpoint in (*writers, *readers)]
+
+    def _on_service_event(self, event: Any) -> None:
+        info = event.info
+        if info.event_type == ServiceEventInfo.REQUEST_RECEIVED:
+            stamp_ns = info.stamp.sec * 1_000_000_000 + info.stamp.nanosec
+            with self._state_lock:
+                self._arrivals.append((info.sequence_number, stamp_ns, bytes(info.client_gid)))
+
+    def _client_of(self, header: Any) -> bytes | None:
+        """The GID of the client that sent the request of ``header`` (same sequence number,
+        the arrival closest in time, within a second), or None when not known (yet)."""
+        number, received_ns = header.request_id.sequence_number, header.received_timestamp
+        with self._state_lock:
+            matches = [
+                (abs(stamp_ns - received_ns), gid)
+                for seq, stamp_ns, gid in self._arrivals
+                if seq == number and abs(stamp_ns - received_ns) < 1_000_000_000
+            ]
+        return min(matches)[1] if matches else None
 
     # --- Topics ------------------------------------------------------------------------------
 
@@ -701,6 +812,8 @@ class GraspSafetyNode(Node):
             with self._state_lock:
                 self._candidates_pending = True  # retried with the next trajectory
             self._report_error("topics", error)
+        except ShuttingDownError:
+            pass  # the node is going: nothing to report
         except GraspSafetyError as error:
             self._report_error("topics", error)
 
@@ -724,6 +837,7 @@ class GraspSafetyNode(Node):
         metric_point: str = "",
         quality_field: str = "grasp_quality",
         joint_trajectories: Sequence[JointTrajectory] = (),
+        client_watch: ClientWatch | None = None,
     ) -> GraspRanking:
         """Convert, rank, analyse, publish; return the GraspRanking. Raises GraspSafetyError.
 
@@ -731,6 +845,8 @@ class GraspSafetyNode(Node):
             quality: One grasp quality per grasp (higher is better), or None.
             metric_point: The request's metric point; empty: the parameter's.
             joint_trajectories: One planned joint trajectory per grasp, or none (IK).
+            client_watch: The service's clients at the request's arrival: the ranking stops
+                when they are all gone.
         """
         state = self._snapshot()
         settings, bundle = state.settings, state.bundle
@@ -754,7 +870,9 @@ class GraspSafetyNode(Node):
             settings.max_grasps,
             grasps_field,
         )
-        grasps = grasps_with_joint_trajectories(grasps, joint_trajectories)
+        grasps = grasps_with_joint_trajectories(
+            grasps, joint_trajectories, max_samples=settings.max_samples
+        )
         samples = len(trajectory.times_s())
         total = sum(
             samples if g.joint_trajectory is None else len(g.joint_trajectory.times_s)
@@ -785,14 +903,16 @@ class GraspSafetyNode(Node):
             seed = seed_from_joint_state(*state.joint_state, bundle.robot)
 
         if not self._compute_lock.acquire(timeout=settings.service_busy_timeout_s):
+            if self._stopping.is_set():
+                raise ShuttingDownError("ranking not started: the node is shutting down")
             raise BusyError(
                 f"busy: another ranking has been running for more than "
                 f"service_busy_timeout_s={settings.service_busy_timeout_s:g} s; try again"
             )
         try:
             started = time.perf_counter()
-            deadline_check = _deadline_check(
-                started + settings.max_compute_time_s, settings, self._stopping
+            deadline_check = _progress_check(
+                settings, self._stopping, self._compute_lock, client_watch
             )
             ranking = bundle.evaluator.rank(
                 grasps,
@@ -829,20 +949,26 @@ class GraspSafetyNode(Node):
         result = report_msg(
             report, grasps_msg, settings.base_frame, stamp, compute_time_s, settings.response
         )
+        check_finite_result(result)  # no NaN or inf ranks a grasp
         self._ranking_pub.publish(lambda: result)
         self._ranked_pub.publish(result.ranked_grasps)
+        # The markers may be built later (on demand): keep what they need only, not the
+        # report and its per-sample arrays (0.5 GB kept after a 1,000 x 481 request)
+        labels, order, scores = _labels_only(ranking), report.order, report.scores
+        not_admissible = {
+            a.index for a in report.iso if a.feasible and not a.admissible_where_permitted
+        }
+        tips = [replace(g, joint_trajectory=None) if g.joint_trajectory else g for g in grasps]
         self._markers_pub.publish(
             lambda: markers_msg(
-                ranking,
-                grasps,
+                labels,
+                tips,
                 trajectory,
                 settings.base_frame,
                 stamp,
-                order=report.order,
-                scores=report.scores,
-                not_admissible={
-                    a.index for a in report.iso if a.feasible and not a.admissible_where_permitted
-                },
+                order=order,
+                scores=scores,
+                not_admissible=not_admissible,
             )
         )
         feasible = sum(1 for e in ranking.evaluations if e.feasible)
@@ -854,6 +980,7 @@ class GraspSafetyNode(Node):
             status.last_infeasible = len(ranking.evaluations) - feasible
             status.last_source = source
             status.last_was_error = False
+            self._trim_pending = True
         # Debug, not info: an rclpy log call that is emitted costs about 2 ms here (its caller
         # lookup, inspect.getmodule, scans every loaded module); /diagnostics has the counts.
         self.get_logger().debug(
@@ -868,6 +995,8 @@ class GraspSafetyNode(Node):
     def _report_error(self, source: str, error: BaseException | str) -> None:
         with self._state_lock:
             self._status.refused += 1
+            by_source = self._status.refused_by_source
+            by_source[source] = by_source.get(source, 0) + 1
             self._status.last_error = f"{source}: {error}"
             self._status.last_source = source
             self._status.last_was_error = True
@@ -907,6 +1036,10 @@ class GraspSafetyNode(Node):
                 "robot_description_error": status.robot_description_error,
                 "robot_parameters_pending": status.robot_parameters_pending,
                 "armature": _armature_status(bundle.robot) if bundle else "",
+                "ignored_robot_descriptions": status.ignored_descriptions,
+                **{f"refused.{k}": n for k, n in sorted(status.refused_by_source.items())},
+                **{f"lost.{k}": n for k, n in sorted(status.lost_by_source.items())},
+                **{f"memory.{k}": n for k, n in memory_kib().items()},
             }
         return DiagnosticStatus(
             level=level,
@@ -915,6 +1048,18 @@ class GraspSafetyNode(Node):
             hardware_id=f"{settings.base_frame}->{settings.tip_frame}",
             values=[KeyValue(key=k, value=str(v)) for k, v in values.items()],
         )
+
+    def _on_diagnostics_timer(self) -> None:
+        """Give the heap freed by the last rankings back to the system while none runs (the
+        allocator keeps its high-water mark otherwise), then publish the status."""
+        with self._state_lock:
+            trim, self._trim_pending = self._trim_pending, False
+        if trim and not self._compute_lock.locked():
+            release_free_heap()
+        elif trim:
+            with self._state_lock:
+                self._trim_pending = True  # next time
+        self._publish_diagnostics()
 
     def _publish_diagnostics(self) -> None:
         if self._diagnostics_pub.get_subscription_count() == 0:
@@ -927,16 +1072,48 @@ class GraspSafetyNode(Node):
         )
 
 
+def _labels_only(ranking: Ranking) -> Ranking:
+    """``ranking`` without its per-sample arrays and postures: what the markers read (index,
+    name, feasibility, score, order, metric)."""
+    empty = np.empty(0)
+    arrays = dict.fromkeys(
+        (
+            "times_s",
+            "joint_positions",
+            "directions_in_base",
+            "effective_mass_kg",
+            "direction_is_worst_case",
+            "tip_speed_m_s",
+            "ik_iterations",
+        ),
+        empty,
+    )
+    return replace(
+        ranking,
+        postures=(),
+        evaluations=tuple(replace(e, **arrays) for e in ranking.evaluations),
+    )
+
+
 def _robot_key(settings: NodeSettings) -> tuple[Any, ...]:
     """The settings a robot model depends on."""
     return (settings.robot_source, settings.base_frame, settings.tip_frame, settings.ik_seed)
 
 
 def _quality(values: Sequence[float], field: str) -> tuple[float, ...] | None:
-    """Grasp qualities of a message array (finite); None when empty (pure safety ranking)."""
+    """Grasp qualities of a message array (finite, |q| <= MAX_ABS_GRASP_QUALITY); None when
+    empty (pure safety ranking)."""
     if len(values) == 0:
         return None
-    return tuple(float(v) for v in finite_array(np.asarray(values, dtype=float), field))
+    checked = finite_array(np.asarray(values, dtype=float), field)
+    largest = float(np.max(np.abs(checked)))
+    if largest > MAX_ABS_GRASP_QUALITY:
+        raise InvalidInputError(
+            field,
+            f"must be within +/-{MAX_ABS_GRASP_QUALITY:g} (any unit, higher is better), got "
+            f"a value of magnitude {largest:g}",
+        )
+    return tuple(float(v) for v in checked)
 
 
 def _analysis_options(
@@ -966,23 +1143,37 @@ def _internal_error(error: BaseException) -> str:
     return f"internal error: {type(error).__name__}: {error}"
 
 
-def _deadline_check(
-    deadline: float, settings: NodeSettings, stopping: threading.Event
+def _progress_check(
+    settings: NodeSettings,
+    stopping: threading.Event,
+    lock: FairComputeLock,
+    client_watch: ClientWatch | None,
 ) -> Callable[[int, int], None]:
-    """A progress callback for rank() and analyse() that abandons the work after the deadline
-    or when the node shuts down."""
+    """A progress callback for rank() and analyse(): abandons the work when the node shuts
+    down, after max_compute_time_s of computing (time queued behind other rankings not
+    counted), or when the request's clients are gone; between steps it shares the compute
+    lock with waiting requests (FairComputeLock.share)."""
+    deadline = time.perf_counter() + settings.max_compute_time_s
 
     def check(done: int, total: int) -> None:
-        if done < total and stopping.is_set():
+        nonlocal deadline
+        if done >= total:
+            return
+        if stopping.is_set():
             raise ShuttingDownError(
                 f"ranking abandoned after {done} of {total} steps: the node is shutting down"
             )
-        if done < total and time.perf_counter() > deadline:
+        if time.perf_counter() > deadline:
             raise ComputeTimeExceededError(
                 f"ranking abandoned after {done} of {total} steps: longer than "
                 f"max_compute_time_s={settings.max_compute_time_s:g} s; send fewer grasps or "
                 "raise trajectory.dt_s"
             )
+        if client_watch is not None and client_watch.gone():
+            raise ClientGoneError(
+                f"ranking abandoned after {done} of {total} steps: its client left"
+            )
+        deadline += lock.share()
 
     return check
 
@@ -997,39 +1188,94 @@ def _armature_status(robot: RobotModel) -> str:
     )
 
 
+class _Stop(Exception):  # noqa: N818  (a signal, not an error)
+    """SIGINT or SIGTERM arrived: raised in the main thread by the node's signal handler."""
+
+
+def _raise_stop(signal_number: int, frame: Any) -> None:
+    raise _Stop(signal.Signals(signal_number).name)
+
+
 def main(args: list[str] | None = None) -> int:
-    """Run the node until shut down. Exit status 1 on a start-up error (one log line)."""
+    """Run the node until SIGINT or SIGTERM. Exit status 1 on a start-up error (one log line).
+
+    The node handles the signals itself (rclpy's handlers would shut the context down at
+    once, under the running callbacks: their responses and log lines then failed with "Failed
+    to publish log message to rosout" and "exception was never retrieved"): the executor spins
+    in a thread, the main thread waits; at a signal the rankings are abandoned, their requests
+    answered, the callbacks joined, the node destroyed, and one last line logged.
+    """
     logger = rclpy.logging.get_logger(NODE_NAME)
     try:
-        rclpy.init(args=args)
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except RuntimeError as error:  # rclpy's RCLError: bad --ros-args or params file
         first_line = str(error).strip().splitlines()[0] if str(error).strip() else "rcl error"
         logger.error(f"start-up failed: {first_line}")
         return 1
+    previous = {n: signal.signal(n, _raise_stop) for n in (signal.SIGINT, signal.SIGTERM)}
     node: GraspSafetyNode | None = None
     executor: MultiThreadedExecutor | None = None
-    status = 0
+    spinner: threading.Thread | None = None
+    spinning = threading.Event()
+    spinning.set()
+    status, reason = 0, "the context was shut down"
     try:
         node = GraspSafetyNode()
-        executor = MultiThreadedExecutor(num_threads=EXECUTOR_THREADS)
+        executor = NodeExecutor(num_threads=EXECUTOR_THREADS)
         executor.add_node(node)
         node.wait_for_robot(executor)
-        executor.spin()
+        spinner = threading.Thread(
+            target=_spin_until, args=(executor, spinning), name="executor", daemon=True
+        )
+        spinner.start()
+        spinner.join()  # interrupted by the signal handler's exception
     except StartupError as error:
         logger.error(f"start-up failed: {error}")
         status = 1
+    except _Stop as stop:
+        reason = str(stop)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        for number, handler in previous.items():  # a second signal no longer interrupts
+            signal.signal(number, signal.SIG_IGN if handler is _raise_stop else handler)
         if node is not None:
             node.abandon_rankings()
         if executor is not None:
+            spinning.clear()  # the spin thread leaves its wait before the executor goes
+            if spinner is not None:
+                spinner.join(timeout=10.0)
             executor.shutdown()
             _join_callbacks(executor)
         if node is not None:
+            abandoned = node.abandoned_rankings
             node.destroy_node()
+            if status == 0:
+                logger.info(
+                    f"shut down ({reason}); {abandoned} ranking(s) abandoned, their requests "
+                    "answered"
+                )
         rclpy.try_shutdown()
+        # The middleware's participant goes now, not in the interpreter's teardown (where its
+        # threads were sometimes destroyed still running: "terminate called without an
+        # active exception", exit by SIGABRT)
+        rclpy.utilities.get_default_context().destroy()
     return status
+
+
+SPIN_PERIOD_S = 0.1
+"""How often the spin thread of main() looks whether it should stop [s]."""
+
+
+def _spin_until(executor: Executor, spinning: threading.Event) -> None:
+    """Spin ``executor`` while ``spinning`` is set. Executor.shutdown destroys its guard
+    condition at once, so it must not run while another thread waits in spin()
+    (std::terminate at exit)."""
+    try:
+        while spinning.is_set() and executor.context.ok():
+            executor.spin_once(timeout_sec=SPIN_PERIOD_S)
+    except ExternalShutdownException:  # rclpy.shutdown() elsewhere: main() then stops
+        pass
 
 
 def _join_callbacks(executor: MultiThreadedExecutor) -> None:

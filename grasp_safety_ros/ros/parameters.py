@@ -124,7 +124,9 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
     ),
     "max_mass_kg": ParameterSpec(1000.0, "largest object mass accepted [kg]"),
     "max_compute_time_s": ParameterSpec(
-        60.0, "a ranking still running after this long is abandoned (success=false) [s]"
+        60.0,
+        "a ranking that has computed this long is abandoned (success=false); time queued "
+        "behind other rankings does not count [s]",
     ),
     "service_busy_timeout_s": ParameterSpec(
         10.0, "how long a request waits for a ranking in progress before answering busy [s]"
@@ -248,7 +250,24 @@ _RANGES: Mapping[str, tuple[float, float]] = {
     "safety_weight": (0.0, 1.0),
 }
 _MAX_COUNT = 1_000_000_000
-_MAX_POINTS = 10_000
+_MAX_POINTS = 1_000
+MAX_GRASPS_LIMIT = 10_000
+MAX_SAMPLES_LIMIT = 10_000_000
+MAX_UNCERTAINTY_SAMPLES = 10_000
+MAX_OBJECT_SIZE_M = 100.0
+"""Upper bounds of the node's count parameters and of an object's size, the CLI's scenario
+limits (cli/scenario.py: MAX_GRASPS, MAX_GRASP_SAMPLES, MAX_UNCERTAINTY_SAMPLES, MAX_POINTS,
+MAX_OBJECT_SIZE_M; a test keeps them equal): beyond them a request cannot finish in useful
+time or memory (``uncertainty.samples`` = 10^9 asked for 52 GiB per request)."""
+_COUNT_LIMITS: Mapping[str, tuple[int, int]] = {
+    "max_grasps": (1, MAX_GRASPS_LIMIT),
+    "max_samples": (1, MAX_SAMPLES_LIMIT),
+    "max_total_samples": (1, MAX_SAMPLES_LIMIT),
+    "uncertainty.samples": (0, MAX_UNCERTAINTY_SAMPLES),
+    "uncertainty.seed": (0, _MAX_COUNT),  # a seed, not a count
+    "response.joint_trajectories": (0, _MAX_COUNT),  # clipped to the number of grasps
+    "posture.restarts": (0, MAX_RESTARTS),
+}
 
 
 @dataclass(frozen=True)
@@ -389,12 +408,8 @@ def check_parameter(name: str, value: Any) -> Any:
         if not isinstance(value, bool):
             raise InvalidInputError(name, f"must be true or false, got {_show(value)}")
         return value
-    if name in ("max_grasps", "max_samples", "max_total_samples"):
-        return _integer(name, value, 1, _MAX_COUNT)
-    if name in ("uncertainty.samples", "uncertainty.seed", "response.joint_trajectories"):
-        return _integer(name, value, 0, _MAX_COUNT)
-    if name == "posture.restarts":
-        return _integer(name, value, 0, MAX_RESTARTS)
+    if name in _COUNT_LIMITS:
+        return _integer(name, value, *_COUNT_LIMITS[name])
     if name == "ik_seed":
         return _numbers(name, value, None)
     if name == "robot.armature_kgm2":
@@ -509,12 +524,8 @@ def parameter_constraints(name: str) -> ParameterConstraints:
     text = ""
     if name in _CHOICES:
         text = f"one of: {', '.join(_CHOICES[name])}"
-    elif name in ("max_grasps", "max_samples", "max_total_samples"):
-        closed = (1, _MAX_COUNT)
-    elif name in ("uncertainty.samples", "uncertainty.seed", "response.joint_trajectories"):
-        closed = (0, _MAX_COUNT)
-    elif name == "posture.restarts":
-        closed = (0, MAX_RESTARTS)
+    elif name in _COUNT_LIMITS:
+        closed = _COUNT_LIMITS[name]
     elif name in _RANGES:
         closed = _RANGES[name]
     elif name in _POSITIVE:
@@ -620,10 +631,30 @@ def analysis_from_parameters(values: Mapping[str, Any]) -> AnalysisOptions:
     )
 
 
-def inertia_tensor_from_components(components: Sequence[float], field: str) -> np.ndarray:
-    """3x3 symmetric tensor of (ixx, ixy, ixz, iyy, iyz, izz), as in geometry_msgs/Inertia."""
+def inertia_tensor_from_components(
+    components: Sequence[float], field: str, mass_kg: float | None = None
+) -> np.ndarray:
+    """3x3 symmetric tensor of (ixx, ixy, ixz, iyy, iyz, izz), as in geometry_msgs/Inertia.
+
+    With ``mass_kg``, every component and principal moment must be at most
+    mass_kg * MAX_OBJECT_SIZE_M^2 [kg m^2] (a radius of gyration of at most MAX_OBJECT_SIZE_M,
+    the CLI's bound): ixx = 1e300 made the effective masses NaN deep in the analyses.
+    """
     ixx, ixy, ixz, iyy, iyz, izz = finite_array(list(components), field, (6,))
-    return np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
+    tensor = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
+    if mass_kg is not None:
+        limit = mass_kg * MAX_OBJECT_SIZE_M**2
+        largest = float(np.max(np.abs(tensor)))
+        if largest <= limit:  # then the eigenvalues are finite: |lambda| <= 3 * largest
+            largest = max(largest, float(np.max(np.abs(np.linalg.eigvalsh(tensor)))))
+        if largest > limit:
+            raise InvalidInputError(
+                field,
+                f"components and principal moments must be at most m * {MAX_OBJECT_SIZE_M:g}^2"
+                f" = {limit:g} kg m^2 (a radius of gyration of at most {MAX_OBJECT_SIZE_M:g} m)"
+                f", got {largest:g}",
+            )
+    return tensor
 
 
 def settings_from_parameters(values: Mapping[str, Any]) -> NodeSettings:
@@ -664,7 +695,7 @@ def settings_from_parameters(values: Mapping[str, Any]) -> NodeSettings:
     inertia = None
     if mass > 0.0:
         tensor = inertia_tensor_from_components(
-            v["object.inertia_about_com_kgm2"], "object.inertia_about_com_kgm2"
+            v["object.inertia_about_com_kgm2"], "object.inertia_about_com_kgm2", mass
         )
         inertia = ObjectInertia(mass, np.array(v["object.com_in_object_m"]), tensor)
     return NodeSettings(

@@ -14,10 +14,12 @@ import multiprocessing
 import os
 import threading
 import weakref
+from collections import deque
 from collections.abc import Callable, Generator, Iterator, Sequence
-from concurrent.futures import Executor, ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor
 from dataclasses import replace
 from functools import partial
+from itertools import islice
 from typing import Any, TypeVar
 
 Job = tuple[Any, ...]
@@ -80,16 +82,43 @@ def evaluate_jobs(
     call it on their own copy of the evaluator. On processes, jobs go out in contiguous chunks
     (about four per worker), which keeps the pool's per-task overhead small and the load
     balanced; on threads one job is one task (the overhead is small), so the caller sees each
-    result, and can stop, as soon as it is ready. Closing the returned generator early (an
-    abandoned ranking) cancels the tasks not started yet; a running thread task finishes its
-    one job.
+    result, and can stop, as soon as it is ready, and at most two per worker are submitted
+    ahead of the caller: a caller that pauses between results (a ranking handing the node's
+    compute lock to another request) leaves the workers to other work. Closing the returned
+    generator early (an abandoned ranking) cancels the tasks not started yet; a running
+    thread task finishes its one job.
     """
     if isinstance(executor, ThreadPoolExecutor):
-        return _close_early(executor.map(lambda job: [evaluate(evaluator, *job)], jobs))
+        ahead = 2 * max(1, getattr(executor, "_max_workers", 2))
+        return _ahead(executor, partial(_evaluate_job, evaluate, evaluator), jobs, ahead)
     workers = max(1, getattr(executor, "_max_workers", 2))
     size = max(1, math.ceil(len(jobs) / (4 * workers)))
     chunks = [jobs[k : k + size] for k in range(0, len(jobs), size)]
     return _close_early(executor.map(partial(_evaluate_chunk_in_worker, evaluate), chunks))
+
+
+def _evaluate_job(evaluate: Callable[..., Result], evaluator: Any, job: Job) -> Result:
+    return evaluate(evaluator, *job)
+
+
+def _ahead(
+    executor: Executor, run: Callable[[Job], Result], jobs: Sequence[Job], ahead: int
+) -> Generator[Result, None, None]:
+    """``run(job)`` of each job on ``executor``, yielded in job order, with at most ``ahead``
+    jobs submitted and not yet taken by the caller; closing cancels those not started."""
+    pending: deque[Future[Result]] = deque()
+    remaining = iter(jobs)
+    try:
+        for job in islice(remaining, ahead):
+            pending.append(executor.submit(run, job))
+        while pending:
+            result = pending.popleft().result()
+            for job in islice(remaining, 1):
+                pending.append(executor.submit(run, job))
+            yield result
+    finally:
+        for future in pending:
+            future.cancel()
 
 
 def _close_early(results: Iterator[list[Result]]) -> Generator[Result, None, None]:
