@@ -8,7 +8,6 @@ robot's links, each refusal naming the parameter.
 
 from __future__ import annotations
 
-import array
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -17,6 +16,7 @@ import numpy as np
 from ..core.analyses.whole_arm import MAX_SITES, resolve_arm_sites
 from ..core.exceptions import InvalidInputError
 from ..core.model.robot import RobotModel
+from .values import show, string_list
 
 LINKS = "whole_arm.point_links"
 POINTS = "whole_arm.points_m"
@@ -24,15 +24,11 @@ POINTS = "whole_arm.points_m"
 
 def check_point_links(value: Any) -> tuple[str, ...]:
     """``whole_arm.point_links`` on its own: non-empty names, at most MAX_SITES."""
-    if value is None:  # an empty list in a params file arrives as NOT_SET
-        value = []
-    if isinstance(value, (str, bytes)) or not isinstance(value, (list, tuple, array.array)):
-        raise InvalidInputError(LINKS, f"must be a list of link names, got {value!r:.80}")
-    names = list(value)
-    if not names:  # [] may arrive as an empty byte or integer array
+    names = string_list(LINKS, value, "link names")
+    if not names:
         return ()
     if not all(isinstance(link, str) and link for link in names):
-        raise InvalidInputError(LINKS, f"must be a list of link names, got {names!r:.80}")
+        raise InvalidInputError(LINKS, f"must be a list of link names, got {show(names)}")
     if len(names) > MAX_SITES:
         raise InvalidInputError(LINKS, f"must hold at most {MAX_SITES} links, got {len(names)}")
     return tuple(names)

@@ -34,6 +34,7 @@ from ..core.model.armature import PUBLISHED, published_for, published_values
 from ..core.model.inertia import ObjectInertia
 from ..core.model.robot import RobotModel
 from .arm_points import arm_points, check_arm_point_links, check_point_links
+from .values import show, string_list
 
 
 @dataclass(frozen=True)
@@ -349,13 +350,13 @@ class NodeSettings:
 
 def _string(name: str, value: Any) -> str:
     if not isinstance(value, str):
-        raise InvalidInputError(name, f"must be a string, got {_show(value)}")
+        raise InvalidInputError(name, f"must be a string, got {show(value)}")
     return value
 
 
 def _integer(name: str, value: Any, minimum: int, maximum: int) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise InvalidInputError(name, f"must be an integer, got {_show(value)}")
+        raise InvalidInputError(name, f"must be an integer, got {show(value)}")
     if not minimum <= value <= maximum:
         raise InvalidInputError(name, f"must be in [{minimum}, {maximum}], got {value}")
     return int(value)
@@ -365,19 +366,14 @@ def _numbers(name: str, value: Any, length: int | None) -> tuple[float, ...]:
     if value is None:  # an empty list in a params file arrives as NOT_SET
         value = []
     if not isinstance(value, (list, tuple, np.ndarray, array.array)):
-        raise InvalidInputError(name, f"must be a list of numbers, got {_show(value)}")
+        raise InvalidInputError(name, f"must be a list of numbers, got {show(value)}")
     items = list(value)
     if any(isinstance(v, (bool, str, bytes)) for v in items):
-        raise InvalidInputError(name, f"must be a list of numbers, got {_show(items)}")
+        raise InvalidInputError(name, f"must be a list of numbers, got {show(items)}")
     array_ = finite_array(items, name, None if length is None else (length,))
     if array_.ndim != 1:
-        raise InvalidInputError(name, f"must be a flat list of numbers, got {_show(items)}")
+        raise InvalidInputError(name, f"must be a flat list of numbers, got {show(items)}")
     return tuple(float(v) for v in array_)
-
-
-def _show(value: Any) -> str:
-    text = repr(value)
-    return text if len(text) <= 80 else text[:77] + "..."
 
 
 def check_parameter(name: str, value: Any) -> Any:
@@ -406,7 +402,7 @@ def check_parameter(name: str, value: Any) -> Any:
         return text
     if name in _FLAGS:
         if not isinstance(value, bool):
-            raise InvalidInputError(name, f"must be true or false, got {_show(value)}")
+            raise InvalidInputError(name, f"must be true or false, got {show(value)}")
         return value
     if name in _COUNT_LIMITS:
         return _integer(name, value, *_COUNT_LIMITS[name])
@@ -432,7 +428,7 @@ def check_parameter(name: str, value: Any) -> Any:
         size = _numbers(name, value, None)
         if size and (len(size) != 3 or min(size) <= 0.0):
             raise InvalidInputError(
-                name, f"must be empty or 3 edge lengths > 0 [m], got {_show(list(size))}"
+                name, f"must be empty or 3 edge lengths > 0 [m], got {show(list(size))}"
             )
         return size
     if name == "iso_ts_15066.regions":
@@ -442,7 +438,7 @@ def check_parameter(name: str, value: Any) -> Any:
     if name == "whole_arm.points_m":
         return _points(name, value, MAX_SITES)
     if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
-        raise InvalidInputError(name, f"must be a number, got {_show(value)}")
+        raise InvalidInputError(name, f"must be a number, got {show(value)}")
     if name in _POSITIVE:
         return finite_float(value, name, minimum=0.0, strict_minimum=True)
     if name in _FRACTIONS:
@@ -472,35 +468,27 @@ def _points(name: str, value: Any, maximum: int = _MAX_POINTS) -> tuple[float, .
 
 def _names(name: str, value: Any) -> tuple[str, ...]:
     """A list of distinct non-empty names."""
-    if value is None:  # an empty list in a params file arrives as NOT_SET
-        value = []
-    if isinstance(value, (str, bytes)) or not isinstance(value, (list, tuple, array.array)):
-        raise InvalidInputError(name, f"must be a list of joint names, got {_show(value)}")
-    names = list(value)
+    names = string_list(name, value, "joint names")
     if not names:
         return ()
     if not all(isinstance(n, str) and n for n in names) or len(set(names)) != len(names):
-        raise InvalidInputError(name, f"must be distinct joint names, got {_show(names)}")
+        raise InvalidInputError(name, f"must be distinct joint names, got {show(names)}")
     return tuple(names)
 
 
 def _regions(name: str, value: Any) -> tuple[str, ...]:
-    if value is None:  # an empty list in a params file arrives as NOT_SET
-        value = []
-    if isinstance(value, (str, bytes)) or not isinstance(value, (list, tuple, array.array)):
-        raise InvalidInputError(name, f"must be a list of region names, got {_show(value)}")
-    names = list(value)
-    if not names:  # [] may arrive as an empty byte or integer array
+    names = string_list(name, value, "region names")
+    if not names:
         return ()
     for region in names:
         if not isinstance(region, str):
-            raise InvalidInputError(name, f"must be a list of region names, got {_show(names)}")
+            raise InvalidInputError(name, f"must be a list of region names, got {show(names)}")
         if region not in BODY_REGIONS:
             raise InvalidInputError(
                 name, f"unknown body region {region!r}; regions: {', '.join(BODY_REGIONS)}"
             )
     if len(set(names)) != len(names):
-        raise InvalidInputError(name, f"regions repeat: {_show(names)}")
+        raise InvalidInputError(name, f"regions repeat: {show(names)}")
     return tuple(names)
 
 
