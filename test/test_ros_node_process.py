@@ -224,3 +224,32 @@ def test_startup_error_is_one_log_line_and_exit_1(ros_env: dict[str, str], case:
     assert len(failures) == 1, output
     assert failures[0].startswith("[ERROR]") and "[grasp_safety]" in failures[0]
     assert re.search(pattern, failures[0]), failures[0]
+
+
+STOPS = 8
+
+
+def test_repeated_sigint_stops_exit_0_without_an_abort(ros_env: dict[str, str]) -> None:
+    """The node process, started and stopped by SIGINT again and again, exits 0 every time,
+    its last line the node's own: the interpreter's teardown after it ended in std::terminate
+    ("terminate called without an active exception", SIGABRT) about one stop in two."""
+    for stop in range(STOPS):
+        process = subprocess.Popen(
+            command("--params-file", PARAMS, "-p", "use_joint_states_seed:=false"),
+            env=ros_env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
+        lines: list[str] = []
+        assert process.stdout is not None
+        for line in process.stdout:  # until the robot is loaded
+            lines.append(line)
+            if "robot from" in line:
+                break
+        process.send_signal(signal.SIGINT)
+        rest, _ = process.communicate(timeout=60)
+        log = "".join(lines) + rest
+        assert process.returncode == 0, f"stop {stop}: exit {process.returncode}\n{log}"
+        assert "terminate called" not in log, log
+        assert log.strip().splitlines()[-1].endswith("their requests answered"), log
