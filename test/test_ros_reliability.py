@@ -33,9 +33,9 @@ from grasp_safety_ros.ros.message_checks import (
     check_no_subnormals,
     first_subnormal,
 )
-from grasp_safety_ros.ros.node import MAX_ABS_GRASP_QUALITY, _quality
 from grasp_safety_ros.ros.parameters import check_parameter, parameter_constraints
 from grasp_safety_ros.ros.ranking_job import ClientWatch, FairComputeLock
+from grasp_safety_ros.ros.topic_inputs import MAX_ABS_GRASP_QUALITY, check_quality
 
 # --- Count parameters (D) ----------------------------------------------------------------------
 
@@ -122,9 +122,9 @@ def test_joint_trajectory_longer_than_max_samples_is_refused_before_conversion()
 
 
 def test_grasp_quality_is_bounded() -> None:
-    assert _quality([MAX_ABS_GRASP_QUALITY, -MAX_ABS_GRASP_QUALITY, 0.0], "q") is not None
+    assert check_quality([MAX_ABS_GRASP_QUALITY, -MAX_ABS_GRASP_QUALITY, 0.0], "q") is not None
     with pytest.raises(InvalidInputError, match=r"^grasp_quality: must be within \+/-1e\+09"):
-        _quality([1.7976931348623157e308, -1.7976931348623157e308, 0.0], "grasp_quality")
+        check_quality([1.7976931348623157e308, -1.7976931348623157e308, 0.0], "grasp_quality")
 
 
 # --- Subnormal floats: an int sent as a float (issue 19) -----------------------------------------
