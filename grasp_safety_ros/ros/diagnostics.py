@@ -8,7 +8,8 @@ from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
 from ..core.model.robot import NO_ARMATURE_NOTE, RobotModel
 from .memory import memory_kib
-from .parameters import NodeSettings, RobotBundle
+from .parameters import NodeSettings
+from .robot_bundle import RobotBundle
 
 
 @dataclass

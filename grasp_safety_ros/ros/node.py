@@ -82,14 +82,7 @@ from .executor import NodeExecutor, join_callbacks, request_header, spin_until
 from .memory import release_free_heap
 from .message_checks import check_finite_result, check_no_subnormals
 from .on_demand import OnDemandPublisher
-from .parameters import (
-    PARAMETERS,
-    NodeSettings,
-    RobotBundle,
-    build_robot,
-    check_parameter,
-    settings_from_parameters,
-)
+from .parameters import PARAMETERS, NodeSettings, check_parameter, settings_from_parameters
 from .qos import INPUT, LATCHED, SERVICE
 from .ranking_inputs import compute_ranking, markers_builder, ranking_inputs
 from .ranking_job import (
@@ -98,6 +91,7 @@ from .ranking_job import (
     Snapshot,
     progress_check,
 )
+from .robot_bundle import RobotBundle, build_robot
 from .robot_group import PENDING_FIELDS, ROBOT_GROUP, group_complete, pending_reason
 from .service_clients import ServiceClients
 from .topic_inputs import TopicInputs, check_quality

@@ -29,11 +29,9 @@ from .conversions import (
     seed_from_joint_state,
     trajectory_from_msg,
 )
-from .parameters import (
-    NodeSettings,
-    RobotBundle,
-)
+from .parameters import NodeSettings
 from .ranking_job import Snapshot, labels_only
+from .robot_bundle import RobotBundle
 
 
 @dataclass(frozen=True)

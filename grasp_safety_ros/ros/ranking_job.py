@@ -27,10 +27,8 @@ from .errors import (
     ComputeTimeExceededError,
     ShuttingDownError,
 )
-from .parameters import (
-    NodeSettings,
-    RobotBundle,
-)
+from .parameters import NodeSettings
+from .robot_bundle import RobotBundle
 
 SLICE_S = 0.2
 """Compute time a ranking keeps the lock for while others wait [s]."""
