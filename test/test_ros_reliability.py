@@ -23,6 +23,7 @@ from grasp_safety_ros.core.exceptions import InvalidInputError
 from grasp_safety_ros.core.method.ranking import Grasp
 from grasp_safety_ros.ros import parameters
 from grasp_safety_ros.ros.conversions import (
+    geometry,
     grasps_with_joint_trajectories,
     object_inertia_from_msg,
 )
@@ -44,7 +45,7 @@ def test_count_parameter_limits_are_the_clis() -> None:
     assert parameters.MAX_GRASPS_LIMIT == scenario.MAX_GRASPS
     assert parameters.MAX_SAMPLES_LIMIT == scenario.MAX_GRASP_SAMPLES
     assert parameters.MAX_UNCERTAINTY_SAMPLES == scenario.MAX_UNCERTAINTY_SAMPLES
-    assert parameters.MAX_OBJECT_SIZE_M == scenario.MAX_OBJECT_SIZE_M
+    assert geometry.MAX_OBJECT_SIZE_M == scenario.MAX_OBJECT_SIZE_M
 
 
 @pytest.mark.parametrize(

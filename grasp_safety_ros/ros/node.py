@@ -1,9 +1,9 @@
 """The ``grasp_safety`` node: ranks candidate grasps with the core, over a service and topics.
 
-A thin adapter: messages are converted in conversions.py, parameters validated in
-parameters.py, the work is GraspSafetyEvaluator.rank followed by
-core.analyses.safety_report.analyse (metric point, ISO/TS 15066, inertia uncertainty, grasp
-quality, redundancy, effort). See docs/ros/interface.md for the interface.
+A thin adapter: messages are converted in the conversions package, parameters validated in
+parameters.py, requests prepared and computed in ranking_inputs.py: GraspSafetyEvaluator.rank
+followed by core.analyses.safety_report.analyse (metric point, ISO/TS 15066, inertia
+uncertainty, grasp quality, redundancy, effort). See docs/ros/interface.md for the interface.
 
 Threads: a NodeExecutor (a MultiThreadedExecutor) with EXECUTOR_THREADS threads. The service
 sits in its own reentrant callback group, the input topics in a mutually exclusive one,

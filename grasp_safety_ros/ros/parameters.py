@@ -32,6 +32,8 @@ from ..core.method.ranking import METRICS
 from ..core.model.armature import PUBLISHED
 from ..core.model.inertia import ObjectInertia
 from .arm_points import arm_points, check_point_links
+from .conversions.geometry import inertia_tensor_from_components
+from .response import MAX_COUNT, ResponseContent
 from .values import show, string_list
 
 
@@ -248,50 +250,24 @@ _RANGES: Mapping[str, tuple[float, float]] = {
     "uncertainty.percentile": (0.0, 100.0),
     "safety_weight": (0.0, 1.0),
 }
-_MAX_COUNT = 1_000_000_000
 _MAX_POINTS = 1_000
 MAX_GRASPS_LIMIT = 10_000
 MAX_SAMPLES_LIMIT = 10_000_000
 MAX_UNCERTAINTY_SAMPLES = 10_000
-MAX_OBJECT_SIZE_M = 100.0
-"""Upper bounds of the node's count parameters and of an object's size, the CLI's scenario
-limits (cli/scenario.py: MAX_GRASPS, MAX_GRASP_SAMPLES, MAX_UNCERTAINTY_SAMPLES, MAX_POINTS,
-MAX_OBJECT_SIZE_M; a test keeps them equal): beyond them a request cannot finish in useful
+"""Upper bounds of the node's count parameters and (conversions.geometry.MAX_OBJECT_SIZE_M)
+of an object's size, the CLI's scenario limits (cli/scenario.py: MAX_GRASPS,
+MAX_GRASP_SAMPLES, MAX_UNCERTAINTY_SAMPLES, MAX_POINTS, MAX_OBJECT_SIZE_M; a test keeps them
+equal): beyond them a request cannot finish in useful
 time or memory (``uncertainty.samples`` = 10^9 asked for 52 GiB per request)."""
 _COUNT_LIMITS: Mapping[str, tuple[int, int]] = {
     "max_grasps": (1, MAX_GRASPS_LIMIT),
     "max_samples": (1, MAX_SAMPLES_LIMIT),
     "max_total_samples": (1, MAX_SAMPLES_LIMIT),
     "uncertainty.samples": (0, MAX_UNCERTAINTY_SAMPLES),
-    "uncertainty.seed": (0, _MAX_COUNT),  # a seed, not a count
-    "response.joint_trajectories": (0, _MAX_COUNT),  # clipped to the number of grasps
+    "uncertainty.seed": (0, MAX_COUNT),  # a seed, not a count
+    "response.joint_trajectories": (0, MAX_COUNT),  # clipped to the number of grasps
     "posture.restarts": (0, MAX_RESTARTS),
 }
-
-
-@dataclass(frozen=True)
-class ResponseContent:
-    """What a GraspRanking message carries beyond the scores (parameters ``response.*``).
-
-    Attributes:
-        joint_trajectories: How many grasps get their ``joint_trajectory``: the first of the
-            final order, then the grasps outside it in index order (infeasible grasps have
-            none to give); 0: none. The default, all, is what a message built without node
-            parameters carries.
-        per_sample: Whether each evaluation's per-sample arrays are filled; false leaves them
-            empty (scores, aggregates and per-grasp fields are kept).
-    """
-
-    joint_trajectories: int = _MAX_COUNT
-    per_sample: bool = True
-
-    def with_joint_trajectory(self, order: Sequence[int], count: int) -> frozenset[int]:
-        """The grasp indices (of ``count`` grasps) that carry their joint trajectory."""
-        if self.joint_trajectories >= count:
-            return frozenset(range(count))
-        ranked = set(order)
-        first = [*order, *(i for i in range(count) if i not in ranked)]
-        return frozenset(first[: self.joint_trajectories])
 
 
 @dataclass(frozen=True)
@@ -615,32 +591,6 @@ def analysis_from_parameters(values: Mapping[str, Any]) -> AnalysisOptions:
         arm_points_m=arm_points(values["whole_arm.point_links"], values["whole_arm.points_m"]),
         whole_arm_region=values["whole_arm.region"],
     )
-
-
-def inertia_tensor_from_components(
-    components: Sequence[float], field: str, mass_kg: float | None = None
-) -> np.ndarray:
-    """3x3 symmetric tensor of (ixx, ixy, ixz, iyy, iyz, izz), as in geometry_msgs/Inertia.
-
-    With ``mass_kg``, every component and principal moment must be at most
-    mass_kg * MAX_OBJECT_SIZE_M^2 [kg m^2] (a radius of gyration of at most MAX_OBJECT_SIZE_M,
-    the CLI's bound): ixx = 1e300 made the effective masses NaN deep in the analyses.
-    """
-    ixx, ixy, ixz, iyy, iyz, izz = finite_array(list(components), field, (6,))
-    tensor = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
-    if mass_kg is not None:
-        limit = mass_kg * MAX_OBJECT_SIZE_M**2
-        largest = float(np.max(np.abs(tensor)))
-        if largest <= limit:  # then the eigenvalues are finite: |lambda| <= 3 * largest
-            largest = max(largest, float(np.max(np.abs(np.linalg.eigvalsh(tensor)))))
-        if largest > limit:
-            raise InvalidInputError(
-                field,
-                f"components and principal moments must be at most m * {MAX_OBJECT_SIZE_M:g}^2"
-                f" = {limit:g} kg m^2 (a radius of gyration of at most {MAX_OBJECT_SIZE_M:g} m)"
-                f", got {largest:g}",
-            )
-    return tensor
 
 
 def settings_from_parameters(values: Mapping[str, Any]) -> NodeSettings:

@@ -21,6 +21,9 @@ from ...core.input_checks import (
     rotation_from_quat_xyzw,
 )
 
+MAX_OBJECT_SIZE_M = 100.0
+"""Largest radius of gyration of an object [m] (the CLI's scenario limit; a test keeps them
+equal)."""
 MAX_ABS_POSITION_M = 1000.0
 """Pose coordinates and object CoMs beyond this are refused: no manipulator reaches them, and
 absurd values (1e300) made the IK search for seconds (poses) or the effective mass NaN (CoM)."""
@@ -110,3 +113,29 @@ def duration_msg(seconds: float) -> Duration:
     """builtin_interfaces/Duration of a non-negative time [s], rounded to the nanosecond."""
     nanoseconds = round(float(seconds) * 1e9)
     return Duration(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
+
+
+def inertia_tensor_from_components(
+    components: Sequence[float], field: str, mass_kg: float | None = None
+) -> np.ndarray:
+    """3x3 symmetric tensor of (ixx, ixy, ixz, iyy, iyz, izz), as in geometry_msgs/Inertia.
+
+    With ``mass_kg``, every component and principal moment must be at most
+    mass_kg * MAX_OBJECT_SIZE_M^2 [kg m^2] (a radius of gyration of at most MAX_OBJECT_SIZE_M,
+    the CLI's bound): ixx = 1e300 made the effective masses NaN deep in the analyses.
+    """
+    ixx, ixy, ixz, iyy, iyz, izz = finite_array(list(components), field, (6,))
+    tensor = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
+    if mass_kg is not None:
+        limit = mass_kg * MAX_OBJECT_SIZE_M**2
+        largest = float(np.max(np.abs(tensor)))
+        if largest <= limit:  # then the eigenvalues are finite: |lambda| <= 3 * largest
+            largest = max(largest, float(np.max(np.abs(np.linalg.eigvalsh(tensor)))))
+        if largest > limit:
+            raise InvalidInputError(
+                field,
+                f"components and principal moments must be at most m * {MAX_OBJECT_SIZE_M:g}^2"
+                f" = {limit:g} kg m^2 (a radius of gyration of at most {MAX_OBJECT_SIZE_M:g} m)"
+                f", got {largest:g}",
+            )
+    return tensor

@@ -28,12 +28,12 @@ from ...core.model.inertia import ObjectInertia
 from ...core.model.robot import RobotModel
 from ...core.model.trajectory import ObjectTrajectory
 from ...core.model.waypoint_trajectory import WaypointTrajectory
-from ..parameters import inertia_tensor_from_components
 from .geometry import (
     MAX_ABS_POSITION_M,
     _pose_numbers,
     check_frame_id,
     duration_to_seconds,
+    inertia_tensor_from_components,
     stamp_to_seconds,
     transform_from_pose_msg,
     transform_from_transform_msg,

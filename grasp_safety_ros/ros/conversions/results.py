@@ -21,7 +21,7 @@ from ...core.method.posture import PostureSelection, single_posture
 from ...core.method.ranking import GraspEvaluation, Ranking
 from ...core.model.armature import armature_ratio
 from ...core.model.robot import NO_ARMATURE_NOTE
-from ..parameters import ResponseContent
+from ..response import ResponseContent
 from ._fast import _slot_constructor, _template_constructor, collector_paused, float64_array
 
 NAN = float("nan")
