@@ -122,7 +122,8 @@ def running_node(
     from rclpy.executors import MultiThreadedExecutor
     from rclpy.parameter import Parameter
 
-    from grasp_safety_ros.ros.node import EXECUTOR_THREADS, GraspSafetyNode, _join_callbacks
+    from grasp_safety_ros.ros.executor import join_callbacks
+    from grasp_safety_ros.ros.node import EXECUTOR_THREADS, GraspSafetyNode
 
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     domain_id = random.SystemRandom().randint(0, 101)
@@ -151,7 +152,7 @@ def running_node(
     finally:
         executor.shutdown()  # stop spinning and let callbacks end before destroying (as main)
         thread.join(timeout=10.0)
-        _join_callbacks(executor)
+        join_callbacks(executor)
         node.destroy_node()
         rclpy.shutdown(context=context)
 

@@ -53,6 +53,7 @@ from grasp_safety_ros.core.method.ranking import GraspEvaluation, Ranking
 from grasp_safety_ros.core.model.waypoint_trajectory import WaypointTrajectory
 from grasp_safety_ros.ros import conversions
 from grasp_safety_ros.ros.conversions import (
+    _fast,
     check_grasp_array,
     duration_msg,
     grasps_from_pose_array,
@@ -64,6 +65,7 @@ from grasp_safety_ros.ros.conversions import (
     rank_color,
     ranking_msg,
     report_msg,
+    results,
     seed_from_joint_state,
     trajectory_from_multi_dof,
     trajectory_from_path,
@@ -540,18 +542,18 @@ def test_report_message_content_drops_only_what_it_is_told(arm6: RobotModel) -> 
 def test_collector_is_paused_while_building_and_restored_after(arm6: RobotModel) -> None:
     report, request = _report(arm6)
     states: list[bool] = []
-    original = conversions._report_msg
+    original = results._report_msg
 
     def spying(*args: Any) -> Any:
         states.append(gc.isenabled())
-        with conversions.collector_paused:  # nested (as a concurrent build): still paused
+        with _fast.collector_paused:  # nested (as a concurrent build): still paused
             states.append(gc.isenabled())
         states.append(gc.isenabled())
         return original(*args)
 
     assert gc.isenabled()
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(conversions, "_report_msg", spying)
+        patch.setattr(results, "_report_msg", spying)
         report_msg(report, request, "base_link", Time(), 0.0)
         assert states == [False, False, False] and gc.isenabled()
         gc.disable()  # someone else's choice is kept
@@ -560,7 +562,7 @@ def test_collector_is_paused_while_building_and_restored_after(arm6: RobotModel)
             assert not gc.isenabled()
         finally:
             gc.enable()
-        patch.setattr(conversions, "_report_msg", lambda *args: 1 / 0)
+        patch.setattr(results, "_report_msg", lambda *args: 1 / 0)
         with pytest.raises(ZeroDivisionError):
             report_msg(report, request, "base_link", Time(), 0.0)
         assert gc.isenabled()

@@ -58,8 +58,8 @@ from grasp_safety_ros.core.method.executable import joint_velocities_acceleratio
 from grasp_safety_ros.core.method.posture import PostureConfig, select_postures
 from grasp_safety_ros.paths import config_file
 from grasp_safety_ros.ros.conversions import inertia_msg_from_object, pose_msg_from_transform
-from grasp_safety_ros.ros.executor import NodeExecutor
-from grasp_safety_ros.ros.node import EXECUTOR_THREADS, GraspSafetyNode, _join_callbacks
+from grasp_safety_ros.ros.executor import NodeExecutor, join_callbacks
+from grasp_safety_ros.ros.node import EXECUTOR_THREADS, GraspSafetyNode
 
 BOOK = load_scenario(config_file("book_baxter.yaml"))
 BOOK_GRASPS = [Grasp(g.transform_tip_to_object, f"grasp_{i}") for i, g in enumerate(BOOK.grasps)]
@@ -141,7 +141,7 @@ class NodeUnderTest:
         raised InvalidHandle in that thread)."""
         self.executor.shutdown()
         self.thread.join(timeout=10.0)
-        _join_callbacks(self.executor)
+        join_callbacks(self.executor)
         self.node.destroy_node()
         self.client.destroy_node()
         rclpy.shutdown(context=self.context)
@@ -547,7 +547,7 @@ def test_result_topics_are_built_for_subscribers_only(
     both). A transient-local subscriber alone, or left alone, gets the last ones."""
     from rclpy.publisher import Publisher
 
-    import grasp_safety_ros.ros.node as node_module
+    import grasp_safety_ros.ros.ranking_inputs as node_module  # builds the markers
 
     ros = own_ros
     built: list[int] = []

@@ -21,10 +21,10 @@ from grasp_safety_ros.paths import config_file
 from grasp_safety_ros.ros.parameters import (
     PARAMETERS,
     ResponseContent,
-    build_robot,
     check_parameter,
     settings_from_parameters,
 )
+from grasp_safety_ros.ros.robot_bundle import build_robot
 
 MINIMAL = {"base_frame": "base_link", "tip_frame": "tool"}
 

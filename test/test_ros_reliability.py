@@ -23,6 +23,7 @@ from grasp_safety_ros.core.exceptions import InvalidInputError
 from grasp_safety_ros.core.method.ranking import Grasp
 from grasp_safety_ros.ros import parameters
 from grasp_safety_ros.ros.conversions import (
+    geometry,
     grasps_with_joint_trajectories,
     object_inertia_from_msg,
 )
@@ -33,9 +34,9 @@ from grasp_safety_ros.ros.message_checks import (
     check_no_subnormals,
     first_subnormal,
 )
-from grasp_safety_ros.ros.node import MAX_ABS_GRASP_QUALITY, _quality
 from grasp_safety_ros.ros.parameters import check_parameter, parameter_constraints
 from grasp_safety_ros.ros.ranking_job import ClientWatch, FairComputeLock
+from grasp_safety_ros.ros.topic_inputs import MAX_ABS_GRASP_QUALITY, check_quality
 
 # --- Count parameters (D) ----------------------------------------------------------------------
 
@@ -44,7 +45,7 @@ def test_count_parameter_limits_are_the_clis() -> None:
     assert parameters.MAX_GRASPS_LIMIT == scenario.MAX_GRASPS
     assert parameters.MAX_SAMPLES_LIMIT == scenario.MAX_GRASP_SAMPLES
     assert parameters.MAX_UNCERTAINTY_SAMPLES == scenario.MAX_UNCERTAINTY_SAMPLES
-    assert parameters.MAX_OBJECT_SIZE_M == scenario.MAX_OBJECT_SIZE_M
+    assert geometry.MAX_OBJECT_SIZE_M == scenario.MAX_OBJECT_SIZE_M
 
 
 @pytest.mark.parametrize(
@@ -122,9 +123,9 @@ def test_joint_trajectory_longer_than_max_samples_is_refused_before_conversion()
 
 
 def test_grasp_quality_is_bounded() -> None:
-    assert _quality([MAX_ABS_GRASP_QUALITY, -MAX_ABS_GRASP_QUALITY, 0.0], "q") is not None
+    assert check_quality([MAX_ABS_GRASP_QUALITY, -MAX_ABS_GRASP_QUALITY, 0.0], "q") is not None
     with pytest.raises(InvalidInputError, match=r"^grasp_quality: must be within \+/-1e\+09"):
-        _quality([1.7976931348623157e308, -1.7976931348623157e308, 0.0], "grasp_quality")
+        check_quality([1.7976931348623157e308, -1.7976931348623157e308, 0.0], "grasp_quality")
 
 
 # --- Subnormal floats: an int sent as a float (issue 19) -----------------------------------------

@@ -12,7 +12,12 @@ from collections.abc import Callable
 from typing import Any
 
 from rclpy.exceptions import InvalidHandle
-from rclpy.executors import MultiThreadedExecutor, await_or_execute
+from rclpy.executors import (
+    Executor,
+    ExternalShutdownException,
+    MultiThreadedExecutor,
+    await_or_execute,
+)
 
 _CALLBACK = threading.local()
 """``header``: the request header of the service callback running in this thread (set by
@@ -52,3 +57,32 @@ class NodeExecutor(MultiThreadedExecutor):
 def request_header() -> Any:
     """The rmw service info of the request whose callback runs in this thread, or None."""
     return getattr(_CALLBACK, "header", None)
+
+
+SPIN_PERIOD_S = 0.1
+"""How often the spin thread of main() looks whether it should stop [s]."""
+
+
+def spin_until(executor: Executor, spinning: threading.Event) -> None:
+    """Spin ``executor`` while ``spinning`` is set. Executor.shutdown destroys its guard
+    condition at once, so it must not run while another thread waits in spin()
+    (std::terminate at exit)."""
+    try:
+        while spinning.is_set() and executor.context.ok():
+            executor.spin_once(timeout_sec=SPIN_PERIOD_S)
+    except ExternalShutdownException:  # rclpy.shutdown() elsewhere: main() then stops
+        pass
+
+
+def join_callbacks(executor: MultiThreadedExecutor) -> None:
+    """Wait until every callback the executor started has returned (its response sent).
+
+    Jazzy's ``Executor.shutdown`` is documented to wait for outstanding callbacks but does not
+    (its wait is skipped once the shut-down flag is set), so a service callback abandoned at
+    shut-down could still be sending its response while the node is destroyed, which crashed
+    the process. The callbacks run on the executor's thread pool; joining it waits for them
+    (an abandoned ranking stops within one grasp).
+    """
+    pool = getattr(executor, "_executor", None)  # rclpy's ThreadPoolExecutor of callbacks
+    if pool is not None:
+        pool.shutdown(wait=True)

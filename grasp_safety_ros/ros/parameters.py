@@ -25,15 +25,15 @@ from ..core.analyses.iso15066 import BODY_REGIONS
 from ..core.analyses.safety_report import RANK_BY, AnalysisOptions
 from ..core.analyses.uncertainty import InertiaUncertainty
 from ..core.analyses.whole_arm import DEFAULT_RANK_REGION, MAX_SITES
-from ..core.exceptions import FrameNotFoundError, GraspSafetyError, InvalidInputError
+from ..core.exceptions import InvalidInputError
 from ..core.input_checks import finite_array, finite_float
 from ..core.method.posture import DEFAULT_RESTARTS, MAX_RESTARTS, PostureConfig
-from ..core.method.ranking import METRICS, EvaluationConfig, GraspSafetyEvaluator
-from ..core.method.warm_up import warm_up
-from ..core.model.armature import PUBLISHED, published_for, published_values
+from ..core.method.ranking import METRICS
+from ..core.model.armature import PUBLISHED
 from ..core.model.inertia import ObjectInertia
-from ..core.model.robot import RobotModel
-from .arm_points import arm_points, check_arm_point_links, check_point_links
+from .arm_points import arm_points, check_point_links
+from .conversions.geometry import inertia_tensor_from_components
+from .response import MAX_COUNT, ResponseContent
 from .values import show, string_list
 
 
@@ -250,50 +250,24 @@ _RANGES: Mapping[str, tuple[float, float]] = {
     "uncertainty.percentile": (0.0, 100.0),
     "safety_weight": (0.0, 1.0),
 }
-_MAX_COUNT = 1_000_000_000
 _MAX_POINTS = 1_000
 MAX_GRASPS_LIMIT = 10_000
 MAX_SAMPLES_LIMIT = 10_000_000
 MAX_UNCERTAINTY_SAMPLES = 10_000
-MAX_OBJECT_SIZE_M = 100.0
-"""Upper bounds of the node's count parameters and of an object's size, the CLI's scenario
-limits (cli/scenario.py: MAX_GRASPS, MAX_GRASP_SAMPLES, MAX_UNCERTAINTY_SAMPLES, MAX_POINTS,
-MAX_OBJECT_SIZE_M; a test keeps them equal): beyond them a request cannot finish in useful
+"""Upper bounds of the node's count parameters and (conversions.geometry.MAX_OBJECT_SIZE_M)
+of an object's size, the CLI's scenario limits (cli/scenario.py: MAX_GRASPS,
+MAX_GRASP_SAMPLES, MAX_UNCERTAINTY_SAMPLES, MAX_POINTS, MAX_OBJECT_SIZE_M; a test keeps them
+equal): beyond them a request cannot finish in useful
 time or memory (``uncertainty.samples`` = 10^9 asked for 52 GiB per request)."""
 _COUNT_LIMITS: Mapping[str, tuple[int, int]] = {
     "max_grasps": (1, MAX_GRASPS_LIMIT),
     "max_samples": (1, MAX_SAMPLES_LIMIT),
     "max_total_samples": (1, MAX_SAMPLES_LIMIT),
     "uncertainty.samples": (0, MAX_UNCERTAINTY_SAMPLES),
-    "uncertainty.seed": (0, _MAX_COUNT),  # a seed, not a count
-    "response.joint_trajectories": (0, _MAX_COUNT),  # clipped to the number of grasps
+    "uncertainty.seed": (0, MAX_COUNT),  # a seed, not a count
+    "response.joint_trajectories": (0, MAX_COUNT),  # clipped to the number of grasps
     "posture.restarts": (0, MAX_RESTARTS),
 }
-
-
-@dataclass(frozen=True)
-class ResponseContent:
-    """What a GraspRanking message carries beyond the scores (parameters ``response.*``).
-
-    Attributes:
-        joint_trajectories: How many grasps get their ``joint_trajectory``: the first of the
-            final order, then the grasps outside it in index order (infeasible grasps have
-            none to give); 0: none. The default, all, is what a message built without node
-            parameters carries.
-        per_sample: Whether each evaluation's per-sample arrays are filled; false leaves them
-            empty (scores, aggregates and per-grasp fields are kept).
-    """
-
-    joint_trajectories: int = _MAX_COUNT
-    per_sample: bool = True
-
-    def with_joint_trajectory(self, order: Sequence[int], count: int) -> frozenset[int]:
-        """The grasp indices (of ``count`` grasps) that carry their joint trajectory."""
-        if self.joint_trajectories >= count:
-            return frozenset(range(count))
-        ranked = set(order)
-        first = [*order, *(i for i in range(count) if i not in ranked)]
-        return frozenset(first[: self.joint_trajectories])
 
 
 @dataclass(frozen=True)
@@ -619,32 +593,6 @@ def analysis_from_parameters(values: Mapping[str, Any]) -> AnalysisOptions:
     )
 
 
-def inertia_tensor_from_components(
-    components: Sequence[float], field: str, mass_kg: float | None = None
-) -> np.ndarray:
-    """3x3 symmetric tensor of (ixx, ixy, ixz, iyy, iyz, izz), as in geometry_msgs/Inertia.
-
-    With ``mass_kg``, every component and principal moment must be at most
-    mass_kg * MAX_OBJECT_SIZE_M^2 [kg m^2] (a radius of gyration of at most MAX_OBJECT_SIZE_M,
-    the CLI's bound): ixx = 1e300 made the effective masses NaN deep in the analyses.
-    """
-    ixx, ixy, ixz, iyy, iyz, izz = finite_array(list(components), field, (6,))
-    tensor = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
-    if mass_kg is not None:
-        limit = mass_kg * MAX_OBJECT_SIZE_M**2
-        largest = float(np.max(np.abs(tensor)))
-        if largest <= limit:  # then the eigenvalues are finite: |lambda| <= 3 * largest
-            largest = max(largest, float(np.max(np.abs(np.linalg.eigvalsh(tensor)))))
-        if largest > limit:
-            raise InvalidInputError(
-                field,
-                f"components and principal moments must be at most m * {MAX_OBJECT_SIZE_M:g}^2"
-                f" = {limit:g} kg m^2 (a radius of gyration of at most {MAX_OBJECT_SIZE_M:g} m)"
-                f", got {largest:g}",
-            )
-    return tensor
-
-
 def settings_from_parameters(values: Mapping[str, Any]) -> NodeSettings:
     """Validate a full set of parameter values (missing ones take their defaults).
 
@@ -716,90 +664,3 @@ def settings_from_parameters(values: Mapping[str, Any]) -> NodeSettings:
         armature_joint_names=v["robot.armature_joint_names"],
         armature_published=v["robot.armature_published"],
     )
-
-
-@dataclass(frozen=True)
-class RobotBundle:
-    """A loaded robot chain with its evaluator and the validated ``ik_seed`` (or None).
-
-    Attributes:
-        origin: Where the description came from: a parameter name or the topic.
-    """
-
-    robot: RobotModel
-    evaluator: GraspSafetyEvaluator
-    seed: tuple[float, ...] | None
-    origin: str
-
-
-_CORE_FIELDS = {
-    "robot.urdf": None,  # replaced by the parameter (or topic) the description came from
-    "robot.base_frame": "base_frame",
-    "robot.tip_frame": "tip_frame",
-    "robot.seed": "ik_seed",
-}
-
-
-def _renamed(error: GraspSafetyError, origin: str) -> GraspSafetyError:
-    """The core's error with its field renamed to the node parameter to change."""
-    field = getattr(error, "field", None)
-    if field not in _CORE_FIELDS:
-        return error
-    new_field = _CORE_FIELDS[field] or origin
-    if isinstance(error, FrameNotFoundError):
-        return error.renamed(new_field)
-    message = str(error)[len(field) + 2 :] if str(error).startswith(f"{field}: ") else str(error)
-    return InvalidInputError(new_field, message)
-
-
-def _with_armature_parameters(
-    robot: RobotModel, settings: NodeSettings, source: str
-) -> RobotModel:
-    """The chain with the armature of the ``robot.armature_*`` parameters (if any)."""
-    if settings.armature_published:
-        entry = published_for(settings.armature_published, source, robot.joint_names)
-        return robot.with_armature(published_values(entry, robot.joint_names))
-    values = settings.armature_kgm2
-    names = settings.armature_joint_names
-    if not values and not names:
-        return robot
-    if names:
-        if len(names) != len(values):
-            raise InvalidInputError(
-                "robot.armature_joint_names",
-                f"has {len(names)} names for {len(values)} values of robot.armature_kgm2",
-            )
-        return robot.with_armature(dict(zip(names, values, strict=True)))
-    return robot.with_armature(values)
-
-
-def build_robot(settings: NodeSettings, topic_description: str | None) -> RobotBundle | None:
-    """Load the robot chain of ``settings`` (parameters first, then the topic's description).
-
-    Returns:
-        None when neither the parameters nor the topic gave a description yet.
-
-    Raises:
-        GraspSafetyError: the description, a frame or the seed is wrong (field renamed to the
-            node parameter, or ``/robot_description`` for the topic).
-    """
-    if settings.robot_description:
-        source, origin = settings.robot_description, "robot_description"
-    elif settings.urdf:
-        source, origin = settings.urdf, "urdf"
-    elif topic_description:
-        source, origin = topic_description, "/robot_description"
-    else:
-        return None
-    try:
-        robot = RobotModel.from_urdf(source, settings.base_frame, settings.tip_frame)
-        robot = _with_armature_parameters(robot, settings, source)
-        check_arm_point_links(settings.analysis.arm_points_m, robot)
-        seed = None
-        if settings.ik_seed is not None:
-            seed = tuple(float(x) for x in robot.check_positions(settings.ik_seed, "robot.seed"))
-    except GraspSafetyError as error:
-        raise _renamed(error, origin) from None
-    evaluator = GraspSafetyEvaluator(robot, EvaluationConfig(metric=settings.metric))
-    warm_up(evaluator)  # compile or load the kernels now, not on the first request
-    return RobotBundle(robot=robot, evaluator=evaluator, seed=seed, origin=origin)

@@ -15,7 +15,20 @@ from __future__ import annotations
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..core.method.ranking import Ranking
+from ..core.model.inertia import ObjectInertia
+from .errors import (
+    ClientGoneError,
+    ComputeTimeExceededError,
+    ShuttingDownError,
+)
+from .parameters import NodeSettings
+from .robot_bundle import RobotBundle
 
 SLICE_S = 0.2
 """Compute time a ranking keeps the lock for while others wait [s]."""
@@ -141,3 +154,71 @@ class ClientWatch:
             missing = bool(self._at_arrival) and self._at_arrival.isdisjoint(present)
         self._absent = self._absent + 1 if missing else 0
         return self._absent >= CLIENT_ABSENT_CHECKS
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """Consistent view of the state one ranking uses."""
+
+    settings: NodeSettings
+    bundle: RobotBundle | None
+    joint_state: tuple[Sequence[str], Sequence[float]] | None
+    inertia_override: ObjectInertia | None
+
+
+def labels_only(ranking: Ranking) -> Ranking:
+    """``ranking`` without its per-sample arrays and postures: what the markers read (index,
+    name, feasibility, score, order, metric)."""
+    empty = np.empty(0)
+    arrays = dict.fromkeys(
+        (
+            "times_s",
+            "joint_positions",
+            "directions_in_base",
+            "effective_mass_kg",
+            "direction_is_worst_case",
+            "tip_speed_m_s",
+            "ik_iterations",
+        ),
+        empty,
+    )
+    return replace(
+        ranking,
+        postures=(),
+        evaluations=tuple(replace(e, **arrays) for e in ranking.evaluations),
+    )
+
+
+def progress_check(
+    settings: NodeSettings,
+    stopping: threading.Event,
+    lock: FairComputeLock,
+    client_watch: ClientWatch | None,
+) -> Callable[[int, int], None]:
+    """A progress callback for rank() and analyse(): abandons the work when the node shuts
+    down, after max_compute_time_s of computing (time queued behind other rankings not
+    counted), or when the request's clients are gone; between steps it shares the compute
+    lock with waiting requests (FairComputeLock.share)."""
+    deadline = time.perf_counter() + settings.max_compute_time_s
+
+    def check(done: int, total: int) -> None:
+        nonlocal deadline
+        if done >= total:
+            return
+        if stopping.is_set():
+            raise ShuttingDownError(
+                f"ranking abandoned after {done} of {total} steps: the node is shutting down"
+            )
+        if time.perf_counter() > deadline:
+            raise ComputeTimeExceededError(
+                f"ranking abandoned after {done} of {total} steps: longer than "
+                f"max_compute_time_s={settings.max_compute_time_s:g} s; send fewer grasps or "
+                "raise trajectory.dt_s"
+            )
+        if client_watch is not None and client_watch.gone():
+            raise ClientGoneError(
+                f"ranking abandoned after {done} of {total} steps: its client left"
+            )
+        deadline += lock.share()
+
+    return check

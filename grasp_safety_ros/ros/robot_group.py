@@ -7,7 +7,8 @@ from collections.abc import Mapping
 from typing import Any
 
 from ..core.exceptions import GraspSafetyError
-from .parameters import ROBOT_PARAMETERS, RobotBundle
+from .parameters import ROBOT_PARAMETERS
+from .robot_bundle import RobotBundle
 
 ROBOT_GROUP = frozenset({*ROBOT_PARAMETERS, "ik_seed"})
 """Parameters that make the robot model; applied together (GraspSafetyNode._apply_parameters)."""

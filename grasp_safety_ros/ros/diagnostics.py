@@ -1,0 +1,107 @@
+"""What the node reports on /diagnostics: its counters and their DiagnosticStatus."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+
+from ..core.model.robot import NO_ARMATURE_NOTE, RobotModel
+from .memory import memory_kib
+from .parameters import NodeSettings
+from .robot_bundle import RobotBundle
+
+
+@dataclass
+class NodeStatus:
+    """What /diagnostics reports (guarded by the node's state lock)."""
+
+    rankings: int = 0
+    refused: int = 0
+    last_compute_time_s: float = 0.0
+    last_feasible: int = 0
+    last_infeasible: int = 0
+    last_source: str = ""
+    last_error: str = ""
+    last_was_error: bool = False
+    robot_description_error: str = ""  # why the last /robot_description was not used
+    robot_parameters_pending: str = ""  # why the robot group is not applied yet
+    abandoned: int = 0  # rankings abandoned at shut-down
+    ignored_descriptions: int = 0  # /robot_description messages ignored (parameters rule)
+    refused_by_source: dict[str, int] = field(default_factory=dict)
+    lost_by_source: dict[str, int] = field(default_factory=dict)  # the middleware's count
+
+    def record_ranking(
+        self, source: str, compute_time_s: float, feasible: int, total: int
+    ) -> None:
+        """Count a ranking of ``total`` grasps, ``feasible`` of them feasible."""
+        self.rankings += 1
+        self.last_compute_time_s = compute_time_s
+        self.last_feasible = feasible
+        self.last_infeasible = total - feasible
+        self.last_source = source
+        self.last_was_error = False
+
+    def record_refusal(self, source: str, error: BaseException | str) -> None:
+        """Count an input of ``source`` refused with ``error``."""
+        self.refused += 1
+        self.refused_by_source[source] = self.refused_by_source.get(source, 0) + 1
+        self.last_error = f"{source}: {error}"
+        self.last_source = source
+        self.last_was_error = True
+
+
+def armature_status(robot: RobotModel) -> str:
+    """The chain's armature per joint [kg m^2 or kg], or the note that none was given."""
+    if not robot.armature_given:
+        return NO_ARMATURE_NOTE
+    return ", ".join(
+        f"{name} {value:g}"
+        for name, value in zip(robot.joint_names, robot.armature_kgm2, strict=True)
+    )
+
+
+def status_msg(
+    status: NodeStatus, settings: NodeSettings, bundle: RobotBundle | None, node_name: str
+) -> DiagnosticStatus:
+    """The DiagnosticStatus of a node with these counters, settings and robot."""
+    if bundle is None:
+        level, message = DiagnosticStatus.ERROR, "no robot description yet"
+    elif status.robot_parameters_pending:
+        level, message = DiagnosticStatus.WARN, status.robot_parameters_pending
+    elif status.last_was_error:
+        level, message = DiagnosticStatus.WARN, f"input refused: {status.last_error}"
+    elif status.rankings:
+        level = DiagnosticStatus.OK
+        message = (
+            f"last ranking: {status.last_feasible} feasible, {status.last_infeasible} infeasible"
+        )
+    else:
+        level, message = DiagnosticStatus.OK, "ready, no ranking yet"
+    values = {
+        "robot_source": bundle.origin if bundle else "",
+        "backend": bundle.evaluator.ik.backend_used if bundle else "",
+        "base_frame": settings.base_frame,
+        "tip_frame": settings.tip_frame,
+        "rankings": status.rankings,
+        "refused_inputs": status.refused,
+        "last_source": status.last_source,
+        "last_compute_time_s": f"{status.last_compute_time_s:.6f}",
+        "last_feasible_grasps": status.last_feasible,
+        "last_infeasible_grasps": status.last_infeasible,
+        "last_error": status.last_error,
+        "robot_description_error": status.robot_description_error,
+        "robot_parameters_pending": status.robot_parameters_pending,
+        "armature": armature_status(bundle.robot) if bundle else "",
+        "ignored_robot_descriptions": status.ignored_descriptions,
+        **{f"refused.{k}": n for k, n in sorted(status.refused_by_source.items())},
+        **{f"lost.{k}": n for k, n in sorted(status.lost_by_source.items())},
+        **{f"memory.{k}": n for k, n in memory_kib().items()},
+    }
+    return DiagnosticStatus(
+        level=level,
+        name=f"{node_name}: grasp ranking",
+        message=message,
+        hardware_id=f"{settings.base_frame}->{settings.tip_frame}",
+        values=[KeyValue(key=k, value=str(v)) for k, v in values.items()],
+    )

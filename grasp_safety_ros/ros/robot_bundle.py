@@ -1,0 +1,101 @@
+"""The robot the node serves: its chain from the parameters or /robot_description, with the
+armature parameters applied, its evaluator (kernels warmed up) and its validated IK seed."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..core.exceptions import FrameNotFoundError, GraspSafetyError, InvalidInputError
+from ..core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
+from ..core.method.warm_up import warm_up
+from ..core.model.armature import published_for, published_values
+from ..core.model.robot import RobotModel
+from .arm_points import check_arm_point_links
+from .parameters import NodeSettings
+
+
+@dataclass(frozen=True)
+class RobotBundle:
+    """A loaded robot chain with its evaluator and the validated ``ik_seed`` (or None).
+
+    Attributes:
+        origin: Where the description came from: a parameter name or the topic.
+    """
+
+    robot: RobotModel
+    evaluator: GraspSafetyEvaluator
+    seed: tuple[float, ...] | None
+    origin: str
+
+
+_CORE_FIELDS = {
+    "robot.urdf": None,  # replaced by the parameter (or topic) the description came from
+    "robot.base_frame": "base_frame",
+    "robot.tip_frame": "tip_frame",
+    "robot.seed": "ik_seed",
+}
+
+
+def _renamed(error: GraspSafetyError, origin: str) -> GraspSafetyError:
+    """The core's error with its field renamed to the node parameter to change."""
+    field = getattr(error, "field", None)
+    if field not in _CORE_FIELDS:
+        return error
+    new_field = _CORE_FIELDS[field] or origin
+    if isinstance(error, FrameNotFoundError):
+        return error.renamed(new_field)
+    message = str(error)[len(field) + 2 :] if str(error).startswith(f"{field}: ") else str(error)
+    return InvalidInputError(new_field, message)
+
+
+def _with_armature_parameters(
+    robot: RobotModel, settings: NodeSettings, source: str
+) -> RobotModel:
+    """The chain with the armature of the ``robot.armature_*`` parameters (if any)."""
+    if settings.armature_published:
+        entry = published_for(settings.armature_published, source, robot.joint_names)
+        return robot.with_armature(published_values(entry, robot.joint_names))
+    values = settings.armature_kgm2
+    names = settings.armature_joint_names
+    if not values and not names:
+        return robot
+    if names:
+        if len(names) != len(values):
+            raise InvalidInputError(
+                "robot.armature_joint_names",
+                f"has {len(names)} names for {len(values)} values of robot.armature_kgm2",
+            )
+        return robot.with_armature(dict(zip(names, values, strict=True)))
+    return robot.with_armature(values)
+
+
+def build_robot(settings: NodeSettings, topic_description: str | None) -> RobotBundle | None:
+    """Load the robot chain of ``settings`` (parameters first, then the topic's description).
+
+    Returns:
+        None when neither the parameters nor the topic gave a description yet.
+
+    Raises:
+        GraspSafetyError: the description, a frame or the seed is wrong (field renamed to the
+            node parameter, or ``/robot_description`` for the topic).
+    """
+    if settings.robot_description:
+        source, origin = settings.robot_description, "robot_description"
+    elif settings.urdf:
+        source, origin = settings.urdf, "urdf"
+    elif topic_description:
+        source, origin = topic_description, "/robot_description"
+    else:
+        return None
+    try:
+        robot = RobotModel.from_urdf(source, settings.base_frame, settings.tip_frame)
+        robot = _with_armature_parameters(robot, settings, source)
+        check_arm_point_links(settings.analysis.arm_points_m, robot)
+        seed = None
+        if settings.ik_seed is not None:
+            seed = tuple(float(x) for x in robot.check_positions(settings.ik_seed, "robot.seed"))
+    except GraspSafetyError as error:
+        raise _renamed(error, origin) from None
+    evaluator = GraspSafetyEvaluator(robot, EvaluationConfig(metric=settings.metric))
+    warm_up(evaluator)  # compile or load the kernels now, not on the first request
+    return RobotBundle(robot=robot, evaluator=evaluator, seed=seed, origin=origin)
