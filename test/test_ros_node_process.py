@@ -231,8 +231,9 @@ STOPS = 8
 
 def test_repeated_sigint_stops_exit_0_without_an_abort(ros_env: dict[str, str]) -> None:
     """The node process, started and stopped by SIGINT again and again, exits 0 every time,
-    its last line the node's own: the interpreter's teardown after it ended in std::terminate
-    ("terminate called without an active exception", SIGABRT) about one stop in two."""
+    its last line the node's own (the signal may come while the node is still starting): the
+    interpreter's teardown after it ended in std::terminate ("terminate called without an
+    active exception", SIGABRT) about one stop in two."""
     for stop in range(STOPS):
         process = subprocess.Popen(
             command("--params-file", PARAMS, "-p", "use_joint_states_seed:=false"),

@@ -781,14 +781,13 @@ def run(args: list[str] | None = None) -> int:
                 spinner.join(timeout=10.0)
             executor.shutdown()
             join_callbacks(executor)
+        abandoned = 0 if node is None else node.abandoned_rankings  # None: signal at start-up
         if node is not None:
-            abandoned = node.abandoned_rankings
             node.destroy_node()
-            if status == 0:
-                logger.info(
-                    f"shut down ({reason}); {abandoned} ranking(s) abandoned, their requests "
-                    "answered"
-                )
+        if status == 0:
+            logger.info(
+                f"shut down ({reason}); {abandoned} ranking(s) abandoned, their requests answered"
+            )
         rclpy.try_shutdown()
         rclpy.utilities.get_default_context().destroy()  # the middleware's participant goes
     return status
