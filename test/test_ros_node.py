@@ -85,7 +85,7 @@ NODE_PARAMETERS = {
     "trajectory.dt_s": DT_S,
     "max_grasps": MAX_GRASPS,
     "max_total_samples": 100_000,
-    "max_compute_time_s": 3.0,  # the known-good requests must finish on a loaded machine too
+    "max_compute_time_s": 10.0,  # known-good requests must finish on a loaded machine too
     "service_busy_timeout_s": 0.3,
     "diagnostics_period_s": 0.5,
     "posture.restarts": 0,  # the paper's single IK; posture selection: its own tests below

@@ -682,8 +682,11 @@ class GraspSafetyNode(Node):
         allocator keeps its high-water mark otherwise), then publish the status."""
         with self._state_lock:
             trim, self._trim_pending = self._trim_pending, False
-        if trim and not self._compute_lock.locked():
-            release_free_heap()
+        if trim and self._compute_lock.acquire(timeout=0.0):  # malloc_trim holds the heap:
+            try:  # a ranking starting meanwhile waits in the queue, not on its compute time
+                release_free_heap()
+            finally:
+                self._compute_lock.release()
         elif trim:
             with self._state_lock:
                 self._trim_pending = True  # next time
