@@ -660,5 +660,6 @@ def rank_with_evaluator(
         bounds.lower_kgm2,
         bounds.upper_kgm2,
         ranking.metric,
+        compiled=evaluator.ik.compiled,
     )
     return replace(report, armature_range=spread)

@@ -327,7 +327,7 @@ def analyse(
     uncertainty = None
     if options.uncertainty is not None:
         uncertainty = analyse_inertia_uncertainty(
-            robot, evaluations, grasps, object_inertia, options.uncertainty, metric
+            robot, evaluations, grasps, object_inertia, options.uncertainty, metric, chain
         )
         step()
     effort: tuple[EffortEvaluation, ...] = ()

@@ -5,7 +5,9 @@ reused and only the effective mass is recomputed per perturbed inertia. With the
 spatial inertia Y (6x6, tip frame, Pinocchio's [linear; angular] order) attached to the tip,
 the joint-space inertia is M_aug(q) = M(q) + J(q)ᵀ Y J(q) (J: the tip's LOCAL Jacobian), exactly
 what core.effective_mass.augmented_model builds, so every perturbation costs one batched
-n x n solve per sample.
+n x n solve per sample. On chains the compiled kernels support (``chain`` given), every
+(grasp, sample, perturbation) runs compiled instead (``method.perturbed``: the ranking's own
+mass matrix with each inertia merged into the tip body, equal to this reference to rounding).
 
 Uncertainty set (deterministic): the nominal inertia, then the corners of the parameter box
 (over the parameters with a non-zero bound), then ``num_random_samples`` points drawn uniformly
@@ -34,6 +36,9 @@ import pinocchio as pin
 
 from ..exceptions import InvalidInputError
 from ..input_checks import finite_array, finite_float
+from ..method.compiled import chain_arrays
+from ..method.packed import ChainArrays
+from ..method.perturbed import perturbed_effective_masses
 from ..method.ranking import Grasp, GraspEvaluation, aggregate, check_metric
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
@@ -229,6 +234,42 @@ def effective_mass_for_inertias(
     return result
 
 
+def _masses_for_inertias(
+    robot: RobotModel,
+    chain: ChainArrays | None,
+    evaluations: Sequence[GraspEvaluation],
+    grasps: Sequence[Grasp],
+    inertias: Sequence[ObjectInertia],
+) -> list[np.ndarray]:
+    """``effective_mass_for_inertias`` of each (feasible) evaluation: compiled for all at once
+    when ``chain`` is given, else the Pinocchio reference per grasp."""
+    if chain is None:
+        return [
+            effective_mass_for_inertias(robot, evaluation, grasp, inertias)
+            for evaluation, grasp in zip(evaluations, grasps, strict=True)
+        ]
+    return perturbed_effective_masses(
+        robot,
+        chain,
+        inertias,
+        [grasp.transform_tip_to_object for grasp in grasps],
+        [evaluation.joint_positions for evaluation in evaluations],
+        [evaluation.directions_in_base for evaluation in evaluations],
+        [evaluation.direction_is_worst_case for evaluation in evaluations],
+    )
+
+
+def _aggregate_rows(masses: np.ndarray, times_s: np.ndarray, metric: str) -> np.ndarray:
+    """``aggregate`` of each row of masses (P, N) [kg], as numpy reduces a row on its own."""
+    if metric == "mean":
+        return masses.sum(axis=1) / masses.shape[1]
+    if metric == "max":
+        return masses.max(axis=1)
+    if masses.shape[1] < 2:
+        return np.zeros(len(masses))
+    return np.trapezoid(masses, times_s, axis=1)
+
+
 @dataclass(frozen=True)
 class GraspUncertainty:
     """Score of one grasp over the uncertainty set.
@@ -290,11 +331,13 @@ def analyse_inertia_uncertainty(
     object_inertia: ObjectInertia,
     uncertainty: InertiaUncertainty | None = None,
     metric: str = "mean",
+    chain: ChainArrays | None = None,
 ) -> UncertaintyAnalysis:
     """Scores of every grasp over the uncertainty set, worst case, percentile and P(safest).
 
     ``grasps[i]`` is the grasp of ``evaluations[i]``; ``metric`` should be the one the
-    evaluations were ranked with.
+    evaluations were ranked with. ``chain``: ``compiled.chain_arrays(robot)`` to run the
+    compiled kernel (numba); None: the Pinocchio reference.
     """
     check_metric(metric)
     uncertainty = uncertainty or InertiaUncertainty()
@@ -305,10 +348,16 @@ def analyse_inertia_uncertainty(
     perturbations = sample_inertia_perturbations(object_inertia, uncertainty)
     count = len(perturbations)
     scores = np.full((len(evaluations), count), np.nan)
-    for g, (evaluation, grasp) in enumerate(zip(evaluations, grasps, strict=True)):
-        if evaluation.feasible:
-            masses = effective_mass_for_inertias(robot, evaluation, grasp, perturbations.inertias)
-            scores[g] = [aggregate(row, evaluation.times_s, metric) for row in masses]
+    feasible_indices = [g for g, evaluation in enumerate(evaluations) if evaluation.feasible]
+    masses = _masses_for_inertias(
+        robot,
+        chain,
+        [evaluations[g] for g in feasible_indices],
+        [grasps[g] for g in feasible_indices],
+        perturbations.inertias,
+    )
+    for g, rows in zip(feasible_indices, masses, strict=True):
+        scores[g] = _aggregate_rows(rows, evaluations[g].times_s, metric)
     feasible = np.array([e.feasible for e in evaluations], dtype=bool)
     if feasible.any():
         masked = np.where(feasible[:, None], scores, np.inf)
@@ -440,21 +489,28 @@ def analyse_armature_range(
     lower_kgm2: np.ndarray,
     upper_kgm2: np.ndarray,
     metric: str = "mean",
+    compiled: bool = False,
 ) -> ArmatureRangeAnalysis:
     """Effective masses and scores at both ends of the armature ranges (the IK does not
-    depend on the armature: the evaluations' joint positions are reused)."""
+    depend on the armature: the evaluations' joint positions are reused). ``compiled``: run
+    the compiled kernel where it supports the chain (numba); False: the Pinocchio reference."""
     check_metric(metric)
     ends = (robot.with_armature(lower_kgm2), robot.with_armature(upper_kgm2))
     count = len(evaluations)
     scores = np.full((2, count), np.nan)
     ranges = np.full((count, 2), np.nan)
-    for g, (evaluation, grasp) in enumerate(zip(evaluations, grasps, strict=True)):
-        if not evaluation.feasible:
-            continue
-        for end, chain in enumerate(ends):
-            (masses,) = effective_mass_for_inertias(chain, evaluation, grasp, [object_inertia])
-            scores[end, g] = aggregate(masses, evaluation.times_s, metric)
-            ranges[g, end] = masses.min() if end == 0 else masses.max()
+    feasible_indices = [g for g, evaluation in enumerate(evaluations) if evaluation.feasible]
+    for end, chain_robot in enumerate(ends):
+        masses = _masses_for_inertias(
+            chain_robot,
+            chain_arrays(chain_robot) if compiled else None,
+            [evaluations[g] for g in feasible_indices],
+            [grasps[g] for g in feasible_indices],
+            [object_inertia],
+        )
+        for g, (row,) in zip(feasible_indices, masses, strict=True):
+            scores[end, g] = aggregate(row, evaluations[g].times_s, metric)
+            ranges[g, end] = row.min() if end == 0 else row.max()
     orders = []
     for end in range(2):
         feasible = [g for g in range(count) if evaluations[g].feasible]

@@ -11,6 +11,7 @@ from ..model.inertia import solid_box
 from ..model.robot import RobotModel
 from ..model.trajectory import ObjectTrajectory
 from .effective_mass import translational_mobilities_in_base
+from .perturbed import perturbed_effective_masses
 from .ranking import Grasp, GraspSafetyEvaluator
 from .terms import grasp_terms
 
@@ -60,4 +61,13 @@ def warm_up(evaluator: GraspSafetyEvaluator | None = None) -> float:
         )
         positions = np.array([robot.default_seed_positions()])
         grasp_terms(robot, evaluator.ik.chain, box, pin.SE3.Identity(), positions)
+        perturbed_effective_masses(  # the inertia-uncertainty kernel
+            robot,
+            evaluator.ik.chain,
+            [box],
+            [pin.SE3.Identity()],
+            [positions],
+            [np.array([[1.0, 0.0, 0.0]])],
+            [np.array([False])],
+        )
     return time.perf_counter() - start
