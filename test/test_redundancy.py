@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import BAXTER_SEED, book_trajectory
+from conftest import ARM7_AXES, BAXTER_SEED, book_trajectory, serial_arm_urdf
 
 from grasp_safety_ros.core import (
     Grasp,
@@ -32,6 +34,7 @@ from grasp_safety_ros.core.method.effective_mass import (
     translational_mobility_in_base,
     worst_direction,
 )
+from grasp_safety_ros.core.method.ik import compiled_available
 from grasp_safety_ros.core.method.ranking import METRICS, aggregate
 
 BOOK = solid_box(0.34, [0.15, 0.22, 0.015])
@@ -278,3 +281,49 @@ def test_switched_off_and_infeasible_are_unchanged(arm7: RobotModel) -> None:
 def test_bad_settings_are_refused(kwargs: dict, field: str) -> None:
     with pytest.raises(InvalidInputError, match=field.replace(".", r"\.")):
         RedundancyConfig(**kwargs)
+
+
+@pytest.mark.skipif(not compiled_available(), reason="numba is not installed")
+@pytest.mark.parametrize("case", ["arm7", "geared", "baxter", "arm7_worst"])
+def test_compiled_trial_masses_equal_pinocchio(
+    case: str, arm7: RobotModel, baxter: RobotModel
+) -> None:
+    """Each trial's effective masses from the compiled mobility kernel: the same trials are
+    accepted (joint positions bit for bit), masses and score equal to 1e-12 of scale; armature
+    and worst-direction samples included."""
+    if case == "baxter":
+        robot, obj, grasp, trajectory = baxter, BOOK, book_grasp(-0.1), book_trajectory(0.05)
+        positions = np.array(BAXTER_SEED)
+    else:
+        robot = arm7
+        if case == "geared":
+            armature = [0.3, 0.25, 0.2, 0.1, 0.05, 0.04, 0.02]
+            robot = RobotModel.from_urdf(
+                serial_arm_urdf(ARM7_AXES, seed=1), "base_link", "tool", armature_kgm2=armature
+            )
+        positions = np.array([0.3, 0.6, -0.4, -1.1, 0.5, 0.8, -0.2])
+        grasp = Grasp(pin.SE3(pin.exp3(np.array([0.3, 0.1, -0.2])), np.array([0.0, 0.05, -0.12])))
+        obj, trajectory = BOX, trajectory_from_configuration(robot, positions, grasp)
+    evaluator = GraspSafetyEvaluator(robot)
+    evaluation = evaluator.evaluate(grasp, obj, trajectory, seed_positions=positions)
+    assert evaluation.feasible, evaluation.reason
+    if case == "arm7_worst":  # the largest effective mass over directions at two samples
+        worst = evaluation.direction_is_worst_case.copy()
+        worst[[0, 5]] = True
+        evaluation = replace(evaluation, direction_is_worst_case=worst)
+        masses = recomputed_effective_mass(
+            robot, obj, grasp, evaluation, evaluation.joint_positions
+        )
+        evaluation = replace(evaluation, effective_mass_kg=masses)
+    config = RedundancyConfig(iterations=8)
+    reference = resolve_redundancy(robot, evaluation, obj, grasp, trajectory, config)
+    compiled = resolve_redundancy(
+        robot, evaluation, obj, grasp, trajectory, config, chain=evaluator.ik.chain
+    )
+    assert reference.applied and reference.score < reference.original_score
+    np.testing.assert_array_equal(compiled.joint_positions, reference.joint_positions)
+    scale = np.abs(reference.effective_mass_kg).max()
+    error = np.abs(compiled.effective_mass_kg - reference.effective_mass_kg).max() / scale
+    assert error <= 1e-12, f"relative error {error:.2e}"
+    assert compiled.score == pytest.approx(reference.score, rel=1e-12)
+    assert compiled.samples_improved == reference.samples_improved

@@ -67,7 +67,12 @@ import pinocchio as pin
 
 from ..exceptions import InvalidInputError
 from ..input_checks import read_only
-from ..method.effective_mass import augmented_model, translational_mobility_in_base
+from ..method.effective_mass import (
+    augmented_model,
+    translational_mobilities_in_base,
+    translational_mobility_in_base,
+)
+from ..method.packed import ChainArrays
 from ..method.ranking import Grasp, GraspEvaluation, aggregate, check_metric, positions_along
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
@@ -430,11 +435,17 @@ def resolve_redundancy(
     trajectory: Trajectory,
     config: RedundancyConfig | None = None,
     model: pin.Model | None = None,
+    chain: ChainArrays | None = None,
 ) -> RedundancyResolution:
     """Lower the effective mass of one evaluated grasp through a smooth null-space motion.
 
     ``grasp`` and ``trajectory`` must be the ones the evaluation was computed with;
-    ``model``: their ``augmented_model``, when already built (shared across analyses).
+    ``model``: their ``augmented_model``, when already built (shared across analyses);
+    ``chain``: ``compiled.chain_arrays(robot)`` to take each trial's effective masses from the
+    compiled mobility kernel, all samples in one call (numba; equal to Pinocchio's to rounding).
+    The null-space gradients stay on Pinocchio: their central differences divide rounding by
+    2 h (h = ``finite_difference_step_rad``), so a change of summation order in U would move
+    them, and every later trial, by far more than rounding.
     """
     config = config or RedundancyConfig()
     original = np.asarray(evaluation.joint_positions, dtype=float)
@@ -488,12 +499,21 @@ def resolve_redundancy(
             q_new.append(projected)
         if not motion.ok(q_new):
             return _Rejection("motion")
-        u = np.array(
-            [
-                problem.objective(q, d, bool(w))
-                for q, d, w in zip(q_new, directions, worst, strict=True)
-            ]
-        )
+        if chain is not None:
+            u = _objectives(
+                translational_mobilities_in_base(
+                    robot, object_inertia, grasp.transform_tip_to_object, np.array(q_new), chain
+                ),
+                directions,
+                worst,
+            )
+        else:
+            u = np.array(
+                [
+                    problem.objective(q, d, bool(w))
+                    for q, d, w in zip(q_new, directions, worst, strict=True)
+                ]
+            )
         above = u > ceiling
         if np.any(above):
             return _Rejection("mass", above)
@@ -562,6 +582,18 @@ def resolve_redundancy(
         max_position_error_m=float(errors[:, 0].max()),
         max_orientation_error_rad=float(errors[:, 1].max()),
     )
+
+
+def _objectives(mobilities: np.ndarray, directions: np.ndarray, worst: np.ndarray) -> np.ndarray:
+    """``_SampleProblem.objective`` of (N, 3, 3) mobilities [1/kg] at once: 1 / (dᵀ A d), or
+    1 / the smallest eigenvalue of A where ``worst`` [kg]."""
+    masses = 1.0 / np.einsum("ni,nij,nj->n", directions, mobilities, directions)
+    if worst.any():
+        flagged = mobilities[worst]
+        masses[worst] = (
+            1.0 / np.linalg.eigvalsh(0.5 * (flagged + flagged.transpose(0, 2, 1)))[:, 0]
+        )
+    return masses
 
 
 def _step_ok(robot: RobotModel, previous: np.ndarray, q: np.ndarray, bound: np.ndarray) -> bool:

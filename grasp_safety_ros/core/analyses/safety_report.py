@@ -295,7 +295,9 @@ def analyse(
         resolutions = []
         for k, (e, g) in enumerate(zip(evaluations, grasps, strict=True)):
             resolutions.append(
-                resolve_redundancy(robot, e, object_inertia, g, motions[k], config, model_of(k))
+                resolve_redundancy(
+                    robot, e, object_inertia, g, motions[k], config, model_of(k), chain
+                )
             )
             step()
         redundancy = tuple(resolutions)
