@@ -1,7 +1,7 @@
 """Inertia uncertainty on the compiled path (``method.perturbed``) equals the Pinocchio reference
-(``effective_mass_for_inertias``) to rounding, on revolute, prismatic, continuous and geared
-arms and Baxter, infeasible grasps and worst-direction samples mixed in; its nominal inertia
-gives the ranking's own effective masses. Equality only, never timing."""
+(``effective_mass_for_inertias``) to rounding, on 6- and 7-joint revolute, prismatic,
+continuous and geared arms and Baxter, infeasible grasps and worst-direction samples mixed in;
+its nominal inertia gives the ranking's own effective masses. Equality only, never timing."""
 
 from __future__ import annotations
 
@@ -33,7 +33,11 @@ from grasp_safety_ros.core.method.effective_mass import (
 )
 from grasp_safety_ros.core.method.ik import compiled_available
 from grasp_safety_ros.core.method.metrics import aggregate
-from grasp_safety_ros.core.method.perturbed import GRASP_CHUNK, perturbed_effective_masses
+from grasp_safety_ros.core.method.perturbed import (
+    GRASP_CHUNK,
+    perturbed_effective_masses,
+    spatial_inertias_in_tip,
+)
 
 needs_numba = pytest.mark.skipif(not compiled_available(), reason="numba is not installed")
 ROUNDING = 1e-12
@@ -42,7 +46,7 @@ fused multiply-adds), relative to each array's largest entry."""
 BOX = solid_box(0.8, [0.08, 0.12, 0.2], [0.0, 0.01, -0.02])
 UNCERTAINTY = InertiaUncertainty(0.3, 0.03, 0.4, num_random_samples=6, seed=2)
 """1 nominal + 2^7 corners + 6 random inertias."""
-ARMS = ("arm7", "baxter", "prismatic_arm", "continuous_arm", "geared_arm")
+ARMS = ("arm6", "arm7", "baxter", "prismatic_arm", "continuous_arm", "geared_arm")
 
 
 @pytest.fixture(scope="module")
@@ -266,3 +270,19 @@ def test_row_aggregates_are_the_per_row_aggregates() -> None:
         expected = [aggregate(row, times, metric) for row in masses]
         np.testing.assert_array_equal(_aggregate_rows(masses, times, metric), expected)
     np.testing.assert_array_equal(_aggregate_rows(masses[:, :1], times[:1], "integral"), 0.0)
+
+
+def test_spatial_inertias_in_tip_are_pinocchios() -> None:
+    """Y in the tip frame: Pinocchio's SE3.act of the object's spatial inertia, as a matrix."""
+    rng = np.random.default_rng(6)
+    inertias = sample_inertia_perturbations(BOX, UNCERTAINTY).inertias[:5]
+    grasps = [pin.SE3(pin.exp3(rng.normal(size=3)), rng.normal(size=3) * 0.1) for _ in range(3)]
+    ours = spatial_inertias_in_tip(
+        inertias,
+        np.array([g.rotation for g in grasps]),
+        np.array([g.translation for g in grasps]),
+    )
+    for p, inertia in enumerate(inertias):
+        for g, grasp in enumerate(grasps):
+            expected = grasp.inverse().act(inertia.spatial_inertia_in_object()).matrix()
+            assert_close_to_scale(ours[p, g], expected, f"inertia {p}, grasp {g}")

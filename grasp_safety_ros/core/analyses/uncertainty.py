@@ -7,7 +7,8 @@ the joint-space inertia is M_aug(q) = M(q) + J(q)ᵀ Y J(q) (J: the tip's LOCAL 
 what core.effective_mass.augmented_model builds, so every perturbation costs one batched
 n x n solve per sample. On chains the compiled kernels support (``chain`` given), every
 (grasp, sample, perturbation) runs compiled instead (``method.perturbed``: the ranking's own
-mass matrix with each inertia merged into the tip body, equal to this reference to rounding).
+mass matrix and Cholesky factor once per sample, then one 6 x 6 solve per perturbation, by
+J M_aug⁻¹ Jᵀ = A (I + Y A)⁻¹ with A = J M⁻¹ Jᵀ; equal to this reference to rounding).
 
 Uncertainty set (deterministic): the nominal inertia, then the corners of the parameter box
 (over the parameters with a non-zero bound), then ``num_random_samples`` points drawn uniformly

@@ -3,8 +3,8 @@ by the compiled kernel ``kernels.uncertainty.perturbed_effective_masses`` (the i
 uncertainty and armature-range analyses; their Pinocchio loop is the reference).
 
 The IK does not depend on the object's inertia, so the joint paths are reused and only the
-joint-space inertia changes: per inertia the object is merged into the tip body as the ranking
-merges it (``compiled.augmented_bodies``), and M is the ranking's own (armature included).
+joint-space inertia changes, M_aug = M + Jᵀ Y J: per (grasp, sample) the kernel factorises the
+chain's own M once (the ranking's, armature included) and per inertia solves a 6 x 6 system.
 """
 
 from __future__ import annotations
@@ -17,13 +17,40 @@ import pinocchio as pin
 
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
-from .compiled import augmented_bodies, call_kernel, plain_array
+from .compiled import call_kernel, plain_array
+from .effective_mass import robot_inertia_arrays
 from .packed import BodyInertias, ChainArrays
 from .terms import configurations
 
 GRASP_CHUNK = 16
-"""Grasps per kernel call: bounds the bodies (inertias x chunk x n x 13 floats) and the masses
-(inertias x chunk x samples floats) held at once."""
+"""Grasps per kernel call: bounds the spatial inertias (inertias x chunk x 36 floats) and the
+masses (inertias x chunk x samples floats) held at once."""
+
+
+def spatial_inertias_in_tip(
+    inertias: Sequence[ObjectInertia], rotations: np.ndarray, translations: np.ndarray
+) -> np.ndarray:
+    """(P, G, 6, 6) spatial inertias of P object inertias in the tip frames of G grasps
+    (Pinocchio's matrix, [linear; angular]: [[m I, -m ĉ], [m ĉ, I_c - m ĉ ĉ]], c the centre of
+    mass, I_c the rotational inertia about it); rotations (G, 3, 3), translations (G, 3) [m]:
+    the tip frame in the object frame."""
+    masses = np.array([i.mass_kg for i in inertias])[:, None]  # (P, 1)
+    coms = np.array([i.com_in_object_m for i in inertias], dtype=float)  # (P, 3)
+    tensors = np.array([i.inertia_about_com_kgm2 for i in inertias], dtype=float)
+    # In the tip frame: c' = Rᵀ (c - t), I' = Rᵀ I R (R, t: the tip in the object frame).
+    com = np.einsum("gba,pgb->pga", rotations, coms[:, None] - translations[None])
+    tensor = np.einsum("gba,pbc,gcd->pgad", rotations, tensors, rotations)
+    skew = np.zeros((*com.shape, 3))
+    skew[..., 0, 1], skew[..., 0, 2] = -com[..., 2], com[..., 1]
+    skew[..., 1, 0], skew[..., 1, 2] = com[..., 2], -com[..., 0]
+    skew[..., 2, 0], skew[..., 2, 1] = -com[..., 1], com[..., 0]
+    weighted = masses[..., None, None] * skew
+    out = np.empty((len(masses), len(rotations), 6, 6))
+    out[..., :3, :3] = masses[..., None, None] * np.eye(3)
+    out[..., :3, 3:] = -weighted
+    out[..., 3:, :3] = weighted
+    out[..., 3:, 3:] = tensor - weighted @ skew
+    return out
 
 
 def perturbed_effective_masses(
@@ -52,7 +79,17 @@ def perturbed_effective_masses(
     from ..kernels.uncertainty import perturbed_effective_masses as kernel
 
     results: list[np.ndarray] = []
-    ws, mobility = thread_workspace(robot.model.nv), np.empty((3, 3))
+    n = robot.model.nv
+    ws = thread_workspace(n)
+    scratch = (
+        np.empty((n, 6)),
+        np.empty((3, 3)),
+        np.empty((6, 6)),
+        np.empty((6, 6)),
+        np.empty((6, 3)),
+        np.empty(3),
+    )
+    bodies = BodyInertias(*(plain_array(array[None]) for array in robot_inertia_arrays(robot)))
     for start in range(0, len(joint_positions), GRASP_CHUNK):
         chunk = slice(start, start + GRASP_CHUNK)
         positions = joint_positions[chunk]
@@ -61,8 +98,7 @@ def perturbed_effective_masses(
         grasps = [pin.SE3(transform) for transform in transforms_tip_to_object[chunk]]
         rotations = np.array([grasp.rotation for grasp in grasps]).reshape(-1, 3, 3)
         translations = np.array([grasp.translation for grasp in grasps]).reshape(-1, 3)
-        parts = [augmented_bodies(robot, i, rotations, translations) for i in inertias]
-        bodies = BodyInertias(*(np.concatenate(arrays) for arrays in zip(*parts, strict=True)))
+        spatial = spatial_inertias_in_tip(inertias, rotations, translations)
         q_all = np.zeros((count, longest, robot.model.nq))
         directions = np.zeros((count, longest, 3))
         slots = np.full((count, longest), -1, dtype=np.int64)
@@ -81,18 +117,19 @@ def perturbed_effective_masses(
             kernel,
             chain,
             bodies,
+            spatial,
             q_all,
             counts,
-            plain_array(directions),
+            directions,
             slots,
             out,
             worst_mobilities,
-            mobility,
+            scratch,
             ws,
         )
         if flagged:
             smallest = np.linalg.eigvalsh(worst_mobilities[:flagged])[..., 0]  # (W, P)
             rows, columns = np.nonzero(slots >= 0)
             out[:, rows, columns] = 1.0 / smallest.T
-        results.extend(out[:, g, :n].copy() for g, n in enumerate(counts))
+        results.extend(out[:, g, :size].copy() for g, size in enumerate(counts))
     return results
