@@ -1,5 +1,6 @@
 """Benchmark: the inertia-uncertainty analysis on the compiled path vs its Pinocchio reference,
-each as a ratio to the ranking's own time in the same run (one process, one core).
+each as a ratio to the ranking's own time in the same run (one process): on one core
+(workers=1), and on the evaluator's thread pool (one worker per core) for both.
 
 Workload: the Baxter book scenario of ``bench/pipeline.py`` (G grasps along the spine, dt
 0.01 s, 201 samples) with bounds mass ±20 %, CoM ±1 cm, second moments ±30 % and 64 random
@@ -25,6 +26,7 @@ from grasp_safety_ros.core.analyses.uncertainty import (
     InertiaUncertainty,
     analyse_inertia_uncertainty,
 )
+from grasp_safety_ros.core.method.pool import default_workers, executor_for
 from grasp_safety_ros.core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
 
 UNCERTAINTY = InertiaUncertainty(0.2, 0.01, 0.3, num_random_samples=64)
@@ -37,10 +39,13 @@ def bench_uncertainty(grasps: int, repeats: int = 3) -> dict[str, Any]:
     robot = scenario.robot.load(scenario.base_dir)
     evaluator = GraspSafetyEvaluator(robot, EvaluationConfig(metric=scenario.metric, workers=1))
     args = (scenario.grasps, scenario.object_inertia, scenario.trajectory)
+    pooled = GraspSafetyEvaluator(robot, EvaluationConfig(metric=scenario.metric))
     ranking = evaluator.rank(*args, seed_positions=scenario.robot.seed)  # warm
+    pooled.rank(*args, seed_positions=scenario.robot.seed)
     chain = evaluator.ik.chain
+    samples = len(scenario.trajectory.times_s())
 
-    def analysis(compiled: bool) -> Any:
+    def analysis(compiled: bool, pool: bool = False) -> Any:
         return analyse_inertia_uncertainty(
             robot,
             ranking.evaluations,
@@ -49,10 +54,13 @@ def bench_uncertainty(grasps: int, repeats: int = 3) -> dict[str, Any]:
             UNCERTAINTY,
             ranking.metric,
             chain if compiled else None,
+            executor_for(pooled, grasps * samples) if pool else None,
         )
 
     analysis(True)  # warm: the kernel loaded
-    timings: dict[str, list[float]] = {"ranking": [], "compiled": [], "reference": []}
+    timings: dict[str, list[float]] = {
+        name: [] for name in ("ranking", "compiled", "ranking_pool", "compiled_pool", "reference")
+    }
     for repeat in range(repeats):
         start = time.perf_counter()
         ranking = evaluator.rank(*args, seed_positions=scenario.robot.seed)
@@ -60,6 +68,12 @@ def bench_uncertainty(grasps: int, repeats: int = 3) -> dict[str, Any]:
         start = time.perf_counter()
         compiled = analysis(True)
         timings["compiled"].append(time.perf_counter() - start)
+        start = time.perf_counter()
+        pooled.rank(*args, seed_positions=scenario.robot.seed)
+        timings["ranking_pool"].append(time.perf_counter() - start)
+        start = time.perf_counter()
+        analysis(True, pool=True)
+        timings["compiled_pool"].append(time.perf_counter() - start)
         if repeat == 0:  # the Pinocchio reference, once
             start = time.perf_counter()
             reference = analysis(False)
@@ -71,7 +85,6 @@ def bench_uncertainty(grasps: int, repeats: int = 3) -> dict[str, Any]:
         for ours, theirs in zip(compiled.grasps, reference.grasps, strict=True)
         if ours.feasible
     )
-    samples = len(scenario.trajectory.times_s())
     evaluations = len(feasible) * samples * len(compiled.perturbations)
     return {
         "grasps": grasps,
@@ -79,7 +92,9 @@ def bench_uncertainty(grasps: int, repeats: int = 3) -> dict[str, Any]:
         "samples": samples,
         "inertias": len(compiled.perturbations),
         "seconds": medians,
+        "workers": default_workers(),
         "compiled_vs_ranking": medians["compiled"] / medians["ranking"],
+        "pool_compiled_vs_pool_ranking": medians["compiled_pool"] / medians["ranking_pool"],
         "reference_vs_ranking": medians["reference"] / medians["ranking"],
         "speed_up": medians["reference"] / medians["compiled"],
         "compiled_ns_per_grasp_sample_inertia": 1e9 * medians["compiled"] / evaluations,

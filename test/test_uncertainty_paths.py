@@ -286,3 +286,28 @@ def test_spatial_inertias_in_tip_are_pinocchios() -> None:
         for g, grasp in enumerate(grasps):
             expected = grasp.inverse().act(inertia.spatial_inertia_in_object()).matrix()
             assert_close_to_scale(ours[p, g], expected, f"inertia {p}, grasp {g}")
+
+
+@needs_numba
+def test_thread_pool_gives_the_serial_masses_bit_for_bit(arm7: RobotModel) -> None:
+    from concurrent.futures import ThreadPoolExecutor
+
+    grasps, evaluations = ranked_case(arm7, 26)
+    feasible = [k for k, e in enumerate(evaluations) if e.feasible]
+    picks = [feasible[j % len(feasible)] for j in range(3 * GRASP_CHUNK + 1)]
+    inertias = sample_inertia_perturbations(BOX, UNCERTAINTY).inertias
+    args = (
+        arm7,
+        GraspSafetyEvaluator(arm7).ik.chain,
+        inertias,
+        [grasps[k].transform_tip_to_object for k in picks],
+        [evaluations[k].joint_positions for k in picks],
+        [evaluations[k].directions_in_base for k in picks],
+        [evaluations[k].direction_is_worst_case for k in picks],
+    )
+    serial = perturbed_effective_masses(*args)
+    with ThreadPoolExecutor(max_workers=3) as pool:
+        pooled = perturbed_effective_masses(*args, executor=pool)
+    assert len(pooled) == len(picks)
+    for ours, theirs in zip(pooled, serial, strict=True):
+        np.testing.assert_array_equal(ours, theirs)

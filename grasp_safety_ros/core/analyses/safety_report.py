@@ -18,6 +18,7 @@ import pinocchio as pin
 
 from ..exceptions import InvalidInputError
 from ..method.effective_mass import augmented_model
+from ..method.pool import executor_for
 from ..method.ranking import Grasp, GraspEvaluation, GraspSafetyEvaluator, Ranking, aggregate
 from ..method.terms import SampleTerms, grasp_terms
 from ..model.inertia import ObjectInertia
@@ -328,8 +329,16 @@ def analyse(
     )
     uncertainty = None
     if options.uncertainty is not None:
+        samples = sum(len(e.times_s) for e in evaluations if e.feasible)
         uncertainty = analyse_inertia_uncertainty(
-            robot, evaluations, grasps, object_inertia, options.uncertainty, metric, chain
+            robot,
+            evaluations,
+            grasps,
+            object_inertia,
+            options.uncertainty,
+            metric,
+            chain,
+            executor_for(evaluator, samples) if chain is not None else None,
         )
         step()
     effort: tuple[EffortEvaluation, ...] = ()

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
+from concurrent.futures import Executor
 from dataclasses import dataclass
 from typing import Any
 
@@ -241,9 +242,11 @@ def _masses_for_inertias(
     evaluations: Sequence[GraspEvaluation],
     grasps: Sequence[Grasp],
     inertias: Sequence[ObjectInertia],
+    executor: Executor | None = None,
 ) -> list[np.ndarray]:
     """``effective_mass_for_inertias`` of each (feasible) evaluation: compiled for all at once
-    when ``chain`` is given, else the Pinocchio reference per grasp."""
+    when ``chain`` is given (on ``executor``'s threads if given), else the Pinocchio reference
+    per grasp."""
     if chain is None:
         return [
             effective_mass_for_inertias(robot, evaluation, grasp, inertias)
@@ -257,6 +260,7 @@ def _masses_for_inertias(
         [evaluation.joint_positions for evaluation in evaluations],
         [evaluation.directions_in_base for evaluation in evaluations],
         [evaluation.direction_is_worst_case for evaluation in evaluations],
+        executor,
     )
 
 
@@ -333,12 +337,14 @@ def analyse_inertia_uncertainty(
     uncertainty: InertiaUncertainty | None = None,
     metric: str = "mean",
     chain: ChainArrays | None = None,
+    executor: Executor | None = None,
 ) -> UncertaintyAnalysis:
     """Scores of every grasp over the uncertainty set, worst case, percentile and P(safest).
 
     ``grasps[i]`` is the grasp of ``evaluations[i]``; ``metric`` should be the one the
     evaluations were ranked with. ``chain``: ``compiled.chain_arrays(robot)`` to run the
-    compiled kernel (numba); None: the Pinocchio reference.
+    compiled kernel (numba), on the thread pool ``executor`` if given; None: the Pinocchio
+    reference.
     """
     check_metric(metric)
     uncertainty = uncertainty or InertiaUncertainty()
@@ -356,6 +362,7 @@ def analyse_inertia_uncertainty(
         [evaluations[g] for g in feasible_indices],
         [grasps[g] for g in feasible_indices],
         perturbations.inertias,
+        executor,
     )
     for g, rows in zip(feasible_indices, masses, strict=True):
         scores[g] = _aggregate_rows(rows, evaluations[g].times_s, metric)

@@ -10,6 +10,8 @@ chain's own M once (the ranking's, armature included) and per inertia solves a 6
 from __future__ import annotations
 
 from collections.abc import Sequence
+from concurrent.futures import Executor
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -61,6 +63,7 @@ def perturbed_effective_masses(
     joint_positions: Sequence[np.ndarray],
     directions_in_base: Sequence[np.ndarray],
     worst: Sequence[np.ndarray],
+    executor: Executor | None = None,
 ) -> list[np.ndarray]:
     """Per grasp, the effective masses (P, N_g) [kg] of its N_g samples for the P inertias.
 
@@ -74,11 +77,43 @@ def perturbed_effective_masses(
             the mass is 1 / (dᵀ A d), A the tip's translational mobility [1/kg].
         worst: Per grasp, (N_g,) bool: where set, the largest effective mass over directions
             (1 / smallest eigenvalue of A) instead.
+        executor: A thread pool (``pool.executor_for``) to share the chunks of GRASP_CHUNK
+            grasps out over (the kernel runs without the GIL); the results equal the serial
+            ones bit for bit. None: serial.
     """
+    run = partial(
+        _chunk_masses,
+        robot,
+        chain,
+        inertias,
+        transforms_tip_to_object,
+        joint_positions,
+        directions_in_base,
+        worst,
+    )
+    chunks = [
+        slice(start, start + GRASP_CHUNK) for start in range(0, len(joint_positions), GRASP_CHUNK)
+    ]
+    parts = (
+        executor.map(run, chunks) if executor is not None and len(chunks) > 1 else map(run, chunks)
+    )
+    return [masses for part in parts for masses in part]
+
+
+def _chunk_masses(
+    robot: RobotModel,
+    chain: ChainArrays,
+    inertias: Sequence[ObjectInertia],
+    transforms_tip_to_object: Sequence[Any],
+    joint_positions: Sequence[np.ndarray],
+    directions_in_base: Sequence[np.ndarray],
+    worst: Sequence[np.ndarray],
+    chunk: slice,
+) -> list[np.ndarray]:
+    """``perturbed_effective_masses`` of the grasps in ``chunk``, by one kernel call."""
     from ..kernels.ik import thread_workspace
     from ..kernels.uncertainty import perturbed_effective_masses as kernel
 
-    results: list[np.ndarray] = []
     n = robot.model.nv
     ws = thread_workspace(n)
     scratch = (
@@ -90,46 +125,43 @@ def perturbed_effective_masses(
         np.empty(3),
     )
     bodies = BodyInertias(*(plain_array(array[None]) for array in robot_inertia_arrays(robot)))
-    for start in range(0, len(joint_positions), GRASP_CHUNK):
-        chunk = slice(start, start + GRASP_CHUNK)
-        positions = joint_positions[chunk]
-        counts = np.array([len(p) for p in positions], dtype=np.int64)
-        count, longest = len(counts), int(counts.max(initial=0))
-        grasps = [pin.SE3(transform) for transform in transforms_tip_to_object[chunk]]
-        rotations = np.array([grasp.rotation for grasp in grasps]).reshape(-1, 3, 3)
-        translations = np.array([grasp.translation for grasp in grasps]).reshape(-1, 3)
-        spatial = spatial_inertias_in_tip(inertias, rotations, translations)
-        q_all = np.zeros((count, longest, robot.model.nq))
-        directions = np.zeros((count, longest, 3))
-        slots = np.full((count, longest), -1, dtype=np.int64)
-        flagged = 0
-        for g, (p, d, w) in enumerate(
-            zip(positions, directions_in_base[chunk], worst[chunk], strict=True)
-        ):
-            q_all[g, : len(p)] = configurations(robot, p)
-            directions[g, : len(p)] = d
-            marked = np.flatnonzero(w)
-            slots[g, marked] = flagged + np.arange(len(marked))
-            flagged += len(marked)
-        out = np.empty((len(inertias), count, longest))
-        worst_mobilities = np.empty((max(flagged, 1), len(inertias), 3, 3))
-        call_kernel(
-            kernel,
-            chain,
-            bodies,
-            spatial,
-            q_all,
-            counts,
-            directions,
-            slots,
-            out,
-            worst_mobilities,
-            scratch,
-            ws,
-        )
-        if flagged:
-            smallest = np.linalg.eigvalsh(worst_mobilities[:flagged])[..., 0]  # (W, P)
-            rows, columns = np.nonzero(slots >= 0)
-            out[:, rows, columns] = 1.0 / smallest.T
-        results.extend(out[:, g, :size].copy() for g, size in enumerate(counts))
-    return results
+    positions = joint_positions[chunk]
+    counts = np.array([len(p) for p in positions], dtype=np.int64)
+    count, longest = len(counts), int(counts.max(initial=0))
+    grasps = [pin.SE3(transform) for transform in transforms_tip_to_object[chunk]]
+    rotations = np.array([grasp.rotation for grasp in grasps]).reshape(-1, 3, 3)
+    translations = np.array([grasp.translation for grasp in grasps]).reshape(-1, 3)
+    spatial = spatial_inertias_in_tip(inertias, rotations, translations)
+    q_all = np.zeros((count, longest, robot.model.nq))
+    directions = np.zeros((count, longest, 3))
+    slots = np.full((count, longest), -1, dtype=np.int64)
+    flagged = 0
+    for g, (p, d, w) in enumerate(
+        zip(positions, directions_in_base[chunk], worst[chunk], strict=True)
+    ):
+        q_all[g, : len(p)] = configurations(robot, p)
+        directions[g, : len(p)] = d
+        marked = np.flatnonzero(w)
+        slots[g, marked] = flagged + np.arange(len(marked))
+        flagged += len(marked)
+    out = np.empty((len(inertias), count, longest))
+    worst_mobilities = np.empty((max(flagged, 1), len(inertias), 3, 3))
+    call_kernel(
+        kernel,
+        chain,
+        bodies,
+        spatial,
+        q_all,
+        counts,
+        directions,
+        slots,
+        out,
+        worst_mobilities,
+        scratch,
+        ws,
+    )
+    if flagged:
+        smallest = np.linalg.eigvalsh(worst_mobilities[:flagged])[..., 0]  # (W, P)
+        rows, columns = np.nonzero(slots >= 0)
+        out[:, rows, columns] = 1.0 / smallest.T
+    return [out[:, g, :size].copy() for g, size in enumerate(counts)]
