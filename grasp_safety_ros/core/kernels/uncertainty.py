@@ -50,52 +50,56 @@ def _tip_operational_mobility(chain, bodies, ws, columns, mobility, a):
 
 
 @_jit_inline
-def _perturbed_mobility(a, spatial, system, solved, out):
-    """The translational block (3 x 3, tip axes) of A (I + Y A)⁻¹ for Y = ``spatial`` (6 x 6):
-    (I + Y A) Z = [e0 e1 e2] by LU with partial pivoting (system, solved: (6, 6), (6, 3)
-    scratch), then A[:3] Z, symmetrised."""
-    for i in range(6):
-        for j in range(6):
-            total = 1.0 if i == j else 0.0
-            for k in range(6):
-                total += spatial[i, k] * a[k, j]
+def _factor_system(a, spatial, system, pivots):
+    """I + Y A (Y = ``spatial``, 6 x 6, Pinocchio's spatial inertia [[m I, -m ĉ], [m ĉ, Ĩ]])
+    into ``system``, factorised in place by LU with partial pivoting (row swaps in pivots)."""
+    m = spatial[0, 0]
+    for j in range(6):  # Y A column by column, from Y's blocks: m I, -m ĉ, m ĉ, Ĩ
+        t0, t1, t2, r0, r1, r2 = a[0, j], a[1, j], a[2, j], a[3, j], a[4, j], a[5, j]
+        for i in range(3):
+            total = m * (t0 if i == 0 else (t1 if i == 1 else t2))
+            total += spatial[i, 3] * r0 + spatial[i, 4] * r1 + spatial[i, 5] * r2
             system[i, j] = total
-        for j in range(3):
-            solved[i, j] = 1.0 if i == j else 0.0
+            total = spatial[3 + i, 0] * t0 + spatial[3 + i, 1] * t1 + spatial[3 + i, 2] * t2
+            total += spatial[3 + i, 3] * r0 + spatial[3 + i, 4] * r1 + spatial[3 + i, 5] * r2
+            system[3 + i, j] = total
+        system[j, j] += 1.0
     for k in range(6):
         pivot, largest = k, abs(system[k, k])
         for i in range(k + 1, 6):
             if abs(system[i, k]) > largest:
                 pivot, largest = i, abs(system[i, k])
+        pivots[k] = pivot
         if pivot != k:
             for j in range(6):
                 system[k, j], system[pivot, j] = system[pivot, j], system[k, j]
-            for j in range(3):
-                solved[k, j], solved[pivot, j] = solved[pivot, j], solved[k, j]
         inverse = 1.0 / system[k, k]
+        system[k, k] = inverse  # the pivot's inverse: the solves multiply
         for i in range(k + 1, 6):
             factor = system[i, k] * inverse
+            system[i, k] = factor
             for j in range(k + 1, 6):
                 system[i, j] -= factor * system[k, j]
-            for j in range(3):
-                solved[i, j] -= factor * solved[k, j]
-    for j in range(3):
-        for i in range(5, -1, -1):
-            total = solved[i, j]
-            for k in range(i + 1, 6):
-                total -= system[i, k] * solved[k, j]
-            solved[i, j] = total / system[i, i]
-    for i in range(3):
-        for j in range(3):
-            total = 0.0
-            for k in range(6):
-                total += a[i, k] * solved[k, j]
-            out[i, j] = total
-    for i in range(3):
-        for j in range(i + 1, 3):
-            mean = 0.5 * (out[i, j] + out[j, i])
-            out[i, j] = mean
-            out[j, i] = mean
+
+
+@_jit_inline
+def _solve_factored(system, pivots, rhs):
+    """Solve with ``_factor_system``'s factors (P C = L U, whole rows swapped), rhs (6,) in
+    place: the row swaps in order, then L, then U."""
+    for k in range(6):
+        pivot = pivots[k]
+        if pivot != k:
+            rhs[k], rhs[pivot] = rhs[pivot], rhs[k]
+    for i in range(1, 6):
+        total = rhs[i]
+        for k in range(i):
+            total -= system[i, k] * rhs[k]
+        rhs[i] = total
+    for i in range(5, -1, -1):
+        total = rhs[i]
+        for k in range(i + 1, 6):
+            total -= system[i, k] * rhs[k]
+        rhs[i] = total * system[i, i]
 
 
 @_jit
@@ -119,9 +123,9 @@ def perturbed_effective_masses(
     mobility [1/kg] of the chain (``bodies``: BodyInertias of one row, without the object)
     with Y added. Where worst_slots[g, i] = s >= 0 (the tip does not translate), W itself (tip
     axes) goes into worst_mobilities[s, p] instead (the caller takes its smallest eigenvalue)
-    and out is left untouched. scratch: ((n, 6), (3, 3), (6, 6), (6, 6), (6, 3), (3,));
-    ws: ``ik.workspace(n)``."""
-    columns, mobility, a, system, solved, local = scratch
+    and out is left untouched. scratch: ((n, 6), (3, 3), (6, 6) floats, (6, 6) floats, (6,)
+    int64, (6,) floats); ws: ``ik.workspace(n)``."""
+    columns, mobility, a, system, pivots, rhs = scratch
     base_rotation, fr = chain.base_rotation, ws[2]
     inertias = out.shape[0]
     for g in range(q_all.shape[0]):
@@ -130,19 +134,35 @@ def perturbed_effective_masses(
             _tip_operational_mobility(chain, bodies, ws, columns, mobility, a)
             slot = worst_slots[g, i]
             d0, d1, d2 = directions[g, i, 0], directions[g, i, 1], directions[g, i, 2]
-            for b in range(3):  # the direction in tip axes: frᵀ (base rotation) d
-                world = base_rotation[b, 0] * d0 + base_rotation[b, 1] * d1
-                local[b] = world + base_rotation[b, 2] * d2
-            e0 = fr[0, 0] * local[0] + fr[1, 0] * local[1] + fr[2, 0] * local[2]
-            e1 = fr[0, 1] * local[0] + fr[1, 1] * local[1] + fr[2, 1] * local[2]
-            e2 = fr[0, 2] * local[0] + fr[1, 2] * local[1] + fr[2, 2] * local[2]
+            w0 = base_rotation[0, 0] * d0 + base_rotation[0, 1] * d1 + base_rotation[0, 2] * d2
+            w1 = base_rotation[1, 0] * d0 + base_rotation[1, 1] * d1 + base_rotation[1, 2] * d2
+            w2 = base_rotation[2, 0] * d0 + base_rotation[2, 1] * d1 + base_rotation[2, 2] * d2
+            e0 = fr[0, 0] * w0 + fr[1, 0] * w1 + fr[2, 0] * w2  # the direction in tip axes
+            e1 = fr[0, 1] * w0 + fr[1, 1] * w1 + fr[2, 1] * w2
+            e2 = fr[0, 2] * w0 + fr[1, 2] * w1 + fr[2, 2] * w2
             for p in range(inertias):
-                target = mobility if slot < 0 else worst_mobilities[slot, p]
-                _perturbed_mobility(a, spatial[p, g], system, solved, target)
-                if slot < 0:
-                    quadratic = (
-                        e0 * (mobility[0, 0] * e0 + mobility[0, 1] * e1 + mobility[0, 2] * e2)
-                        + e1 * (mobility[1, 0] * e0 + mobility[1, 1] * e1 + mobility[1, 2] * e2)
-                        + e2 * (mobility[2, 0] * e0 + mobility[2, 1] * e1 + mobility[2, 2] * e2)
-                    )
+                _factor_system(a, spatial[p, g], system, pivots)
+                if slot < 0:  # dᵀ A (I + Y A)⁻¹ d = (A d)ᵀ z, (I + Y A) z = d (A symmetric)
+                    rhs[0], rhs[1], rhs[2] = e0, e1, e2
+                    rhs[3] = rhs[4] = rhs[5] = 0.0
+                    _solve_factored(system, pivots, rhs)
+                    quadratic = 0.0
+                    for k in range(6):
+                        quadratic += (a[k, 0] * e0 + a[k, 1] * e1 + a[k, 2] * e2) * rhs[k]
                     out[p, g, i] = 1.0 / quadratic
+                    continue
+                target = worst_mobilities[slot, p]  # A[:3] (I + Y A)⁻¹[:, :3], symmetrised
+                for j in range(3):
+                    for k in range(6):
+                        rhs[k] = 1.0 if k == j else 0.0
+                    _solve_factored(system, pivots, rhs)
+                    for r in range(3):
+                        total = 0.0
+                        for k in range(6):
+                            total += a[r, k] * rhs[k]
+                        target[r, j] = total
+                for r in range(3):
+                    for j in range(r + 1, 3):
+                        mean = 0.5 * (target[r, j] + target[j, r])
+                        target[r, j] = mean
+                        target[j, r] = mean

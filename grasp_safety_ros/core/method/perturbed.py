@@ -121,8 +121,8 @@ def _chunk_masses(
         np.empty((3, 3)),
         np.empty((6, 6)),
         np.empty((6, 6)),
-        np.empty((6, 3)),
-        np.empty(3),
+        np.empty(6, dtype=np.int64),
+        np.empty(6),
     )
     bodies = BodyInertias(*(plain_array(array[None]) for array in robot_inertia_arrays(robot)))
     positions = joint_positions[chunk]
