@@ -311,3 +311,30 @@ def test_thread_pool_gives_the_serial_masses_bit_for_bit(arm7: RobotModel) -> No
     assert len(pooled) == len(picks)
     for ours, theirs in zip(pooled, serial, strict=True):
         np.testing.assert_array_equal(ours, theirs)
+
+
+def test_six_by_six_solve_pivots_and_equals_numpy() -> None:
+    """The kernel's LU of I + Y A (row swaps included) solves as numpy does, for spatial
+    inertias Y and mobilities A from light to heavy (Y A up to ~1e3, where rows must swap)."""
+    from grasp_safety_ros.core.kernels import uncertainty as kernels
+
+    factor = getattr(kernels._factor_system, "py_func", kernels._factor_system)
+    solve = getattr(kernels._solve_factored, "py_func", kernels._solve_factored)
+    rng = np.random.default_rng(7)
+    swapped = 0
+    for trial in range(200):
+        root = rng.normal(size=(6, 6))
+        mobility = root @ root.T * 10.0 ** rng.uniform(-2, 2)
+        inertia = pin.Inertia(
+            10.0 ** rng.uniform(-1, 1.5),
+            rng.normal(size=3) * 0.2,
+            np.diag(rng.uniform(0.01, 1, 3)),
+        ).matrix()
+        system, pivots = np.empty((6, 6)), np.empty(6, dtype=np.int64)
+        factor(mobility, inertia, system, pivots)
+        swapped += int(np.any(pivots != np.arange(6)))
+        rhs = rng.normal(size=6)
+        expected = np.linalg.solve(np.eye(6) + inertia @ mobility, rhs)
+        solve(system, pivots, rhs)
+        assert_close_to_scale(rhs, expected, f"trial {trial}")
+    assert swapped > 20
