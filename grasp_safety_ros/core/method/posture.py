@@ -281,11 +281,11 @@ def select_posture_batch(
         found = (
             [np.asarray(single_ik.joint_positions[0], dtype=float)] if single_ik.feasible else []
         )
+        reached[k] = bool(converged[row].any())
         for r in np.flatnonzero(converged[row]):
-            reached[k] = True
             positions = robot.positions_from_q(q[row, r])
-            if any(np.max(np.abs(positions - other)) < tolerance for other in found):
-                continue
+            if found and np.min(np.max(np.abs(np.array(found) - positions), axis=1)) < tolerance:
+                continue  # within the tolerance of a start posture already found
             found.append(positions)
         starts[k] = found[1:] if single_ik.feasible else found  # the single IK's is evaluated
     rows = [(k, positions) for k in searched for positions in starts[k]]
