@@ -538,3 +538,21 @@ def test_selection_is_deterministic_and_independent_of_the_workers(baxter) -> No
                 b.postures_tried,
                 b.postures_feasible,
             )
+
+
+def test_python_backend_selects_the_same_postures(baxter, baxter_book) -> None:
+    """Without the kernels (IKSolver.solve_poses one pose at a time, no early stop) the same
+    postures are kept, to rounding."""
+    evaluator, grasps, trajectory, _ = baxter_book
+    python = GraspSafetyEvaluator(baxter, EvaluationConfig(workers=1, backend="python"))
+    config = PostureConfig(restarts=8, early_stop=True)
+    kept = [
+        select_postures(
+            e, grasps, BOOK, trajectory, e.rank(grasps, BOOK, trajectory, BAXTER_SEED), config
+        )
+        for e in (evaluator, python)
+    ]
+    for a, b in zip(kept[0].postures, kept[1].postures, strict=True):
+        assert (a.selected, a.postures_tried) == (b.selected, b.postures_tried)
+        assert a.score == pytest.approx(b.score, rel=1e-9)
+        assert a.postures_feasible <= b.postures_feasible  # the kernels stopped some
