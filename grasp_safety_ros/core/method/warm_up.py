@@ -10,9 +10,11 @@ import pinocchio as pin
 from ..model.inertia import solid_box
 from ..model.robot import RobotModel
 from ..model.trajectory import ObjectTrajectory
+from .compiled import augmented_bodies
+from .dynamics import joint_dynamics
 from .effective_mass import translational_mobilities_in_base
 from .ranking import Grasp, GraspSafetyEvaluator
-from .terms import grasp_terms
+from .terms import configurations, grasp_terms
 
 _WARM_UP_URDF = """<robot name="warm_up"><link name="base"/>
 <link name="a"><inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01"
@@ -60,4 +62,15 @@ def warm_up(evaluator: GraspSafetyEvaluator | None = None) -> float:
         )
         positions = np.array([robot.default_seed_positions()])
         grasp_terms(robot, evaluator.ik.chain, box, pin.SE3.Identity(), positions)
+        bodies = augmented_bodies(robot, box, np.eye(3)[None], np.zeros((1, 3)))
+        joint_dynamics(  # the effort analysis's kernel
+            evaluator.ik.chain,
+            bodies,
+            positions[None],
+            configurations(robot, positions)[None],
+            np.ones(1, dtype=np.int64),
+            np.zeros((1, 3, 1)),
+            np.zeros((1, 2, 1, 6)),
+            np.zeros(3),
+        )
     return time.perf_counter() - start
