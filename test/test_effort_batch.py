@@ -236,3 +236,30 @@ def test_a_path_of_the_wrong_shape_is_refused(arm7: RobotModel) -> None:
     chain = GraspSafetyEvaluator(arm7).ik.chain
     with pytest.raises(InvalidInputError, match="joint_positions"):
         evaluate_efforts(arm7, [evaluation], BOX, [grasp], motion, [np.zeros((3, 7))], chain=chain)
+
+
+@needs_numba
+def test_planned_joint_trajectories_in_a_batch(baxter: RobotModel) -> None:
+    """A grasp along its own planned joint trajectory (JointSpaceTrajectory: the object's
+    motion from the joints) next to one along the object trajectory: each equals its
+    reference."""
+    from test_joint_trajectory import BOOK, GRASP, ik_route
+
+    from grasp_safety_ros.core.method.joint_trajectory import PlannedJointTrajectory
+
+    evaluator, trajectory, evaluation = ik_route(baxter)
+    planned = PlannedJointTrajectory(
+        baxter.joint_names, evaluation.times_s, evaluation.joint_positions
+    )
+    grasps = [Grasp(GRASP, "ik"), Grasp(GRASP, "planned", joint_trajectory=planned)]
+    motions = [evaluator.trajectory_for(g, trajectory) for g in grasps]
+    evaluations = [
+        evaluator.evaluate(g, BOOK, m, index=k)
+        for k, (g, m) in enumerate(zip(grasps, motions, strict=True))
+    ]
+    assert all(e.feasible for e in evaluations)
+    batched = evaluate_efforts(
+        baxter, evaluations, BOOK, grasps, motions, chain=evaluator.ik.chain
+    )
+    for ours, e, g, m in zip(batched, evaluations, grasps, motions, strict=True):
+        assert_effort_close(ours, evaluate_effort(baxter, e, BOOK, g, m))

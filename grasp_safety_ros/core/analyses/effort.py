@@ -40,7 +40,7 @@ from ..method.ranking import Grasp, GraspEvaluation
 from ..method.terms import SampleTerms, configurations
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
-from ..model.trajectory import Trajectory, tip_twists_of_grasps
+from ..model.trajectory import Trajectory
 
 EFFORT_CRITERIA = ("peak_fraction", "rms_fraction")
 """Effort scores: max over joints of peak |τ| / limit, or of RMS τ / limit (lower is better)."""
@@ -272,8 +272,8 @@ def evaluate_efforts(
 ) -> tuple[EffortEvaluation, ...]:
     """``evaluate_effort`` of every grasp, equal to its Pinocchio reference to rounding
     (test_effort_batch): compiled, the per-sample work of all grasps in one kernel call
-    (``method.dynamics.joint_dynamics``) on the shared terms; the tip twists of the grasps
-    sharing a trajectory in one array pass. Pinocchio grasp by grasp where the kernels do not
+    (``method.dynamics.joint_dynamics``), which moves each trajectory's object motion
+    (sampled once) to each grasp's tip. Pinocchio grasp by grasp where the kernels do not
     support the chain or numba is missing.
 
     Args:
@@ -310,34 +310,62 @@ def evaluate_efforts(
     samples = max((len(evaluations[k].times_s) for k in feasible), default=0)
     positions = np.zeros((count, samples, n))
     counts = np.zeros(count, dtype=np.int64)
-    paths = np.zeros((count, 3, samples))
-    twists = np.zeros((count, 2, samples, 6))
-    groups: dict[tuple[int, bytes], list[int]] = {}
+    motion_of = np.zeros(count, dtype=np.int64)
+    groups: dict[tuple[int, bytes], int] = {}  # (motion, sample times) -> its index
+    first_of_group: list[int] = []
     for k in feasible:
-        path = _checked_positions(robot, evaluations[k], overrides[k])
+        evaluation = evaluations[k]
+        path = np.asarray(
+            evaluation.joint_positions if overrides[k] is None else overrides[k], dtype=float
+        )
+        if path.shape != (len(evaluation.times_s), n):
+            _checked_positions(robot, evaluation, path)  # raises
         counts[k] = len(path)
         positions[k, : len(path)] = path
-        times = np.asarray(evaluations[k].times_s, dtype=float)
-        groups.setdefault((id(motions[k]), times.tobytes()), []).append(k)
-    for members in groups.values():  # grasps along one motion at the same times
-        motion, times = motions[members[0]], np.asarray(evaluations[members[0]].times_s)
-        paths[members, :, : len(times)] = np.array(motion.path_parameter(times))
-        transforms = [grasps[k].transform_tip_to_object for k in members]
-        twist, rate = tip_twists_of_grasps(motion, transforms, times)
-        twists[members, 0, : len(times)] = twist
-        twists[members, 1, : len(times)] = rate
+        key = (id(motions[k]), np.asarray(evaluation.times_s, dtype=float).tobytes())
+        motion_of[k] = groups.setdefault(key, len(groups))
+        if motion_of[k] == len(first_of_group):
+            first_of_group.append(k)
+    finite = np.isfinite(positions).all(axis=(1, 2))
+    if not finite.all():
+        k = int(np.flatnonzero(~finite)[0])
+        _checked_positions(robot, evaluations[k], positions[k, : counts[k]])  # raises
+    # Each motion's path parameter and the object's own motion (its origin's twist: the
+    # identity grasp's); the kernel moves them to each grasp's tip.
+    paths = np.zeros((len(groups), 3, samples))
+    object_rotations = np.zeros((len(groups), samples, 3, 3))
+    object_twists = np.zeros((len(groups), 2, samples, 6))
+    for index, k in enumerate(first_of_group):
+        motion, times = motions[k], np.asarray(evaluations[k].times_s, dtype=float)
+        paths[index, :, : len(times)] = motion.path_parameter(times)
+        object_rotations[index, : len(times)] = motion.object_poses(times)[0]
+        twist, rate = motion.tip_twists(pin.SE3.Identity(), times)
+        object_twists[index, 0, : len(times)] = twist
+        object_twists[index, 1, : len(times)] = rate
     transforms = [pin.SE3(grasp.transform_tip_to_object) for grasp in grasps]
+    translations = np.array([t.translation for t in transforms]).reshape(-1, 3)
     bodies = augmented_bodies(
         robot,
         object_inertia,
         np.array([t.rotation for t in transforms]).reshape(-1, 3, 3),
-        np.array([t.translation for t in transforms]).reshape(-1, 3),
+        translations,
     )
     model = robot.model
     q_all = positions if model.nq == model.nv else configurations(robot, positions)
     gravity = np.asarray(model.gravity.linear, dtype=float)
     dynamics = joint_dynamics(
-        chain, bodies, positions, q_all, counts, paths, twists, gravity, terms
+        chain,
+        bodies,
+        positions,
+        q_all,
+        counts,
+        motion_of,
+        paths,
+        object_rotations,
+        object_twists,
+        translations,
+        gravity,
+        terms,
     )
     shared_limits = read_only(limits, copy=True)
     peak_fractions = read_only(dynamics.peak_abs_torques / limits)

@@ -285,8 +285,11 @@ def joint_dynamics(
     positions,
     q_all,
     counts,
+    motion_of,
     paths,
-    twists,
+    object_rotations,
+    object_twists,
+    grasp_translations,
     gravity,
     out,
     factors,
@@ -302,8 +305,13 @@ def joint_dynamics(
             them here (forward kinematics into ``kinematics``, ``ik.workspace(n)``).
         positions: (G, N, n) joint positions; q_all: (G, N, nq) their configurations.
         counts: (G,) int64 samples per grasp (0: skipped; rows from counts[g] on untouched).
-        paths: (G, 3, N) s, ds/dt [1/s], d²s/dt² [1/s²] at the samples.
-        twists: (G, 2, N, 6) tip twist and its rate, base axes [m/s, rad/s; m/s², rad/s²].
+        motion_of: (G,) int64: the motion (index into the next three) grasp g follows.
+        paths: (M, 3, N) s, ds/dt [1/s], d²s/dt² [1/s²] at the samples of each motion.
+        object_rotations: (M, N, 3, 3) the object frame in the base frame.
+        object_twists: (M, 2, N, 6) the object origin's twist and its rate (classical
+            acceleration), base axes [m/s, rad/s; m/s², rad/s²]; a grasp's tip at r = R p
+            (p: grasp_translations (G, 3) [m], object frame) moves at v + ω × r and
+            accelerates at a + α × r + ω × (ω × r).
         gravity: (3,) world frame [m/s²].
         out: (velocities, accelerations, torques) (G, N, n) and (peak |τ|, RMS τ) (G, n).
         factors, ws: scratch (``method.dynamics.joint_dynamics``).
@@ -323,7 +331,10 @@ def joint_dynamics(
         count = counts[g]
         if count == 0:
             continue
-        s, s_rate, s_accel = paths[g, 0], paths[g, 1], paths[g, 2]
+        motion = motion_of[g]
+        s, s_rate, s_accel = paths[motion, 0], paths[motion, 1], paths[motion, 2]
+        grasp = grasp_translations[g]
+        pg0, pg1, pg2 = grasp[0], grasp[1], grasp[2]
         _path_rates(chain, positions[g], q_all[g], s, count, path)
         for k in range(n):
             peaks[g, k] = 0.0
@@ -333,14 +344,31 @@ def joint_dynamics(
             for k in range(n):
                 fd[0, k] = path[1][i, k] * rate
                 fd[1, k] = path[2][i, k] * (rate * rate) + path[1][i, k] * accel
-            for row in range(2):
-                for part in range(2):
-                    for a in range(3):
-                        world[row, 3 * part + a] = (
-                            base[a, 0] * twists[g, row, i, 3 * part]
-                            + base[a, 1] * twists[g, row, i, 3 * part + 1]
-                            + base[a, 2] * twists[g, row, i, 3 * part + 2]
-                        )
+            # The tip's twist and rate from the object's (base axes), then in world axes.
+            rotation = object_rotations[motion, i]
+            r0 = rotation[0, 0] * pg0 + rotation[0, 1] * pg1 + rotation[0, 2] * pg2
+            r1 = rotation[1, 0] * pg0 + rotation[1, 1] * pg1 + rotation[1, 2] * pg2
+            r2 = rotation[2, 0] * pg0 + rotation[2, 1] * pg1 + rotation[2, 2] * pg2
+            twist, twist_rate = object_twists[motion, 0, i], object_twists[motion, 1, i]
+            w0, w1, w2 = twist[3], twist[4], twist[5]
+            e0, e1, e2 = twist_rate[3], twist_rate[4], twist_rate[5]
+            x0 = w1 * r2 - w2 * r1  # ω × r
+            x1 = w2 * r0 - w0 * r2
+            x2 = w0 * r1 - w1 * r0
+            tip_twist = (
+                twist[0] + x0,
+                twist[1] + x1,
+                twist[2] + x2,
+                twist_rate[0] + (e1 * r2 - e2 * r1) + (w1 * x2 - w2 * x1),
+                twist_rate[1] + (e2 * r0 - e0 * r2) + (w2 * x0 - w0 * x2),
+                twist_rate[2] + (e0 * r1 - e1 * r0) + (w0 * x1 - w1 * x0),
+            )
+            for a in range(3):
+                b0, b1, b2 = base[a, 0], base[a, 1], base[a, 2]
+                world[0, a] = b0 * tip_twist[0] + b1 * tip_twist[1] + b2 * tip_twist[2]
+                world[0, 3 + a] = b0 * w0 + b1 * w1 + b2 * w2
+                world[1, a] = b0 * tip_twist[3] + b1 * tip_twist[4] + b2 * tip_twist[5]
+                world[1, 3 + a] = b0 * e0 + b1 * e1 + b2 * e2
             if use_terms:
                 motions, jacobian = terms.joint_motions[g, i], terms.tip_jacobians[g, i]
                 rotations, origins = terms.joint_rotations[g, i], terms.joint_origins[g, i]

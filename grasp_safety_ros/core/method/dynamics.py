@@ -31,8 +31,11 @@ def joint_dynamics(
     positions: np.ndarray,
     q_all: np.ndarray,
     counts: np.ndarray,
+    motion_of: np.ndarray,
     paths: np.ndarray,
-    twists: np.ndarray,
+    object_rotations: np.ndarray,
+    object_twists: np.ndarray,
+    grasp_translations: np.ndarray,
     gravity: np.ndarray,
     terms: SampleTerms | None = None,
 ) -> JointDynamics:
@@ -44,8 +47,12 @@ def joint_dynamics(
         positions: (G, N, n) joint positions [rad or m], chain order; q_all: (G, N, nq) their
             Pinocchio configurations (``terms.configurations``).
         counts: (G,) samples per grasp (0: none); rows from counts[g] on are ignored.
-        paths: (G, 3, N) the path parameter s, ds/dt [1/s] and d²s/dt² [1/s²].
-        twists: (G, 2, N, 6) the tip's twist and its rate, base axes [m/s, rad/s; m/s², rad/s²].
+        motion_of: (G,) the motion grasp g follows (index into the next three).
+        paths: (M, 3, N) each motion's path parameter s, ds/dt [1/s] and d²s/dt² [1/s²].
+        object_rotations: (M, N, 3, 3) the object frame in the base frame.
+        object_twists: (M, 2, N, 6) the object origin's twist and its rate, base axes
+            [m/s, rad/s; m/s², rad/s²] (``tip_twists`` of the identity grasp).
+        grasp_translations: (G, 3) the tip origin in the object frame [m].
         gravity: (3,) [m/s²] in the world frame (the model's).
         terms: The shared terms along these paths (``batch_terms``); None: the kernel
             computes the kinematics it needs itself (no M⁻¹, nothing stored).
@@ -97,8 +104,11 @@ def joint_dynamics(
         positions,
         q_all,
         counts,
+        np.ascontiguousarray(motion_of, dtype=np.int64),
         plain_array(paths),
-        plain_array(twists),
+        plain_array(object_rotations),
+        plain_array(object_twists),
+        plain_array(grasp_translations),
         plain_array(gravity),
         tuple(out),
         factors,

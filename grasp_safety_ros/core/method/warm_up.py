@@ -69,8 +69,11 @@ def warm_up(evaluator: GraspSafetyEvaluator | None = None) -> float:
             positions[None],
             configurations(robot, positions)[None],
             np.ones(1, dtype=np.int64),
+            np.zeros(1, dtype=np.int64),
             np.zeros((1, 3, 1)),
+            np.eye(3)[None, None],
             np.zeros((1, 2, 1, 6)),
+            np.zeros((1, 3)),
             np.zeros(3),
         )
     return time.perf_counter() - start

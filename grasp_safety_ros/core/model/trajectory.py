@@ -233,17 +233,7 @@ class ObjectTrajectory:
         Linear part: velocity / classical acceleration of the tip origin; angular part: angular
         velocity / acceleration of the object (= of the tip).
         """
-        translation = pin.SE3(transform_tip_to_object).translation
-        twists, rates = self.tip_twists_of_grasps(translation[None], times_s)
-        return twists[0], rates[0]
-
-    def tip_twists_of_grasps(
-        self, grasp_translations: np.ndarray, times_s: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """``tip_twists`` (G, N, 6) of G grasps at once, from their tip origins in the object
-        frame ((G, 3) [m]; the twists do not depend on the tip's orientation); each grasp's
-        rows round as they would alone (elementwise products only)."""
-        translations = np.asarray(grasp_translations, dtype=float).reshape(-1, 3)
+        grasp = pin.SE3(transform_tip_to_object)
         times = np.asarray(times_s, dtype=float)
         s_values, s_rate, s_accel = self.path_parameter(times)
         omega = self.rotation_log_in_object  # object angular velocity per unit s, object axes
@@ -251,44 +241,13 @@ class ObjectTrajectory:
         linear = self.transform_object_to_base_goal.translation - start.translation
         rotations = np.matmul(start.rotation, exp3_batch(s_values[:, None] * omega))
         # d p_tip / ds (as tip_path), the angular tangent and d² p_tip / ds², base axes.
-        lever = np.cross(omega, translations)
-        tangents = linear + _rotate(rotations, lever)
+        tangents = linear + rotations @ np.cross(omega, grasp.translation)
         angular = rotations @ omega
-        second = _rotate(rotations, np.cross(omega, lever))
+        second = rotations @ np.cross(omega, np.cross(omega, grasp.translation))
         rate, accel = s_rate[:, None], s_accel[:, None]
-        twist = np.empty((len(translations), len(times), 6))
-        twist_rate = np.empty_like(twist)
-        twist[..., :3] = tangents * rate
-        twist[..., 3:] = angular * rate
-        twist_rate[..., :3] = second * rate**2 + tangents * accel
-        twist_rate[..., 3:] = angular * accel
+        twist = np.concatenate([tangents * rate, angular * rate], axis=1)
+        twist_rate = np.concatenate([second * rate**2 + tangents * accel, angular * accel], axis=1)
         return twist, twist_rate
-
-
-def _rotate(rotations: np.ndarray, vectors: np.ndarray) -> np.ndarray:
-    """(G, N, 3): each of the N rotations (N, 3, 3) applied to each of the G vectors (G, 3)."""
-    out = np.empty((len(vectors), len(rotations), 3))
-    for a in range(3):
-        out[..., a] = (
-            rotations[:, a, 0] * vectors[:, 0, None]
-            + rotations[:, a, 1] * vectors[:, 1, None]
-            + rotations[:, a, 2] * vectors[:, 2, None]
-        )
-    return out
-
-
-def tip_twists_of_grasps(
-    trajectory: Trajectory, transforms_tip_to_object: list[pin.SE3], times_s: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """``trajectory.tip_twists`` (G, N, 6) of G grasps: in one array pass for an
-    ObjectTrajectory, else grasp by grasp."""
-    if isinstance(trajectory, ObjectTrajectory):
-        translations = np.array([pin.SE3(t).translation for t in transforms_tip_to_object])
-        return trajectory.tip_twists_of_grasps(translations, times_s)
-    pairs = [trajectory.tip_twists(t, times_s) for t in transforms_tip_to_object]
-    count = len(np.asarray(times_s))
-    twists = np.array([pair[0] for pair in pairs]).reshape(-1, count, 6)
-    return twists, np.array([pair[1] for pair in pairs]).reshape(-1, count, 6)
 
 
 def exp3_batch(rotation_vectors: np.ndarray) -> np.ndarray:
