@@ -93,78 +93,82 @@ def _path_rates(chain, positions, q_all, s, count, path):
 
 
 @_jit_inline
-def _factorise(jacobian, wide, qr, tau, rdiag, rinv):
-    """Householder QR of A = Jᵀ (wide: n >= 6) or J: reflectors in qr's lower part (v_k in
-    qr[k:, k]) with factors tau, R's diagonal in rdiag and its upper part in qr; R⁻¹ in rinv.
-    Returns True if the bound of the module docstring certifies full rank."""
+def _factorise(jacobian, wide, at, tau, rdiag, rinv):
+    """Householder QR of A = Jᵀ (wide: n >= 6) or J, stored by columns of A (at[c] = A[:, c],
+    contiguous): reflector v_k in at[k, k:] with factor tau[k], R's diagonal in rdiag and
+    R[j, c] (c > j) in at[c, j]; R⁻¹ in rinv. Returns True if the bound of the module
+    docstring certifies full rank."""
     n = jacobian.shape[1]
     rows, cols = (n, 6) if wide else (6, n)
-    for r in range(rows):
-        for c in range(cols):
-            qr[r, c] = jacobian[c, r] if wide else jacobian[r, c]
+    for c in range(cols):
+        for r in range(rows):
+            at[c, r] = jacobian[c, r] if wide else jacobian[r, c]
     for k in range(cols):
+        vk = at[k]
         norm2 = 0.0
         for r in range(k, rows):
-            norm2 += qr[r, k] * qr[r, k]
+            norm2 += vk[r] * vk[r]
         norm = math.sqrt(norm2)
         if norm == 0.0:
             tau[k] = 0.0
             rdiag[k] = 0.0
             continue
-        x0 = qr[k, k]
+        x0 = vk[k]
         alpha = -norm if x0 >= 0.0 else norm
-        qr[k, k] = x0 - alpha
-        vv = norm2 - x0 * x0 + qr[k, k] * qr[k, k]
-        tau[k] = 2.0 / vv
+        vk[k] = x0 - alpha
+        factor = 2.0 / (norm2 - x0 * x0 + vk[k] * vk[k])
+        tau[k] = factor
         rdiag[k] = alpha
         for c in range(k + 1, cols):
+            column = at[c]
             w = 0.0
             for r in range(k, rows):
-                w += qr[r, k] * qr[r, c]
-            w *= tau[k]
+                w += vk[r] * column[r]
+            w *= factor
             for r in range(k, rows):
-                qr[r, c] -= w * qr[r, k]
+                column[r] -= w * vk[r]
     r_norm2 = 0.0
     inverse_norm2 = 0.0
     for j in range(cols - 1, -1, -1):
         if rdiag[j] == 0.0:
             return False
-        rinv[j, j] = 1.0 / rdiag[j]
+        inverse = 1.0 / rdiag[j]
+        rinv[j, j] = inverse
+        r_norm2 += rdiag[j] * rdiag[j]
+        inverse_norm2 += inverse * inverse
         for c in range(j + 1, cols):
             total = 0.0
             for k in range(j + 1, c + 1):
-                total += qr[j, k] * rinv[k, c]
-            rinv[j, c] = -total * rinv[j, j]
-        r_norm2 += rdiag[j] * rdiag[j]
-        for c in range(j + 1, cols):
-            r_norm2 += qr[j, c] * qr[j, c]
-        for c in range(j, cols):
+                total += at[k, j] * rinv[k, c]
+            rinv[j, c] = -total * inverse
+            r_norm2 += at[c, j] * at[c, j]
             inverse_norm2 += rinv[j, c] * rinv[j, c]
     return r_norm2 * inverse_norm2 < _FULL_RANK_BOUND * _FULL_RANK_BOUND
 
 
 @_jit_inline
-def _reflect(qr, tau, x, rows, cols, forward):
+def _reflect(at, tau, x, rows, cols, forward):
     """x <- Qᵀ x (forward) or Q x, Q the full rows x rows product of the reflectors."""
     for step in range(cols):
         k = step if forward else cols - 1 - step
         if tau[k] == 0.0:
             continue
+        vk = at[k]
         w = 0.0
         for r in range(k, rows):
-            w += qr[r, k] * x[r]
+            w += vk[r] * x[r]
         w *= tau[k]
         for r in range(k, rows):
-            x[r] -= w * qr[r, k]
+            x[r] -= w * vk[r]
 
 
 @_jit_inline
-def _jacobi_svd(qr, rdiag, cols, b, v, sigma):
-    """One-sided Jacobi SVD of R (cols x cols, from qr and rdiag): R V = U Σ; U's columns in
+def _jacobi_svd(at, rdiag, cols, b, v, sigma):
+    """One-sided Jacobi SVD of R (cols x cols, from at and rdiag): R V = U Σ; U's columns in
     b (unit, or zero where σ = 0), V in v, Σ in sigma."""
     for r in range(cols):
         for c in range(cols):
-            b[r, c] = rdiag[r] if r == c else (qr[r, c] if c > r else 0.0)
+            b[r, c] = rdiag[r] if r == c else (at[c, r] if c > r else 0.0)
             v[r, c] = 1.0 if r == c else 0.0
     for _ in range(_JACOBI_SWEEPS):
         rotated = False
@@ -205,7 +209,7 @@ def _jacobi_svd(qr, rdiag, cols, b, v, sigma):
 def _pinv_solve(wide, certified, factors, target, rate_fd, out):
     """out = J⁺ target + (I - J⁺ J) rate_fd (n), J⁺ numpy's pinv at RCOND (module docstring);
     ``factors`` from ``_factorise`` (and ``_jacobi_svd`` unless certified)."""
-    qr, tau, _, rinv, b, v, sigma, x, y = factors
+    at, tau, _, rinv, b, v, sigma, x, y = factors
     n = out.shape[0]
     rows, cols = (n, 6) if wide else (6, n)
     cutoff = 0.0
@@ -217,7 +221,7 @@ def _pinv_solve(wide, certified, factors, target, rate_fd, out):
     if wide:  # J = Rᵀ Qᵀ: out = Q [R⁻ᵀ target; 0] + (I - Q Qᵀ) rate_fd, in Q's coordinates
         for r in range(rows):
             x[r] = rate_fd[r]
-        _reflect(qr, tau, x, rows, cols, True)
+        _reflect(at, tau, x, rows, cols, True)
         if certified:
             for c in range(cols):
                 total = 0.0
@@ -239,13 +243,13 @@ def _pinv_solve(wide, certified, factors, target, rate_fd, out):
                 coefficient = coefficient / sigma[j] - along
                 for r in range(cols):
                     x[r] += coefficient * b[r, j]
-        _reflect(qr, tau, x, rows, cols, False)
+        _reflect(at, tau, x, rows, cols, False)
         for r in range(n):
             out[r] = x[r]
         return
     for r in range(6):  # J = Q R (n < 6)
         x[r] = target[r]
-    _reflect(qr, tau, x, rows, cols, True)
+    _reflect(at, tau, x, rows, cols, True)
     if certified:  # full column rank: J⁺ J = I
         for r in range(n):
             total = 0.0

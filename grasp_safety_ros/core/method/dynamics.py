@@ -76,7 +76,7 @@ def joint_dynamics(
     )
     wide, narrow = max(n, 6), min(n, 6)
     factors = (
-        np.empty((wide, narrow)),
+        np.empty((narrow, wide)),
         np.empty(narrow),
         np.empty(narrow),
         np.empty((narrow, narrow)),
