@@ -263,3 +263,14 @@ def test_planned_joint_trajectories_in_a_batch(baxter: RobotModel) -> None:
     )
     for ours, e, g, m in zip(batched, evaluations, grasps, motions, strict=True):
         assert_effort_close(ours, evaluate_effort(baxter, e, BOOK, g, m))
+
+
+@needs_numba
+def test_batches_without_a_feasible_grasp(arm7: RobotModel) -> None:
+    chain = GraspSafetyEvaluator(arm7).ik.chain
+    assert evaluate_efforts(arm7, [], BOX, [], [], chain=chain) == ()
+    _, _, _, motion = _terms_case(arm7, 29)
+    far, infeasible = infeasible_case(arm7, motion)
+    efforts = evaluate_efforts(arm7, [infeasible] * 2, BOX, [far] * 2, motion, chain=chain)
+    for effort in efforts:
+        assert_effort_close(effort, evaluate_effort(arm7, infeasible, BOX, far, motion))
