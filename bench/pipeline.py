@@ -20,6 +20,7 @@ Run alone: .venv/bin/python bench/run.py --pipeline-only [--json bench/results_p
 
 from __future__ import annotations
 
+import json
 import statistics
 import subprocess
 import sys
@@ -63,12 +64,49 @@ def _wall(command: list[str]) -> float:
     return time.perf_counter() - start
 
 
+START_UP_SCRIPT = """
+import json, time
+start = time.perf_counter()
+import numpy, pinocchio
+libraries = time.perf_counter()
+import numba
+numba_done = time.perf_counter()
+from grasp_safety_ros.core.method.warm_up import warm_up
+package = time.perf_counter()
+warm_up()
+kernels = time.perf_counter()
+print(json.dumps({"numpy_pinocchio_s": libraries - start, "numba_s": numba_done - libraries,
+    "package_s": package - numba_done, "kernels_from_cache_s": kernels - package}))
+"""
+"""Times the fixed cost of a command that ranks, in a fresh process: importing numpy and
+Pinocchio, numba, the package's core, and loading the compiled kernels from numba's cache
+(``warm_up``; the first kernel call also loads numba's linear-algebra registry, which
+imports scipy.linalg)."""
+
+
+def bench_start_up(repeats: int = 3) -> dict[str, float]:
+    """Medians [s] of START_UP_SCRIPT's spans, and the interpreter's own start
+    (``python -c pass``)."""
+    runs = []
+    for _ in range(repeats):
+        done = subprocess.run(
+            [sys.executable, "-c", START_UP_SCRIPT], check=True, capture_output=True, text=True
+        )
+        runs.append(json.loads(done.stdout.strip().splitlines()[-1]))
+    result = {key: statistics.median(run[key] for run in runs) for key in runs[0]}
+    result["interpreter_s"] = statistics.median(
+        _wall([sys.executable, "-c", "pass"]) for _ in range(repeats)
+    )
+    return result
+
+
 def bench_cli(folder: Path, repeats: int = 3) -> dict[str, Any]:
     """Median wall times [s] of the CLI in fresh processes, and the JSON sizes [bytes]."""
     results: dict[str, Any] = {
-        "help_s": statistics.median(_wall([str(CLI), "--help"]) for _ in range(repeats))
+        "help_s": statistics.median(_wall([str(CLI), "--help"]) for _ in range(repeats)),
+        "start_up": bench_start_up(repeats),
     }
-    for grasps, flags in ((100, ()), (1000, ()), (1000, ("--no-per-sample",))):
+    for grasps, flags in ((1, ()), (100, ()), (1000, ()), (1000, ("--no-per-sample",))):
         scenario = book_scenario(grasps, folder)
         out = folder / f"out_{grasps}.json"
         key = f"rank_{grasps}" + ("_no_per_sample" if flags else "")
@@ -180,7 +218,11 @@ def print_pipeline(results: dict[str, Any]) -> None:
         f"{1e3 * core['effort_reference_s']:.0f} ms)"
     )
     print(f"  CLI --help: {cli['help_s']:.2f} s")
+    start_up = cli["start_up"]
+    spans = ", ".join(f"{key[:-2].replace('_', ' ')} {s:.2f} s" for key, s in start_up.items())
+    print(f"  fixed cost of a ranking command, fresh process: {spans}")
     for key, label in (
+        ("rank_1", "CLI 1 x 201 --json (the floor)"),
         ("rank_100", "CLI 100 x 201 --json"),
         ("rank_1000", "CLI 1,000 x 201 --json"),
         ("rank_1000_no_per_sample", "CLI 1,000 x 201 --json --no-per-sample"),

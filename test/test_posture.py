@@ -30,7 +30,14 @@ from grasp_safety_ros.core.analyses.whole_arm import (
 )
 from grasp_safety_ros.core.input_checks import pose_from_position_quat
 from grasp_safety_ros.core.method.executable import joint_velocities_accelerations
-from grasp_safety_ros.core.method.posture import PostureConfig, select_postures
+from grasp_safety_ros.core.method.metrics import METRICS
+from grasp_safety_ros.core.method.posture import (
+    PostureConfig,
+    restart_seeds,
+    scrambled_halton,
+    select_postures,
+)
+from grasp_safety_ros.core.method.ranking import sample_trajectory
 
 BOOK = solid_box(0.34, (0.15, 0.22, 0.015))
 
@@ -58,6 +65,8 @@ def test_config_rejects_bad_values() -> None:
         PostureConfig(restarts=True)  # type: ignore[arg-type]
     with pytest.raises(InvalidInputError, match=r"posture\.duplicate_tolerance_rad"):
         PostureConfig(duplicate_tolerance_rad=0.0)
+    with pytest.raises(InvalidInputError, match=r"posture\.early_stop: must be true or false"):
+        PostureConfig(early_stop=1)  # type: ignore[arg-type]
 
 
 def test_zero_restarts_is_the_single_ik_bit_for_bit(baxter_book) -> None:
@@ -393,3 +402,157 @@ def test_a_kept_restart_posture_holds_no_kernel_buffer(baxter_book) -> None:
         ):
             assert getattr(e, name).base is None, name
         assert np.array_equal(e.links_only_effective_mass_kg, e.effective_mass_kg)
+
+
+def test_scrambled_halton_is_scipys_bit_for_bit() -> None:
+    """The restart seeds' sequence, drawn without scipy.stats, is the one main drew with
+    scipy (its ``seed`` keyword: the numpy Generator default_rng(seed) itself)."""
+    from scipy.stats import qmc
+
+    for dimensions, count, seed in ((1, 5, 0), (6, 8, 0), (7, 64, 12345), (14, 300, 2**32 - 1)):
+        expected = qmc.Halton(d=dimensions, scramble=True, seed=seed).random(count)
+        assert np.array_equal(scrambled_halton(dimensions, count, seed), expected)
+    assert scrambled_halton(3, 0, 0).shape == (0, 3)
+
+
+def test_restart_seeds_do_not_import_scipy_stats() -> None:
+    """scipy.stats costs 0.5-1 s to import; posture selection's seeds do not need it."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "from grasp_safety_ros.core import GraspSafetyEvaluator, RobotModel\n"
+        "from grasp_safety_ros.core.method.posture import PostureConfig, restart_seeds\n"
+        f"robot = RobotModel.from_urdf({PLANAR_URDF!r}, 'base', 'tool')\n"
+        "seeds = restart_seeds(GraspSafetyEvaluator(robot), PostureConfig(restarts=8))\n"
+        "print(seeds.shape, 'scipy.stats' in sys.modules)\n"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    )
+    assert result.stdout.split("\n")[0] == "(8, 3) False"
+
+
+def _reference_choice(evaluator, grasp, trajectory, single, seeds, metric):
+    """The selection as specified, one start posture at a time with the public API: each
+    seed's IK solution of the start pose, the new distinct ones (1e-3 rad) followed by
+    ``evaluate_batch`` seeded with them, the lowest score kept (the first of equal ones)."""
+    robot = evaluator.robot
+    start = trajectory.transform_object_to_base_start * grasp.transform_tip_to_object
+    found = [single.joint_positions[0]] if single.feasible else []
+    for seed in seeds:
+        q, converged, _ = evaluator.ik.solve(start, robot.q_from_positions(seed))
+        positions = robot.positions_from_q(q)
+        if converged and all(np.max(np.abs(positions - p)) >= 1e-3 for p in found):
+            found.append(positions)
+    sampled = sample_trajectory(trajectory)
+    candidates = [single] + [
+        evaluator.evaluate_batch(
+            [single.index], [grasp], BOOK, sampled, metric, robot.q_from_positions(p)
+        )[0]
+        for p in found[1 if single.feasible else 0 :]
+    ]
+    feasible = [e for e in candidates if e.feasible]
+    return min(feasible, key=lambda e: e.score) if feasible else None, len(candidates)
+
+
+@pytest.mark.parametrize("metric", METRICS)
+def test_batched_selection_keeps_the_reference_posture_bit_for_bit(baxter, metric) -> None:
+    """All grasps' restarts and postures in batched kernel calls, with and without the early
+    stop: each grasp keeps the posture the one-at-a-time reference keeps, with the same
+    per-sample results bit for bit, never scoring above the single IK; the early stop only
+    drops postures from the record."""
+    evaluator = GraspSafetyEvaluator(baxter, EvaluationConfig(workers=1, metric=metric))
+    trajectory = book_trajectory(dt_s=0.05)
+    grasps = book_grasps()
+    ranking = evaluator.rank(grasps, BOOK, trajectory, seed_positions=BAXTER_SEED)
+    config = PostureConfig(restarts=8)
+    seeds = restart_seeds(evaluator, config)
+    full = select_postures(evaluator, grasps, BOOK, trajectory, ranking, config)
+    early = select_postures(
+        evaluator, grasps, BOOK, trajectory, ranking, PostureConfig(restarts=8, early_stop=True)
+    )
+    for k, (grasp, single) in enumerate(zip(grasps, ranking.evaluations, strict=True)):
+        expected, tried = _reference_choice(evaluator, grasp, trajectory, single, seeds, metric)
+        assert expected is not None
+        for selected in (full, early):
+            kept, posture = selected.evaluations[k], selected.postures[k]
+            assert kept.score == expected.score <= single.score
+            assert posture.postures_tried == tried
+            for name in ("joint_positions", "effective_mass_kg", "directions_in_base"):
+                assert np.array_equal(getattr(kept, name), getattr(expected, name)), name
+            assert np.array_equal(kept.ik_iterations, expected.ik_iterations)
+        assert early.postures[k].postures_feasible <= full.postures[k].postures_feasible
+    assert early.order == full.order
+
+
+def test_early_stop_stops_only_postures_that_score_higher(baxter_book) -> None:
+    """follow_postures: a bound equal to a posture's own score never stops it (the kernel's
+    running bound never exceeds the score, rounding included) and it equals evaluate_batch
+    bit for bit; a bound of half the score stops every posture."""
+    evaluator, grasps, trajectory, _ = baxter_book
+    sampled = sample_trajectory(trajectory)
+    rows = list(range(len(grasps)))
+    for metric in METRICS:
+        singles = [
+            evaluator.evaluate(g, BOOK, trajectory, seed_positions=BAXTER_SEED, metric=metric)
+            for g in grasps
+        ]
+        seeds = np.array([evaluator.robot.q_from_positions(e.joint_positions[0]) for e in singles])
+        full = evaluator.evaluate_batch(rows, grasps, BOOK, sampled, metric, seeds)
+        scores = np.array([e.score for e in full])
+        same = evaluator.follow_postures(rows, grasps, BOOK, sampled, metric, seeds, scores)
+        for a, b in zip(same, full, strict=True):
+            assert a is not None and a.score == b.score
+            assert np.array_equal(a.effective_mass_kg, b.effective_mass_kg)
+            assert np.array_equal(a.joint_positions, b.joint_positions)
+        halves = evaluator.follow_postures(rows, grasps, BOOK, sampled, metric, seeds, scores / 2)
+        assert halves == [None] * len(grasps), metric
+
+
+def test_selection_is_deterministic_and_independent_of_the_workers(baxter) -> None:
+    trajectory = book_trajectory(dt_s=0.05)
+    grasps = [
+        Grasp(pose_from_position_quat([-0.075, y, 0.0], [0, 0, 0, 1], "g"), f"spine_{y:.3f}")
+        for y in np.linspace(-0.1, 0.1, 20)
+    ]
+    results = []
+    for workers in (1, 2, 2):
+        evaluator = GraspSafetyEvaluator(
+            baxter, EvaluationConfig(workers=workers, parallel_min_samples=1)
+        )
+        ranking = evaluator.rank(grasps, BOOK, trajectory, seed_positions=BAXTER_SEED)
+        config = PostureConfig(restarts=8, early_stop=True)
+        results.append(select_postures(evaluator, grasps, BOOK, trajectory, ranking, config))
+    first = results[0]
+    for other in results[1:]:
+        assert other.order == first.order
+        for a, b in zip(first.evaluations, other.evaluations, strict=True):
+            assert a.score == b.score
+            assert np.array_equal(a.joint_positions, b.joint_positions)
+            assert np.array_equal(a.effective_mass_kg, b.effective_mass_kg)
+        for a, b in zip(first.postures, other.postures, strict=True):
+            assert (a.selected, a.postures_tried, a.postures_feasible) == (
+                b.selected,
+                b.postures_tried,
+                b.postures_feasible,
+            )
+
+
+def test_python_backend_selects_the_same_postures(baxter, baxter_book) -> None:
+    """Without the kernels (IKSolver.solve_poses one pose at a time, no early stop) the same
+    postures are kept, to rounding."""
+    evaluator, grasps, trajectory, _ = baxter_book
+    python = GraspSafetyEvaluator(baxter, EvaluationConfig(workers=1, backend="python"))
+    config = PostureConfig(restarts=8, early_stop=True)
+    kept = [
+        select_postures(
+            e, grasps, BOOK, trajectory, e.rank(grasps, BOOK, trajectory, BAXTER_SEED), config
+        )
+        for e in (evaluator, python)
+    ]
+    for a, b in zip(kept[0].postures, kept[1].postures, strict=True):
+        assert (a.selected, a.postures_tried) == (b.selected, b.postures_tried)
+        assert a.score == pytest.approx(b.score, rel=1e-9)
+        assert a.postures_feasible <= b.postures_feasible  # the kernels stopped some

@@ -109,12 +109,12 @@ def _write_outputs(
     per_sample: bool = True,
 ) -> None:
     if json_path is not None:
-        from .report import report_json
+        from .report import report_json_bytes
 
-        text = report_json(report, per_sample)
+        data = report_json_bytes(report, per_sample)
         try:
             json_path.parent.mkdir(parents=True, exist_ok=True)
-            json_path.write_text(text, encoding="utf-8")
+            json_path.write_bytes(data)
         except OSError as error:
             raise InvalidInputError(
                 "--json", f"cannot write '{json_path}': {error.strerror or error}"

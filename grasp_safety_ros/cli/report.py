@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import gc
-import json
 import math
 from collections.abc import Sequence
 from typing import Any
@@ -32,14 +30,10 @@ def number(value: float) -> float | None:
     return value if math.isfinite(value) else None
 
 
-def numbers(values: np.ndarray) -> Any:
-    """Nested lists of an array (one ``tolist``), with None for NaN and inf floats."""
-    array = np.asarray(values)
-    if array.dtype.kind == "f" and not np.isfinite(array).all():
-        patched = array.astype(object)
-        patched[~np.isfinite(array)] = None
-        return patched.tolist()
-    return array.tolist()
+def numbers(values: np.ndarray) -> np.ndarray:
+    """An array as the JSON writer takes it (C-contiguous; ``report_json`` writes NaN and inf
+    as null)."""
+    return np.ascontiguousarray(values)
 
 
 def evaluation_to_dict(evaluation: GraspEvaluation, per_sample: bool = True) -> dict[str, Any]:
@@ -133,8 +127,9 @@ def iso_to_dict(assessment: PowerForceLimitAssessment) -> dict[str, Any]:
     }
 
 
-def report_to_dict(report: SafetyReport, per_sample: bool = True) -> dict[str, Any]:
-    """The CLI's JSON: the paper's ranking plus every analysis the options asked for.
+def _report_tree(report: SafetyReport, per_sample: bool = True) -> dict[str, Any]:
+    """The CLI's JSON as a tree of dicts, lists, scalars and numpy arrays: the paper's
+    ranking plus every analysis the options asked for.
 
     ``ranking`` is the final order (safety, safety + quality, or effort); ``safety_ranking``
     orders by the safety score alone (with the chosen ``metric_point``). Without
@@ -194,21 +189,40 @@ def report_to_dict(report: SafetyReport, per_sample: bool = True) -> dict[str, A
     return result
 
 
-def report_json(report: SafetyReport, per_sample: bool = True) -> str:
-    """``report_to_dict`` as compact, strict JSON text (no NaN or inf).
+def _array_as_list(value: Any) -> Any:
+    """orjson's fallback for what it does not write natively (e.g. a 0-d array)."""
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"not JSON-serialisable: {type(value).__name__}")
 
-    The garbage collector is paused meanwhile: the millions of lists and floats of the
-    per-sample arrays would trigger full collections that find nothing to free (half the time
-    of 1,000 grasps x 201 samples, docs/performance_pipeline.md).
+
+def json_bytes(tree: Any) -> bytes:
+    """Compact, strict UTF-8 JSON of a tree of dicts (str keys), lists, tuples, scalars and
+    numpy arrays: NaN and inf are written as null.
+
+    Written by orjson, which takes numpy arrays as they are (no per-float Python objects);
+    floats are the shortest text that reads back to the same double.
     """
-    enabled = gc.isenabled()
-    gc.disable()
-    try:
-        result = report_to_dict(report, per_sample)
-        return json.dumps(result, allow_nan=False, separators=(",", ":"))
-    finally:
-        if enabled:
-            gc.enable()
+    import orjson  # imported when first needed (start-up time)
+
+    return orjson.dumps(tree, default=_array_as_list, option=orjson.OPT_SERIALIZE_NUMPY)
+
+
+def report_json_bytes(report: SafetyReport, per_sample: bool = True) -> bytes:
+    """The CLI's JSON file: ``json_bytes`` of ``_report_tree``."""
+    return json_bytes(_report_tree(report, per_sample))
+
+
+def report_json(report: SafetyReport, per_sample: bool = True) -> str:
+    """``report_json_bytes`` as text."""
+    return report_json_bytes(report, per_sample).decode("utf-8")
+
+
+def report_to_dict(report: SafetyReport, per_sample: bool = True) -> dict[str, Any]:
+    """The CLI's JSON read back: plain dicts, lists, floats and None (``report_json``)."""
+    import orjson  # imported when first needed (start-up time)
+
+    return orjson.loads(report_json_bytes(report, per_sample))
 
 
 def _add_per_grasp_series(report: SafetyReport, k: int, grasp: dict[str, Any]) -> None:

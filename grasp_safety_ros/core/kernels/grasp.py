@@ -26,11 +26,11 @@ def evaluate_grasps(
     out,
     ws,
 ):
-    """``_evaluate_grasp`` of each grasp g: its rows of ``bodies`` (BodyInertias), of the grasp
-    rotations (G, 3, 3) and translations (G, 3) [m], seeds_q (G, nq), q0_given (G,) and of
-    ``out`` (GraspBuffers); its outcome (status, sample, joint) in out.outcomes[g] and the
-    value in out.outcome_values[g]. object_twists (N, 6): scratch for the object's motion
-    between samples, log6(O_{i-1}^-1 O_i), shared by the grasps."""
+    """``_evaluate_grasp`` of each grasp g (never stopped early): its rows of ``bodies``
+    (BodyInertias), of the grasp rotations (G, 3, 3) and translations (G, 3) [m], seeds_q
+    (G, nq), q0_given (G,) and of ``out`` (GraspBuffers); its outcome (status, sample, joint)
+    in out.outcomes[g] and the value in out.outcome_values[g]. object_twists (N, 6): scratch
+    for the object's motion between samples, log6(O_{i-1}^-1 O_i), shared by the grasps."""
     _relative_twists(motion.rotations, motion.positions, object_twists, ws)
     for g in range(grasp_rotations.shape[0]):
         status, sample, joint, value = _evaluate_grasp(
@@ -48,6 +48,56 @@ def evaluate_grasps(
             out,
             g,
             ws,
+            (False, times, math.inf),
+        )
+        out.outcomes[g, 0], out.outcomes[g, 1], out.outcomes[g, 2] = status, sample, joint
+        out.outcome_values[g] = value
+
+
+@_jit
+def follow_postures(
+    chain,
+    settings,
+    bodies,
+    motion,
+    grasp_rotations,
+    grasp_translations,
+    times,
+    seeds_q,
+    stationary_tangent,
+    object_twists,
+    out,
+    ws,
+    bound_is_max,
+    score_weights,
+    bounds,
+):
+    """``evaluate_grasps`` (sample 0 solved from seeds_q[g]) with an early stop: row g stops
+    (status 5) as soon as a lower bound of its score exceeds bounds[g] (inf: never).
+
+    The bound, from the effective masses m_i > 0 computed so far (samples where the tip does
+    not translate count as 0): their running max (``bound_is_max``), else their running sum
+    weighted by score_weights (N,) (1/N for the mean, the trapezoid weights [s] for the
+    integral). The caller widens bounds[g] by the rounding of both sums.
+    """
+    _relative_twists(motion.rotations, motion.positions, object_twists, ws)
+    for g in range(grasp_rotations.shape[0]):
+        status, sample, joint, value = _evaluate_grasp(
+            chain,
+            settings,
+            bodies,
+            motion,
+            grasp_rotations[g],
+            grasp_translations[g],
+            times,
+            seeds_q[g],
+            False,
+            stationary_tangent,
+            object_twists,
+            out,
+            g,
+            ws,
+            (bound_is_max, score_weights, bounds[g]),
         )
         out.outcomes[g, 0], out.outcomes[g, 1], out.outcomes[g, 2] = status, sample, joint
         out.outcome_values[g] = value
@@ -69,9 +119,11 @@ def _evaluate_grasp(
     out,
     g,
     ws,
+    stop,
 ):
     """One grasp (row g of ``bodies`` and ``out``) along the object's motion: IK and effective
-    mass, sample by sample.
+    mass, sample by sample; ``stop`` (bound_is_max, score_weights, bound): the early stop of
+    ``follow_postures`` (bound inf: none).
 
     The same computation as ObjectMotion.tip_motion + IKSolver.solve_trajectory_arrays +
     translational_mobility_in_base + effective_mass_along. Inputs: ``motion`` as
@@ -88,8 +140,9 @@ def _evaluate_grasp(
     Returns:
         (status, sample, joint, value): status 0 OK, 1 IK not converged, 2 joint jump,
         3 joint speed over its limit, 4 sample 0 not converged from the seed (out.q_fail[g]
-        holds the last iterate); for out.worst[g, i] samples (tip not translating) the caller
-        fills directions and effective masses from out.mobilities[g, i].
+        holds the last iterate), 5 stopped: the score's lower bound (value) exceeds the
+        bound after ``sample`` samples; for out.worst[g, i] samples (tip not translating) the
+        caller fills directions and effective masses from out.mobilities[g, i].
     """
     count = times.shape[0]
     base_rotation, base_translation = chain.base_rotation, chain.base_translation
@@ -157,6 +210,8 @@ def _evaluate_grasp(
                 q_fail[k] = q_all[0, k]
             return 4, 0, 0, 0.0
     _reset_predictor(ws)
+    bound_is_max, score_weights, bound = stop
+    running = 0.0
     for i in range(count):
         if i > 0:
             status, joint, value = _trajectory_step(
@@ -182,5 +237,10 @@ def _evaluate_grasp(
         for a in range(3):
             ua = u0 if a == 0 else (u1 if a == 1 else u2)
             quadratic += ua * (mobility[a, 0] * u0 + mobility[a, 1] * u1 + mobility[a, 2] * u2)
-        effective_masses[i] = 1.0 / quadratic
+        mass = 1.0 / quadratic
+        effective_masses[i] = mass
+        if bound < math.inf:
+            running = max(running, mass) if bound_is_max else running + score_weights[i] * mass
+            if running > bound:
+                return 5, i + 1, 0, running
     return 0, count, 0, 0.0

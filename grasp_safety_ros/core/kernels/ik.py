@@ -162,6 +162,23 @@ def solve_pose(chain, settings, target_rotation, target_translation, q_init, q, 
     return _solve_pose_into(chain, settings, target_rotation, target_translation, q_init, q, ws)
 
 
+@_jit
+def solve_poses(chain, settings, target_rotations, target_translations, seeds_q, q, converged, ws):
+    """``solve_pose`` of each tip pose g (world frame: rotations (G, 3, 3), translations (G, 3)
+    [m]) from each seed r (seeds_q (R, nq)) into q[g, r] (G, R, nq); converged (G, R) bool."""
+    for g in range(target_rotations.shape[0]):
+        for r in range(seeds_q.shape[0]):
+            converged[g, r], _ = _solve_pose_into(
+                chain,
+                settings,
+                target_rotations[g],
+                target_translations[g],
+                seeds_q[r],
+                q[g, r],
+                ws,
+            )
+
+
 @_jit_inline
 def _reset_predictor(ws):
     """No defect to extrapolate into sample 1 (ws[20], see ``_predict``)."""

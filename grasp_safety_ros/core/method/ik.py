@@ -231,6 +231,34 @@ class IKSolver:
             return q, bool(converged), int(iterations)
         return self._solve_python(target_in_world, q_init)
 
+    def solve_poses(
+        self, transforms_tip_to_base: Sequence[pin.SE3], seeds_q: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``solve`` of each tip pose g from each seed r (seeds_q (R, nq)), compiled in one
+        kernel call: the configurations (G, R, nq) and whether each converged (G, R)."""
+        seeds_q = np.asarray(seeds_q, dtype=float).reshape(-1, self.robot.model.nq)
+        shape = (len(transforms_tip_to_base), len(seeds_q))
+        q = np.empty((*shape, self.robot.model.nq))
+        converged = np.zeros(shape, dtype=np.bool_)
+        if not self.compiled:
+            for g, transform in enumerate(transforms_tip_to_base):
+                for r, seed in enumerate(seeds_q):
+                    q[g, r], converged[g, r], _ = self.solve(transform, seed)
+            return q, converged
+        targets = [self.robot.transform_base_to_world * pose for pose in transforms_tip_to_base]
+        call_kernel(
+            _kernels().solve_poses,
+            self.chain,
+            self.settings,
+            plain_array(np.array([target.rotation for target in targets]).reshape(-1, 3, 3)),
+            plain_array(np.array([target.translation for target in targets]).reshape(-1, 3)),
+            plain_array(seeds_q),
+            q,
+            converged,
+            _kernels().thread_workspace(self.robot.model.nv),
+        )
+        return q, converged
+
     def _solve_python(
         self,
         target_in_world: pin.SE3,

@@ -27,3 +27,27 @@ def aggregate(effective_mass_kg: np.ndarray, times_s: np.ndarray, metric: str) -
     if metric == "max":
         return float(np.max(effective_mass_kg))
     return float(np.trapezoid(effective_mass_kg, times_s)) if len(times_s) > 1 else 0.0
+
+
+def score_bound_weights(times_s: np.ndarray, metric: str) -> tuple[bool, np.ndarray, float]:
+    """How a lower bound of the score grows, sample by sample, from effective masses m_i > 0
+    (the early stop of ``kernels.grasp.follow_postures``).
+
+    Returns:
+        (is_max, weights, margin): the bound is the running max of the masses (``max``), else
+        their running sum weighted by ``weights`` (N,) (1/N for the mean, the trapezoid's
+        weights [s] for the integral, so that the full sum is the score); ``margin`` is the
+        relative rounding of the bound and of ``aggregate``'s score (both sums of N positive
+        terms): a bound above score * (1 + margin) certainly exceeds that score as computed.
+    """
+    check_metric(metric)
+    count = len(times_s)
+    margin = 4.0 * (count + 4) * float(np.finfo(float).eps)
+    if metric == "integral":
+        weights = np.zeros(count)
+        if count > 1:
+            steps = np.diff(times_s)
+            weights[:-1] += 0.5 * steps
+            weights[1:] += 0.5 * steps
+        return False, weights, margin
+    return metric == "max", np.full(count, 1.0 / max(count, 1)), margin

@@ -6,13 +6,22 @@ solutions, and the effective mass depends on which one the arm is in. The paper 
 
 1. the single IK of the paper: the evaluation from the configured seed (restart 0);
 2. ``restarts`` more IK solutions of the tip pose at the first sample, from deterministic
-   seeds: a scrambled Halton sequence (seeded by ``seed``) within the joint limits
-   ([-pi, pi] for unlimited joints). A start posture within ``duplicate_tolerance_rad``
-   (inf-norm) of one already found is not followed again;
+   seeds: a scrambled Halton sequence (seeded by ``seed``; ``scrambled_halton``, the points
+   of scipy's ``qmc.Halton``) within the joint limits ([-pi, pi] for unlimited joints), all
+   grasps and seeds of a batch in one kernel call. A start posture within
+   ``duplicate_tolerance_rad`` (inf-norm) of one already found is not followed again;
 3. each distinct start posture followed along the whole trajectory with the evaluator's own
-   warm start (``GraspSafetyEvaluator.evaluate_batch`` seeded with it: sample 0 converges at
-   once, in 0 iterations, to that posture), and scored;
+   warm start (seeded with it: sample 0 converges at once, in 0 iterations, to that
+   posture), and scored; the postures of all grasps of a batch in one kernel call
+   (``GraspSafetyEvaluator.follow_postures``). With ``early_stop`` (selecting by the score),
+   a posture is stopped as soon as a lower bound of its score (the running max, or the
+   running weighted sum, of its effective masses, all > 0) exceeds the single IK's score: it
+   could only lose;
 4. the feasible one with the lowest score is kept (ties: the earliest, so the single IK).
+   The early stop changes no choice: a stopped posture scores above the single IK's, and a
+   posture that is not stopped is the one the full evaluation gives, bit for bit. It changes
+   the record: a stopped posture counts as tried, not as feasible, and is not in the score
+   range.
 
 A ``PostureCriterion`` may replace the score in step 4 (core.analyses.whole_arm's, with
 ``rank_by: whole_arm``: the worst predicted force over the arm's points); the single IK is
@@ -53,6 +62,10 @@ MAX_RESTARTS = 1000
 DEFAULT_RESTARTS = 8
 """Default restarts of the CLI and the node (docs/analyses.md, "Posture selection")."""
 
+FOLLOW_ROWS = 64
+"""Start postures per kernel call in ``select_posture_batch`` (bounds its buffers: ~45 floats
+per posture and sample)."""
+
 
 @dataclass(frozen=True)
 class PostureConfig:
@@ -64,11 +77,17 @@ class PostureConfig:
         seed: Seed of the scrambled Halton sequence of the IK seeds (repeatable results).
         duplicate_tolerance_rad: Start postures closer than this (largest joint difference)
             [rad or m] to one already found are not followed again.
+        early_stop: Stop following a start posture as soon as its score certainly exceeds
+            the single IK's (module docstring; the same choice, a shorter record). Off by
+            default: it changed the time by under 4 % (``bench/postures.py``, 8 restarts,
+            Panda, Baxter, book), as the postures' scores differ by a few percent, so a
+            lower bound of a worse one exceeds the best only near the end.
     """
 
     restarts: int = 0
     seed: int = 0
     duplicate_tolerance_rad: float = 1e-3
+    early_stop: bool = False
 
     def __post_init__(self) -> None:
         for name, value, top in (
@@ -87,6 +106,10 @@ class PostureConfig:
             raise InvalidInputError(
                 "posture.duplicate_tolerance_rad",
                 f"must be a finite number > 0, got {tolerance!r}",
+            )
+        if not isinstance(self.early_stop, bool):
+            raise InvalidInputError(
+                "posture.early_stop", f"must be true or false, got {self.early_stop!r}"
             )
 
 
@@ -120,10 +143,48 @@ def restart_seeds(evaluator: GraspSafetyEvaluator, config: PostureConfig) -> np.
         return np.empty((0, robot.num_joints))
     lower = np.where(np.isfinite(robot.lower_limits), robot.lower_limits, -np.pi)
     upper = np.where(np.isfinite(robot.upper_limits), robot.upper_limits, np.pi)
-    from scipy.stats import qmc  # scipy.stats takes ~0.5 s to import: only when restarting
-
-    unit = qmc.Halton(d=robot.num_joints, scramble=True, seed=config.seed).random(config.restarts)
+    unit = scrambled_halton(robot.num_joints, config.restarts, config.seed)
     return lower + unit * (upper - lower)
+
+
+def scrambled_halton(dimensions: int, count: int, seed: int) -> np.ndarray:
+    """The first ``count`` points (count, dimensions) in [0, 1) of the Halton sequence with
+    Owen's digit scrambling: those of ``scipy.stats.qmc.Halton(d=dimensions, scramble=True,
+    seed=seed).random(count)`` (scipy 1.17; its ``rng=`` keyword draws others) bit for bit
+    (tested), without importing scipy.stats (0.5-1 s).
+
+    Dimension k is the van der Corput sequence in the k-th prime base b, point i the sum over
+    its base-b digits d_j(i) (j = 0, 1, ...) of perm_j[d_j(i)] b^-(j+1), with one random
+    permutation perm_j of the digits per position j (ceil(54 / log2 b) - 1 positions, as far
+    as a double resolves), drawn by ``numpy.random.default_rng(seed).shuffle`` in the order
+    of the bases and positions.
+    """
+    rng = np.random.default_rng(seed)
+    points = np.zeros((count, dimensions))
+    for k, base in enumerate(_primes(dimensions)):
+        positions = math.ceil(54 / math.log2(base)) - 1
+        permutations = np.repeat(np.arange(base)[None], positions, axis=0)
+        for permutation in permutations:
+            rng.shuffle(permutation)
+        quotient = np.arange(count)
+        scale = 1.0 / base
+        column = points[:, k]
+        for j in range(positions):  # the same operations, in the same order, as scipy's
+            column += permutations[j, quotient % base] * scale
+            quotient //= base
+            scale /= base
+    return points
+
+
+def _primes(count: int) -> list[int]:
+    """The first ``count`` primes."""
+    primes: list[int] = []
+    candidate = 2
+    while len(primes) < count:
+        if all(candidate % p for p in primes if p * p <= candidate):
+            primes.append(candidate)
+        candidate += 1
+    return primes
 
 
 def single_posture(evaluation: GraspEvaluation, restarts: int = 0) -> PostureSelection:
@@ -169,45 +230,118 @@ def select_posture(
     Returns:
         The kept evaluation (``single_ik`` itself when nothing scores lower) and the record.
     """
-    if grasp.joint_trajectory is not None:  # a planned motion: its posture is given
-        return single_ik, single_posture(single_ik)
     if seeds is None:
         seeds = restart_seeds(evaluator, config)
     if sampled is None:
         sampled = sample_trajectory(trajectory)
-    robot, solver = evaluator.robot, evaluator.ik
-    start_tip_in_base = trajectory.transform_object_to_base_start * pin.SE3(
-        grasp.transform_tip_to_object
+    (result,) = select_posture_batch(
+        evaluator,
+        [grasp],
+        object_inertia,
+        trajectory,
+        [single_ik],
+        config,
+        metric,
+        seeds,
+        sampled,
+        criterion,
+    )
+    return result
+
+
+def select_posture_batch(
+    evaluator: GraspSafetyEvaluator,
+    grasps: Sequence[Grasp],
+    object_inertia: ObjectInertia,
+    trajectory: ObjectTrajectory,
+    single_iks: Sequence[GraspEvaluation],
+    config: PostureConfig,
+    metric: str,
+    seeds: np.ndarray,
+    sampled: SampledTrajectory,
+    criterion: PostureCriterion | None = None,
+) -> list[tuple[GraspEvaluation, PostureSelection]]:
+    """``select_posture`` of several grasps (one job of the worker pool): the restart IK of
+    all of them in one kernel call, their new start postures followed in one more."""
+    robot = evaluator.robot
+    searched = [k for k, grasp in enumerate(grasps) if grasp.joint_trajectory is None]
+    starts: dict[int, list[np.ndarray]] = {}
+    reached = dict.fromkeys(searched, False)  # a restart converged at the start pose
+    nq = robot.model.nq
+    q, converged = evaluator.ik.solve_poses(
+        [
+            trajectory.transform_object_to_base_start * pin.SE3(grasps[k].transform_tip_to_object)
+            for k in searched
+        ],
+        np.array([robot.q_from_positions(seed) for seed in seeds]).reshape(len(seeds), nq),
     )
     tolerance = config.duplicate_tolerance_rad
-    found: list[np.ndarray] = []
-    if single_ik.feasible:
-        found.append(np.asarray(single_ik.joint_positions[0], dtype=float))
-    converged_any = single_ik.feasible
-    for seed in seeds:
-        q, converged, _ = solver.solve(start_tip_in_base, robot.q_from_positions(seed))
-        if not converged:
-            continue
-        converged_any = True
-        positions = robot.positions_from_q(q)
-        if any(np.max(np.abs(positions - other)) < tolerance for other in found):
-            continue
-        found.append(positions)
-    starts = found[1:] if single_ik.feasible else found  # the single IK's is evaluated
-    candidates = [single_ik]
-    for first in range(0, len(starts), BATCH_GRASPS):  # new start postures, in kernel batches
-        batch = starts[first : first + BATCH_GRASPS]
-        candidates += evaluator.evaluate_batch(
-            [single_ik.index] * len(batch),
-            [grasp] * len(batch),
+    for row, k in enumerate(searched):
+        single_ik = single_iks[k]
+        found = (
+            [np.asarray(single_ik.joint_positions[0], dtype=float)] if single_ik.feasible else []
+        )
+        reached[k] = bool(converged[row].any())
+        for r in np.flatnonzero(converged[row]):
+            positions = robot.positions_from_q(q[row, r])
+            if found and np.min(np.max(np.abs(np.array(found) - positions), axis=1)) < tolerance:
+                continue  # within the tolerance of a start posture already found
+            found.append(positions)
+        starts[k] = found[1:] if single_ik.feasible else found  # the single IK's is evaluated
+    rows = [(k, positions) for k in searched for positions in starts[k]]
+    followed: list[GraspEvaluation | None] = []
+    for first in range(0, len(rows), FOLLOW_ROWS):  # the new start postures, in kernel calls
+        batch = rows[first : first + FOLLOW_ROWS]
+        followed += evaluator.follow_postures(
+            [single_iks[k].index for k, _ in batch],
+            [grasps[k] for k, _ in batch],
             object_inertia,
             sampled,
             metric,
-            np.array([robot.q_from_positions(positions) for positions in batch]),
+            np.array([robot.q_from_positions(p) for _, p in batch]).reshape(len(batch), nq),
+            np.array(
+                [
+                    single_iks[k].score
+                    if config.early_stop and criterion is None and single_iks[k].feasible
+                    else math.inf
+                    for k, _ in batch
+                ]
+            ),
         )
-    feasible = [k for k, e in enumerate(candidates) if e.feasible]
+    remaining = iter(followed)
+    results = []
+    for k, (grasp, single_ik) in enumerate(zip(grasps, single_iks, strict=True)):
+        if k not in starts:  # a planned motion: its posture is given
+            results.append((single_ik, single_posture(single_ik)))
+            continue
+        results.append(
+            _choose(
+                evaluator,
+                (grasp, object_inertia, trajectory),
+                single_ik,
+                [next(remaining) for _ in starts[k]],
+                (config, len(seeds) + 1, single_ik.feasible or reached[k]),
+                criterion,
+            )
+        )
+    return results
+
+
+def _choose(
+    evaluator: GraspSafetyEvaluator,
+    case: tuple[Grasp, ObjectInertia, ObjectTrajectory],
+    single_ik: GraspEvaluation,
+    followed: list[GraspEvaluation | None],
+    config_tried_reached: tuple[PostureConfig, int, bool],
+    criterion: PostureCriterion | None,
+) -> tuple[GraspEvaluation, PostureSelection]:
+    """The kept posture of one grasp among the single IK's and its ``followed`` start
+    postures (None: stopped early) and its record; ``config_tried_reached``: the config, the
+    IK seeds tried (restarts + 1) and whether any of them converged at the start pose."""
+    config, tried, converged_any = config_tried_reached
+    candidates = [single_ik, *followed]
+    feasible = [k for k, e in enumerate(candidates) if e is not None and e.feasible]
     if not feasible:
-        tried = len(seeds) + 1
         detail = "" if converged_any else ", none reached the start pose"
         reason = (
             f"no feasible posture from {tried} IK seeds{detail}; single IK: {single_ik.reason}"
@@ -224,14 +358,11 @@ def select_posture(
             selected=-1,
             criterion=SCORE_CRITERION if criterion is None else criterion.name,
         )
-    scores = np.array([candidates[k].score for k in feasible])
+    kept = [e for e in candidates if e is not None and e.feasible]
+    scores = np.array([e.score for e in kept])
     values = scores
     if criterion is not None:
-        feasible_candidates = [candidates[k] for k in feasible]
-        values = np.asarray(
-            criterion(evaluator, grasp, object_inertia, trajectory, feasible_candidates),
-            dtype=float,
-        )
+        values = np.asarray(criterion(evaluator, *case, kept), dtype=float)
         if values.shape != scores.shape or not np.all(np.isfinite(values)):
             raise InvalidInputError(
                 "posture.criterion",
@@ -239,7 +370,7 @@ def select_posture(
             )
     chosen_k = int(np.argmin(values))  # argmin keeps the first of equal values
     best = feasible[chosen_k]
-    chosen = candidates[best] if best == 0 else _detached(candidates[best])
+    chosen = kept[chosen_k] if best == 0 else _detached(kept[chosen_k])
     return chosen, PostureSelection(
         index=single_ik.index,
         restarts=config.restarts,
@@ -274,7 +405,8 @@ def select_postures(
         ``config.restarts == 0`` the same evaluations and order (the paper's single IK).
 
     Args:
-        progress: Called as ``progress(done, total)`` after each grasp; it may raise.
+        progress: Called as ``progress(done, total)`` after each grasp (the grasps of a
+            batch, up to BATCH_GRASPS, come together); it may raise.
         criterion: What each grasp's posture minimises; None: its score (select_posture).
     """
     grasps = list(grasps)
@@ -289,35 +421,36 @@ def select_postures(
     sampled = sample_trajectory(trajectory)  # once for every grasp and posture
     jobs = [
         (
-            grasp,
+            grasps[first : first + BATCH_GRASPS],
             object_inertia,
             trajectory,
-            single_ik,
+            ranking.evaluations[first : first + BATCH_GRASPS],
             config,
             ranking.metric,
             seeds,
             sampled,
             criterion,
         )
-        for grasp, single_ik in zip(grasps, ranking.evaluations, strict=True)
+        for first in range(0, len(grasps), BATCH_GRASPS)
     ]
     # Work estimate: every grasp followed from up to restarts + 1 postures.
     executor = executor_for(evaluator, len(grasps) * len(sampled.times_s) * (len(seeds) + 1))
-    results = (
-        (select_posture(evaluator, *job) for job in jobs)
+    batches = (
+        (select_posture_batch(evaluator, *job) for job in jobs)
         if executor is None
-        else evaluate_jobs(evaluator, executor, jobs, select_posture)
+        else evaluate_jobs(evaluator, executor, jobs, select_posture_batch)
     )
     evaluations: list[GraspEvaluation] = []
     selections: list[PostureSelection] = []
     try:
-        for evaluation, selection in results:
-            evaluations.append(evaluation)
-            selections.append(selection)
-            if progress is not None:
-                progress(len(evaluations), len(grasps))
+        for batch in batches:
+            for evaluation, selection in batch:
+                evaluations.append(evaluation)
+                selections.append(selection)
+                if progress is not None:
+                    progress(len(evaluations), len(grasps))
     finally:
-        results.close()  # progress raised: stop the work still queued
+        batches.close()  # progress raised: stop the work still queued
     return replace(
         ranking,
         order=order_by_score(evaluations),

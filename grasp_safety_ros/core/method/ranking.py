@@ -11,7 +11,7 @@ from ..exceptions import InvalidInputError
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
 from ..model.trajectory import ObjectMotion, ObjectPath, TipMotion, Trajectory
-from .batch import evaluate_grasps_compiled
+from .batch import evaluate_grasps_compiled, follow_postures_compiled
 from .effective_mass import (
     STATIONARY_TANGENT_M,
     effective_masses_along,
@@ -21,7 +21,7 @@ from .effective_mass import (
 from .ik import IKConfig, IKSolver, check_backend
 from .joint_trajectory import JointSpaceTrajectory
 from .metrics import METRICS as METRICS  # imported from here by ros.parameters
-from .metrics import aggregate, check_metric
+from .metrics import aggregate, check_metric, score_bound_weights
 from .packed import CompiledGraspResult
 from .pool import evaluate_jobs, executor_for
 from .results import Grasp, GraspEvaluation, Ranking
@@ -205,6 +205,59 @@ class GraspSafetyEvaluator:
                     (seeds[k], starts[k]),
                 )
         return [evaluations[k] for k in range(len(grasps))]
+
+    def follow_postures(
+        self,
+        indices: Sequence[int],
+        grasps: Sequence[Grasp],
+        object_inertia: ObjectInertia,
+        sampled_trajectory: SampledTrajectory,
+        metric: str,
+        seeds_q: np.ndarray,
+        stop_above: np.ndarray,
+    ) -> list[GraspEvaluation | None]:
+        """``evaluate_batch`` of start postures (seeds_q (G, nq): row g an IK solution of its
+        grasp's first tip pose), each stopped as soon as its score certainly exceeds
+        stop_above[g] (inf: never): None for a stopped row.
+
+        The early stop runs in the fused kernel (``follow_postures_compiled``); a row that is
+        not stopped equals ``evaluate_batch``'s bit for bit. Without the fused kernel
+        (Python backend, a trajectory without an ObjectMotion) no row is stopped.
+        """
+        motion = sampled_trajectory.object_motion
+        if not self.ik.compiled or motion is None:
+            return list(
+                self.evaluate_batch(
+                    indices, grasps, object_inertia, sampled_trajectory, metric, seeds_q
+                )
+            )
+        times = sampled_trajectory.times_s
+        is_max, weights, margin = score_bound_weights(times, metric)
+        bounds = np.asarray(stop_above, dtype=float)
+        bounds = bounds + np.abs(bounds) * margin  # inf stays inf
+        results = follow_postures_compiled(
+            self.ik,
+            object_inertia,
+            [grasp.transform_tip_to_object for grasp in grasps],
+            motion,
+            times,
+            seeds_q,
+            (is_max, weights, bounds),
+        )
+        return [
+            None
+            if result is None
+            else self._from_compiled(
+                index,
+                grasp,
+                result,
+                motion,
+                times,
+                metric,
+                (object_inertia, self.robot.positions_from_q(seed)),
+            )
+            for index, grasp, result, seed in zip(indices, grasps, results, seeds_q, strict=True)
+        ]
 
     def _from_compiled(
         self,

@@ -129,12 +129,14 @@ class PostureSelection:
         score: Score of the kept posture (the evaluation's score); NaN if infeasible.
         score_single_ik: Score of the paper's single IK from the configured seed; NaN when
             that one is infeasible.
-        score_range: (lowest, highest) score over the feasible postures found; NaN if none.
+        score_range: (lowest, highest) score over the feasible postures found (with
+            ``PostureConfig.early_stop``: followed to the end); NaN if none.
         start_positions: (n,) joint positions at t = 0 of the kept posture [rad or m], chain
             order; empty if infeasible.
         postures_tried: Distinct start postures followed along the trajectory (the single
             IK's counts as one, also when it fails).
-        postures_feasible: Of those, the ones whose whole trajectory is feasible.
+        postures_feasible: Of those, the ones whose whole trajectory is feasible (with
+            ``PostureConfig.early_stop``: not counting those stopped early).
         selected: Which of the tried postures was kept (0: the single IK's); -1 if none.
         criterion: What chose the posture: SCORE_CRITERION or a posture criterion's name
             (core.method.posture.PostureCriterion).

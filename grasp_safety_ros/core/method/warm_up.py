@@ -13,7 +13,7 @@ from ..model.trajectory import ObjectTrajectory
 from .compiled import augmented_bodies
 from .dynamics import joint_dynamics
 from .effective_mass import translational_mobilities_in_base
-from .ranking import Grasp, GraspSafetyEvaluator
+from .ranking import Grasp, GraspSafetyEvaluator, sample_trajectory
 from .terms import configurations, grasp_terms
 
 _WARM_UP_URDF = """<robot name="warm_up"><link name="base"/>
@@ -52,6 +52,16 @@ def warm_up(evaluator: GraspSafetyEvaluator | None = None) -> float:
         evaluator.evaluate(Grasp(pin.SE3.Identity()), box, trajectory)
         seed_q = robot.q_from_positions(robot.default_seed_positions())
         evaluator.ik.solve(pose, seed_q)
+        evaluator.ik.solve_poses([pose], seed_q[None])  # posture selection's kernels
+        evaluator.follow_postures(
+            [0],
+            [Grasp(pin.SE3.Identity())],
+            box,
+            sample_trajectory(trajectory),
+            "mean",
+            seed_q[None],
+            np.array([np.inf]),
+        )
         rotations = np.array([pose.rotation, pose.rotation])
         translations = np.array([pose.translation, pose.translation])
         evaluator.ik.solve_trajectory_arrays(  # the analyses' IK and mobility kernels
