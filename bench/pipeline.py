@@ -11,7 +11,9 @@ over the spine (y from -0.1 to +0.1 m), dt 0.01 s (201 samples), the scenario's 
 - in one process, one core (workers=1), median over repeats: the paper's ranking (single IK),
   posture selection after it, and every default analysis (``safety_report.analyse``) on the
   shared compiled terms and on the Pinocchio per-sample reference path; as ratios to the
-  ranking's own time and as µs per (grasp, sample).
+  ranking's own time and as µs per (grasp, sample); of those, the effort analysis alone
+  (``evaluate_efforts``: one kernel call over every (grasp, sample)) and its Pinocchio
+  per-grasp reference.
 
 Run alone: .venv/bin/python bench/run.py --pipeline-only [--json bench/results_pipeline.json]
 """
@@ -120,6 +122,7 @@ def bench_in_process(grasps: int, folder: Path, repeats: int = 3) -> dict[str, A
     """Ranking, posture selection and analyses of the book scenario in this process (one
     core), medians [s], and their ratios to the ranking's time."""
     from grasp_safety_ros.cli.scenario import load_scenario
+    from grasp_safety_ros.core.analyses.effort import evaluate_efforts
     from grasp_safety_ros.core.analyses.safety_report import analyse
     from grasp_safety_ros.core.method.posture import select_postures
     from grasp_safety_ros.core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
@@ -137,8 +140,11 @@ def bench_in_process(grasps: int, folder: Path, repeats: int = 3) -> dict[str, A
 
     ranking = rank()  # warm: kernels loaded, restart seeds computed below
     selected = select_postures(evaluator, *args, ranking, scenario.posture)
-    timings: dict[str, list[float]] = {"ranking": [], "postures": [], "analyses": []}
+    timings: dict[str, list[float]] = {"ranking": [], "postures": [], "analyses": [], "effort": []}
     reference: list[float] = []
+    effort_reference: list[float] = []
+    grasps_and_motion = (scenario.grasps, scenario.trajectory)
+    effort_args = (robot, selected.evaluations, scenario.object_inertia, *grasps_and_motion)
     for repeat in range(repeats):
         start = time.perf_counter()
         ranking = rank()
@@ -149,10 +155,16 @@ def bench_in_process(grasps: int, folder: Path, repeats: int = 3) -> dict[str, A
         start = time.perf_counter()
         analyse(evaluator, *args, scenario.options, ranking=selected)
         timings["analyses"].append(time.perf_counter() - start)
-        if repeat == 0:  # the Pinocchio per-sample reference path, once
+        start = time.perf_counter()
+        evaluate_efforts(*effort_args, chain=evaluator.ik.chain)
+        timings["effort"].append(time.perf_counter() - start)
+        if repeat == 0:  # the Pinocchio per-sample reference paths, once
             start = time.perf_counter()
             analyse(reference_evaluator, *args, scenario.options, ranking=selected)
             reference.append(time.perf_counter() - start)
+            start = time.perf_counter()
+            evaluate_efforts(*effort_args)
+            effort_reference.append(time.perf_counter() - start)
     samples = grasps * len(scenario.trajectory.times_s())
     medians = {name: statistics.median(values) for name, values in timings.items()}
     return {
@@ -160,6 +172,8 @@ def bench_in_process(grasps: int, folder: Path, repeats: int = 3) -> dict[str, A
         "samples": len(scenario.trajectory.times_s()),
         "seconds": medians,
         "analyses_reference_s": reference[0],
+        "effort_reference_s": effort_reference[0],
+        "effort_vs_ranking": medians["effort"] / medians["ranking"],
         "core_us_per_sample": 1e6 * medians["ranking"] / samples,
         "postures_vs_ranking": medians["postures"] / medians["ranking"],
         "analyses_vs_ranking": medians["analyses"] / medians["ranking"],
@@ -197,6 +211,11 @@ def print_pipeline(results: dict[str, Any]) -> None:
         f"x{core['analyses_vs_ranking']:.1f} the ranking (Pinocchio per sample: "
         f"{1e3 * core['analyses_reference_s']:.0f} ms = "
         f"x{core['reference_analyses_vs_ranking']:.0f})"
+    )
+    print(
+        f"  of which effort (one kernel call): {1e3 * seconds['effort']:.1f} ms = "
+        f"x{core['effort_vs_ranking']:.2f} the ranking (Pinocchio per grasp: "
+        f"{1e3 * core['effort_reference_s']:.0f} ms)"
     )
     print(f"  CLI --help: {cli['help_s']:.2f} s")
     start_up = cli["start_up"]

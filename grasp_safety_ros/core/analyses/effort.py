@@ -31,10 +31,13 @@ import pinocchio as pin
 
 from ..exceptions import InvalidInputError
 from ..input_checks import read_only
-from ..method.effective_mass import augmented_inertia_arrays, augmented_model
-from ..method.packed import BodyInertias
+from ..method.compiled import augmented_bodies, chain_arrays
+from ..method.dynamics import joint_dynamics
+from ..method.effective_mass import augmented_model
+from ..method.ik import compiled_available
+from ..method.packed import ChainArrays
 from ..method.ranking import Grasp, GraspEvaluation
-from ..method.terms import SampleTerms
+from ..method.terms import SampleTerms, configurations
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
 from ..model.trajectory import Trajectory
@@ -142,38 +145,22 @@ def evaluate_effort(
         model: The ``augmented_model`` of robot, object and grasp, when already built
             (shared across analyses).
         terms: The grasp's ``method.terms.SampleTerms`` at these joint positions: then
-            everything runs on arrays over the samples (``_dynamics_from_terms``); None:
-            Pinocchio per sample (the reference; equal to rounding, test_performance_paths).
+            the compiled path (``evaluate_efforts``) runs on them; None: Pinocchio per
+            sample (the reference; equal to rounding, test_performance_paths).
     """
-    n = robot.num_joints
     limits = effort_limits(robot)
     if not evaluation.feasible:
-        per_joint = read_only(np.full(n, np.nan), copy=True)
-        per_sample = read_only(np.empty((0, n)), copy=True)
-        return EffortEvaluation(
-            index=evaluation.index,
-            name=evaluation.name,
-            feasible=False,
-            times_s=read_only(np.empty(0), copy=True),
-            joint_velocities=per_sample,
-            joint_accelerations=per_sample,
-            joint_torques=per_sample,
-            peak_abs_torque=per_joint,
-            rms_torque=per_joint,
-            effort_limits=read_only(limits, copy=True),
-            peak_fraction_of_limit=per_joint,
-            rms_fraction_of_limit=per_joint,
-        )
+        return _infeasible(evaluation, limits)
     times = np.asarray(evaluation.times_s, dtype=float)
-    positions = np.asarray(
-        evaluation.joint_positions if joint_positions is None else joint_positions, dtype=float
-    )
-    if positions.shape != (len(times), n) or not np.all(np.isfinite(positions)):
-        raise InvalidInputError(
-            "joint_positions",
-            f"must be finite with shape {[len(times), n]}, got {list(positions.shape)}",
-        )
+    positions = _checked_positions(robot, evaluation, joint_positions)
+    chain = chain_arrays(robot) if terms is not None and compiled_available() else None
+    if chain is not None:
+        batched = SampleTerms(*(array[None] for array in terms))
+        return evaluate_efforts(
+            robot, [evaluation], object_inertia, [grasp], trajectory, [positions], batched, chain
+        )[0]
     kinematic_model = robot.model
+    n = robot.num_joints
     # The IK makes q a function of the path parameter s only: null-space rates from
     # differences over s (unwrapped for continuous joints), then the chain rule in time.
     s_values, s_rate, s_accel = trajectory.path_parameter(times)
@@ -198,21 +185,6 @@ def evaluate_effort(
         trajectory, grasp.transform_tip_to_object, times
     )
     rotation = robot.transform_base_to_world.rotation
-    if terms is not None:
-        twists = np.concatenate(
-            [twist_base[:, :3] @ rotation.T, twist_base[:, 3:] @ rotation.T], 1
-        )
-        twist_rates = np.concatenate(
-            [twist_rate_base[:, :3] @ rotation.T, twist_rate_base[:, 3:] @ rotation.T], 1
-        )
-        grasp_pose = pin.SE3(grasp.transform_tip_to_object)
-        bodies = augmented_inertia_arrays(
-            robot, object_inertia, grasp_pose.rotation[None], grasp_pose.translation[None]
-        )
-        velocities, accelerations, torques = _dynamics_from_terms(
-            robot, terms, bodies, twists, twist_rates, velocity_fd, acceleration_fd
-        )
-        return _summary(evaluation, limits, times, velocities, accelerations, torques)
     kinematics = kinematic_model.createData()
     if model is None:
         model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
@@ -250,6 +222,181 @@ def evaluate_effort(
     return _summary(evaluation, limits, times, velocities, accelerations, torques)
 
 
+def _infeasible(evaluation: GraspEvaluation, limits: np.ndarray) -> EffortEvaluation:
+    """The EffortEvaluation of an infeasible grasp: no samples, NaN summaries."""
+    n = len(limits)
+    per_joint = read_only(np.full(n, np.nan), copy=True)
+    per_sample = read_only(np.empty((0, n)), copy=True)
+    return EffortEvaluation(
+        index=evaluation.index,
+        name=evaluation.name,
+        feasible=False,
+        times_s=read_only(np.empty(0), copy=True),
+        joint_velocities=per_sample,
+        joint_accelerations=per_sample,
+        joint_torques=per_sample,
+        peak_abs_torque=per_joint,
+        rms_torque=per_joint,
+        effort_limits=read_only(limits, copy=True),
+        peak_fraction_of_limit=per_joint,
+        rms_fraction_of_limit=per_joint,
+    )
+
+
+def _checked_positions(
+    robot: RobotModel, evaluation: GraspEvaluation, joint_positions: np.ndarray | None
+) -> np.ndarray:
+    """The joint path (N, n) to use for a feasible grasp: ``joint_positions`` or the
+    evaluation's; InvalidInputError unless finite with one row per sample."""
+    positions = np.asarray(
+        evaluation.joint_positions if joint_positions is None else joint_positions, dtype=float
+    )
+    shape = (len(evaluation.times_s), robot.num_joints)
+    if positions.shape != shape or not np.all(np.isfinite(positions)):
+        raise InvalidInputError(
+            "joint_positions",
+            f"must be finite with shape {list(shape)}, got {list(positions.shape)}",
+        )
+    return positions
+
+
+def evaluate_efforts(
+    robot: RobotModel,
+    evaluations: Sequence[GraspEvaluation],
+    object_inertia: ObjectInertia,
+    grasps: Sequence[Grasp],
+    trajectories: Trajectory | Sequence[Trajectory],
+    joint_positions: Sequence[np.ndarray | None] | None = None,
+    terms: SampleTerms | None = None,
+    chain: ChainArrays | None = None,
+) -> tuple[EffortEvaluation, ...]:
+    """``evaluate_effort`` of every grasp, equal to its Pinocchio reference to rounding
+    (test_effort_batch): compiled, the per-sample work of all grasps in one kernel call
+    (``method.dynamics.joint_dynamics``), which moves each trajectory's object motion
+    (sampled once) to each grasp's tip. Pinocchio grasp by grasp where the kernels do not
+    support the chain or numba is missing.
+
+    Args:
+        trajectories: The motion of every grasp: one for all, or one per grasp
+            (``GraspSafetyEvaluator.trajectory_for``).
+        joint_positions: Per grasp, (N, n) positions to use instead of the evaluation's, or
+            None (the evaluation's).
+        terms: The grasps' ``SampleTerms`` along these positions (axis 0 as ``evaluations``;
+            ``method.terms.batch_terms``), when already computed; None: the kernel computes
+            the kinematics it needs (cheaper than storing them).
+        chain: ``method.compiled.chain_arrays(robot)``: the compiled path; None: Pinocchio
+            grasp by grasp (the reference).
+    """
+    count = len(evaluations)
+    if isinstance(trajectories, Sequence):
+        motions = list(trajectories)
+    else:
+        motions = [trajectories] * count
+    overrides = [None] * count if joint_positions is None else list(joint_positions)
+    if not len(grasps) == len(motions) == len(overrides) == count:
+        raise InvalidInputError(
+            "grasps", f"need one grasp, motion and path per evaluation ({count})"
+        )
+    if chain is None:
+        return tuple(
+            evaluate_effort(robot, evaluation, object_inertia, grasp, motion, path)
+            for evaluation, grasp, motion, path in zip(
+                evaluations, grasps, motions, overrides, strict=True
+            )
+        )
+    limits = effort_limits(robot)
+    n = robot.num_joints
+    feasible = [k for k, evaluation in enumerate(evaluations) if evaluation.feasible]
+    samples = max((len(evaluations[k].times_s) for k in feasible), default=0)
+    positions = np.zeros((count, samples, n))
+    counts = np.zeros(count, dtype=np.int64)
+    motion_of = np.zeros(count, dtype=np.int64)
+    groups: dict[tuple[int, bytes], int] = {}  # (motion, sample times) -> its index
+    first_of_group: list[int] = []
+    for k in feasible:
+        evaluation = evaluations[k]
+        path = np.asarray(
+            evaluation.joint_positions if overrides[k] is None else overrides[k], dtype=float
+        )
+        if path.shape != (len(evaluation.times_s), n):
+            _checked_positions(robot, evaluation, path)  # raises
+        counts[k] = len(path)
+        positions[k, : len(path)] = path
+        key = (id(motions[k]), np.asarray(evaluation.times_s, dtype=float).tobytes())
+        motion_of[k] = groups.setdefault(key, len(groups))
+        if motion_of[k] == len(first_of_group):
+            first_of_group.append(k)
+    finite = np.isfinite(positions).all(axis=(1, 2))
+    if not finite.all():
+        k = int(np.flatnonzero(~finite)[0])
+        _checked_positions(robot, evaluations[k], positions[k, : counts[k]])  # raises
+    # Each motion's path parameter and the object's own motion (its origin's twist: the
+    # identity grasp's); the kernel moves them to each grasp's tip.
+    paths = np.zeros((len(groups), 3, samples))
+    object_rotations = np.zeros((len(groups), samples, 3, 3))
+    object_twists = np.zeros((len(groups), 2, samples, 6))
+    for index, k in enumerate(first_of_group):
+        motion, times = motions[k], np.asarray(evaluations[k].times_s, dtype=float)
+        paths[index, :, : len(times)] = motion.path_parameter(times)
+        object_rotations[index, : len(times)] = motion.object_poses(times)[0]
+        twist, rate = motion.tip_twists(pin.SE3.Identity(), times)
+        object_twists[index, 0, : len(times)] = twist
+        object_twists[index, 1, : len(times)] = rate
+    transforms = [pin.SE3(grasp.transform_tip_to_object) for grasp in grasps]
+    translations = np.array([t.translation for t in transforms]).reshape(-1, 3)
+    bodies = augmented_bodies(
+        robot,
+        object_inertia,
+        np.array([t.rotation for t in transforms]).reshape(-1, 3, 3),
+        translations,
+    )
+    model = robot.model
+    q_all = positions if model.nq == model.nv else configurations(robot, positions)
+    gravity = np.asarray(model.gravity.linear, dtype=float)
+    dynamics = joint_dynamics(
+        chain,
+        bodies,
+        positions,
+        q_all,
+        counts,
+        motion_of,
+        paths,
+        object_rotations,
+        object_twists,
+        translations,
+        gravity,
+        terms,
+    )
+    shared_limits = read_only(limits, copy=True)
+    peak_fractions = read_only(dynamics.peak_abs_torques / limits)
+    rms_fractions = read_only(dynamics.rms_torques / limits)
+    for array in dynamics:
+        read_only(array)
+    results = []
+    for k, evaluation in enumerate(evaluations):
+        if not evaluation.feasible:
+            results.append(_infeasible(evaluation, limits))
+            continue
+        rows = slice(0, int(counts[k]))
+        results.append(
+            EffortEvaluation(
+                index=evaluation.index,
+                name=evaluation.name,
+                feasible=True,
+                times_s=read_only(evaluation.times_s, copy=True),
+                joint_velocities=dynamics.velocities[k, rows],
+                joint_accelerations=dynamics.accelerations[k, rows],
+                joint_torques=dynamics.torques[k, rows],
+                peak_abs_torque=dynamics.peak_abs_torques[k],
+                rms_torque=dynamics.rms_torques[k],
+                effort_limits=shared_limits,
+                peak_fraction_of_limit=peak_fractions[k],
+                rms_fraction_of_limit=rms_fractions[k],
+            )
+        )
+    return tuple(results)
+
+
 def _summary(
     evaluation: GraspEvaluation,
     limits: np.ndarray,
@@ -284,86 +431,3 @@ def order_by_effort(
     check_effort_criterion(criterion)
     scored = [(e.score(criterion), k) for k, e in enumerate(efforts) if e.feasible]
     return tuple(efforts[k].index for _, k in sorted(s for s in scored if np.isfinite(s[0])))
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a × b over the last axis (size 3), broadcast (np.cross without its axis handling)."""
-    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    np.subtract(a1 * b2, a2 * b1, out=out[..., 0])
-    np.subtract(a2 * b0, a0 * b2, out=out[..., 1])
-    np.subtract(a0 * b1, a1 * b0, out=out[..., 2])
-    return out
-
-
-def _dynamics_from_terms(
-    robot: RobotModel,
-    terms: SampleTerms,
-    bodies: BodyInertias,
-    twists: np.ndarray,
-    twist_rates: np.ndarray,
-    velocity_fd: np.ndarray,
-    acceleration_fd: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """q̇, q̈ and τ (N, n) of the module docstring on arrays over the N samples, from the
-    shared terms (tip Jacobian, joint poses and axes, world frame) and the augmented bodies
-    (``BodyInertias`` of one grasp): the same steps as the Pinocchio loop of
-    ``evaluate_effort``, RNEA written out in world-frame spatial vectors (at the world origin).
-
-    twists, twist_rates: (N, 6) tip twist and its rate, world axes [m/s, rad/s; m/s², rad/s²].
-    """
-    jacobian = terms.tip_jacobians  # (N, 6, n)
-    n = jacobian.shape[-1]
-    pseudo_inverse = np.linalg.pinv(jacobian, rcond=1e-10)  # (N, n, 6)
-    null = np.eye(n) - pseudo_inverse @ jacobian
-    velocities = (pseudo_inverse @ twists[..., None] + null @ velocity_fd[..., None])[..., 0]
-    # Motion subspaces S_k = (linear_axes, angular_axes), world origin (SampleTerms).
-    linear_axes, angular_axes = terms.joint_motions[..., :3], terms.joint_motions[..., 3:]
-    origins = terms.joint_origins  # (N, n, 3)
-    # Spatial velocities V_k = V_(k-1) + S_k q̇_k and the velocity-product accelerations
-    # c_k = V_k × S_k q̇_k (motion cross product), cumulated down the chain.
-    joint_linear = linear_axes * velocities[..., None]
-    joint_angular = angular_axes * velocities[..., None]
-    body_linear = np.cumsum(joint_linear, axis=1)
-    body_angular = np.cumsum(joint_angular, axis=1)
-    bias_linear = _cross(body_angular, joint_linear) + _cross(body_linear, joint_angular)
-    bias_angular = _cross(body_angular, joint_angular)
-    # The tip's classical acceleration at q̈ = 0 (the drift J̇ q̇).
-    tip = terms.tip_translations
-    tip_angular = body_angular[:, -1]
-    tip_velocity = body_linear[:, -1] + _cross(tip_angular, tip)
-    drift_linear = bias_linear.sum(axis=1)
-    drift_angular = bias_angular.sum(axis=1)
-    drift = np.concatenate(
-        [
-            drift_linear + _cross(drift_angular, tip) + _cross(tip_angular, tip_velocity),
-            drift_angular,
-        ],
-        axis=1,
-    )
-    accelerations = (
-        pseudo_inverse @ (twist_rates - drift)[..., None] + null @ acceleration_fd[..., None]
-    )[..., 0]
-    # RNEA: A_k = A_(k-1) + S_k q̈_k + c_k from A = (-gravity, 0); body forces
-    # f = I A + V ×* (I V); joint torques τ_k = S_k · (f_k + ... + f_(n-1)).
-    gravity = np.asarray(robot.model.gravity.linear, dtype=float)
-    acc_linear = np.cumsum(linear_axes * accelerations[..., None] + bias_linear, axis=1) - gravity
-    acc_angular = np.cumsum(angular_axes * accelerations[..., None] + bias_angular, axis=1)
-    masses, levers, inertias = (array[0] for array in bodies)
-    rotations = terms.joint_rotations  # (N, n, 3, 3)
-    centres = origins + (rotations @ levers[..., None])[..., 0]
-    inertias_world = rotations @ inertias @ np.swapaxes(rotations, -1, -2)
-    momentum = masses[:, None] * (body_linear + _cross(body_angular, centres))
-    angular_momentum = (inertias_world @ body_angular[..., None])[..., 0] + _cross(
-        centres, momentum
-    )
-    force = masses[:, None] * (acc_linear + _cross(acc_angular, centres))
-    moment = (inertias_world @ acc_angular[..., None])[..., 0] + _cross(centres, force)
-    force = force + _cross(body_angular, momentum)
-    moment = moment + _cross(body_angular, angular_momentum) + _cross(body_linear, momentum)
-    force = np.cumsum(force[:, ::-1], axis=1)[:, ::-1]  # the subtree's total
-    moment = np.cumsum(moment[:, ::-1], axis=1)[:, ::-1]
-    torques = (linear_axes * force).sum(axis=-1) + (angular_axes * moment).sum(axis=-1)
-    torques += np.asarray(robot.model.armature, dtype=float) * accelerations
-    return velocities, accelerations, torques

@@ -24,7 +24,7 @@ from ..method.terms import SampleTerms, grasp_terms
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
 from ..model.trajectory import Trajectory
-from .effort import EffortEvaluation, check_effort_criterion, evaluate_effort, order_by_effort
+from .effort import EffortEvaluation, check_effort_criterion, evaluate_efforts, order_by_effort
 from .exposed_points import (
     ExposedPointsEvaluation,
     check_metric_point,
@@ -343,26 +343,12 @@ def analyse(
         step()
     effort: tuple[EffortEvaluation, ...] = ()
     if options.effort:
-        efforts = []
-        for k, (e, g) in enumerate(zip(evaluations, grasps, strict=True)):
-            resolved = (
-                redundancy[k].joint_positions if redundancy and redundancy[k].applied else None
-            )
-            shared = terms_of(k, resolved)
-            efforts.append(
-                evaluate_effort(
-                    robot,
-                    e,
-                    object_inertia,
-                    g,
-                    motions[k],
-                    resolved,
-                    None if shared is not None else model_of(k),
-                    shared,
-                )
-            )
+        resolved = [r.joint_positions if r.applied else None for r in redundancy] or None
+        effort = evaluate_efforts(
+            robot, evaluations, object_inertia, grasps, motions, resolved, chain=chain
+        )
+        for _ in grasps:
             step()
-        effort = tuple(efforts)
     whole_arm: tuple[WholeArmEvaluation, ...] = ()
     arm_sites = None
     if options.whole_arm:

@@ -4,9 +4,29 @@ Jacobian and the inverse joint-space inertia of the augmented chain (``method.te
 M is the one ``_mobility_from_frames`` builds and factorises for the ranking, so the ranking and
 the analyses read the same mass matrix (whatever it includes: object, armature)."""
 
-from ._jit import _jit
+from ._jit import _jit, _jit_inline
 from .effective_mass import _mobility_from_frames
 from .kinematics import _forward_kinematics, _joint_axis_in_world
+
+
+@_jit_inline
+def _motions_and_jacobian(axes, prismatic, jr, jp, ft, joint_axes, motions, jacobian):
+    """Every joint's unit axis (joint_axes (n, 3)) and motion subspace at the world origin
+    (motions (n, 6)), and the tip Jacobian (6 x n, LOCAL_WORLD_ALIGNED), from the joint
+    rotations jr, origins jp and tip origin ft (world frame; the chain's axes, prismatic)."""
+    for k in range(axes.shape[0]):
+        u0, u1, u2, w0, w1, w2, slide = _joint_axis_in_world(axes, prismatic, jr, k)
+        joint_axes[k, 0], joint_axes[k, 1], joint_axes[k, 2] = u0, u1, u2
+        p0, p1, p2 = jp[k, 0], jp[k, 1], jp[k, 2]
+        motions[k, 0] = (p1 * w2 - p2 * w1) + slide * u0
+        motions[k, 1] = (p2 * w0 - p0 * w2) + slide * u1
+        motions[k, 2] = (p0 * w1 - p1 * w0) + slide * u2
+        motions[k, 3], motions[k, 4], motions[k, 5] = w0, w1, w2
+        dx, dy, dz = ft[0] - p0, ft[1] - p1, ft[2] - p2
+        jacobian[0, k] = (w1 * dz - w2 * dy) + slide * u0
+        jacobian[1, k] = (w2 * dx - w0 * dz) + slide * u1
+        jacobian[2, k] = (w0 * dy - w1 * dx) + slide * u2
+        jacobian[3, k], jacobian[4, k], jacobian[5, k] = w0, w1, w2
 
 
 @_jit
@@ -31,23 +51,12 @@ def sample_terms(chain, bodies, q_all, counts, out, lower_inverse, ws):
                 out.tip_translations[g, i, a] = ft[a]
                 for b in range(3):
                     out.tip_rotations[g, i, a, b] = fr[a, b]
+            _motions_and_jacobian(axes, prismatic, jr, jp, ft, joint_axes, motions, jacobian)
             for k in range(n):
-                u0, u1, u2, w0, w1, w2, slide = _joint_axis_in_world(axes, prismatic, jr, k)
-                joint_axes[k, 0], joint_axes[k, 1], joint_axes[k, 2] = u0, u1, u2
-                p0, p1, p2 = jp[k, 0], jp[k, 1], jp[k, 2]
-                motions[k, 0] = (p1 * w2 - p2 * w1) + slide * u0
-                motions[k, 1] = (p2 * w0 - p0 * w2) + slide * u1
-                motions[k, 2] = (p0 * w1 - p1 * w0) + slide * u2
-                motions[k, 3], motions[k, 4], motions[k, 5] = w0, w1, w2
                 for a in range(3):
                     joint_origins[k, a] = jp[k, a]
                     for b in range(3):
                         joint_rotations[k, a, b] = jr[k, a, b]
-                dx, dy, dz = ft[0] - jp[k, 0], ft[1] - jp[k, 1], ft[2] - jp[k, 2]
-                jacobian[0, k] = (w1 * dz - w2 * dy) + slide * u0
-                jacobian[1, k] = (w2 * dx - w0 * dz) + slide * u1
-                jacobian[2, k] = (w0 * dy - w1 * dx) + slide * u2
-                jacobian[3, k], jacobian[4, k], jacobian[5, k] = w0, w1, w2
             # M = L L^T (L's strict lower triangle in ``factor``, 1/L_jj in inverse_diagonal):
             # L^-1 by forward substitution, then M^-1 = L^-T L^-1.
             for j in range(n):

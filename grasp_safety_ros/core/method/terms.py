@@ -21,7 +21,7 @@ import pinocchio as pin
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
 from .compiled import augmented_bodies, call_kernel, plain_array
-from .packed import ChainArrays
+from .packed import BodyInertias, ChainArrays
 
 
 class SampleTerms(NamedTuple):
@@ -90,19 +90,29 @@ def grasp_terms(
 ) -> SampleTerms:
     """The terms of one grasp along its joint path ((N, n) positions, chain order), axis 0
     dropped. ``chain``: ``compiled.chain_arrays(robot)`` (numba must be installed)."""
+    grasp = pin.SE3(transform_tip_to_object)
+    bodies = augmented_bodies(robot, object_inertia, grasp.rotation[None], grasp.translation[None])
+    q_all = configurations(robot, joint_positions)[None]
+    return batch_terms(chain, bodies, q_all, np.array([q_all.shape[1]])).of_grasp(0)
+
+
+def batch_terms(
+    chain: ChainArrays, bodies: BodyInertias, q_all: np.ndarray, counts: np.ndarray
+) -> SampleTerms:
+    """The terms of G grasps in one kernel call: grasp g's augmented ``bodies`` (axis 0 the
+    grasp, ``compiled.augmented_bodies``) along its first counts[g] configurations of
+    ``q_all`` (G, N, nq); its rows from counts[g] on are left uninitialised."""
     from ..kernels.ik import thread_workspace
     from ..kernels.terms import sample_terms
 
-    grasp = pin.SE3(transform_tip_to_object)
-    bodies = augmented_bodies(robot, object_inertia, grasp.rotation[None], grasp.translation[None])
-    q_all = plain_array(configurations(robot, joint_positions)[None])
-    n = robot.model.nv
-    out = sample_terms_buffers(1, q_all.shape[1], n)
-    counts = np.array([q_all.shape[1]], dtype=np.int64)
+    q_all = plain_array(q_all)
+    n = chain.axes.shape[0]
+    out = sample_terms_buffers(q_all.shape[0], q_all.shape[1], n)
     lower_inverse = np.empty((n, n))
     ws = thread_workspace(n)
+    counts = np.ascontiguousarray(counts, dtype=np.int64)
     call_kernel(sample_terms, chain, bodies, q_all, counts, out, lower_inverse, ws)
-    return out.of_grasp(0)
+    return out
 
 
 def point_jacobians(terms: SampleTerms, joint: int, points_in_world_m: np.ndarray) -> np.ndarray:

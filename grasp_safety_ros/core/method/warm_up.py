@@ -10,10 +10,12 @@ import pinocchio as pin
 from ..model.inertia import solid_box
 from ..model.robot import RobotModel
 from ..model.trajectory import ObjectTrajectory
+from .compiled import augmented_bodies
+from .dynamics import joint_dynamics
 from .effective_mass import translational_mobilities_in_base
 from .perturbed import perturbed_effective_masses
 from .ranking import Grasp, GraspSafetyEvaluator, sample_trajectory
-from .terms import grasp_terms
+from .terms import configurations, grasp_terms
 
 _WARM_UP_URDF = """<robot name="warm_up"><link name="base"/>
 <link name="a"><inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01"
@@ -79,5 +81,19 @@ def warm_up(evaluator: GraspSafetyEvaluator | None = None) -> float:
             [positions],
             [np.array([[1.0, 0.0, 0.0]])],
             [np.array([False])],
+        )
+        bodies = augmented_bodies(robot, box, np.eye(3)[None], np.zeros((1, 3)))
+        joint_dynamics(  # the effort analysis's kernel
+            evaluator.ik.chain,
+            bodies,
+            positions[None],
+            configurations(robot, positions)[None],
+            np.ones(1, dtype=np.int64),
+            np.zeros(1, dtype=np.int64),
+            np.zeros((1, 3, 1)),
+            np.eye(3)[None, None],
+            np.zeros((1, 2, 1, 6)),
+            np.zeros((1, 3)),
+            np.zeros(3),
         )
     return time.perf_counter() - start
