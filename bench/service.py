@@ -3,8 +3,8 @@
 
 Baxter's right arm (example-robot-data), the benchmark box, grasps around it, a 2 s quintic
 trajectory; the node runs in-process (rclpy, its NodeExecutor spun in a thread, as its
-console script runs it) and the client is a separate process (bench/service_client.py, a small rclpy
-node as a user's), driven over a pipe. Four node configurations:
+console script runs it) and the client is a separate process (bench/service_client.py, a
+small rclpy node as a user's), driven over a pipe. Four node configurations:
 
 - ``issue_comparable``: ``posture.restarts`` 0 (the paper's single IK, what the node ran when
   issue 12's targets were written) and the default response;
