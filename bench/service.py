@@ -10,7 +10,9 @@ small rclpy node as a user's), driven over a pipe. Four node configurations:
   issue 12's targets were written) and the default response;
 - ``issue_comparable_per_sample_off``: the same with ``response.per_sample`` false (scores
   and aggregates only, the first grasp's joint trajectory);
-- ``node_defaults``: the node's default parameters (posture selection with 8 restarts);
+- ``node_defaults``: the node's default parameters (posture selection with 8 restarts), the
+  benchmark box described by ``object.box_size_m`` (its corners: the exposed points, as
+  issue 21's targets count them);
 - ``least_response``: the least the node can be set to return (no per-sample arrays, no
   joint trajectory, one ISO/TS 15066 region): what the round trip costs beyond the ranking
   when the messages are as small as they get.
@@ -65,12 +67,12 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np
-from workload import ARMS, ArmWorkload, box_object, grasps_around_box
+from workload import ARMS, BOX_SIZE_M, ArmWorkload, box_object, grasps_around_box
 
 CONFIGURATIONS: dict[str, dict[str, Any]] = {
     "issue_comparable": {"posture.restarts": 0},
     "issue_comparable_per_sample_off": {"posture.restarts": 0, "response.per_sample": False},
-    "node_defaults": {},
+    "node_defaults": {"object.box_size_m": list(BOX_SIZE_M)},
     "least_response": {
         "posture.restarts": 0,
         "response.per_sample": False,
@@ -82,7 +84,10 @@ CONFIGURATIONS: dict[str, dict[str, Any]] = {
 DESCRIPTIONS = {
     "issue_comparable": "posture.restarts 0 (the paper's single IK), default response",
     "issue_comparable_per_sample_off": "posture.restarts 0, response.per_sample false",
-    "node_defaults": "the node's defaults (posture.restarts 8, default response)",
+    "node_defaults": (
+        "the node's defaults (posture.restarts 8, default response), the box described "
+        "(object.box_size_m: its corners are the exposed points analysed)"
+    ),
     "least_response": (
         "the least the node returns: posture.restarts 0, response.per_sample false, "
         "response.joint_trajectories 0, one ISO/TS 15066 region (chest)"
