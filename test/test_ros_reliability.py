@@ -229,6 +229,18 @@ def test_fair_lock_hands_over_to_a_waiter_after_a_slice() -> None:
     assert not lock.locked()
 
 
+def test_fair_lock_never_makes_a_lone_ranking_wait() -> None:
+    """Past its slice, a ranking nobody waits behind keeps the lock at once (no hand-over,
+    no queueing): slices cost a lone client nothing."""
+    lock = FairComputeLock()
+    assert lock.acquire(timeout=0.0)  # free: taken at once
+    started = time.perf_counter()
+    assert all(lock.share(slice_s=0.0) == 0.0 for _ in range(1000))
+    assert lock.locked() and lock.waiting() == 0
+    assert time.perf_counter() - started < 0.5  # 1,000 checks, no wait among them
+    lock.release()
+
+
 def test_fair_lock_times_out_and_stops() -> None:
     lock = FairComputeLock()
     assert lock.acquire(timeout=0.0)
