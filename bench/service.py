@@ -508,8 +508,8 @@ def run(
     Returns:
         ``{configuration: {"parameters", "description", "latency_10x101",
         "end_to_end_100x201", "end_to_end_1000x201"}, "load_average_1min": [before,
-        after]}`` with ``configurations`` (of CONFIGURATIONS); an end-to-end row is left out
-        when its repeats are 0.
+        after], "targets": target_rows(...)}`` with ``configurations`` (of CONFIGURATIONS); an
+        end-to-end row is left out when its repeats are 0.
     """
     load_before = os.getloadavg()[0]
     arm = ARMS["baxter"]
@@ -526,6 +526,7 @@ def run(
         if large_repeats > 0:
             results[name]["end_to_end_1000x201"] = end_to_end(arm, 1000, large_repeats, overrides)
     results["load_average_1min"] = [load_before, os.getloadavg()[0]]
+    results["targets"] = target_rows(results)
     return results
 
 
@@ -602,7 +603,7 @@ def print_results(results: dict[str, Any]) -> None:
             )
             print(f"    spans (median ms): {spans(big['spans_ms'])}")
             print(f"    spans (median CPU ms): {spans(big['spans_cpu_ms'])}")
-    rows = target_rows(results)
+    rows = results.get("targets") or target_rows(results)
     if rows:
         print("issue 21's service targets (node defaults), beside the core's ranking of this run:")
     for row in rows:
@@ -633,7 +634,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     if unknown:
         parser.error(f"--configurations: unknown {unknown}; valid: {', '.join(CONFIGURATIONS)}")
     results = run(args.repeats, args.large_repeats, args.mid_repeats, names)
-    results["targets"] = target_rows(results)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(results, indent=2) + "\n")
