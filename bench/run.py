@@ -481,6 +481,7 @@ def service_latency(arm: ArmWorkload, repeats: int) -> dict[str, Any]:
         return {
             "configuration": measured["description"],
             **measured["latency_10x101"],
+            "end_to_end_100x201": measured.get("end_to_end_100x201"),
             "end_to_end_1000x201": measured.get("end_to_end_1000x201"),
         }
 
@@ -489,6 +490,7 @@ def service_latency(arm: ArmWorkload, repeats: int) -> dict[str, Any]:
         "per_sample_off": flat("issue_comparable_per_sample_off"),
         "node_defaults": flat("node_defaults"),
         "least_response": flat("least_response"),
+        "targets": results["targets"],
         "load_average_1min": results["load_average_1min"],
     }
 
@@ -748,12 +750,21 @@ def print_table(results: dict[str, Any]) -> None:
                 f"{fmt(measured['empty_request_spin_until_ms']['median'])} ms "
                 "(spin_until_future_complete)"
             )
-        large = measured.get("end_to_end_1000x201")
-        if large:
-            print(
-                f"service end to end (1000 x 201, Baxter, {label}): "
-                f"{fmt(large['wall_s'], '.3f')} s, response {large['response_bytes']} bytes"
-            )
+        for key in ("end_to_end_100x201", "end_to_end_1000x201"):
+            large = measured.get(key)
+            if large:
+                print(
+                    f"service end to end ({large['grasps']} x {large['samples_per_grasp']}, "
+                    f"Baxter, {label}): {fmt(large['wall_s'], '.3f')} s, response "
+                    f"{large['response_bytes']} bytes"
+                )
+    for row in service.get("targets") or ():
+        print(
+            f"service target, node defaults, {row['row']}: {fmt(row['measured_ms'])} ms "
+            f"(target {fmt(row['target_ms'])} ms), core ranking {fmt(row['core_ranking_ms'])} "
+            f"ms (x{fmt(row['over_core_ranking'])}), the node's own work "
+            f"{fmt(row['node_share_ms'])} ms"
+        )
 
 
 if __name__ == "__main__":

@@ -2,15 +2,17 @@
 """Service cost of the grasp_safety node (issue 12): latency, where it goes, large requests.
 
 Baxter's right arm (example-robot-data), the benchmark box, grasps around it, a 2 s quintic
-trajectory; the node runs in-process (rclpy, MultiThreadedExecutor thread, as its console
-script runs it) and the client is a separate process (bench/service_client.py, a small rclpy
-node as a user's), driven over a pipe. Four node configurations:
+trajectory; the node runs in-process (rclpy, its NodeExecutor spun in a thread, as its
+console script runs it) and the client is a separate process (bench/service_client.py, a
+small rclpy node as a user's), driven over a pipe. Four node configurations:
 
 - ``issue_comparable``: ``posture.restarts`` 0 (the paper's single IK, what the node ran when
   issue 12's targets were written) and the default response;
 - ``issue_comparable_per_sample_off``: the same with ``response.per_sample`` false (scores
   and aggregates only, the first grasp's joint trajectory);
-- ``node_defaults``: the node's default parameters (posture selection with 8 restarts);
+- ``node_defaults``: the node's default parameters (posture selection with 8 restarts), the
+  benchmark box described by ``object.box_size_m`` (its corners: the exposed points, as
+  issue 21's targets count them);
 - ``least_response``: the least the node can be set to return (no per-sample arrays, no
   joint trajectory, one ISO/TS 15066 region): what the round trip costs beyond the ranking
   when the messages are as small as they get.
@@ -31,11 +33,18 @@ Each is measured for:
   readings of the machine's monotonic clock in both processes. The markers and the
   ``~/ranking`` publication are made only for a subscriber (none here): the markers are
   timed apart, not in the sum;
-- end to end, 1,000 grasps x 201 samples (dt 0.01 s), from the EventsExecutor client: wall
-  time of the call and the response's size in bytes (serialised RankGrasps response), with
-  the same spans once.
+- end to end, 100 and 1,000 grasps x 201 samples (dt 0.01 s), from the EventsExecutor
+  client: wall time of the call (median of ``--mid-repeats``, ``--large-repeats`` calls)
+  and the response's size in bytes (serialised RankGrasps response), with the same spans
+  measured between the calls.
 
-Usage: .venv/bin/python bench/service.py [--repeats 30] [--large-repeats 2] [--json OUT]
+At the end, issue 21's three service targets (node defaults: 10 x 101 median, 100 x 201 and
+1,000 x 201 end to end) beside the core's own ranking time of the same run (the ``rank``
+span), with what posture selection, the analyses, the node's own work (request conversion,
+response message, serialisation, the client's deserialisation) and the executors take.
+
+Usage: .venv/bin/python bench/service.py [--repeats 30] [--large-repeats 2] [--mid-repeats 5]
+[--configurations node_defaults,...] [--json OUT]
 (not a test; also run by bench/run.py). Figures are wall-clock: other processes on the cores
 inflate them (the load average is recorded).
 """
@@ -58,12 +67,12 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np
-from workload import ARMS, ArmWorkload, box_object, grasps_around_box
+from workload import ARMS, BOX_SIZE_M, ArmWorkload, box_object, grasps_around_box
 
 CONFIGURATIONS: dict[str, dict[str, Any]] = {
     "issue_comparable": {"posture.restarts": 0},
     "issue_comparable_per_sample_off": {"posture.restarts": 0, "response.per_sample": False},
-    "node_defaults": {},
+    "node_defaults": {"object.box_size_m": list(BOX_SIZE_M)},
     "least_response": {
         "posture.restarts": 0,
         "response.per_sample": False,
@@ -75,7 +84,10 @@ CONFIGURATIONS: dict[str, dict[str, Any]] = {
 DESCRIPTIONS = {
     "issue_comparable": "posture.restarts 0 (the paper's single IK), default response",
     "issue_comparable_per_sample_off": "posture.restarts 0, response.per_sample false",
-    "node_defaults": "the node's defaults (posture.restarts 8, default response)",
+    "node_defaults": (
+        "the node's defaults (posture.restarts 8, default response), the box described "
+        "(object.box_size_m: its corners are the exposed points analysed)"
+    ),
     "least_response": (
         "the least the node returns: posture.restarts 0, response.per_sample false, "
         "response.joint_trajectories 0, one ISO/TS 15066 region (chest)"
@@ -119,10 +131,9 @@ def running_node(
     """
     import rclpy
     from rclpy.context import Context
-    from rclpy.executors import MultiThreadedExecutor
     from rclpy.parameter import Parameter
 
-    from grasp_safety_ros.ros.executor import join_callbacks
+    from grasp_safety_ros.ros.executor import NodeExecutor, join_callbacks, spin_until
     from grasp_safety_ros.ros.node import EXECUTOR_THREADS, GraspSafetyNode
 
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
@@ -143,15 +154,18 @@ def running_node(
         context=context,
         parameter_overrides=[Parameter(k, value=v) for k, v in parameters.items()],
     )
-    executor = MultiThreadedExecutor(num_threads=EXECUTOR_THREADS, context=context)
+    executor = NodeExecutor(num_threads=EXECUTOR_THREADS, context=context)
     executor.add_node(node)
-    thread = threading.Thread(target=executor.spin, daemon=True)
+    spinning = threading.Event()
+    spinning.set()
+    thread = threading.Thread(target=spin_until, args=(executor, spinning), daemon=True)
     thread.start()
     try:
         yield node, {**os.environ, "ROS_DOMAIN_ID": str(domain_id)}
-    finally:
-        executor.shutdown()  # stop spinning and let callbacks end before destroying (as main)
+    finally:  # as the console script stops (node.run)
+        spinning.clear()
         thread.join(timeout=10.0)
+        executor.shutdown()
         join_callbacks(executor)
         node.destroy_node()
         rclpy.shutdown(context=context)
@@ -279,19 +293,26 @@ def samples_per_grasp(dt_s: float) -> int:
 
 
 def node_spans(node: Any, request: Any) -> dict[str, float]:
-    """Durations [s] of the node's steps for ``request``, done by hand with its functions and
-    its settings, and of the client's deserialisation of the response.
+    """Durations [s] of the node's steps for ``request``, done by hand with the functions its
+    service callback calls and its settings, and of the client's deserialisation of the
+    response.
 
-    ``<step>`` is the wall-clock time, ``<step>_cpu`` the CPU time of this thread (less
-    affected by other processes; the ranking's pool threads are not counted in it).
-    ``markers`` (built only for a subscriber) is timed too but is not a step of the round trip.
+    ``convert`` is the request's checks and conversion (check_no_subnormals, ranking_inputs);
+    ``rank``, ``posture`` and ``analyse`` the three calls of compute_ranking (``rank`` is the
+    core's own ranking: GraspSafetyEvaluator.rank, the single IK); ``response`` report_msg and
+    check_finite_result. ``<step>`` is the wall-clock time, ``<step>_cpu`` the CPU time of
+    this thread (less affected by other processes; the ranking's pool threads are not counted
+    in it). ``markers`` (built only for a subscriber) is timed too but is not a step of the
+    round trip.
     """
     from grasp_safety_msgs.srv import RankGrasps
     from rclpy.serialization import deserialize_message, serialize_message
 
-    from grasp_safety_ros.core.analyses.safety_report import analyse
+    from grasp_safety_ros.core.analyses.safety_report import analyse, posture_criterion
     from grasp_safety_ros.core.method.posture import select_postures
     from grasp_safety_ros.ros import conversions
+    from grasp_safety_ros.ros.message_checks import check_finite_result, check_no_subnormals
+    from grasp_safety_ros.ros.ranking_inputs import markers_builder, ranking_inputs
 
     spans: dict[str, float] = {}
     snapshot = node._snapshot()
@@ -304,56 +325,61 @@ def node_spans(node: Any, request: Any) -> dict[str, float]:
         spans[f"{name}_cpu"] = time.thread_time() - started_cpu
         return result
 
-    def convert() -> tuple[Any, Any, Any]:
-        trajectory = conversions.trajectory_from_path(
-            request.object_trajectory,
-            settings.base_frame,
-            settings.trajectory_dt_s,
-            settings.trajectory_duration_s,
-            settings.max_samples,
-        )
-        grasps = conversions.grasps_from_pose_array(
+    def convert() -> Any:
+        check_no_subnormals(request)
+        return ranking_inputs(
+            snapshot,
+            bundle,
             request.grasps,
-            settings.object_frame,
-            settings.base_frame,
-            trajectory,
-            settings.max_grasps,
+            conversions.object_trajectory_of_request(
+                request.object_trajectory, request.object_multi_dof_trajectory
+            ),
+            request.object_inertia,
+            request.metric,
+            "grasps",
+            None,
+            request.metric_point,
+            "grasp_quality",
+            request.joint_trajectories,
         )
-        inertia = conversions.object_inertia_from_msg(request.object_inertia, settings.max_mass_kg)
-        return trajectory, grasps, inertia
 
-    trajectory, grasps, inertia = span("convert", convert)
+    inputs = span("convert", convert)
+    grasps, inertia, trajectory = inputs.grasps, inputs.object_inertia, inputs.trajectory
     evaluator = bundle.evaluator
     ranking = span(
-        "rank", lambda: evaluator.rank(grasps, inertia, trajectory, bundle.seed, "mean")
+        "rank", lambda: evaluator.rank(grasps, inertia, trajectory, inputs.seed, inputs.metric)
     )
     ranking = span(
         "posture",
-        lambda: select_postures(evaluator, grasps, inertia, trajectory, ranking, settings.posture),
+        lambda: select_postures(
+            evaluator,
+            grasps,
+            inertia,
+            trajectory,
+            ranking,
+            settings.posture,
+            criterion=posture_criterion(bundle.robot, inputs.options),
+        ),
     )
     report = span(
         "analyse",
-        lambda: analyse(
-            evaluator, grasps, inertia, trajectory, settings.analysis, ranking=ranking
-        ),
+        lambda: analyse(evaluator, grasps, inertia, trajectory, inputs.options, ranking=ranking),
     )
     stamp = node.get_clock().now().to_msg()
-    message = span(
-        "response",
-        lambda: RankGrasps.Response(
-            success=True,
-            ranking=conversions.report_msg(
-                report, request.grasps, settings.base_frame, stamp, 0.0, settings.response
-            ),
-        ),
-    )
+
+    def response() -> Any:
+        message = conversions.report_msg(
+            report, request.grasps, settings.base_frame, stamp, 0.0, settings.response
+        )
+        check_finite_result(message)
+        return RankGrasps.Response(success=True, ranking=message)
+
+    message = span("response", response)
     data = span("serialise", lambda: serialize_message(message))
     span("deserialise", lambda: deserialize_message(data, RankGrasps.Response))
     span(
         "markers",
-        lambda: conversions.markers_msg(
-            ranking, grasps, trajectory, settings.base_frame, stamp, order=report.order
-        ),
+        markers_builder(ranking, report, grasps, trajectory, settings.base_frame, stamp),
     )
     return spans
 
@@ -417,9 +443,14 @@ def latency(arm: ArmWorkload, repeats: int, overrides: dict[str, Any]) -> dict[s
     return result
 
 
-def large(arm: ArmWorkload, repeats: int, overrides: dict[str, Any]) -> dict[str, Any]:
-    """End to end: 1,000 grasps x 201 samples through the service; the response's size."""
-    request = rank_request(arm, 1000)
+def end_to_end(
+    arm: ArmWorkload, num_grasps: int, repeats: int, overrides: dict[str, Any]
+) -> dict[str, Any]:
+    """End to end: ``num_grasps`` grasps x 201 samples through the service, from the
+    EventsExecutor client (median of ``repeats`` calls); the response's size; the spans,
+    measured by hand between the calls (medians)."""
+    request = rank_request(arm, num_grasps)
+    spans: dict[str, list[float]] = {}
     with (
         running_node(arm, 0.01, overrides) as (node, environment),
         clients(environment, "events") as (client,),
@@ -427,11 +458,13 @@ def large(arm: ArmWorkload, repeats: int, overrides: dict[str, Any]) -> dict[str
         client.command("rank 10")  # warm-up
         walls, computes = [], []
         for _ in range(repeats):
-            answer = client.command("rank 1000")
+            answer = client.command(f"rank {num_grasps}")
             walls.append(answer["round_trip_s"])
             computes.append(answer["compute_time_s"])
-        spans = node_spans(node, request)
+            for name, value in node_spans(node, request).items():
+                spans.setdefault(name, []).append(value)
         wait = client.wait
+    median = {name: float(np.median(values)) for name, values in spans.items()}
     result = {
         "robot": arm.name,
         "grasps": answer["grasps"],
@@ -443,43 +476,93 @@ def large(arm: ArmWorkload, repeats: int, overrides: dict[str, Any]) -> dict[str
         "wall_s": summary_ms(walls)["median"] / 1e3,
         "wall_ms": summary_ms(walls),
         "node_compute_ms": summary_ms(computes),
+        "ranking_ms": summary_ms(spans["rank"]),
         "response_bytes": answer["response_bytes"],
-        "spans_ms": {name: 1e3 * spans[name] for name in SPANS},
-        "spans_cpu_ms": {name: 1e3 * spans[f"{name}_cpu"] for name in SPANS},
-        "markers_when_subscribed_ms": 1e3 * spans["markers"],
+        "spans_ms": {name: 1e3 * median[name] for name in SPANS},
+        "spans_cpu_ms": {name: 1e3 * median[f"{name}_cpu"] for name in SPANS},
+        "markers_when_subscribed_ms": 1e3 * median["markers"],
     }
+    result["wall_over_ranking"] = result["wall_s"] * 1e3 / result["ranking_ms"]["median"]
     result["spans_ms"][REST] = 1e3 * result["wall_s"] - sum(result["spans_ms"].values())
     return result
 
 
-def run(repeats: int, large_repeats: int) -> dict[str, Any]:
-    """Both measurements on Baxter for each configuration, with the load average around them.
+TARGETS = (
+    ("latency_10x101", "10 grasps x 101 samples, median", 20.0),
+    ("end_to_end_100x201", "100 grasps x 201 samples, one client", 200.0),
+    ("end_to_end_1000x201", "1,000 grasps x 201 samples, end to end", 3000.0),
+)
+"""Issue 21's service targets, node defaults: (result key, what, target [ms])."""
+NODE_SHARE = ("convert", "response", "serialise", "deserialise")
+"""The spans that are the node's own work around the core (and the client's decoding)."""
+
+
+def run(
+    repeats: int,
+    large_repeats: int,
+    mid_repeats: int = 5,
+    configurations: Sequence[str] = tuple(CONFIGURATIONS),
+) -> dict[str, Any]:
+    """The measurements on Baxter for each configuration, with the load average around them.
 
     Returns:
         ``{configuration: {"parameters", "description", "latency_10x101",
-        "end_to_end_1000x201"}, "load_average_1min": [before, after]}`` with the
-        configurations of CONFIGURATIONS.
+        "end_to_end_100x201", "end_to_end_1000x201"}, "load_average_1min": [before,
+        after], "targets": target_rows(...)}`` with ``configurations`` (of CONFIGURATIONS); an
+        end-to-end row is left out when its repeats are 0.
     """
     load_before = os.getloadavg()[0]
     arm = ARMS["baxter"]
     results: dict[str, Any] = {}
-    for name, overrides in CONFIGURATIONS.items():
+    for name in configurations:
+        overrides = CONFIGURATIONS[name]
         results[name] = {
             "parameters": overrides,
             "description": DESCRIPTIONS[name],
             "latency_10x101": latency(arm, repeats, overrides),
         }
+        if mid_repeats > 0:
+            results[name]["end_to_end_100x201"] = end_to_end(arm, 100, mid_repeats, overrides)
         if large_repeats > 0:
-            results[name]["end_to_end_1000x201"] = large(arm, large_repeats, overrides)
+            results[name]["end_to_end_1000x201"] = end_to_end(arm, 1000, large_repeats, overrides)
     results["load_average_1min"] = [load_before, os.getloadavg()[0]]
+    results["targets"] = target_rows(results)
     return results
+
+
+def target_rows(results: dict[str, Any]) -> list[dict[str, Any]]:
+    """Issue 21's three service rows (node defaults) beside the core's own ranking time of
+    the same run (``rank`` span: GraspSafetyEvaluator.rank on the same inputs) and the node's
+    own share (NODE_SHARE spans); empty when node_defaults was not measured."""
+    measured = results.get("node_defaults")
+    rows: list[dict[str, Any]] = []
+    for key, what, target_ms in TARGETS if measured else ():
+        figures = measured.get(key)
+        if figures is None:
+            continue
+        wall_ms = figures["median_ms"] if key == "latency_10x101" else 1e3 * figures["wall_s"]
+        spans = figures["spans_ms"]
+        rows.append(
+            {
+                "row": what,
+                "measured_ms": wall_ms,
+                "target_ms": target_ms,
+                "core_ranking_ms": spans["rank"],
+                "over_core_ranking": wall_ms / spans["rank"],
+                "posture_ms": spans["posture"],
+                "analyse_ms": spans["analyse"],
+                "node_share_ms": sum(spans[name] for name in NODE_SHARE),
+                "rest_ms": spans[REST],
+            }
+        )
+    return rows
 
 
 def print_results(results: dict[str, Any]) -> None:
     def spans(values: dict[str, float]) -> str:
         return ", ".join(f"{k} {v:.2f}" for k, v in values.items())
 
-    for name in CONFIGURATIONS:
+    for name in (name for name in CONFIGURATIONS if name in results):
         print(f"[{name}] {results[name]['description']}")
         small = results[name]["latency_10x101"]
         lat, rank = small["latency_ms"], small["ranking_ms"]
@@ -506,26 +589,51 @@ def print_results(results: dict[str, Any]) -> None:
             f"    empty request (GetParameters), median: {', '.join(floors)}; markers (built "
             f"only for a subscriber) {small['markers_when_subscribed_ms']:.2f} ms"
         )
-        big = results[name].get("end_to_end_1000x201")
-        if big:
+        for key in ("end_to_end_100x201", "end_to_end_1000x201"):
+            big = results[name].get(key)
+            if not big:
+                continue
             print(
                 f"  service end to end {big['grasps']} x {big['samples_per_grasp']} (Baxter, "
-                f"client: {big['client']}): "
-                f"{big['wall_s']:.3f} s (node compute {big['node_compute_ms']['median']:.0f} ms),"
-                f" response {big['response_bytes']} bytes ({big['response_bytes'] / 1e6:.2f} MB)"
+                f"client: {big['client']}, median of {big['repeats']}): {big['wall_s']:.3f} s "
+                f"(node compute {big['node_compute_ms']['median']:.0f} ms; ranking alone "
+                f"{big['ranking_ms']['median']:.1f} ms, wall / ranking = "
+                f"{big['wall_over_ranking']:.1f}), response {big['response_bytes']} bytes "
+                f"({big['response_bytes'] / 1e6:.2f} MB)"
             )
-            print(f"    spans (ms): {spans(big['spans_ms'])}")
-            print(f"    spans (CPU ms): {spans(big['spans_cpu_ms'])}")
+            print(f"    spans (median ms): {spans(big['spans_ms'])}")
+            print(f"    spans (median CPU ms): {spans(big['spans_cpu_ms'])}")
+    rows = results.get("targets") or target_rows(results)
+    if rows:
+        print("issue 21's service targets (node defaults), beside the core's ranking of this run:")
+    for row in rows:
+        print(
+            f"  {row['row']}: {row['measured_ms']:.1f} ms (target {row['target_ms']:.0f} ms); "
+            f"core ranking {row['core_ranking_ms']:.1f} ms (x{row['over_core_ranking']:.1f}); "
+            f"posture selection {row['posture_ms']:.1f} ms, analyses {row['analyse_ms']:.1f} "
+            f"ms, the node's own work ({', '.join(NODE_SHARE)}) {row['node_share_ms']:.1f} ms, "
+            f"executors and middleware {row['rest_ms']:.1f} ms"
+        )
     print(f"load average (1 min) before/after: {results['load_average_1min']}")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=30)
-    parser.add_argument("--large-repeats", type=int, default=2)
+    parser.add_argument("--large-repeats", type=int, default=2, help="1,000 x 201 calls")
+    parser.add_argument("--mid-repeats", type=int, default=5, help="100 x 201 calls")
+    parser.add_argument(
+        "--configurations",
+        default=",".join(CONFIGURATIONS),
+        help=f"comma-separated, of: {', '.join(CONFIGURATIONS)}",
+    )
     parser.add_argument("--json", type=Path, help="write the results as JSON here")
     args = parser.parse_args(argv)
-    results = run(args.repeats, args.large_repeats)
+    names = [name for name in args.configurations.split(",") if name]
+    unknown = sorted(set(names) - set(CONFIGURATIONS))
+    if unknown:
+        parser.error(f"--configurations: unknown {unknown}; valid: {', '.join(CONFIGURATIONS)}")
+    results = run(args.repeats, args.large_repeats, args.mid_repeats, names)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(results, indent=2) + "\n")

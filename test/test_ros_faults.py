@@ -417,6 +417,25 @@ def test_ranking_stops_soon_after_its_client_leaves(
         restore_limits(ros)
 
 
+def test_service_events_wait_for_a_ranking_that_needs_them(ros: NodeUnderTest) -> None:
+    """The service's introspection events (two per request) are not taken by the executor
+    (each woke it and ran a callback beside the ranking: 4-5 ms of a 10 x 101 round trip);
+    a ranking that needs its client (past its first check) reads them by hand, and finds the
+    client that sent it, present in the graph."""
+    watcher = ros.node._request_clients
+    with watcher._lock:
+        watcher._take_events()  # what earlier tests left
+        watcher._arrivals.clear()
+    response = ros.rank(book_request())
+    assert response.success, response.message
+    assert not ros.spin_until(lambda: len(watcher._arrivals) > 0, 1.0)  # the executor took none
+    with watcher._lock:
+        watcher._take_events()
+    arrivals = list(watcher._arrivals)
+    assert len(arrivals) == 1  # the request received (response-sent events are not kept)
+    assert arrivals[0][2] in watcher.clients()  # the test client's, in the graph
+
+
 # --- An int where a float is expected (issue 19) ---------------------------------------------
 
 INT_CLIENT = """

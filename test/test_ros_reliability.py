@@ -27,6 +27,7 @@ from grasp_safety_ros.ros.conversions import (
     grasps_with_joint_trajectories,
     object_inertia_from_msg,
 )
+from grasp_safety_ros.ros.executor import join_started
 from grasp_safety_ros.ros.message_checks import (
     INT_AS_FLOAT_HINT,
     NonFiniteResultError,
@@ -227,6 +228,46 @@ def test_fair_lock_hands_over_to_a_waiter_after_a_slice() -> None:
     assert served == ["small"] and waited > 0.0 and lock.locked()
     lock.release()
     assert not lock.locked()
+
+
+def test_fair_lock_never_makes_a_lone_ranking_wait() -> None:
+    """Past its slice, a ranking nobody waits behind keeps the lock at once (no hand-over,
+    no queueing): slices cost a lone client nothing."""
+    lock = FairComputeLock()
+    assert lock.acquire(timeout=0.0)  # free: taken at once
+    started = time.perf_counter()
+    assert all(lock.share(slice_s=0.0) == 0.0 for _ in range(1000))
+    assert lock.locked() and lock.waiting() == 0
+    assert time.perf_counter() - started < 0.5  # 1,000 checks, no wait among them
+    lock.release()
+
+
+class _StartedLate(threading.Thread):
+    """A thread launched whose start() was cut short: join() raises until it counts as
+    started (as CPython's, "cannot join thread before it is started")."""
+
+    def __init__(self, refusals: int) -> None:
+        super().__init__()
+        self.refusals, self.joined = refusals, False
+
+    def join(self, timeout: float | None = None) -> None:
+        if self.refusals > 0:
+            self.refusals -= 1
+            raise RuntimeError("cannot join thread before it is started")
+        self.joined = True
+
+
+def test_join_started_waits_for_a_thread_whose_start_was_cut_short() -> None:
+    """The node's main joins its spin thread at a SIGINT; a signal that interrupted the spin
+    thread's start() made that join raise (exit 1 instead of 0, the thread left spinning)."""
+    with pytest.raises(RuntimeError, match="before it is started"):
+        threading.Thread().join()  # what main's plain join did
+    late = _StartedLate(refusals=5)
+    join_started(late, 10.0)
+    assert late.joined and late.refusals == 0
+    started = time.monotonic()
+    join_started(threading.Thread(), 0.05)  # never launched: given up after the timeout
+    assert time.monotonic() - started < 5.0
 
 
 def test_fair_lock_times_out_and_stops() -> None:

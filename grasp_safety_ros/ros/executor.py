@@ -8,6 +8,7 @@ the ranking when that client leaves (ranking_job.ClientWatch).
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -72,6 +73,23 @@ def spin_until(executor: Executor, spinning: threading.Event) -> None:
             executor.spin_once(timeout_sec=SPIN_PERIOD_S)
     except ExternalShutdownException:  # rclpy.shutdown() elsewhere: main() then stops
         pass
+
+
+def join_started(thread: threading.Thread, timeout_s: float) -> None:
+    """Join ``thread`` (at most ``timeout_s``) even when its ``start()`` was cut short: a
+    signal handler's exception in the main thread can interrupt ``start()`` after the thread
+    was launched but before it counts as started, and ``join()`` then raises ("cannot join
+    thread before it is started") while the thread runs on. Waits for it to count as started;
+    a thread never launched is given up after ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        try:
+            thread.join(timeout=max(0.0, deadline - time.monotonic()))
+            return
+        except RuntimeError:  # launched, not yet started (or never launched)
+            if time.monotonic() >= deadline:
+                return
+            time.sleep(0.001)
 
 
 def join_callbacks(executor: MultiThreadedExecutor) -> None:

@@ -79,7 +79,7 @@ from .errors import (
     ShuttingDownError,
     StartupError,
 )
-from .executor import NodeExecutor, join_callbacks, request_header, spin_until
+from .executor import NodeExecutor, join_callbacks, join_started, request_header, spin_until
 from .memory import release_free_heap
 from .message_checks import check_finite_result, check_no_subnormals
 from .on_demand import OnDemandPublisher
@@ -780,8 +780,8 @@ def run(args: list[str] | None = None) -> int:
             node.abandon_rankings()
         if executor is not None:
             spinning.clear()  # the spin thread leaves its wait before the executor goes
-            if spinner is not None:
-                spinner.join(timeout=10.0)
+            if spinner is not None:  # its start may have been cut short by the signal
+                join_started(spinner, 10.0)
             executor.shutdown()
             join_callbacks(executor)
         abandoned = 0 if node is None else node.abandoned_rankings  # None: signal at start-up

@@ -51,6 +51,12 @@ def float64_array(values: Sequence[float] | np.ndarray) -> array.array:
     return array.array("d", np.ascontiguousarray(values, dtype=np.float64).tobytes())
 
 
+def has_slots(message_type: Any, fields: Sequence[str]) -> bool:
+    """Whether a generated message class keeps exactly ``fields`` (and ``_check_fields``) in
+    its slots: the classes the slot-filling constructors here were written for (Jazzy's)."""
+    return set(message_type.__slots__) == {*(f"_{name}" for name in fields), "_check_fields"}
+
+
 def _slot_constructor(message_type: Any, fields: tuple[str, ...]) -> Callable[..., Any]:
     """A constructor of ``message_type`` from all its ``fields``, given positionally.
 
@@ -61,7 +67,7 @@ def _slot_constructor(message_type: Any, fields: tuple[str, ...]) -> Callable[..
     not exactly these fields gets its keyword constructor.
     """
     slots = tuple(f"_{name}" for name in fields)
-    if set(message_type.__slots__) != {*slots, "_check_fields"}:
+    if not has_slots(message_type, fields):
         return lambda *values: message_type(**dict(zip(fields, values, strict=True)))
     check_fields = message_type()._check_fields
 
@@ -79,15 +85,16 @@ def _template_constructor(template: Any) -> Callable[..., Any]:
     """A constructor of messages equal to ``template`` but for the fields given by keyword.
 
     Like _slot_constructor it fills the generated class's slots directly: numbers and strings
-    of ``template`` are shared, every sequence and nested message is made anew (empty; the
-    template's must be empty), the keyword fields are stored as given (they must already have
+    of ``template`` are shared, every sequence and nested message is made anew (empty or the
+    nested type's defaults, by its own template constructor; the template's must be so), the
+    keyword fields are stored as given (they must already have
     the field types, as for _slot_constructor). A class that is not the kind this was written
     for (slots other than its fields and ``_check_fields``) gets a copy of ``template`` with
     the fields set through its setters.
     """
     message_type = type(template)
     fields = message_type.get_fields_and_field_types()
-    if set(message_type.__slots__) != {*(f"_{name}" for name in fields), "_check_fields"}:
+    if not has_slots(message_type, tuple(fields)):
 
         def set_fields(**values: Any) -> Any:
             message = copy.deepcopy(template)
@@ -105,9 +112,10 @@ def _template_constructor(template: Any) -> Callable[..., Any]:
             lists.append(f"_{name}")
         elif isinstance(value, bool | int | float | str):
             shared.append((f"_{name}", value))
-        else:
-            messages.append((f"_{name}", type(value)))
+        else:  # a nested message: made by its own template constructor (its defaults)
+            messages.append((f"_{name}", _template_constructor(type(value)())))
     check_fields, new = template._check_fields, message_type.__new__
+    slot_of = {name: f"_{name}" for name in fields}
 
     def construct(**values: Any) -> Any:
         message = new(message_type)
@@ -117,10 +125,10 @@ def _template_constructor(template: Any) -> Callable[..., Any]:
             setattr(message, slot, array.array(typecode))
         for slot in lists:
             setattr(message, slot, [])
-        for slot, nested_type in messages:
-            setattr(message, slot, nested_type())
+        for slot, make in messages:
+            setattr(message, slot, make())
         for name, value in values.items():
-            setattr(message, f"_{name}", value)
+            setattr(message, slot_of[name], value)
         message._check_fields = check_fields
         return message
 

@@ -288,19 +288,21 @@ def transforms_from_pose_msgs(
         values = np.array([_pose_numbers(p) for p in poses], dtype=float).reshape(-1, 7)
     except (TypeError, ValueError):  # not numbers: the per-pose check names the field
         values = np.full((len(poses), 7), np.nan)
+    quats = values[:, 3:]
     with np.errstate(over="ignore"):  # a huge component: the norm is inf, refused below
-        norms = [float(np.linalg.norm(quat)) for quat in values[:, 3:]]
+        # np.linalg.norm of a vector is sqrt(q.dot(q)): the same numbers, without its checks
+        norms = np.sqrt(np.array([q.dot(q) for q in quats]).reshape(-1))
     if not (
         np.all(np.isfinite(values))
-        and all(abs(norm - 1.0) <= QUATERNION_NORM_TOLERANCE for norm in norms)
+        and np.all(np.abs(norms - 1.0) <= QUATERNION_NORM_TOLERANCE)
         and np.all(np.abs(values[:, :3]) <= MAX_ABS_POSITION_M)
     ):
         return [transform_from_pose_msg(p, f"{field}[{i}]{member}") for i, p in enumerate(poses)]
-    transforms = []
-    for row, norm in zip(values, norms, strict=True):
-        x, y, z, w = row[3:] / norm
-        transforms.append(pin.SE3(pin.Quaternion(w, x, y, z).toRotationMatrix(), row[:3].copy()))
-    return transforms
+    units = (quats / norms[:, None]).tolist()  # each row divided by its norm, as there
+    return [
+        pin.SE3(pin.Quaternion(w, x, y, z).toRotationMatrix(), position)
+        for (x, y, z, w), position in zip(units, values[:, :3], strict=True)
+    ]
 
 
 def grasps_from_pose_array(
