@@ -496,6 +496,72 @@ def service_latency(arm: ArmWorkload, repeats: int) -> dict[str, Any]:
 
 
 # ----------------------------------------------------------------------------- main
+def issue21_rows(
+    arms: dict[str, Any], pipeline: dict[str, Any], service: dict[str, Any]
+) -> list[dict[str, Any]]:
+    """Issue 21's target table, measured in this run: (measure, value, unit, target, met)."""
+    core = pipeline["in_process"]
+    cli = pipeline["cli"]
+
+    def row(measure: str, value: float | None, unit: str, target: float) -> dict[str, Any]:
+        met = None if value is None else value <= target
+        return {"measure": measure, "value": value, "unit": unit, "target": target, "met": met}
+
+    rows = [
+        row(
+            "CLI, 100 x 201, defaults, --json, wall incl. start-up",
+            cli["rank_100"]["wall_s"],
+            "s",
+            1.5,
+        ),
+        row("CLI, 1,000 x 201, defaults, --json", cli["rank_1000"]["wall_s"], "s", 6.0),
+        row("default analyses vs the ranking's own time", core["analyses_vs_ranking"], "x", 1.0),
+        row(
+            "posture selection (8 restarts) vs single-IK ranking",
+            core["postures_vs_ranking"],
+            "x",
+            1.5,
+        ),
+    ]
+    targets = {t["row"]: t for t in service.get("targets") or ()}
+    for label, key, target_ms in (
+        ("service, node defaults, 10 x 101, median", "10 grasps x 101 samples, median", 20.0),
+        (
+            "service, node defaults, 100 x 201, one client",
+            "100 grasps x 201 samples, one client",
+            200.0,
+        ),
+        (
+            "service, node defaults, 1,000 x 201, end to end",
+            "1,000 grasps x 201 samples, end to end",
+            3000.0,
+        ),
+    ):
+        measured = targets.get(key)
+        rows.append(
+            row(label, None if measured is None else measured["measured_ms"], "ms", target_ms)
+        )
+    for name, arm in arms.items():
+        rows.append(
+            row(
+                f"core us per (grasp, sample), {name} (no regression: <= 2.2)",
+                arm["us_per_sample_with_ik"]["median"],
+                "us",
+                2.2,
+            )
+        )
+    return rows
+
+
+def print_issue21(rows: list[dict[str, Any]]) -> None:
+    """The rows of ``issue21_rows`` as a table."""
+    print("\nIssue 21's targets, this run (one machine, same minutes):")
+    for r in rows:
+        value = "n/a" if r["value"] is None else f"{r['value']:.3g} {r['unit']}"
+        verdict = {True: "met", False: "NOT met", None: "not measured"}[r["met"]]
+        print(f"  {r['measure']}: {value} (target <= {r['target']:g} {r['unit']}): {verdict}")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", type=Path, help="write the results as JSON here")
@@ -621,6 +687,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "posture_selection": posture_selection,
         "whole_arm": whole_arm,
         "pipeline": pipeline,
+        "issue21_targets": issue21_rows(arms, pipeline, service),
         "pykdl_unavailable_reason": kdl_reason or None,
         "arms": arms,
         "machine": {
@@ -645,6 +712,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     print_postures(posture_selection)
     print_whole_arm(whole_arm)
     print_pipeline(pipeline)
+    print_issue21(results["issue21_targets"])
     return 0
 
 
