@@ -19,7 +19,7 @@ import pinocchio as pin
 from ..exceptions import InvalidInputError
 from ..method.effective_mass import augmented_model
 from ..method.ranking import Grasp, GraspEvaluation, GraspSafetyEvaluator, Ranking, aggregate
-from ..method.terms import SampleTerms, grasp_terms
+from ..method.terms import SampleTerms, grasp_terms, grasps_terms
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
 from ..model.trajectory import Trajectory
@@ -29,6 +29,7 @@ from .exposed_points import (
     check_metric_point,
     check_points_in_object,
     evaluate_exposed_points,
+    evaluate_exposed_points_on_terms,
     metric_point_series,
 )
 from .iso15066 import (
@@ -53,6 +54,7 @@ from .whole_arm import (
     WholeArmPostureCriterion,
     check_exposed_points_m,
     evaluate_whole_arm,
+    evaluate_whole_arm_on_terms,
     order_by_whole_arm,
     resolve_arm_sites,
 )
@@ -244,13 +246,29 @@ def analyse(
         if progress is not None:
             progress(done, per_grasp)
 
-    # Shared by every analysis: each grasp's motion, and for a feasible grasp the terms along
-    # its joint path (compiled chains) or else its augmented model (an infeasible grasp's
-    # analyses need neither).
+    # Shared by every analysis: each grasp's motion, and for the feasible grasps the terms
+    # along their joint paths, all in one kernel call (compiled chains), or else each one's
+    # augmented model (an infeasible grasp's analyses need neither).
     motions = [evaluator.trajectory_for(g, trajectory) for g in grasps]
     models: dict[int, pin.Model] = {}
     chain = evaluator.ik.chain if evaluator.ik.compiled else None
-    terms: dict[int, SampleTerms] = {}
+    feasible_grasps = [k for k, e in enumerate(evaluations) if e.feasible]
+    row_of = {k: row for row, k in enumerate(feasible_grasps)}
+    batch: list[tuple[SampleTerms, np.ndarray]] = []
+
+    def shared_terms() -> tuple[SampleTerms, np.ndarray]:
+        """The terms of every feasible grasp (axis 0 in ``feasible_grasps`` order), counts."""
+        if not batch:
+            batch.append(
+                grasps_terms(
+                    robot,
+                    chain,
+                    object_inertia,
+                    [grasps[k].transform_tip_to_object for k in feasible_grasps],
+                    [evaluations[k].joint_positions for k in feasible_grasps],
+                )
+            )
+        return batch[0]
 
     def terms_of(k: int, joint_positions: np.ndarray | None = None) -> SampleTerms | None:
         """Grasp k's terms along its evaluated joint path (or along ``joint_positions``)."""
@@ -259,9 +277,8 @@ def analyse(
         if joint_positions is not None:
             transform = grasps[k].transform_tip_to_object
             return grasp_terms(robot, chain, object_inertia, transform, joint_positions)
-        if k not in terms:
-            terms[k] = terms_of(k, evaluations[k].joint_positions)
-        return terms[k]
+        terms, counts = shared_terms()
+        return terms.of_grasp(row_of[k], int(counts[row_of[k]]))
 
     def model_of(k: int) -> pin.Model | None:
         if not evaluations[k].feasible:
@@ -272,23 +289,27 @@ def analyse(
 
     exposed: tuple[ExposedPointsEvaluation, ...] = ()
     if options.points_in_object_m is not None:
-        exposed_list = []
-        for k, (e, g) in enumerate(zip(evaluations, grasps, strict=True)):
-            shared = terms_of(k)
-            exposed_list.append(
-                evaluate_exposed_points(
-                    robot,
-                    e,
-                    object_inertia,
-                    g,
-                    motions[k],
-                    options.points_in_object_m,
-                    None if shared is not None else model_of(k),
-                    shared,
-                )
+        points = options.points_in_object_m
+        exposed_list = [
+            evaluate_exposed_points(robot, e, object_inertia, g, motions[k], points, model_of(k))
+            if chain is None or not e.feasible
+            else None
+            for k, (e, g) in enumerate(zip(evaluations, grasps, strict=True))
+        ]
+        if chain is not None and feasible_grasps:
+            on_terms = evaluate_exposed_points_on_terms(
+                robot,
+                [evaluations[k] for k in feasible_grasps],
+                [grasps[k] for k in feasible_grasps],
+                [motions[k] for k in feasible_grasps],
+                points,
+                *shared_terms(),
             )
+            for k, result in zip(feasible_grasps, on_terms, strict=True):
+                exposed_list[k] = result
+        for _ in grasps:
             step()
-        exposed = tuple(exposed_list)
+        exposed = tuple(e for e in exposed_list if e is not None)
     redundancy: tuple[RedundancyResolution, ...] = ()
     if options.redundancy:
         config = RedundancyConfig(metric=metric, max_joint_step=evaluator.config.ik.max_joint_step)
@@ -356,25 +377,20 @@ def analyse(
     arm_sites = None
     if options.whole_arm:
         arm_sites = resolve_arm_sites(robot, options.arm_points_m)
-        assessed = []
-        for k, (e, g) in enumerate(zip(evaluations, grasps, strict=True)):
-            assessed.append(
-                evaluate_whole_arm(
-                    robot,
-                    e,
-                    object_inertia,
-                    g,
-                    motions[k],
-                    arm_sites,
-                    options.iso_regions,
-                    model_of(k),
-                    redundancy[k].joint_positions
-                    if redundancy and redundancy[k].applied
-                    else None,
-                )
-            )
+        whole_arm = _assess_whole_arm(
+            evaluator,
+            evaluations,
+            grasps,
+            motions,
+            object_inertia,
+            arm_sites,
+            options.iso_regions,
+            [r.joint_positions if r.applied else None for r in redundancy] if redundancy else None,
+            shared_terms if chain is not None else None,
+            model_of,
+        )
+        for _ in grasps:
             step()
-        whole_arm = tuple(assessed)
     if options.rank_by == "effort":
         order = order_by_effort(effort, options.effort_criterion)
     elif options.rank_by == "whole_arm":
@@ -427,3 +443,73 @@ def _assess_iso(
         assessed[k] if k in assessed else assess_grasp(evaluation, regions)
         for k, evaluation in enumerate(evaluations)
     ]
+
+
+def _assess_whole_arm(
+    evaluator: GraspSafetyEvaluator,
+    evaluations: Sequence[GraspEvaluation],
+    grasps: Sequence[Grasp],
+    motions: Sequence[Trajectory],
+    object_inertia: ObjectInertia,
+    sites: ArmSites,
+    iso_regions: Sequence[str] | None,
+    resolved: Sequence[np.ndarray | None] | None,
+    shared_terms: Callable[[], tuple[SampleTerms, np.ndarray]] | None,
+    model_of: Callable[[int], pin.Model | None],
+) -> tuple[WholeArmEvaluation, ...]:
+    """The whole-arm evaluation of every grasp: the feasible ones along their evaluated
+    joint paths on the shared terms (``shared_terms``: compiled chains), those with a joint
+    path of their own (``resolved``: the redundancy resolution's) on terms along it, in one
+    more kernel call; the Pinocchio path when there are no terms."""
+    robot = evaluator.robot
+    regions = select_regions(None if iso_regions is None else list(iso_regions))
+    results: list[WholeArmEvaluation | None] = [None] * len(grasps)
+    feasible = [k for k, e in enumerate(evaluations) if e.feasible]
+    own = [k for k in feasible if resolved is not None and resolved[k] is not None]
+    if shared_terms is not None and feasible:
+        chain = evaluator.ik.chain
+        on_path = [k for k in feasible if k not in set(own)]
+        groups: list[tuple[list[int], tuple[SampleTerms, np.ndarray], list[np.ndarray]]] = []
+        if on_path:
+            terms, counts = shared_terms()
+            rows = [feasible.index(k) for k in on_path] if own else list(range(len(feasible)))
+            if own:
+                terms = SampleTerms(*(array[rows] for array in terms))
+                counts = counts[rows]
+            groups.append(
+                (on_path, (terms, counts), [evaluations[k].joint_positions for k in on_path])
+            )
+        if own:
+            paths = [resolved[k] for k in own]  # type: ignore[index]
+            transforms = [grasps[k].transform_tip_to_object for k in own]
+            groups.append(
+                (own, grasps_terms(robot, chain, object_inertia, transforms, paths), paths)
+            )
+        for indices, (terms, counts), paths in groups:
+            assessed = evaluate_whole_arm_on_terms(
+                robot,
+                [evaluations[k] for k in indices],
+                [motions[k] for k in indices],
+                [grasps[k] for k in indices],
+                sites,
+                regions,
+                terms,
+                counts,
+                paths,
+            )
+            for k, result in zip(indices, assessed, strict=True):
+                results[k] = result
+    for k, (e, g) in enumerate(zip(evaluations, grasps, strict=True)):
+        if results[k] is None:
+            results[k] = evaluate_whole_arm(
+                robot,
+                e,
+                object_inertia,
+                g,
+                motions[k],
+                sites,
+                iso_regions,
+                model_of(k),
+                None if resolved is None else resolved[k],
+            )
+    return tuple(results)  # type: ignore[arg-type]

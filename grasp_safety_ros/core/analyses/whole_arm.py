@@ -41,7 +41,9 @@ from ..exceptions import InvalidInputError
 from ..input_checks import finite_array, read_only
 from ..method.effective_mass import augmented_model
 from ..method.executable import joint_velocities_accelerations
+from ..method.points import site_masses, valid_rows
 from ..method.ranking import Grasp, GraspEvaluation
+from ..method.terms import SampleTerms
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
 from ..model.trajectory import ObjectPath, Trajectory
@@ -254,6 +256,21 @@ class SiteExposure(NamedTuple):
     effective_mass_kg: np.ndarray
 
 
+def _largest_mass_directions(mobilities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per mobility (S, 3, 3) [1/kg] of a site at rest: the unit direction (S, 3) of largest
+    effective mass it can move in and that mass (S,) [kg] (the smallest eigenvalue above
+    EIGENVALUE_RELATIVE_TOLERANCE times the largest; inf where A = 0)."""
+    eigenvalues, eigenvectors = np.linalg.eigh(mobilities)
+    threshold = EIGENVALUE_RELATIVE_TOLERANCE * eigenvalues[:, -1:]
+    movable = eigenvalues > np.maximum(threshold, 0.0)
+    first = np.where(movable.any(axis=1), np.argmax(movable, axis=1), 0)
+    rows = np.arange(len(first))
+    smallest = eigenvalues[rows, first]
+    can_move = movable.any(axis=1)
+    masses = np.where(can_move, 1.0 / np.where(can_move, smallest, 1.0), np.inf)
+    return eigenvectors[rows, :, first], masses
+
+
 def site_exposure(
     sites: ArmSites, terms: ArmTerms, transform_base_to_world: pin.SE3
 ) -> SiteExposure:
@@ -267,15 +284,9 @@ def site_exposure(
     with np.errstate(divide="ignore"):  # stationary rows (0 direction) are replaced below
         masses = 1.0 / np.einsum("nka,nkab,nkb->nk", directions, mobilities, directions)
     if stationary.any():
-        eigenvalues, eigenvectors = np.linalg.eigh(mobilities[stationary])
-        threshold = EIGENVALUE_RELATIVE_TOLERANCE * eigenvalues[:, -1:]
-        movable = eigenvalues > np.maximum(threshold, 0.0)
-        first = np.where(movable.any(axis=1), np.argmax(movable, axis=1), 0)
-        rows = np.arange(len(first))
-        smallest = eigenvalues[rows, first]
-        directions[stationary] = eigenvectors[rows, :, first]
-        can_move = movable.any(axis=1)
-        masses[stationary] = np.where(can_move, 1.0 / np.where(can_move, smallest, 1.0), np.inf)
+        directions[stationary], masses[stationary] = _largest_mass_directions(
+            mobilities[stationary]
+        )
     speeds = np.where(stationary, 0.0, speeds)
     rotation = transform_base_to_world.rotation
     return SiteExposure(
@@ -332,11 +343,7 @@ def tip_following_joint_velocities(
         tip_twists_in_world: (N, 6) tip twists (linear [m/s], angular [rad/s]), world axes.
         times_s, joint_positions: The samples (N,), (N, n); continuous joints are unwrapped.
     """
-    positions = np.array(joint_positions, dtype=float)
-    continuous = ~np.isfinite(robot.lower_limits)
-    if continuous.any() and len(positions) > 1:
-        positions[:, continuous] = np.unwrap(positions[:, continuous], axis=0)
-    spline_rates, _ = joint_velocities_accelerations(times_s, positions)
+    spline_rates = _spline_rates(robot, times_s, joint_positions)
     pseudo_inverse = np.linalg.pinv(tip_jacobians, rcond=1e-10)  # (N, n, 6)
     residual = tip_twists_in_world - (tip_jacobians @ spline_rates[..., None])[..., 0]
     return spline_rates + (pseudo_inverse @ residual[..., None])[..., 0]
@@ -374,34 +381,58 @@ def assess_sites(
 ) -> tuple[WholeArmRegion, ...]:
     """Each region's worst case over (N, K) site speeds [m/s] and effective masses [kg]."""
     speeds = np.asarray(speed_m_s, dtype=float)
-    assessed = []
+    masses = np.asarray(effective_mass_kg, dtype=float)
+    return _assess_sites_batch(speeds[None], masses[None], [duration_s], regions)[0]
+
+
+def _assess_sites_batch(
+    speed_m_s: np.ndarray,
+    effective_mass_kg: np.ndarray,
+    durations_s: Sequence[float],
+    regions: Sequence[BodyRegion],
+) -> list[tuple[WholeArmRegion, ...]]:
+    """``assess_sites`` of G motions at once: (G, N, K) speeds [m/s] and masses [kg] (rows a
+    motion does not have: speed 0), (G,) durations [s]; the same numbers, one array pass per
+    region over every motion."""
+    grasps, _, count_sites = speed_m_s.shape
+    speeds = speed_m_s.reshape(grasps, -1)
+    masses = effective_mass_kg.reshape(grasps, -1)
+    moving = speeds > 0.0
+    columns = []
     for region in regions:
         with np.errstate(divide="ignore", invalid="ignore"):  # m_h = m_r = inf: μ = inf
-            force = transient_contact_force_n(speeds, effective_mass_kg, region)
-        force = np.where(speeds > 0.0, force, 0.0)  # a site at rest: no force (not 0·inf)
+            force = transient_contact_force_n(speeds, masses, region)
+        force = np.where(moving, force, 0.0)  # a site at rest: no force (not 0·inf)
         if region.max_transient_force_n is None:
-            ratio = np.where(speeds > 0.0, np.inf, 0.0)
+            ratio = np.where(moving, np.inf, 0.0)
         else:
             ratio = force / region.max_transient_force_n
-        if ratio.size:
-            sample, site = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
-            worst, peak = float(ratio[sample, site]), float(force.max())
+        if ratio.shape[1]:
+            where = np.argmax(ratio, axis=1)
+            worst, peak = ratio[np.arange(grasps), where], force.max(axis=1)
         else:
-            sample = site = 0
-            worst = peak = 0.0
-        assessed.append(
-            WholeArmRegion(
-                region=region.name,
-                transient_contact_permitted=region.transient_contact_permitted,
-                worst_force_ratio=worst,
-                worst_site=int(site),
-                worst_sample=int(sample),
-                peak_contact_force_n=peak,
-                admissible=worst <= 1.0 + ADMISSIBLE_RATIO_TOLERANCE,
-                min_duration_s=duration_s * worst if worst > 0.0 else 0.0,
+            where, worst, peak = np.zeros(grasps, dtype=int), np.zeros(grasps), np.zeros(grasps)
+        columns.append((where.tolist(), worst.tolist(), peak.tolist()))
+    results = []
+    for g in range(grasps):
+        assessed = []
+        for region, (where, worst_list, peak_list) in zip(regions, columns, strict=True):
+            sample, site = divmod(where[g], count_sites) if count_sites else (0, 0)
+            worst = worst_list[g]
+            assessed.append(
+                WholeArmRegion(
+                    region=region.name,
+                    transient_contact_permitted=region.transient_contact_permitted,
+                    worst_force_ratio=worst,
+                    worst_site=int(site),
+                    worst_sample=int(sample),
+                    peak_contact_force_n=peak_list[g],
+                    admissible=worst <= 1.0 + ADMISSIBLE_RATIO_TOLERANCE,
+                    min_duration_s=durations_s[g] * worst if worst > 0.0 else 0.0,
+                )
             )
-        )
-    return tuple(assessed)
+        results.append(tuple(assessed))
+    return results
 
 
 @dataclass(frozen=True)
@@ -472,8 +503,14 @@ def _whole_arm_result(
     exposure: SiteExposure,
     regions: tuple[BodyRegion, ...],
     duration_s: float,
+    assessed: tuple[WholeArmRegion, ...] | None = None,
 ) -> WholeArmEvaluation:
-    assessed = assess_sites(exposure.speed_m_s, exposure.effective_mass_kg, duration_s, regions)
+    """The evaluation from a grasp's exposure; ``assessed``: its ``assess_sites`` when already
+    computed (with the grasp's fellows in a batch)."""
+    if assessed is None:
+        assessed = assess_sites(
+            exposure.speed_m_s, exposure.effective_mass_kg, duration_s, regions
+        )
     permitted = [a for a in assessed if a.transient_contact_permitted]
     limiting = max(permitted, key=lambda a: a.worst_force_ratio) if permitted else None
     feasible = evaluation.feasible
@@ -511,6 +548,7 @@ def evaluate_whole_arm(
     regions: Sequence[str | BodyRegion] | None = None,
     model: pin.Model | None = None,
     joint_positions: np.ndarray | None = None,
+    terms: SampleTerms | None = None,
 ) -> WholeArmEvaluation:
     """Effective mass, speed, energy and ISO/TS 15066 ratios at every site, per sample.
 
@@ -518,7 +556,9 @@ def evaluate_whole_arm(
     same samples and tip poses (e.g. RedundancyResolution.joint_positions). ``grasp`` and
     ``trajectory`` must be the ones the evaluation was computed with; ``model``: their
     ``augmented_model`` when already built (its ``armature`` is used, as everywhere M
-    appears); ``regions``: None for all.
+    appears); ``regions``: None for all; ``terms``: the grasp's ``method.terms.SampleTerms``
+    at those joint positions (then the compiled path, ``evaluate_whole_arm_on_terms`` of this
+    grasp alone; None: Pinocchio per sample, the reference, equal to rounding).
     """
     selected = select_regions(None if regions is None else list(regions))
     count_sites = len(sites)
@@ -538,17 +578,29 @@ def evaluate_whole_arm(
     )
     if positions.shape != (len(times), robot.num_joints):
         raise InvalidInputError("evaluation.joint_positions", "must have one row per sample")
+    if terms is not None:
+        batch = SampleTerms(*(array[None] for array in terms))
+        return evaluate_whole_arm_on_terms(
+            robot,
+            [evaluation],
+            [trajectory],
+            [grasp],
+            sites,
+            selected,
+            batch,
+            np.array([len(times)]),
+            [positions],
+        )[0]
     if model is None:
         model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
     q_all = np.array([robot.q_from_positions(p) for p in positions]).reshape(len(times), -1)
     kinematics = pinocchio_kinematic_terms(model, q_all)
-    twists_in_base = tip_twists_in_base(trajectory, grasp.transform_tip_to_object, times)
-    rotation = robot.transform_base_to_world.rotation
-    twists = np.concatenate(
-        [twists_in_base[:, :3] @ rotation.T, twists_in_base[:, 3:] @ rotation.T], axis=1
-    )
     velocities = tip_following_joint_velocities(
-        robot, tip_jacobians_world(robot, kinematics), twists, times, positions
+        robot,
+        tip_jacobians_world(robot, kinematics),
+        _tip_twists_in_world(robot, trajectory, grasp, times),
+        times,
+        positions,
     )
     exposure = site_exposure(
         sites, ArmTerms(*kinematics, velocities), robot.transform_base_to_world
@@ -556,6 +608,111 @@ def evaluate_whole_arm(
     return _whole_arm_result(
         evaluation, sites, times, exposure, selected, float(trajectory.duration_s)
     )
+
+
+def _tip_twists_in_world(
+    robot: RobotModel, trajectory: Trajectory, grasp: Grasp, times: np.ndarray
+) -> np.ndarray:
+    """(N, 6) the tip's twists (linear [m/s], angular [rad/s]), world axes."""
+    twists_in_base = tip_twists_in_base(trajectory, grasp.transform_tip_to_object, times)
+    rotation = robot.transform_base_to_world.rotation
+    return np.concatenate(
+        [twists_in_base[:, :3] @ rotation.T, twists_in_base[:, 3:] @ rotation.T], axis=1
+    )
+
+
+def evaluate_whole_arm_on_terms(
+    robot: RobotModel,
+    evaluations: Sequence[GraspEvaluation],
+    trajectories: Sequence[Trajectory],
+    grasps: Sequence[Grasp],
+    sites: ArmSites,
+    regions: tuple[BodyRegion, ...],
+    terms: SampleTerms,
+    counts: np.ndarray,
+    joint_positions: Sequence[np.ndarray] | None = None,
+) -> list[WholeArmEvaluation]:
+    """``evaluate_whole_arm`` of G feasible grasps at once, on their shared terms
+    (``method.terms.grasps_terms`` along ``joint_positions``, default the evaluations' own:
+    axis 0 the grasp, ``counts`` samples each): q̇ from the terms' tip Jacobians (one batched
+    pseudo-inverse), the sites' positions, speeds and masses by one compiled call over (grasp,
+    sample, site) (``method.points.site_masses``), ISO/TS 15066 in one array pass per region.
+    Equal to the Pinocchio path to rounding; each grasp's result is the one it gets alone."""
+    grasp_count, samples = len(evaluations), terms.tip_jacobians.shape[1]
+    paths = (
+        [e.joint_positions for e in evaluations] if joint_positions is None else joint_positions
+    )
+    valid = valid_rows(counts, samples)
+    jacobians = terms.tip_jacobians[valid]  # (S, 6, n), the grasps' samples in order
+    twists = np.empty((len(jacobians), 6))
+    spline_rates = np.empty((len(jacobians), robot.num_joints))
+    offsets = np.concatenate([[0], np.cumsum(counts)])
+    for g, (evaluation, trajectory, grasp) in enumerate(
+        zip(evaluations, trajectories, grasps, strict=True)
+    ):
+        times = np.asarray(evaluation.times_s, dtype=float)
+        rows = slice(offsets[g], offsets[g + 1])
+        twists[rows] = _tip_twists_in_world(robot, trajectory, grasp, times)
+        spline_rates[rows] = _spline_rates(robot, times, paths[g])
+    pseudo_inverse = np.linalg.pinv(jacobians, rcond=1e-10)  # (S, n, 6)
+    residual = twists - (jacobians @ spline_rates[..., None])[..., 0]
+    rates = np.zeros((grasp_count, samples, robot.num_joints))
+    rates[valid] = spline_rates + (pseudo_inverse @ residual[..., None])[..., 0]
+    site_joints = sites.joint_ids - 1
+    positions, velocities, speeds, masses = site_masses(
+        terms,
+        counts,
+        site_joints,
+        sites.points_in_joint_m,
+        sites.support,
+        rates,
+        STATIONARY_SPEED_M_S,
+    )
+    speeds[~valid] = 0.0
+    stationary = (speeds < STATIONARY_SPEED_M_S) & valid[..., None]
+    directions = velocities / np.where(stationary | ~valid[..., None], 1.0, speeds)[..., None]
+    if stationary.any():  # the rest ends: A from the terms on arrays, then its eigenvectors
+        grasp, sample, site = np.nonzero(stationary)
+        motions = terms.joint_motions[grasp, sample]  # (S, n, 6)
+        columns = motions[..., :3] + np.cross(
+            motions[..., 3:], positions[grasp, sample, site, None]
+        )
+        jacobian = np.swapaxes(columns * sites.support[site, :, None], 1, 2)  # (S, 3, n)
+        minv = terms.mass_matrix_inverses[grasp, sample]
+        mobilities = jacobian @ minv @ np.swapaxes(jacobian, -1, -2)
+        directions[stationary], masses[stationary] = _largest_mass_directions(mobilities)
+    speeds[stationary] = 0.0
+    masses[~valid] = 1.0
+    durations = [float(t.duration_s) for t in trajectories]
+    assessed = _assess_sites_batch(speeds, masses, durations, regions)
+    base = robot.transform_base_to_world
+    results = []
+    for g, evaluation in enumerate(evaluations):
+        count = int(counts[g])
+        exposure = SiteExposure(
+            positions_in_base_m=(positions[g, :count] - base.translation) @ base.rotation,
+            directions_in_base=directions[g, :count] @ base.rotation,
+            stationary=stationary[g, :count],
+            speed_m_s=speeds[g, :count],
+            effective_mass_kg=masses[g, :count],
+        )
+        times = np.asarray(evaluation.times_s, dtype=float)
+        results.append(
+            _whole_arm_result(
+                evaluation, sites, times, exposure, regions, durations[g], assessed[g]
+            )
+        )
+    return results
+
+
+def _spline_rates(robot: RobotModel, times: np.ndarray, joint_positions: np.ndarray) -> np.ndarray:
+    """q̇_s (N, n): the clamped spline's rates through the samples, continuous joints
+    unwrapped (``tip_following_joint_velocities``)."""
+    positions = np.array(joint_positions, dtype=float)
+    continuous = ~np.isfinite(robot.lower_limits)
+    if continuous.any() and len(positions) > 1:
+        positions[:, continuous] = np.unwrap(positions[:, continuous], axis=0)
+    return joint_velocities_accelerations(times, positions)[0]
 
 
 def whole_arm_score(whole_arm: WholeArmEvaluation, region: str) -> float:

@@ -13,6 +13,7 @@ reference path (``test_performance_paths`` holds both equal).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -20,7 +21,7 @@ import pinocchio as pin
 
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
-from .compiled import augmented_bodies, call_kernel, plain_array
+from .compiled import augmented_bodies, call_kernel
 from .packed import ChainArrays
 
 
@@ -90,19 +91,42 @@ def grasp_terms(
 ) -> SampleTerms:
     """The terms of one grasp along its joint path ((N, n) positions, chain order), axis 0
     dropped. ``chain``: ``compiled.chain_arrays(robot)`` (numba must be installed)."""
+    return grasps_terms(
+        robot, chain, object_inertia, [transform_tip_to_object], [joint_positions]
+    )[0].of_grasp(0)
+
+
+def grasps_terms(
+    robot: RobotModel,
+    chain: ChainArrays,
+    object_inertia: ObjectInertia,
+    transforms_tip_to_object: Sequence[pin.SE3],
+    joint_positions: Sequence[np.ndarray],
+) -> tuple[SampleTerms, np.ndarray]:
+    """The terms of G grasps along their joint paths ((N_g, n) positions each, chain order),
+    in one kernel call, and the sample counts N_g (G,). Axis 1 has max N_g rows; grasp g's
+    rows from N_g on are undefined (``SampleTerms.of_grasp(g, N_g)`` drops them). Each grasp's
+    terms are those ``grasp_terms`` gives it alone, bit for bit (the same kernel code per
+    grasp). ``chain``: ``compiled.chain_arrays(robot)`` (numba must be installed)."""
     from ..kernels.ik import thread_workspace
     from ..kernels.terms import sample_terms
 
-    grasp = pin.SE3(transform_tip_to_object)
-    bodies = augmented_bodies(robot, object_inertia, grasp.rotation[None], grasp.translation[None])
-    q_all = plain_array(configurations(robot, joint_positions)[None])
-    n = robot.model.nv
-    out = sample_terms_buffers(1, q_all.shape[1], n)
-    counts = np.array([q_all.shape[1]], dtype=np.int64)
-    lower_inverse = np.empty((n, n))
-    ws = thread_workspace(n)
-    call_kernel(sample_terms, chain, bodies, q_all, counts, out, lower_inverse, ws)
-    return out.of_grasp(0)
+    count = len(joint_positions)
+    grasps = [pin.SE3(transform) for transform in transforms_tip_to_object]
+    rotations = np.array([grasp.rotation for grasp in grasps]).reshape(count, 3, 3)
+    translations = np.array([grasp.translation for grasp in grasps]).reshape(count, 3)
+    bodies = augmented_bodies(robot, object_inertia, rotations, translations)
+    counts = np.array([len(positions) for positions in joint_positions], dtype=np.int64)
+    n, longest = robot.model.nv, int(counts.max(initial=0))
+    q_all = np.zeros((count, longest, robot.model.nq))
+    for g, positions in enumerate(joint_positions):
+        q_all[g, : counts[g]] = configurations(robot, positions)
+    out = sample_terms_buffers(count, longest, n)
+    if count:
+        lower_inverse = np.empty((n, n))
+        ws = thread_workspace(n)
+        call_kernel(sample_terms, chain, bodies, q_all, counts, out, lower_inverse, ws)
+    return out, counts
 
 
 def point_jacobians(terms: SampleTerms, joint: int, points_in_world_m: np.ndarray) -> np.ndarray:

@@ -11,8 +11,9 @@ from ..model.inertia import solid_box
 from ..model.robot import RobotModel
 from ..model.trajectory import ObjectTrajectory
 from .effective_mass import translational_mobilities_in_base
+from .points import site_masses, tip_point_masses
 from .ranking import Grasp, GraspSafetyEvaluator
-from .terms import grasp_terms
+from .terms import grasps_terms
 
 _WARM_UP_URDF = """<robot name="warm_up"><link name="base"/>
 <link name="a"><inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01"
@@ -59,5 +60,14 @@ def warm_up(evaluator: GraspSafetyEvaluator | None = None) -> float:
             robot, box, pin.SE3.Identity(), np.array([seed_q]), evaluator.ik.chain
         )
         positions = np.array([robot.default_seed_positions()])
-        grasp_terms(robot, evaluator.ik.chain, box, pin.SE3.Identity(), positions)
+        terms, counts = grasps_terms(
+            robot, evaluator.ik.chain, box, [pin.SE3.Identity()], [positions]
+        )
+        still = np.ones((1, 1, 1), dtype=bool)  # the point kernels of the analyses
+        tip_point_masses(
+            terms, counts, np.eye(3), np.zeros((1, 1, 3)), np.zeros((1, 1, 1, 3)), still, [0]
+        )
+        n = robot.model.nv
+        support, rates = np.ones((1, n), dtype=bool), np.zeros((1, 1, n))
+        site_masses(terms, counts, [0], np.zeros((1, 3)), support, rates, 1e-9)
     return time.perf_counter() - start
