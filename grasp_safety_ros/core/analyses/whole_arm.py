@@ -43,7 +43,7 @@ from ..method.effective_mass import augmented_model
 from ..method.executable import joint_velocities_accelerations
 from ..method.points import site_masses, valid_rows
 from ..method.ranking import Grasp, GraspEvaluation
-from ..method.terms import SampleTerms
+from ..method.terms import SampleTerms, grasps_terms
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
 from ..model.trajectory import ObjectPath, Trajectory
@@ -764,24 +764,28 @@ class WholeArmPostureCriterion:
         trajectory: Trajectory,
         evaluations: Sequence[GraspEvaluation],
     ) -> np.ndarray:
-        """The force [N] of each feasible evaluation of ``grasp`` (one augmented model)."""
-        robot = evaluator.robot
-        model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
-        return np.array(
-            [
-                whole_arm_score(
-                    evaluate_whole_arm(
-                        robot,
-                        evaluation,
-                        object_inertia,
-                        grasp,
-                        trajectory,
-                        self.sites,
-                        [self.region],
-                        model,
-                    ),
-                    self.region,
+        """The force [N] of each feasible evaluation of ``grasp``: on their terms, in one
+        kernel call, with a compiled evaluator; else by Pinocchio (one augmented model)."""
+        robot, count, region = evaluator.robot, len(evaluations), [self.region]
+        if evaluator.ik.compiled and evaluations:
+            paths = [evaluation.joint_positions for evaluation in evaluations]
+            transforms = [grasp.transform_tip_to_object] * count
+            terms = grasps_terms(robot, evaluator.ik.chain, object_inertia, transforms, paths)
+            assessed = evaluate_whole_arm_on_terms(
+                robot,
+                evaluations,
+                [trajectory] * count,
+                [grasp] * count,
+                self.sites,
+                select_regions(region),
+                *terms,
+            )
+        else:
+            model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
+            assessed = [
+                evaluate_whole_arm(
+                    robot, e, object_inertia, grasp, trajectory, self.sites, region, model
                 )
-                for evaluation in evaluations
+                for e in evaluations
             ]
-        )
+        return np.array([whole_arm_score(result, self.region) for result in assessed])
