@@ -201,3 +201,27 @@ def test_the_report_on_batched_terms_equals_one_grasp_at_a_time_and_pinocchio(
                 batch.directions_in_base[moving], slow.directions_in_base[moving], "u"
             )
         assert report.whole_arm[k].regions == alone[1].regions
+
+
+@needs_numba
+@pytest.mark.parametrize("n", [4, 6, 7, 9])
+def test_tip_following_rates_equal_the_pseudo_inverses(n: int) -> None:
+    """q̇_s + J⁺(ξ − J q̇_s): compiled where J is well conditioned, the pseudo-inverse where J
+    is rank-deficient (a repeated row) or has fewer than 6 columns; both within rounding."""
+    from grasp_safety_ros.core.method.points import tip_following_rates
+
+    rng = np.random.default_rng(n)
+    jacobians = rng.normal(size=(2, 5, 6, n))
+    jacobians[1, 2, 5] = jacobians[1, 2, 4]  # rank 5: the pseudo-inverse drops a direction
+    twists, base = rng.normal(size=(2, 5, 6)), rng.normal(size=(2, 5, n))
+    counts = np.array([5, 3])
+    rates = tip_following_rates(jacobians, counts, twists, base)
+    pseudo_inverse = np.linalg.pinv(jacobians, rcond=1e-10)
+    residual = twists - (jacobians @ base[..., None])[..., 0]
+    expected = base + (pseudo_inverse @ residual[..., None])[..., 0]
+    assert_close_to_scale(rates[0], expected[0], "rates")
+    assert_close_to_scale(rates[1, :3], expected[1, :3], "rates, singular sample")
+    np.testing.assert_array_equal(rates[1, 3:], 0.0)  # beyond the grasp's count
+    if n >= 6:  # the minimum-norm solution: J q̇ = ξ where J has full row rank
+        moved = (jacobians[0] @ rates[0][..., None])[..., 0]
+        assert_close_to_scale(moved, twists[0], "J q̇ = ξ")

@@ -41,7 +41,12 @@ from ..exceptions import InvalidInputError
 from ..input_checks import finite_array, read_only
 from ..method.effective_mass import augmented_model
 from ..method.executable import joint_velocities_accelerations
-from ..method.points import site_masses, valid_rows
+from ..method.points import (
+    PSEUDO_INVERSE_RCOND,
+    site_masses,
+    tip_following_rates,
+    valid_rows,
+)
 from ..method.ranking import Grasp, GraspEvaluation
 from ..method.terms import SampleTerms, grasps_terms
 from ..model.inertia import ObjectInertia
@@ -344,7 +349,7 @@ def tip_following_joint_velocities(
         times_s, joint_positions: The samples (N,), (N, n); continuous joints are unwrapped.
     """
     spline_rates = _spline_rates(robot, times_s, joint_positions)
-    pseudo_inverse = np.linalg.pinv(tip_jacobians, rcond=1e-10)  # (N, n, 6)
+    pseudo_inverse = np.linalg.pinv(tip_jacobians, rcond=PSEUDO_INVERSE_RCOND)  # (N, n, 6)
     residual = tip_twists_in_world - (tip_jacobians @ spline_rates[..., None])[..., 0]
     return spline_rates + (pseudo_inverse @ residual[..., None])[..., 0]
 
@@ -634,30 +639,25 @@ def evaluate_whole_arm_on_terms(
 ) -> list[WholeArmEvaluation]:
     """``evaluate_whole_arm`` of G feasible grasps at once, on their shared terms
     (``method.terms.grasps_terms`` along ``joint_positions``, default the evaluations' own:
-    axis 0 the grasp, ``counts`` samples each): q̇ from the terms' tip Jacobians (one batched
-    pseudo-inverse), the sites' positions, speeds and masses by one compiled call over (grasp,
-    sample, site) (``method.points.site_masses``), ISO/TS 15066 in one array pass per region.
+    axis 0 the grasp, ``counts`` samples each): q̇ from the terms' tip Jacobians (compiled,
+    ``method.points.tip_following_rates``), the sites' positions, speeds and masses by one
+    compiled call over (grasp, sample, site) (``method.points.site_masses``), ISO/TS 15066 in
+    one array pass per region.
     Equal to the Pinocchio path to rounding; each grasp's result is the one it gets alone."""
     grasp_count, samples = len(evaluations), terms.tip_jacobians.shape[1]
     paths = (
         [e.joint_positions for e in evaluations] if joint_positions is None else joint_positions
     )
     valid = valid_rows(counts, samples)
-    jacobians = terms.tip_jacobians[valid]  # (S, 6, n), the grasps' samples in order
-    twists = np.empty((len(jacobians), 6))
-    spline_rates = np.empty((len(jacobians), robot.num_joints))
-    offsets = np.concatenate([[0], np.cumsum(counts)])
+    twists = np.zeros((grasp_count, samples, 6))
+    spline_rates = np.zeros((grasp_count, samples, robot.num_joints))
     for g, (evaluation, trajectory, grasp) in enumerate(
         zip(evaluations, trajectories, grasps, strict=True)
     ):
         times = np.asarray(evaluation.times_s, dtype=float)
-        rows = slice(offsets[g], offsets[g + 1])
-        twists[rows] = _tip_twists_in_world(robot, trajectory, grasp, times)
-        spline_rates[rows] = _spline_rates(robot, times, paths[g])
-    pseudo_inverse = np.linalg.pinv(jacobians, rcond=1e-10)  # (S, n, 6)
-    residual = twists - (jacobians @ spline_rates[..., None])[..., 0]
-    rates = np.zeros((grasp_count, samples, robot.num_joints))
-    rates[valid] = spline_rates + (pseudo_inverse @ residual[..., None])[..., 0]
+        twists[g, : counts[g]] = _tip_twists_in_world(robot, trajectory, grasp, times)
+        spline_rates[g, : counts[g]] = _spline_rates(robot, times, paths[g])
+    rates = tip_following_rates(terms.tip_jacobians, counts, twists, spline_rates)
     site_joints = sites.joint_ids - 1
     positions, velocities, speeds, masses = site_masses(
         terms,

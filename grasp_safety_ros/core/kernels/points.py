@@ -1,6 +1,7 @@
 """Effective masses at points of the moving chain over (grasp, sample, point), compiled, from
 the shared per-(grasp, sample) terms (``method.terms.SampleTerms``): points fixed to the tip
-(the carried object's exposed points) and sites fixed to the links (the whole arm).
+(the carried object's exposed points) and sites fixed to the links (the whole arm); and the
+joint velocities that make the tip follow its twist (``tip_following_rates``).
 
 A point's translational mobility is A = J_p M^-1 J_p^T [1/kg] and its effective mass along a
 unit direction u is 1 / (u^T A u); a point that does not move has no direction, so its A is
@@ -197,3 +198,82 @@ def site_masses(
                         inner += inverse[a, c] * weights[c]
                     total += weights[a] * inner
                 masses[g, i, k] = 1.0 / total
+
+
+@_jit
+def tip_following_rates(
+    tip_jacobians,
+    counts,
+    twists,
+    spline_rates,
+    rank_tolerance,
+    rates,
+    fallback,
+    transposed,
+    diagonal,
+    scales,
+    solution,
+):
+    """For grasp g and sample i < counts[g]: q̇ = q̇_s + J⁺ (ξ − J q̇_s) into rates[g, i], with
+    J = tip_jacobians[g, i] (6, n), ξ = twists[g, i], q̇_s = spline_rates[g, i]: the
+    minimum-norm solution of J x = ξ − J q̇_s by a Householder QR of Jᵀ = Q R (x = Q R⁻ᵀ b),
+    backward stable as the pseudo-inverse's SVD. Where that is not the pseudo-inverse's answer
+    to rounding (n < 6, or a diagonal entry of R at most ``rank_tolerance`` times the largest:
+    J near rank-deficient, where the pseudo-inverse drops directions), fallback[g, i] is set
+    and rates[g, i] left as it is, for the caller's pseudo-inverse.
+
+    transposed (n, 6), diagonal (6,), scales (6,), solution (n,): scratch."""
+    n = tip_jacobians.shape[3]
+    for g in range(tip_jacobians.shape[0]):
+        for i in range(counts[g]):
+            fallback[g, i] = n < 6
+            if n < 6:
+                continue
+            jacobian, base = tip_jacobians[g, i], spline_rates[g, i]
+            for r in range(n):
+                for c in range(6):
+                    transposed[r, c] = jacobian[c, r]
+            largest = 0.0
+            for j in range(6):  # reflector j: I - scales[j] v vᵀ, v kept in transposed[j:, j]
+                norm = 0.0
+                for r in range(j, n):
+                    norm += transposed[r, j] * transposed[r, j]
+                norm = norm**0.5
+                alpha = -norm if transposed[j, j] >= 0.0 else norm
+                diagonal[j] = alpha
+                transposed[j, j] -= alpha
+                length = 0.0
+                for r in range(j, n):
+                    length += transposed[r, j] * transposed[r, j]
+                scales[j] = 2.0 / length if length > 0.0 else 0.0
+                for c in range(j + 1, 6):
+                    dot = 0.0
+                    for r in range(j, n):
+                        dot += transposed[r, j] * transposed[r, c]
+                    dot *= scales[j]
+                    for r in range(j, n):
+                        transposed[r, c] -= dot * transposed[r, j]
+                largest = max(largest, abs(alpha))
+            for j in range(6):
+                if not abs(diagonal[j]) > rank_tolerance * largest:
+                    fallback[g, i] = True
+            if fallback[g, i]:
+                continue
+            for j in range(6):  # Rᵀ z = ξ − J q̇_s (R's strict upper part in transposed)
+                total = twists[g, i, j]
+                for c in range(n):
+                    total -= jacobian[j, c] * base[c]
+                for k in range(j):
+                    total -= transposed[k, j] * solution[k]
+                solution[j] = total / diagonal[j]
+            for r in range(6, n):
+                solution[r] = 0.0
+            for j in range(5, -1, -1):  # x = Q (z, 0): the reflectors in reverse order
+                dot = 0.0
+                for r in range(j, n):
+                    dot += transposed[r, j] * solution[r]
+                dot *= scales[j]
+                for r in range(j, n):
+                    solution[r] -= dot * transposed[r, j]
+            for c in range(n):
+                rates[g, i, c] = base[c] + solution[c]

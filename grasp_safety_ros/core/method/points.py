@@ -125,3 +125,59 @@ def site_masses(
         np.empty(n),
     )
     return positions, velocities, speeds, masses
+
+
+PSEUDO_INVERSE_RCOND = 1e-10
+"""Singular values below this times the largest are dropped by the pseudo-inverse of the tip
+Jacobian (numpy's ``pinv`` ``rcond``), as on the Pinocchio path."""
+
+QR_RANK_TOLERANCE = 1e-3
+"""The compiled minimum-norm solve is used where every diagonal entry of R (Jᵀ = Q R) exceeds
+this times the largest (J well conditioned, where it equals the pseudo-inverse's answer to
+rounding); elsewhere the pseudo-inverse itself."""
+
+
+def tip_following_rates(
+    tip_jacobians: np.ndarray,
+    counts: np.ndarray,
+    twists_in_world: np.ndarray,
+    spline_rates: np.ndarray,
+) -> np.ndarray:
+    """q̇ (G, N, n) = q̇_s + J⁺ (ξ − J q̇_s) [rad/s or m/s] of G grasps' samples (rows beyond
+    a grasp's count: 0): compiled (a Householder QR of Jᵀ) where J is well conditioned, the
+    pseudo-inverse (``PSEUDO_INVERSE_RCOND``) elsewhere.
+
+    Args:
+        tip_jacobians: (G, N, 6, n) SampleTerms.tip_jacobians (world axes at the tip).
+        counts: (G,) samples per grasp.
+        twists_in_world: (G, N, 6) tip twists ξ (linear [m/s], angular [rad/s]), world axes.
+        spline_rates: (G, N, n) q̇_s, the self-motion's rates.
+    """
+    from ..kernels.points import tip_following_rates as kernel
+
+    grasps, samples, _, n = tip_jacobians.shape
+    rates = np.zeros((grasps, samples, n))
+    fallback = np.zeros((grasps, samples), dtype=bool)
+    jacobians, twists, base = (
+        plain_array(a) for a in (tip_jacobians, twists_in_world, spline_rates)
+    )
+    call_kernel(
+        kernel,
+        jacobians,
+        np.ascontiguousarray(counts, dtype=np.int64),
+        twists,
+        base,
+        QR_RANK_TOLERANCE,
+        rates,
+        fallback,
+        np.empty((n, 6)),
+        np.empty(6),
+        np.empty(6),
+        np.empty(n),
+    )
+    if fallback.any():
+        jacobian, twist, rate = jacobians[fallback], twists[fallback], base[fallback]
+        pseudo_inverse = np.linalg.pinv(jacobian, rcond=PSEUDO_INVERSE_RCOND)
+        residual = twist - (jacobian @ rate[..., None])[..., 0]
+        rates[fallback] = rate + (pseudo_inverse @ residual[..., None])[..., 0]
+    return rates

@@ -11,7 +11,7 @@ from ..model.inertia import solid_box
 from ..model.robot import RobotModel
 from ..model.trajectory import ObjectTrajectory
 from .effective_mass import translational_mobilities_in_base
-from .points import site_masses, tip_point_masses
+from .points import site_masses, tip_following_rates, tip_point_masses
 from .ranking import Grasp, GraspSafetyEvaluator
 from .terms import grasps_terms
 
@@ -70,4 +70,5 @@ def warm_up(evaluator: GraspSafetyEvaluator | None = None) -> float:
         n = robot.model.nv
         support, rates = np.ones((1, n), dtype=bool), np.zeros((1, 1, n))
         site_masses(terms, counts, [0], np.zeros((1, 3)), support, rates, 1e-9)
+        tip_following_rates(terms.tip_jacobians, counts, np.zeros((1, 1, 6)), rates)
     return time.perf_counter() - start
