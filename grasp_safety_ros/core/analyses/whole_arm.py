@@ -24,13 +24,13 @@ ISO/TS 15066 (core.analyses.iso15066, Annex A): for each body region, the force 
 F/F_tr = v·sqrt(μ k)/F_tr at every (sample, site); the worst over both, the worst site and
 its link, admissibility over the whole arm, and T_min = T · max ratio over the permitted
 regions (a uniform re-timing scales every site speed alike). Energy: ½ M_eff v² [J].
+The sites themselves are resolved in ``arm_sites``.
 """
 
 from __future__ import annotations
 
-import difflib
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -38,29 +38,25 @@ import numpy as np
 import pinocchio as pin
 
 from ..exceptions import InvalidInputError
-from ..input_checks import finite_array, read_only
+from ..input_checks import read_only
 from ..method.effective_mass import augmented_model
 from ..method.executable import joint_velocities_accelerations
-from ..method.points import (
-    PSEUDO_INVERSE_RCOND,
-    site_masses,
-    tip_following_rates,
-    valid_rows,
-)
+from ..method.points import PSEUDO_INVERSE_RCOND, site_masses, tip_following_rates, valid_rows
 from ..method.ranking import Grasp, GraspEvaluation
 from ..method.terms import SampleTerms, grasps_terms
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
-from ..model.trajectory import ObjectPath, Trajectory
+from ..model.trajectory import ObjectMotion, ObjectPath, Trajectory
+from .arm_sites import MAX_SITES as MAX_SITES
+from .arm_sites import ArmSites as ArmSites
+from .arm_sites import check_exposed_points_m as check_exposed_points_m
+from .arm_sites import resolve_arm_sites as resolve_arm_sites
 from .iso15066 import (
     ADMISSIBLE_RATIO_TOLERANCE,
     BodyRegion,
     select_regions,
     transient_contact_force_n,
 )
-
-FIRST_DEFAULT_JOINT = 3
-"""Default sites: the origins of chain joints FIRST_DEFAULT_JOINT.. (1-based), and the tip."""
 
 STATIONARY_SPEED_M_S = 1e-9
 """Below this speed [m/s] a site does not move: flagged, no direction of its own."""
@@ -69,136 +65,8 @@ EIGENVALUE_RELATIVE_TOLERANCE = 1e-12
 """A mobility eigenvalue below this times the largest counts as zero (a direction the site
 cannot move in)."""
 
-MAX_SITES = 1000
-"""Largest number of sites (default plus user points) accepted."""
-
 DEFAULT_RANK_REGION = "chest"
 """Body region whose worst predicted force ``rank_by: whole_arm`` uses unless told."""
-
-
-@dataclass(frozen=True)
-class ArmSites:
-    """Points on the chain's links, resolved once per robot (K sites, n chain joints).
-
-    Attributes:
-        names: Site names, e.g. ``panda_joint4`` (a joint origin), the tip frame's name, or
-            ``panda_link5[0]`` (the first user point on that link).
-        links: Name of the link carrying each site.
-        joint_ids: (K,) Pinocchio joint id of the body carrying each site (1..n).
-        points_in_joint_m: (K, 3) the point in that joint's frame [m].
-        support: (K, n) True where chain joint i moves the site's body.
-        dropped: Names of user sites dropped because their link is welded to the base.
-    """
-
-    names: tuple[str, ...]
-    links: tuple[str, ...]
-    joint_ids: np.ndarray
-    points_in_joint_m: np.ndarray
-    support: np.ndarray
-    dropped: tuple[str, ...] = ()
-
-    def __len__(self) -> int:
-        return len(self.names)
-
-
-def check_exposed_points_m(
-    value: Any, field: str = "robot.exposed_points_m"
-) -> dict[str, np.ndarray]:
-    """Validate ``{link_name: [[x, y, z], ...]}`` (link frame [m]); returns (P, 3) arrays."""
-    if not isinstance(value, Mapping):
-        raise InvalidInputError(
-            field, f"must be a mapping {{link_name: [[x, y, z], ...]}}, got {value!r}"
-        )
-    checked: dict[str, np.ndarray] = {}
-    for link, points in value.items():
-        if not isinstance(link, str) or not link:
-            raise InvalidInputError(field, f"link names must be non-empty strings, got {link!r}")
-        array = finite_array(points, f"{field}.{link}")
-        if array.ndim == 1 and array.shape == (3,):
-            array = array[None]
-        if array.ndim != 2 or array.shape[1] != 3 or len(array) < 1:
-            raise InvalidInputError(
-                f"{field}.{link}", f"must be a list of [x, y, z] points, got {list(array.shape)}"
-            )
-        checked[link] = read_only(array, copy=True)
-    total = sum(len(points) for points in checked.values())
-    if total > MAX_SITES:
-        raise InvalidInputError(field, f"has {total} points; at most {MAX_SITES} are allowed")
-    return checked
-
-
-def _link_frame(model: pin.Model, link: str, field: str) -> int:
-    """Id of the BODY (link) frame called ``link``; refused with close names suggested."""
-    bodies = [frame.name for frame in model.frames if frame.type == pin.FrameType.BODY]
-    for i, frame in enumerate(model.frames):
-        if frame.type == pin.FrameType.BODY and frame.name == link:
-            return i
-    close = difflib.get_close_matches(link, bodies, n=3, cutoff=0.5)
-    hint = f"did you mean {', '.join(close)}?" if close else f"links: {', '.join(bodies)}"
-    raise InvalidInputError(f"{field}.{link}", f"unknown link '{link}'; {hint}")
-
-
-def _child_link(model: pin.Model, joint_id: int) -> str:
-    """The first link (BODY frame) carried by joint ``joint_id``, or the joint's name."""
-    for frame in model.frames:
-        if frame.type == pin.FrameType.BODY and frame.parentJoint == joint_id:
-            return frame.name
-    return model.names[joint_id]
-
-
-def resolve_arm_sites(
-    robot: RobotModel,
-    exposed_points_m: Mapping[str, Any] | None = None,
-    defaults: bool = True,
-    field: str = "robot.exposed_points_m",
-) -> ArmSites:
-    """The sites of ``robot`` (module docstring): the defaults (unless ``defaults`` is False),
-    then each user link's points in the order given."""
-    model = robot.model
-    names: list[str] = []
-    links: list[str] = []
-    joint_ids: list[int] = []
-    points: list[np.ndarray] = []
-    if defaults:
-        for joint_id in range(FIRST_DEFAULT_JOINT, model.njoints):
-            names.append(model.names[joint_id])
-            links.append(_child_link(model, joint_id))
-            joint_ids.append(joint_id)
-            points.append(np.zeros(3))
-        tip = model.frames[robot.tip_frame_id]
-        names.append(robot.tip_frame)
-        links.append(
-            robot.tip_frame
-            if tip.type == pin.FrameType.BODY
-            else _child_link(model, tip.parentJoint)
-        )
-        joint_ids.append(tip.parentJoint)
-        points.append(np.array(tip.placement.translation))
-    dropped: list[str] = []
-    for link, link_points in check_exposed_points_m(exposed_points_m or {}, field).items():
-        frame = model.frames[_link_frame(model, link, field)]
-        for p, point in enumerate(link_points):
-            name = f"{link}[{p}]"
-            if frame.parentJoint == 0:
-                dropped.append(name)
-                continue
-            names.append(name)
-            links.append(link)
-            joint_ids.append(frame.parentJoint)
-            points.append(frame.placement.act(point))
-    ids = np.array(joint_ids, dtype=int)
-    support = np.zeros((len(ids), model.nv), dtype=bool)
-    for k, joint_id in enumerate(ids):
-        for i in model.supports[int(joint_id)][1:]:
-            support[k, model.joints[i].idx_v] = True
-    return ArmSites(
-        names=tuple(names),
-        links=tuple(links),
-        joint_ids=read_only(ids),
-        points_in_joint_m=read_only(np.array(points, dtype=float).reshape(-1, 3)),
-        support=read_only(support),
-        dropped=tuple(dropped),
-    )
 
 
 class ArmTerms(NamedTuple):
@@ -304,14 +172,17 @@ def site_exposure(
 
 
 def tip_twists_in_base(
-    trajectory: Trajectory, transform_tip_to_object: pin.SE3, times_s: np.ndarray
+    trajectory: Trajectory,
+    transform_tip_to_object: pin.SE3,
+    times_s: np.ndarray,
+    object_motion: ObjectMotion | None = None,
 ) -> np.ndarray:
     """Tip twists (N, 6) (linear [m/s], angular [rad/s]), base axes: from the object motion
-    sampled once (ObjectMotion: tangent times speed per tangent) for an object path, else the
-    trajectory's own ``tip_twists``."""
+    sampled once (ObjectMotion: tangent times speed per tangent; ``object_motion`` when
+    already sampled at ``times_s``) for an object path, else the trajectory's ``tip_twists``."""
     if not isinstance(trajectory, ObjectPath):
         return trajectory.tip_twists(transform_tip_to_object, times_s)[0]
-    motion = trajectory.object_motion(times_s)
+    motion = trajectory.object_motion(times_s) if object_motion is None else object_motion
     rate = motion.speed_per_tangent[:, None]
     tip = motion.tip_motion(transform_tip_to_object)
     return np.concatenate([tip.tangents * rate, motion.angular_tangents * rate], axis=1)
@@ -348,7 +219,7 @@ def tip_following_joint_velocities(
         tip_twists_in_world: (N, 6) tip twists (linear [m/s], angular [rad/s]), world axes.
         times_s, joint_positions: The samples (N,), (N, n); continuous joints are unwrapped.
     """
-    spline_rates = _spline_rates(robot, times_s, joint_positions)
+    spline_rates = _spline_rates(robot, times_s, [joint_positions])[0]
     pseudo_inverse = np.linalg.pinv(tip_jacobians, rcond=PSEUDO_INVERSE_RCOND)  # (N, n, 6)
     residual = tip_twists_in_world - (tip_jacobians @ spline_rates[..., None])[..., 0]
     return spline_rates + (pseudo_inverse @ residual[..., None])[..., 0]
@@ -616,10 +487,15 @@ def evaluate_whole_arm(
 
 
 def _tip_twists_in_world(
-    robot: RobotModel, trajectory: Trajectory, grasp: Grasp, times: np.ndarray
+    robot: RobotModel,
+    trajectory: Trajectory,
+    grasp: Grasp,
+    times: np.ndarray,
+    object_motion: ObjectMotion | None = None,
 ) -> np.ndarray:
     """(N, 6) the tip's twists (linear [m/s], angular [rad/s]), world axes."""
-    twists_in_base = tip_twists_in_base(trajectory, grasp.transform_tip_to_object, times)
+    transform = grasp.transform_tip_to_object
+    twists_in_base = tip_twists_in_base(trajectory, transform, times, object_motion)
     rotation = robot.transform_base_to_world.rotation
     return np.concatenate(
         [twists_in_base[:, :3] @ rotation.T, twists_in_base[:, 3:] @ rotation.T], axis=1
@@ -651,12 +527,21 @@ def evaluate_whole_arm_on_terms(
     valid = valid_rows(counts, samples)
     twists = np.zeros((grasp_count, samples, 6))
     spline_rates = np.zeros((grasp_count, samples, robot.num_joints))
+    by_times: dict[bytes, list[int]] = {}
+    sampled: dict[tuple[int, bytes], ObjectMotion] = {}  # each object path sampled once
     for g, (evaluation, trajectory, grasp) in enumerate(
         zip(evaluations, trajectories, grasps, strict=True)
     ):
         times = np.asarray(evaluation.times_s, dtype=float)
-        twists[g, : counts[g]] = _tip_twists_in_world(robot, trajectory, grasp, times)
-        spline_rates[g, : counts[g]] = _spline_rates(robot, times, paths[g])
+        key = (id(trajectory), times.tobytes())
+        if isinstance(trajectory, ObjectPath) and key not in sampled:
+            sampled[key] = trajectory.object_motion(times)
+        motion = sampled.get(key)
+        twists[g, : counts[g]] = _tip_twists_in_world(robot, trajectory, grasp, times, motion)
+        by_times.setdefault(key[1], []).append(g)
+    for group in by_times.values():
+        times, count = np.asarray(evaluations[group[0]].times_s, dtype=float), counts[group[0]]
+        spline_rates[group, :count] = _spline_rates(robot, times, [paths[g] for g in group])
     rates = tip_following_rates(terms.tip_jacobians, counts, twists, spline_rates)
     site_joints = sites.joint_ids - 1
     positions, velocities, speeds, masses = site_masses(
@@ -705,14 +590,21 @@ def evaluate_whole_arm_on_terms(
     return results
 
 
-def _spline_rates(robot: RobotModel, times: np.ndarray, joint_positions: np.ndarray) -> np.ndarray:
-    """q̇_s (N, n): the clamped spline's rates through the samples, continuous joints
-    unwrapped (``tip_following_joint_velocities``)."""
-    positions = np.array(joint_positions, dtype=float)
+def _spline_rates(
+    robot: RobotModel, times: np.ndarray, joint_positions: Sequence[np.ndarray]
+) -> np.ndarray:
+    """q̇_s (G, N, n) of G joint paths (N, n) sampled at the same ``times``: the clamped
+    spline's rates through the samples, continuous joints unwrapped, all paths in one spline
+    (its columns are independent: each path's rates are those of a spline through it alone).
+    """
+    positions = np.array(joint_positions, dtype=float)  # (G, N, n)
     continuous = ~np.isfinite(robot.lower_limits)
-    if continuous.any() and len(positions) > 1:
-        positions[:, continuous] = np.unwrap(positions[:, continuous], axis=0)
-    return joint_velocities_accelerations(times, positions)[0]
+    if continuous.any() and positions.shape[1] > 1:
+        positions[..., continuous] = np.unwrap(positions[..., continuous], axis=1)
+    grasps, count, n = positions.shape
+    columns = np.moveaxis(positions, 0, 1).reshape(count, grasps * n)
+    rates = joint_velocities_accelerations(times, columns)[0]
+    return np.moveaxis(rates.reshape(count, grasps, n), 1, 0)
 
 
 def whole_arm_score(whole_arm: WholeArmEvaluation, region: str) -> float:
