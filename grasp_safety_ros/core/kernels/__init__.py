@@ -4,7 +4,10 @@
 ``lie_group`` (Pinocchio's log3 / log6 / Jlog6 / exp3), ``linalg`` (LU solve, damped
 least-squares step), ``ik`` (pose and trajectory IK), ``effective_mass`` (translational
 mobility) and ``grasp`` (the fused kernel: IK and effective mass of a batch of grasps along
-the object's motion, sampled once by the caller, so every trajectory type runs compiled). They
+the object's motion, sampled once by the caller, so every trajectory type runs compiled),
+``terms`` (the per-(grasp, sample) terms the analyses share) and ``points`` (the analyses'
+effective masses at points fixed to the tip or to the links, over (grasp, sample, point), and
+the joint velocities that make the tip follow its twist). They
 mirror the Pinocchio-based Python loops of ``core.method`` operation for operation, so
 per-sample results equal the Python path's to rounding, for serial chains of revolute,
 continuous ((cos, sin) in q, as Pinocchio) and prismatic joints. Their inputs come packed,

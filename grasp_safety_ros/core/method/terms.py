@@ -1,6 +1,8 @@
 """The per-(grasp, sample) terms the analyses share, computed once along each grasp's joint
 path: joint and tip poses, the tip Jacobian and the inverse joint-space inertia of the augmented
-chain (robot + object), by the compiled kernel ``kernels.terms.sample_terms``.
+chain (robot + object), by the compiled kernel ``kernels.terms.sample_terms``: for many grasps
+in one call (``grasps_terms``, how ``analyses.safety_report.analyse`` takes them for every
+feasible grasp at once) or for one (``grasp_terms``, the same numbers bit for bit).
 
 It is the one traversal every analysis reads from (pinocchio's ``computeAllTerms`` pattern):
 exposed points (``analyses.exposed_points``), effort (``analyses.effort``) and whole-arm
