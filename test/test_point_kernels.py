@@ -225,3 +225,50 @@ def test_tip_following_rates_equal_the_pseudo_inverses(n: int) -> None:
     if n >= 6:  # the minimum-norm solution: J q̇ = ξ where J has full row rank
         moved = (jacobians[0] @ rates[0][..., None])[..., 0]
         assert_close_to_scale(moved, twists[0], "J q̇ = ξ")
+
+
+@needs_numba
+def test_terms_in_small_chunks_give_the_same_report_and_progress_per_grasp(
+    arm7: RobotModel, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """One grasp per chunk and no chunk kept (every analysis computes its terms again): the
+    same report bit for bit, and progress after every grasp of every analysis, in order, so a
+    request can be abandoned between chunks."""
+    from grasp_safety_ros.core.analyses import safety_report
+
+    seed = random_positions(arm7, np.random.default_rng(18))
+    trajectory = reach_trajectory(arm7, seed)
+    far = Grasp(pin.SE3(np.eye(3), np.array([0.0, 0.0, 5.0])), "unreachable")
+    grasps = [*grasps_near_identity(3, 19), far]
+    corners = box_corners_in_object([0.08, 0.12, 0.2])
+    options = AnalysisOptions(points_in_object_m=corners, whole_arm=True, effort=True)
+    evaluator = GraspSafetyEvaluator(arm7, EvaluationConfig(workers=1))
+    ranking = evaluator.rank(grasps, BOX, trajectory, seed_positions=seed)
+    whole = analyse(evaluator, grasps, BOX, trajectory, options, ranking=ranking)
+    monkeypatch.setattr(safety_report, "TERMS_CHUNK_SAMPLES", 1)
+    monkeypatch.setattr(safety_report, "TERMS_CACHE_SAMPLES", 1)
+    calls: list[tuple[int, int]] = []
+    chunked = analyse(
+        evaluator,
+        grasps,
+        BOX,
+        trajectory,
+        options,
+        ranking=ranking,
+        progress=lambda *a: calls.append(a),
+    )
+    assert calls == [(k, 3 * len(grasps)) for k in range(1, 3 * len(grasps) + 1)]
+    for ours, theirs in zip(
+        chunked.exposed + chunked.whole_arm + chunked.effort,
+        whole.exposed + whole.whole_arm + whole.effort,
+        strict=True,
+    ):
+        for field, value in _fields(ours).items():
+            np.testing.assert_array_equal(value, getattr(theirs, field), err_msg=field)
+
+    def abandon(done: int, total: int) -> None:
+        if done == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        analyse(evaluator, grasps, BOX, trajectory, options, ranking=ranking, progress=abandon)

@@ -59,6 +59,16 @@ from .whole_arm import (
     resolve_arm_sites,
 )
 
+TERMS_CHUNK_SAMPLES = 25_000
+"""The shared terms are computed for consecutive chunks of feasible grasps of at most this
+many samples in all (about 50 MB for a 7-joint arm), so that a request's progress is reported
+(and it can be abandoned) chunk by chunk."""
+
+TERMS_CACHE_SAMPLES = 250_000
+"""Chunks of terms are kept for the next analysis while those kept hold at most this many
+samples (about 500 MB for a 7-joint arm); beyond it the oldest is dropped (then computed
+again if an analysis needs it)."""
+
 RANK_BY = ("safety", "effort", "whole_arm")
 """What orders the final ranking: the safety score (with quality, when given), the effort, or
 the whole arm's worst predicted force for ``whole_arm_region``."""
@@ -253,22 +263,29 @@ def analyse(
     models: dict[int, pin.Model] = {}
     chain = evaluator.ik.chain if evaluator.ik.compiled else None
     feasible_grasps = [k for k, e in enumerate(evaluations) if e.feasible]
-    row_of = {k: row for row, k in enumerate(feasible_grasps)}
-    batch: list[tuple[SampleTerms, np.ndarray]] = []
+    chunks = _chunks(feasible_grasps, [len(evaluations[k].times_s) for k in feasible_grasps])
+    place = {k: (c, row) for c, chunk in enumerate(chunks) for row, k in enumerate(chunk)}
+    cached: dict[int, tuple[SampleTerms, np.ndarray]] = {}
 
-    def shared_terms() -> tuple[SampleTerms, np.ndarray]:
-        """The terms of every feasible grasp (axis 0 in ``feasible_grasps`` order), counts."""
-        if not batch:
-            batch.append(
-                grasps_terms(
-                    robot,
-                    chain,
-                    object_inertia,
-                    [grasps[k].transform_tip_to_object for k in feasible_grasps],
-                    [evaluations[k].joint_positions for k in feasible_grasps],
-                )
+    def chunk_terms(c: int) -> tuple[SampleTerms, np.ndarray]:
+        """The terms of the grasps of ``chunks[c]`` (axis 0 in its order) and their counts,
+        kept while the kept chunks stay within TERMS_CACHE_SAMPLES samples."""
+        if c not in cached:
+            while (
+                cached
+                and sum(int(n.sum()) for _, n in cached.values())
+                + sum(len(evaluations[k].times_s) for k in chunks[c])
+                > TERMS_CACHE_SAMPLES
+            ):
+                cached.pop(next(iter(cached)))  # the oldest
+            cached[c] = grasps_terms(
+                robot,
+                chain,
+                object_inertia,
+                [grasps[k].transform_tip_to_object for k in chunks[c]],
+                [evaluations[k].joint_positions for k in chunks[c]],
             )
-        return batch[0]
+        return cached[c]
 
     def terms_of(k: int, joint_positions: np.ndarray | None = None) -> SampleTerms | None:
         """Grasp k's terms along its evaluated joint path (or along ``joint_positions``)."""
@@ -277,8 +294,9 @@ def analyse(
         if joint_positions is not None:
             transform = grasps[k].transform_tip_to_object
             return grasp_terms(robot, chain, object_inertia, transform, joint_positions)
-        terms, counts = shared_terms()
-        return terms.of_grasp(row_of[k], int(counts[row_of[k]]))
+        c, row = place[k]
+        terms, counts = chunk_terms(c)
+        return terms.of_grasp(row, int(counts[row]))
 
     def model_of(k: int) -> pin.Model | None:
         if not evaluations[k].feasible:
@@ -290,26 +308,26 @@ def analyse(
     exposed: tuple[ExposedPointsEvaluation, ...] = ()
     if options.points_in_object_m is not None:
         points = options.points_in_object_m
-        exposed_list = [
-            evaluate_exposed_points(robot, e, object_inertia, g, motions[k], points, model_of(k))
-            if chain is None or not e.feasible
-            else None
-            for k, (e, g) in enumerate(zip(evaluations, grasps, strict=True))
-        ]
-        if chain is not None and feasible_grasps:
+        exposed_list: list[ExposedPointsEvaluation | None] = [None] * len(grasps)
+        for c, chunk in enumerate(chunks if chain is not None else []):
             on_terms = evaluate_exposed_points_on_terms(
                 robot,
-                [evaluations[k] for k in feasible_grasps],
-                [grasps[k] for k in feasible_grasps],
-                [motions[k] for k in feasible_grasps],
+                [evaluations[k] for k in chunk],
+                [grasps[k] for k in chunk],
+                [motions[k] for k in chunk],
                 points,
-                *shared_terms(),
+                *chunk_terms(c),
             )
-            for k, result in zip(feasible_grasps, on_terms, strict=True):
+            for k, result in zip(chunk, on_terms, strict=True):
                 exposed_list[k] = result
-        for _ in grasps:
-            step()
-        exposed = tuple(e for e in exposed_list if e is not None)
+                step()
+        for k, (e, g) in enumerate(zip(evaluations, grasps, strict=True)):
+            if exposed_list[k] is None:  # infeasible, or no compiled chain
+                exposed_list[k] = evaluate_exposed_points(
+                    robot, e, object_inertia, g, motions[k], points, model_of(k)
+                )
+                step()
+        exposed = tuple(exposed_list)  # type: ignore[arg-type]
     redundancy: tuple[RedundancyResolution, ...] = ()
     if options.redundancy:
         config = RedundancyConfig(metric=metric, max_joint_step=evaluator.config.ik.max_joint_step)
@@ -386,11 +404,10 @@ def analyse(
             arm_sites,
             options.iso_regions,
             [r.joint_positions if r.applied else None for r in redundancy] if redundancy else None,
-            shared_terms if chain is not None else None,
+            (chunks, chunk_terms) if chain is not None else None,
             model_of,
+            step,
         )
-        for _ in grasps:
-            step()
     if options.rank_by == "effort":
         order = order_by_effort(effort, options.effort_criterion)
     elif options.rank_by == "whole_arm":
@@ -445,6 +462,20 @@ def _assess_iso(
     ]
 
 
+def _chunks(grasps: Sequence[int], samples: Sequence[int]) -> list[list[int]]:
+    """``grasps`` in consecutive chunks of at most TERMS_CHUNK_SAMPLES samples (``samples``
+    per grasp; a longer grasp alone)."""
+    chunks: list[list[int]] = []
+    total = 0
+    for k, count in zip(grasps, samples, strict=True):
+        if not chunks or total + count > TERMS_CHUNK_SAMPLES:
+            chunks.append([])
+            total = 0
+        chunks[-1].append(k)
+        total += count
+    return chunks
+
+
 def _assess_whole_arm(
     evaluator: GraspSafetyEvaluator,
     evaluations: Sequence[GraspEvaluation],
@@ -454,38 +485,36 @@ def _assess_whole_arm(
     sites: ArmSites,
     iso_regions: Sequence[str] | None,
     resolved: Sequence[np.ndarray | None] | None,
-    shared_terms: Callable[[], tuple[SampleTerms, np.ndarray]] | None,
+    shared: tuple[list[list[int]], Callable[[int], tuple[SampleTerms, np.ndarray]]] | None,
     model_of: Callable[[int], pin.Model | None],
+    step: Callable[[], None],
 ) -> tuple[WholeArmEvaluation, ...]:
-    """The whole-arm evaluation of every grasp: the feasible ones along their evaluated
-    joint paths on the shared terms (``shared_terms``: compiled chains), those with a joint
-    path of their own (``resolved``: the redundancy resolution's) on terms along it, in one
-    more kernel call; the Pinocchio path when there are no terms."""
+    """The whole-arm evaluation of every grasp, ``step()`` after each: with ``shared`` (the
+    chunks of feasible grasps and their terms, compiled chains) the feasible ones along their
+    evaluated joint paths on those terms, and those with a joint path of their own
+    (``resolved``: the redundancy resolution's) on terms along it, chunk by chunk; the
+    Pinocchio path when there are no terms."""
     robot = evaluator.robot
     regions = select_regions(None if iso_regions is None else list(iso_regions))
     results: list[WholeArmEvaluation | None] = [None] * len(grasps)
-    feasible = [k for k, e in enumerate(evaluations) if e.feasible]
-    own = [k for k in feasible if resolved is not None and resolved[k] is not None]
-    if shared_terms is not None and feasible:
-        chain = evaluator.ik.chain
-        on_path = [k for k in feasible if k not in set(own)]
-        groups: list[tuple[list[int], tuple[SampleTerms, np.ndarray], list[np.ndarray]]] = []
+    chunks, chunk_terms = shared if shared is not None else ([], None)
+    for c, chunk in enumerate(chunks):
+        own = [k for k in chunk if resolved is not None and resolved[k] is not None]
+        on_path = [k for k in chunk if k not in set(own)]
+        groups = []
         if on_path:
-            terms, counts = shared_terms()
-            rows = [feasible.index(k) for k in on_path] if own else list(range(len(feasible)))
+            terms, counts = chunk_terms(c)  # type: ignore[misc]
             if own:
-                terms = SampleTerms(*(array[rows] for array in terms))
-                counts = counts[rows]
-            groups.append(
-                (on_path, (terms, counts), [evaluations[k].joint_positions for k in on_path])
-            )
+                rows = [chunk.index(k) for k in on_path]
+                terms, counts = SampleTerms(*(array[rows] for array in terms)), counts[rows]
+            paths = [evaluations[k].joint_positions for k in on_path]
+            groups.append((on_path, terms, counts, paths))
         if own:
             paths = [resolved[k] for k in own]  # type: ignore[index]
             transforms = [grasps[k].transform_tip_to_object for k in own]
-            groups.append(
-                (own, grasps_terms(robot, chain, object_inertia, transforms, paths), paths)
-            )
-        for indices, (terms, counts), paths in groups:
+            terms = grasps_terms(robot, evaluator.ik.chain, object_inertia, transforms, paths)
+            groups.append((own, *terms, paths))
+        for indices, terms, counts, paths in groups:
             assessed = evaluate_whole_arm_on_terms(
                 robot,
                 [evaluations[k] for k in indices],
@@ -499,6 +528,7 @@ def _assess_whole_arm(
             )
             for k, result in zip(indices, assessed, strict=True):
                 results[k] = result
+                step()
     for k, (e, g) in enumerate(zip(evaluations, grasps, strict=True)):
         if results[k] is None:
             results[k] = evaluate_whole_arm(
@@ -512,4 +542,5 @@ def _assess_whole_arm(
                 model_of(k),
                 None if resolved is None else resolved[k],
             )
+            step()
     return tuple(results)  # type: ignore[arg-type]
