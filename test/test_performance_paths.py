@@ -804,3 +804,57 @@ def test_point_jacobians_from_shared_terms_equal_pinocchio(
                 model, data, frame, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
             )[:3]
             assert_close_to_scale(ours[10 * i, 0], expected, f"site on link {k}")
+
+
+@needs_numba
+@pytest.mark.parametrize("name", TERM_ARMS)
+def test_whole_arm_from_shared_terms_equals_pinocchio(
+    name: str, request: pytest.FixtureRequest
+) -> None:
+    """Sites of the whole arm (the defaults and a point on every link) on the compiled path:
+    positions, directions, speeds, masses, energies and the regions' worst cases."""
+    from grasp_safety_ros.core.analyses.whole_arm import evaluate_whole_arm, resolve_arm_sites
+
+    robot: RobotModel = request.getfixturevalue(name)
+    grasp, evaluation, terms, motion = _terms_case(robot, 16)
+    links = {
+        frame.name
+        for frame in robot.model.frames
+        if frame.type == pin.FrameType.BODY and frame.parentJoint > 0
+    }
+    sites = resolve_arm_sites(robot, {link: [[0.03, -0.05, 0.1]] for link in sorted(links)})
+    reference = evaluate_whole_arm(robot, evaluation, BOX, grasp, motion, sites)
+    shared = evaluate_whole_arm(robot, evaluation, BOX, grasp, motion, sites, terms=terms)
+    assert reference.stationary.any() and not reference.stationary.all()  # both branches
+    np.testing.assert_array_equal(shared.stationary, reference.stationary)
+    for field in ("positions_in_base_m", "speed_m_s", "energy_j"):
+        assert_close_to_scale(getattr(shared, field), getattr(reference, field), field)
+    moving = ~reference.stationary
+    masses, expected = shared.effective_mass_kg, reference.effective_mass_kg
+    assert_close_to_scale(masses[moving], expected[moving], "masses")
+    # At rest the mass is 1/λ_min of the mobility A, conditioned by λ_max/λ_min (here up to
+    # 1e6): λ_min agrees to rounding of A's scale, so compare 1/M_eff.
+    assert_close_to_scale(1.0 / masses[~moving], 1.0 / expected[~moving], "1/masses at rest")
+    assert_close_to_scale(
+        shared.directions_in_base[moving], reference.directions_in_base[moving], "directions"
+    )
+    still = reference.stationary  # eigenvectors: up to sign
+    signs = np.sign(
+        np.einsum(
+            "ka,ka->k", shared.directions_in_base[still], reference.directions_in_base[still]
+        )
+    )
+    assert_close_to_scale(
+        shared.directions_in_base[still] * signs[:, None],
+        reference.directions_in_base[still],
+        "directions at rest",
+    )
+    for a, b in zip(shared.regions, reference.regions, strict=True):
+        assert (a.region, a.worst_site, a.worst_sample, a.admissible) == (
+            b.region,
+            b.worst_site,
+            b.worst_sample,
+            b.admissible,
+        )
+        assert a.peak_contact_force_n == pytest.approx(b.peak_contact_force_n, rel=1e-12)
+        assert a.worst_force_ratio == pytest.approx(b.worst_force_ratio, rel=1e-12)

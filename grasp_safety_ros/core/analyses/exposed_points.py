@@ -26,6 +26,7 @@ import pinocchio as pin
 from ..exceptions import InvalidInputError
 from ..input_checks import finite_array, finite_float, read_only
 from ..method.effective_mass import STATIONARY_TANGENT_M, augmented_model
+from ..method.points import tip_point_masses
 from ..method.ranking import Grasp, GraspEvaluation, aggregate, check_metric
 from ..method.terms import SampleTerms
 from ..model.inertia import ObjectInertia
@@ -228,8 +229,9 @@ def evaluate_exposed_points(
     Reuses the evaluation's joint positions (no IK). ``grasp`` and ``trajectory`` must be the
     ones the evaluation was computed with; ``model``: their ``augmented_model``, when already
     built (shared across analyses); ``terms``: the grasp's ``method.terms.SampleTerms`` at
-    the evaluation's joint positions (then the mobilities come from its Jacobians and M⁻¹ on
-    arrays; None: Pinocchio per sample, the reference, equal to rounding).
+    the evaluation's joint positions (then the compiled path,
+    ``evaluate_exposed_points_on_terms`` of this grasp alone; None: Pinocchio per sample, the
+    reference, equal to rounding).
     """
     points = check_points_in_object(points_in_object_m)
     count_points = len(points)
@@ -252,52 +254,29 @@ def evaluate_exposed_points(
     times = np.asarray(evaluation.times_s, dtype=float)
     if len(times) != evaluation.joint_positions.shape[0]:
         raise InvalidInputError("evaluation.times_s", "must have one entry per joint sample")
-    count = len(times)
-    grasp_pose = pin.SE3(grasp.transform_tip_to_object)
-    points_in_tip = points @ grasp_pose.rotation  # R_otᵀ (p − t_ot), row-wise
-    points_in_tip -= grasp_pose.translation @ grasp_pose.rotation
-    positions = np.empty((count, count_points, 3))
-    tangents = np.empty((count, count_points, 3))
-    speeds = np.empty((count, count_points))
-    object_motion = (  # sampled once for every point
-        trajectory.object_motion(times) if isinstance(trajectory, ObjectPath) else None
-    )
-    for k, point in enumerate(points):
-        frame = pin.SE3(np.eye(3), point)
-        motion = (
-            trajectory.tip_motion(frame, times)
-            if object_motion is None
-            else object_motion.tip_motion(frame)
-        )
-        positions[:, k] = motion.positions
-        tangents[:, k] = motion.tangents
-        speeds[:, k] = motion.speeds
     if terms is not None:
-        jacobians = _point_jacobians(
-            robot, terms.tip_jacobians, terms.tip_rotations, points_in_tip
-        )  # (N, K, 3, nv)
-        minv = terms.mass_matrix_inverses[:, None]  # (N, 1, nv, nv)
-        mobilities = jacobians @ minv @ np.swapaxes(jacobians, -1, -2)
-    else:
-        if model is None:
-            model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
-        data = model.createData()
-        mobilities = np.empty((count, count_points, 3, 3))
-        for i, positions_i in enumerate(evaluation.joint_positions):
-            q = robot.q_from_positions(positions_i)
-            mobilities[i] = point_mobility_in_base(robot, model, data, q, points_in_tip)
-    norms = np.linalg.norm(tangents, axis=2)
-    stationary = norms < STATIONARY_TANGENT_M
-    directions = tangents / np.where(stationary, 1.0, norms)[..., None]
+        batch = SampleTerms(*(array[None] for array in terms))
+        counts = np.array([len(times)])
+        return evaluate_exposed_points_on_terms(
+            robot, [evaluation], [grasp], [trajectory], points, batch, counts
+        )[0]
+    count = len(times)
+    positions, tangents, speeds = _point_motion(trajectory, times, points)
+    if model is None:
+        model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
+    data = model.createData()
+    mobilities = np.empty((count, count_points, 3, 3))
+    points_in_tip = _points_in_tip(points, [grasp])[0]
+    for i, positions_i in enumerate(evaluation.joint_positions):
+        q = robot.q_from_positions(positions_i)
+        mobilities[i] = point_mobility_in_base(robot, model, data, q, points_in_tip)
+    stationary, directions = _directions(tangents)
     masses = 1.0 / np.einsum("nka,nkab,nkb->nk", directions, mobilities, directions)
     if stationary.any():
         worst_dirs, worst_masses = _worst_directions(mobilities[stationary])
         directions[stationary] = worst_dirs
         masses[stationary] = worst_masses
-    centroid = positions.mean(axis=1, keepdims=True)
-    ahead = np.einsum("nka,nka->nk", positions - centroid, directions)
-    ahead = np.where(stationary, -np.inf, ahead)
-    leading = np.argmax(ahead, axis=1)
+    leading = _leading_points(positions, directions, stationary)
     worst = np.argmax(masses, axis=1)
     leading = np.where(stationary.all(axis=1), worst, leading)
     return ExposedPointsEvaluation(
@@ -314,6 +293,142 @@ def evaluate_exposed_points(
         leading_point_index=read_only(leading),
         worst_point_index=read_only(worst),
     )
+
+
+def evaluate_exposed_points_on_terms(
+    robot: RobotModel,
+    evaluations: Sequence[GraspEvaluation],
+    grasps: Sequence[Grasp],
+    trajectories: Sequence[Trajectory],
+    points_in_object_m: Any,
+    terms: SampleTerms,
+    counts: np.ndarray,
+) -> list[ExposedPointsEvaluation]:
+    """``evaluate_exposed_points`` of G feasible grasps at once, on their shared terms
+    (``method.terms.grasps_terms``: axis 0 the grasp, in the order of ``evaluations``, with
+    ``counts`` samples each): the mobilities by one compiled call over (grasp, sample, point)
+    (``method.points.tip_point_masses``), the points' motions once per distinct motion (an
+    object path moves the object's points alike whatever the grasp). Equal to the Pinocchio
+    path to rounding; each grasp's result is the one it gets alone, bit for bit."""
+    points = check_points_in_object(points_in_object_m)
+    count_points, grasp_count = len(points), len(evaluations)
+    motion_keys: dict[tuple[int, bytes], int] = {}
+    motions: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+    motion_of = np.empty(grasp_count, dtype=np.int64)
+    for g, (evaluation, trajectory) in enumerate(zip(evaluations, trajectories, strict=True)):
+        times = np.asarray(evaluation.times_s, dtype=float)
+        if not evaluation.feasible or len(times) != counts[g]:
+            raise InvalidInputError(
+                "evaluation", f"grasp {evaluation.index}: must be feasible, one term per sample"
+            )
+        key = (id(trajectory), times.tobytes())
+        if key not in motion_keys:
+            motion_keys[key] = len(motions)
+            motions.append((times, *_point_motion(trajectory, times, points)))
+        motion_of[g] = motion_keys[key]
+    samples = terms.tip_jacobians.shape[1]
+    directions = np.zeros((len(motions), samples, count_points, 3))
+    stationary = np.zeros((len(motions), samples, count_points), dtype=bool)
+    leading_moving = np.zeros((len(motions), samples), dtype=np.int64)
+    for m, (times, positions, tangents, _) in enumerate(motions):
+        still, unit = _directions(tangents)
+        directions[m, : len(times)], stationary[m, : len(times)] = unit, still
+        leading_moving[m, : len(times)] = _leading_points(positions, unit, still)
+    masses, mask, mobilities = tip_point_masses(
+        terms,
+        counts,
+        robot.transform_base_to_world.rotation,
+        _points_in_tip(points, grasps),
+        directions,
+        stationary,
+        motion_of,
+    )
+    grasp_directions = directions[motion_of] if len(mobilities) else None  # else shared
+    if grasp_directions is not None:
+        grasp_directions[mask], masses[mask] = _worst_directions(mobilities)
+    worst = np.argmax(masses, axis=2)
+    all_still = stationary[motion_of].all(axis=2)
+    leading = np.where(all_still, worst, leading_moving[motion_of])
+    results = []
+    for g, evaluation in enumerate(evaluations):
+        times, positions, _, speeds = motions[motion_of[g]]
+        count = len(times)
+        results.append(
+            ExposedPointsEvaluation(
+                index=evaluation.index,
+                name=evaluation.name,
+                feasible=True,
+                times_s=read_only(times, copy=True),
+                points_in_object_m=points,
+                positions_in_base_m=read_only(positions),
+                directions_in_base=read_only(
+                    directions[motion_of[g], :count]
+                    if grasp_directions is None
+                    else grasp_directions[g, :count]
+                ),
+                direction_is_worst_case=read_only(stationary[motion_of[g], :count]),
+                speed_m_s=read_only(speeds),
+                effective_mass_kg=read_only(masses[g, :count]),
+                leading_point_index=read_only(leading[g, :count]),
+                worst_point_index=read_only(worst[g, :count]),
+            )
+        )
+    return results
+
+
+def _points_in_tip(points: np.ndarray, grasps: Sequence[Grasp]) -> np.ndarray:
+    """(G, K, 3) the object points in each grasp's tip frame [m]: R_otᵀ (p − t_ot), summed
+    in a fixed order (the same bits for a grasp alone or in a batch)."""
+    poses = [pin.SE3(grasp.transform_tip_to_object) for grasp in grasps]
+    rotations = np.array([pose.rotation for pose in poses]).reshape(-1, 3, 3)
+    translations = np.array([pose.translation for pose in poses]).reshape(-1, 3)
+    relative = points[None] - translations[:, None]  # (G, K, 3)
+    return (
+        relative[..., 0, None] * rotations[:, None, 0]
+        + relative[..., 1, None] * rotations[:, None, 1]
+        + relative[..., 2, None] * rotations[:, None, 2]
+    )
+
+
+def _point_motion(
+    trajectory: Trajectory, times: np.ndarray, points: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Positions (N, K, 3) [m] and tangents (N, K, 3) (base frame) and speeds (N, K) [m/s] of
+    the object points along ``trajectory`` at ``times``."""
+    count, count_points = len(times), len(points)
+    positions = np.empty((count, count_points, 3))
+    tangents = np.empty((count, count_points, 3))
+    speeds = np.empty((count, count_points))
+    object_motion = (  # sampled once for every point
+        trajectory.object_motion(times) if isinstance(trajectory, ObjectPath) else None
+    )
+    for k, point in enumerate(points):
+        frame = pin.SE3(np.eye(3), point)
+        motion = (
+            trajectory.tip_motion(frame, times)
+            if object_motion is None
+            else object_motion.tip_motion(frame)
+        )
+        positions[:, k] = motion.positions
+        tangents[:, k] = motion.tangents
+        speeds[:, k] = motion.speeds
+    return positions, tangents, speeds
+
+
+def _directions(tangents: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(stationary (N, K), unit directions (N, K, 3); 0 where stationary) of the tangents."""
+    norms = np.linalg.norm(tangents, axis=2)
+    stationary = norms < STATIONARY_TANGENT_M
+    return stationary, tangents / np.where(stationary, 1.0, norms)[..., None]
+
+
+def _leading_points(
+    positions: np.ndarray, directions: np.ndarray, stationary: np.ndarray
+) -> np.ndarray:
+    """(N,) the leading point among those that translate (module docstring); 0 where none."""
+    centroid = positions.mean(axis=1, keepdims=True)
+    ahead = np.einsum("nka,nka->nk", positions - centroid, directions)
+    return np.argmax(np.where(stationary, -np.inf, ahead), axis=1)
 
 
 def metric_point_series(

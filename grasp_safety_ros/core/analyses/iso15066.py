@@ -349,45 +349,69 @@ def _assess_regions_batch(
 ) -> list[tuple[RegionAssessment, ...]]:
     """Per motion, the assessment of each region; speeds and masses (M, N), validated.
 
-    One array pass over regions x motions x samples, with the elementwise formulas of
-    transient_contact_force_n and max_permissible_speed_m_s (the same numbers as one region
-    and one motion at a time).
+    One array pass over regions x motions x samples (``_region_arrays``): the same numbers as
+    one region and one motion at a time.
     """
-    permitted, human_mass, stiffness, limit = (c[:, :, None] for c in _region_columns(regions))
-    root = np.sqrt(reduced_mass_kg(human_mass, effective_mass_kg) * stiffness)  # sqrt(μ·k)
-    force = read_only(speed_m_s * root)  # (R, M, N)
-    v_max = read_only(np.where(permitted, limit / root, 0.0))
-    moving = np.where(speed_m_s > 0.0, np.inf, 0.0)
-    ratio = read_only(np.where(permitted, force / limit, moving))
-    count = ratio.shape[2]
-    if count:
-        worst_sample = np.argmax(ratio, axis=2)
-        worst = np.take_along_axis(ratio, worst_sample[:, :, None], axis=2)[:, :, 0]
-        peak = force.max(axis=2)
-    else:
-        worst_sample = np.zeros(ratio.shape[:2], dtype=int)
-        worst = peak = np.zeros(ratio.shape[:2])
+    force, v_max, ratio, worst, worst_sample, peak = _region_arrays(
+        speed_m_s, effective_mass_kg, regions
+    )
     worst_list, sample_list, peak_list = worst.tolist(), worst_sample.tolist(), peak.tolist()
+    rows = [(list(force[k]), list(v_max[k]), list(ratio[k])) for k in range(len(regions))]
     motions = []
     for m in range(ratio.shape[1]):
         assessed = []
         for k, region in enumerate(regions):
             worst_k = worst_list[k][m]
+            forces, speeds, ratios = rows[k]
             assessed.append(
-                RegionAssessment(
-                    region=region,
-                    contact_force_n=force[k, m],
-                    max_permissible_speed_m_s=v_max[k, m],
-                    force_ratio=ratio[k, m],
-                    worst_force_ratio=worst_k,
-                    worst_sample=sample_list[k][m],
-                    peak_contact_force_n=peak_list[k][m],
-                    admissible=worst_k <= 1.0 + ADMISSIBLE_RATIO_TOLERANCE,
-                    min_duration_s=duration_s * worst_k if worst_k > 0.0 else 0.0,
+                RegionAssessment(  # positional (12 per motion): the fields in order
+                    region,
+                    forces[m],
+                    speeds[m],
+                    ratios[m],
+                    worst_k,
+                    sample_list[k][m],
+                    peak_list[k][m],
+                    worst_k <= 1.0 + ADMISSIBLE_RATIO_TOLERANCE,
+                    duration_s * worst_k if worst_k > 0.0 else 0.0,
                 )
             )
         motions.append(tuple(assessed))
     return motions
+
+
+def _region_arrays(
+    speed_m_s: np.ndarray, effective_mass_kg: np.ndarray, regions: tuple[BodyRegion, ...]
+) -> tuple[np.ndarray, ...]:
+    """Force [N], v_max [m/s] and force ratio (R, M, N) (read-only) of R regions for M motions
+    of N samples ((M, N) speeds and masses, validated), and per (region, motion) the worst
+    ratio, its sample and the peak force (R, M).
+
+    The elementwise formulas of transient_contact_force_n and max_permissible_speed_m_s, in
+    the same operation order (so the same bits), written in place: one (R, M, N) buffer per
+    output, no temporaries of that size.
+    """
+    permitted, human_mass, stiffness, limit = (c[:, :, None] for c in _region_columns(regions))
+    shape = (len(regions), *speed_m_s.shape)
+    root = np.add(1.0 / human_mass, 1.0 / effective_mass_kg, out=np.empty(shape))
+    np.divide(1.0, root, out=root)  # μ = (1/m_h + 1/m_r)⁻¹
+    np.multiply(root, stiffness, out=root)
+    np.sqrt(root, out=root)  # sqrt(μ·k)
+    force = np.multiply(speed_m_s, root)  # (R, M, N)
+    v_max = np.divide(limit, root, out=root)
+    ratio = np.divide(force, limit)
+    not_permitted = ~permitted[:, 0, 0]
+    if not_permitted.any():
+        v_max[not_permitted] = 0.0
+        ratio[not_permitted] = np.where(speed_m_s > 0.0, np.inf, 0.0)
+    if shape[2]:
+        worst_sample = np.argmax(ratio, axis=2)
+        worst = np.take_along_axis(ratio, worst_sample[:, :, None], axis=2)[:, :, 0]
+        peak = force.max(axis=2)
+    else:
+        worst_sample = np.zeros(shape[:2], dtype=int)
+        worst = peak = np.zeros(shape[:2])
+    return read_only(force), read_only(v_max), read_only(ratio), worst, worst_sample, peak
 
 
 def _checked_motion(speed_m_s: Any, effective_mass_kg: Any) -> tuple[np.ndarray, np.ndarray]:

@@ -20,7 +20,7 @@ from ..exceptions import InvalidInputError
 from ..method.effective_mass import augmented_model
 from ..method.pool import executor_for
 from ..method.ranking import Grasp, GraspEvaluation, GraspSafetyEvaluator, Ranking, aggregate
-from ..method.terms import SampleTerms, grasp_terms
+from ..method.terms import SampleTerms, grasp_terms, grasps_terms
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
 from ..model.trajectory import Trajectory
@@ -30,6 +30,7 @@ from .exposed_points import (
     check_metric_point,
     check_points_in_object,
     evaluate_exposed_points,
+    evaluate_exposed_points_on_terms,
     metric_point_series,
 )
 from .iso15066 import (
@@ -54,9 +55,20 @@ from .whole_arm import (
     WholeArmPostureCriterion,
     check_exposed_points_m,
     evaluate_whole_arm,
+    evaluate_whole_arm_on_terms,
     order_by_whole_arm,
     resolve_arm_sites,
 )
+
+TERMS_CHUNK_SAMPLES = 25_000
+"""The shared terms are computed for consecutive chunks of feasible grasps of at most this
+many samples in all (about 50 MB for a 7-joint arm), so that a request's progress is reported
+(and it can be abandoned) chunk by chunk."""
+
+TERMS_CACHE_SAMPLES = 250_000
+"""Chunks of terms are kept for the next analysis while those kept hold at most this many
+samples (about 500 MB for a 7-joint arm); beyond it the oldest is dropped (then computed
+again if an analysis needs it)."""
 
 RANK_BY = ("safety", "effort", "whole_arm")
 """What orders the final ranking: the safety score (with quality, when given), the effort, or
@@ -245,13 +257,36 @@ def analyse(
         if progress is not None:
             progress(done, per_grasp)
 
-    # Shared by every analysis: each grasp's motion, and for a feasible grasp the terms along
-    # its joint path (compiled chains) or else its augmented model (an infeasible grasp's
-    # analyses need neither).
+    # Shared by every analysis: each grasp's motion, and for the feasible grasps the terms
+    # along their joint paths, all in one kernel call (compiled chains), or else each one's
+    # augmented model (an infeasible grasp's analyses need neither).
     motions = [evaluator.trajectory_for(g, trajectory) for g in grasps]
     models: dict[int, pin.Model] = {}
     chain = evaluator.ik.chain if evaluator.ik.compiled else None
-    terms: dict[int, SampleTerms] = {}
+    feasible_grasps = [k for k, e in enumerate(evaluations) if e.feasible]
+    chunks = _chunks(feasible_grasps, [len(evaluations[k].times_s) for k in feasible_grasps])
+    place = {k: (c, row) for c, chunk in enumerate(chunks) for row, k in enumerate(chunk)}
+    cached: dict[int, tuple[SampleTerms, np.ndarray]] = {}
+
+    def chunk_terms(c: int) -> tuple[SampleTerms, np.ndarray]:
+        """The terms of the grasps of ``chunks[c]`` (axis 0 in its order) and their counts,
+        kept while the kept chunks stay within TERMS_CACHE_SAMPLES samples."""
+        if c not in cached:
+            while (
+                cached
+                and sum(int(n.sum()) for _, n in cached.values())
+                + sum(len(evaluations[k].times_s) for k in chunks[c])
+                > TERMS_CACHE_SAMPLES
+            ):
+                cached.pop(next(iter(cached)))  # the oldest
+            cached[c] = grasps_terms(
+                robot,
+                chain,
+                object_inertia,
+                [grasps[k].transform_tip_to_object for k in chunks[c]],
+                [evaluations[k].joint_positions for k in chunks[c]],
+            )
+        return cached[c]
 
     def terms_of(k: int, joint_positions: np.ndarray | None = None) -> SampleTerms | None:
         """Grasp k's terms along its evaluated joint path (or along ``joint_positions``)."""
@@ -260,9 +295,9 @@ def analyse(
         if joint_positions is not None:
             transform = grasps[k].transform_tip_to_object
             return grasp_terms(robot, chain, object_inertia, transform, joint_positions)
-        if k not in terms:
-            terms[k] = terms_of(k, evaluations[k].joint_positions)
-        return terms[k]
+        c, row = place[k]
+        terms, counts = chunk_terms(c)
+        return terms.of_grasp(row, int(counts[row]))
 
     def model_of(k: int) -> pin.Model | None:
         if not evaluations[k].feasible:
@@ -273,23 +308,27 @@ def analyse(
 
     exposed: tuple[ExposedPointsEvaluation, ...] = ()
     if options.points_in_object_m is not None:
-        exposed_list = []
-        for k, (e, g) in enumerate(zip(evaluations, grasps, strict=True)):
-            shared = terms_of(k)
-            exposed_list.append(
-                evaluate_exposed_points(
-                    robot,
-                    e,
-                    object_inertia,
-                    g,
-                    motions[k],
-                    options.points_in_object_m,
-                    None if shared is not None else model_of(k),
-                    shared,
-                )
+        points = options.points_in_object_m
+        exposed_list: list[ExposedPointsEvaluation | None] = [None] * len(grasps)
+        for c, chunk in enumerate(chunks if chain is not None else []):
+            on_terms = evaluate_exposed_points_on_terms(
+                robot,
+                [evaluations[k] for k in chunk],
+                [grasps[k] for k in chunk],
+                [motions[k] for k in chunk],
+                points,
+                *chunk_terms(c),
             )
-            step()
-        exposed = tuple(exposed_list)
+            for k, result in zip(chunk, on_terms, strict=True):
+                exposed_list[k] = result
+                step()
+        for k, (e, g) in enumerate(zip(evaluations, grasps, strict=True)):
+            if exposed_list[k] is None:  # infeasible, or no compiled chain
+                exposed_list[k] = evaluate_exposed_points(
+                    robot, e, object_inertia, g, motions[k], points, model_of(k)
+                )
+                step()
+        exposed = tuple(exposed_list)  # type: ignore[arg-type]
     redundancy: tuple[RedundancyResolution, ...] = ()
     if options.redundancy:
         config = RedundancyConfig(metric=metric, max_joint_step=evaluator.config.ik.max_joint_step)
@@ -353,25 +392,19 @@ def analyse(
     arm_sites = None
     if options.whole_arm:
         arm_sites = resolve_arm_sites(robot, options.arm_points_m)
-        assessed = []
-        for k, (e, g) in enumerate(zip(evaluations, grasps, strict=True)):
-            assessed.append(
-                evaluate_whole_arm(
-                    robot,
-                    e,
-                    object_inertia,
-                    g,
-                    motions[k],
-                    arm_sites,
-                    options.iso_regions,
-                    model_of(k),
-                    redundancy[k].joint_positions
-                    if redundancy and redundancy[k].applied
-                    else None,
-                )
-            )
-            step()
-        whole_arm = tuple(assessed)
+        whole_arm = _assess_whole_arm(
+            evaluator,
+            evaluations,
+            grasps,
+            motions,
+            object_inertia,
+            arm_sites,
+            options.iso_regions,
+            [r.joint_positions if r.applied else None for r in redundancy] if redundancy else None,
+            (chunks, chunk_terms) if chain is not None else None,
+            model_of,
+            step,
+        )
     if options.rank_by == "effort":
         order = order_by_effort(effort, options.effort_criterion)
     elif options.rank_by == "whole_arm":
@@ -424,3 +457,87 @@ def _assess_iso(
         assessed[k] if k in assessed else assess_grasp(evaluation, regions)
         for k, evaluation in enumerate(evaluations)
     ]
+
+
+def _chunks(grasps: Sequence[int], samples: Sequence[int]) -> list[list[int]]:
+    """``grasps`` in consecutive chunks of at most TERMS_CHUNK_SAMPLES samples (``samples``
+    per grasp; a longer grasp alone)."""
+    chunks: list[list[int]] = []
+    total = 0
+    for k, count in zip(grasps, samples, strict=True):
+        if not chunks or total + count > TERMS_CHUNK_SAMPLES:
+            chunks.append([])
+            total = 0
+        chunks[-1].append(k)
+        total += count
+    return chunks
+
+
+def _assess_whole_arm(
+    evaluator: GraspSafetyEvaluator,
+    evaluations: Sequence[GraspEvaluation],
+    grasps: Sequence[Grasp],
+    motions: Sequence[Trajectory],
+    object_inertia: ObjectInertia,
+    sites: ArmSites,
+    iso_regions: Sequence[str] | None,
+    resolved: Sequence[np.ndarray | None] | None,
+    shared: tuple[list[list[int]], Callable[[int], tuple[SampleTerms, np.ndarray]]] | None,
+    model_of: Callable[[int], pin.Model | None],
+    step: Callable[[], None],
+) -> tuple[WholeArmEvaluation, ...]:
+    """The whole-arm evaluation of every grasp, ``step()`` after each: with ``shared`` (the
+    chunks of feasible grasps and their terms, compiled chains) the feasible ones along their
+    evaluated joint paths on those terms, and those with a joint path of their own
+    (``resolved``: the redundancy resolution's) on terms along it, chunk by chunk; the
+    Pinocchio path when there are no terms."""
+    robot = evaluator.robot
+    regions = select_regions(None if iso_regions is None else list(iso_regions))
+    results: list[WholeArmEvaluation | None] = [None] * len(grasps)
+    chunks, chunk_terms = shared if shared is not None else ([], None)
+    for c, chunk in enumerate(chunks):
+        own = [k for k in chunk if resolved is not None and resolved[k] is not None]
+        on_path = [k for k in chunk if k not in set(own)]
+        groups = []
+        if on_path:
+            terms, counts = chunk_terms(c)  # type: ignore[misc]
+            if own:
+                rows = [chunk.index(k) for k in on_path]
+                terms, counts = SampleTerms(*(array[rows] for array in terms)), counts[rows]
+            paths = [evaluations[k].joint_positions for k in on_path]
+            groups.append((on_path, terms, counts, paths))
+        if own:
+            paths = [resolved[k] for k in own]  # type: ignore[index]
+            transforms = [grasps[k].transform_tip_to_object for k in own]
+            terms = grasps_terms(robot, evaluator.ik.chain, object_inertia, transforms, paths)
+            groups.append((own, *terms, paths))
+        for indices, terms, counts, paths in groups:
+            assessed = evaluate_whole_arm_on_terms(
+                robot,
+                [evaluations[k] for k in indices],
+                [motions[k] for k in indices],
+                [grasps[k] for k in indices],
+                sites,
+                regions,
+                terms,
+                counts,
+                paths,
+            )
+            for k, result in zip(indices, assessed, strict=True):
+                results[k] = result
+                step()
+    for k, (e, g) in enumerate(zip(evaluations, grasps, strict=True)):
+        if results[k] is None:
+            results[k] = evaluate_whole_arm(
+                robot,
+                e,
+                object_inertia,
+                g,
+                motions[k],
+                sites,
+                iso_regions,
+                model_of(k),
+                None if resolved is None else resolved[k],
+            )
+            step()
+    return tuple(results)  # type: ignore[arg-type]

@@ -24,13 +24,13 @@ ISO/TS 15066 (core.analyses.iso15066, Annex A): for each body region, the force 
 F/F_tr = v·sqrt(μ k)/F_tr at every (sample, site); the worst over both, the worst site and
 its link, admissibility over the whole arm, and T_min = T · max ratio over the permitted
 regions (a uniform re-timing scales every site speed alike). Energy: ½ M_eff v² [J].
+The sites themselves are resolved in ``arm_sites``.
 """
 
 from __future__ import annotations
 
-import difflib
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -38,22 +38,25 @@ import numpy as np
 import pinocchio as pin
 
 from ..exceptions import InvalidInputError
-from ..input_checks import finite_array, read_only
+from ..input_checks import read_only
 from ..method.effective_mass import augmented_model
 from ..method.executable import joint_velocities_accelerations
+from ..method.points import PSEUDO_INVERSE_RCOND, site_masses, tip_following_rates, valid_rows
 from ..method.ranking import Grasp, GraspEvaluation
+from ..method.terms import SampleTerms, grasps_terms
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
-from ..model.trajectory import ObjectPath, Trajectory
+from ..model.trajectory import ObjectMotion, ObjectPath, Trajectory
+from .arm_sites import MAX_SITES as MAX_SITES
+from .arm_sites import ArmSites as ArmSites
+from .arm_sites import check_exposed_points_m as check_exposed_points_m
+from .arm_sites import resolve_arm_sites as resolve_arm_sites
 from .iso15066 import (
     ADMISSIBLE_RATIO_TOLERANCE,
     BodyRegion,
     select_regions,
     transient_contact_force_n,
 )
-
-FIRST_DEFAULT_JOINT = 3
-"""Default sites: the origins of chain joints FIRST_DEFAULT_JOINT.. (1-based), and the tip."""
 
 STATIONARY_SPEED_M_S = 1e-9
 """Below this speed [m/s] a site does not move: flagged, no direction of its own."""
@@ -62,136 +65,8 @@ EIGENVALUE_RELATIVE_TOLERANCE = 1e-12
 """A mobility eigenvalue below this times the largest counts as zero (a direction the site
 cannot move in)."""
 
-MAX_SITES = 1000
-"""Largest number of sites (default plus user points) accepted."""
-
 DEFAULT_RANK_REGION = "chest"
 """Body region whose worst predicted force ``rank_by: whole_arm`` uses unless told."""
-
-
-@dataclass(frozen=True)
-class ArmSites:
-    """Points on the chain's links, resolved once per robot (K sites, n chain joints).
-
-    Attributes:
-        names: Site names, e.g. ``panda_joint4`` (a joint origin), the tip frame's name, or
-            ``panda_link5[0]`` (the first user point on that link).
-        links: Name of the link carrying each site.
-        joint_ids: (K,) Pinocchio joint id of the body carrying each site (1..n).
-        points_in_joint_m: (K, 3) the point in that joint's frame [m].
-        support: (K, n) True where chain joint i moves the site's body.
-        dropped: Names of user sites dropped because their link is welded to the base.
-    """
-
-    names: tuple[str, ...]
-    links: tuple[str, ...]
-    joint_ids: np.ndarray
-    points_in_joint_m: np.ndarray
-    support: np.ndarray
-    dropped: tuple[str, ...] = ()
-
-    def __len__(self) -> int:
-        return len(self.names)
-
-
-def check_exposed_points_m(
-    value: Any, field: str = "robot.exposed_points_m"
-) -> dict[str, np.ndarray]:
-    """Validate ``{link_name: [[x, y, z], ...]}`` (link frame [m]); returns (P, 3) arrays."""
-    if not isinstance(value, Mapping):
-        raise InvalidInputError(
-            field, f"must be a mapping {{link_name: [[x, y, z], ...]}}, got {value!r}"
-        )
-    checked: dict[str, np.ndarray] = {}
-    for link, points in value.items():
-        if not isinstance(link, str) or not link:
-            raise InvalidInputError(field, f"link names must be non-empty strings, got {link!r}")
-        array = finite_array(points, f"{field}.{link}")
-        if array.ndim == 1 and array.shape == (3,):
-            array = array[None]
-        if array.ndim != 2 or array.shape[1] != 3 or len(array) < 1:
-            raise InvalidInputError(
-                f"{field}.{link}", f"must be a list of [x, y, z] points, got {list(array.shape)}"
-            )
-        checked[link] = read_only(array, copy=True)
-    total = sum(len(points) for points in checked.values())
-    if total > MAX_SITES:
-        raise InvalidInputError(field, f"has {total} points; at most {MAX_SITES} are allowed")
-    return checked
-
-
-def _link_frame(model: pin.Model, link: str, field: str) -> int:
-    """Id of the BODY (link) frame called ``link``; refused with close names suggested."""
-    bodies = [frame.name for frame in model.frames if frame.type == pin.FrameType.BODY]
-    for i, frame in enumerate(model.frames):
-        if frame.type == pin.FrameType.BODY and frame.name == link:
-            return i
-    close = difflib.get_close_matches(link, bodies, n=3, cutoff=0.5)
-    hint = f"did you mean {', '.join(close)}?" if close else f"links: {', '.join(bodies)}"
-    raise InvalidInputError(f"{field}.{link}", f"unknown link '{link}'; {hint}")
-
-
-def _child_link(model: pin.Model, joint_id: int) -> str:
-    """The first link (BODY frame) carried by joint ``joint_id``, or the joint's name."""
-    for frame in model.frames:
-        if frame.type == pin.FrameType.BODY and frame.parentJoint == joint_id:
-            return frame.name
-    return model.names[joint_id]
-
-
-def resolve_arm_sites(
-    robot: RobotModel,
-    exposed_points_m: Mapping[str, Any] | None = None,
-    defaults: bool = True,
-    field: str = "robot.exposed_points_m",
-) -> ArmSites:
-    """The sites of ``robot`` (module docstring): the defaults (unless ``defaults`` is False),
-    then each user link's points in the order given."""
-    model = robot.model
-    names: list[str] = []
-    links: list[str] = []
-    joint_ids: list[int] = []
-    points: list[np.ndarray] = []
-    if defaults:
-        for joint_id in range(FIRST_DEFAULT_JOINT, model.njoints):
-            names.append(model.names[joint_id])
-            links.append(_child_link(model, joint_id))
-            joint_ids.append(joint_id)
-            points.append(np.zeros(3))
-        tip = model.frames[robot.tip_frame_id]
-        names.append(robot.tip_frame)
-        links.append(
-            robot.tip_frame
-            if tip.type == pin.FrameType.BODY
-            else _child_link(model, tip.parentJoint)
-        )
-        joint_ids.append(tip.parentJoint)
-        points.append(np.array(tip.placement.translation))
-    dropped: list[str] = []
-    for link, link_points in check_exposed_points_m(exposed_points_m or {}, field).items():
-        frame = model.frames[_link_frame(model, link, field)]
-        for p, point in enumerate(link_points):
-            name = f"{link}[{p}]"
-            if frame.parentJoint == 0:
-                dropped.append(name)
-                continue
-            names.append(name)
-            links.append(link)
-            joint_ids.append(frame.parentJoint)
-            points.append(frame.placement.act(point))
-    ids = np.array(joint_ids, dtype=int)
-    support = np.zeros((len(ids), model.nv), dtype=bool)
-    for k, joint_id in enumerate(ids):
-        for i in model.supports[int(joint_id)][1:]:
-            support[k, model.joints[i].idx_v] = True
-    return ArmSites(
-        names=tuple(names),
-        links=tuple(links),
-        joint_ids=read_only(ids),
-        points_in_joint_m=read_only(np.array(points, dtype=float).reshape(-1, 3)),
-        support=read_only(support),
-        dropped=tuple(dropped),
-    )
 
 
 class ArmTerms(NamedTuple):
@@ -254,6 +129,21 @@ class SiteExposure(NamedTuple):
     effective_mass_kg: np.ndarray
 
 
+def _largest_mass_directions(mobilities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per mobility (S, 3, 3) [1/kg] of a site at rest: the unit direction (S, 3) of largest
+    effective mass it can move in and that mass (S,) [kg] (the smallest eigenvalue above
+    EIGENVALUE_RELATIVE_TOLERANCE times the largest; inf where A = 0)."""
+    eigenvalues, eigenvectors = np.linalg.eigh(mobilities)
+    threshold = EIGENVALUE_RELATIVE_TOLERANCE * eigenvalues[:, -1:]
+    movable = eigenvalues > np.maximum(threshold, 0.0)
+    first = np.where(movable.any(axis=1), np.argmax(movable, axis=1), 0)
+    rows = np.arange(len(first))
+    smallest = eigenvalues[rows, first]
+    can_move = movable.any(axis=1)
+    masses = np.where(can_move, 1.0 / np.where(can_move, smallest, 1.0), np.inf)
+    return eigenvectors[rows, :, first], masses
+
+
 def site_exposure(
     sites: ArmSites, terms: ArmTerms, transform_base_to_world: pin.SE3
 ) -> SiteExposure:
@@ -267,15 +157,9 @@ def site_exposure(
     with np.errstate(divide="ignore"):  # stationary rows (0 direction) are replaced below
         masses = 1.0 / np.einsum("nka,nkab,nkb->nk", directions, mobilities, directions)
     if stationary.any():
-        eigenvalues, eigenvectors = np.linalg.eigh(mobilities[stationary])
-        threshold = EIGENVALUE_RELATIVE_TOLERANCE * eigenvalues[:, -1:]
-        movable = eigenvalues > np.maximum(threshold, 0.0)
-        first = np.where(movable.any(axis=1), np.argmax(movable, axis=1), 0)
-        rows = np.arange(len(first))
-        smallest = eigenvalues[rows, first]
-        directions[stationary] = eigenvectors[rows, :, first]
-        can_move = movable.any(axis=1)
-        masses[stationary] = np.where(can_move, 1.0 / np.where(can_move, smallest, 1.0), np.inf)
+        directions[stationary], masses[stationary] = _largest_mass_directions(
+            mobilities[stationary]
+        )
     speeds = np.where(stationary, 0.0, speeds)
     rotation = transform_base_to_world.rotation
     return SiteExposure(
@@ -288,14 +172,17 @@ def site_exposure(
 
 
 def tip_twists_in_base(
-    trajectory: Trajectory, transform_tip_to_object: pin.SE3, times_s: np.ndarray
+    trajectory: Trajectory,
+    transform_tip_to_object: pin.SE3,
+    times_s: np.ndarray,
+    object_motion: ObjectMotion | None = None,
 ) -> np.ndarray:
     """Tip twists (N, 6) (linear [m/s], angular [rad/s]), base axes: from the object motion
-    sampled once (ObjectMotion: tangent times speed per tangent) for an object path, else the
-    trajectory's own ``tip_twists``."""
+    sampled once (ObjectMotion: tangent times speed per tangent; ``object_motion`` when
+    already sampled at ``times_s``) for an object path, else the trajectory's ``tip_twists``."""
     if not isinstance(trajectory, ObjectPath):
         return trajectory.tip_twists(transform_tip_to_object, times_s)[0]
-    motion = trajectory.object_motion(times_s)
+    motion = trajectory.object_motion(times_s) if object_motion is None else object_motion
     rate = motion.speed_per_tangent[:, None]
     tip = motion.tip_motion(transform_tip_to_object)
     return np.concatenate([tip.tangents * rate, motion.angular_tangents * rate], axis=1)
@@ -332,12 +219,8 @@ def tip_following_joint_velocities(
         tip_twists_in_world: (N, 6) tip twists (linear [m/s], angular [rad/s]), world axes.
         times_s, joint_positions: The samples (N,), (N, n); continuous joints are unwrapped.
     """
-    positions = np.array(joint_positions, dtype=float)
-    continuous = ~np.isfinite(robot.lower_limits)
-    if continuous.any() and len(positions) > 1:
-        positions[:, continuous] = np.unwrap(positions[:, continuous], axis=0)
-    spline_rates, _ = joint_velocities_accelerations(times_s, positions)
-    pseudo_inverse = np.linalg.pinv(tip_jacobians, rcond=1e-10)  # (N, n, 6)
+    spline_rates = _spline_rates(robot, times_s, [joint_positions])[0]
+    pseudo_inverse = np.linalg.pinv(tip_jacobians, rcond=PSEUDO_INVERSE_RCOND)  # (N, n, 6)
     residual = tip_twists_in_world - (tip_jacobians @ spline_rates[..., None])[..., 0]
     return spline_rates + (pseudo_inverse @ residual[..., None])[..., 0]
 
@@ -374,34 +257,58 @@ def assess_sites(
 ) -> tuple[WholeArmRegion, ...]:
     """Each region's worst case over (N, K) site speeds [m/s] and effective masses [kg]."""
     speeds = np.asarray(speed_m_s, dtype=float)
-    assessed = []
+    masses = np.asarray(effective_mass_kg, dtype=float)
+    return _assess_sites_batch(speeds[None], masses[None], [duration_s], regions)[0]
+
+
+def _assess_sites_batch(
+    speed_m_s: np.ndarray,
+    effective_mass_kg: np.ndarray,
+    durations_s: Sequence[float],
+    regions: Sequence[BodyRegion],
+) -> list[tuple[WholeArmRegion, ...]]:
+    """``assess_sites`` of G motions at once: (G, N, K) speeds [m/s] and masses [kg] (rows a
+    motion does not have: speed 0), (G,) durations [s]; the same numbers, one array pass per
+    region over every motion."""
+    grasps, _, count_sites = speed_m_s.shape
+    speeds = speed_m_s.reshape(grasps, -1)
+    masses = effective_mass_kg.reshape(grasps, -1)
+    moving = speeds > 0.0
+    columns = []
     for region in regions:
         with np.errstate(divide="ignore", invalid="ignore"):  # m_h = m_r = inf: μ = inf
-            force = transient_contact_force_n(speeds, effective_mass_kg, region)
-        force = np.where(speeds > 0.0, force, 0.0)  # a site at rest: no force (not 0·inf)
+            force = transient_contact_force_n(speeds, masses, region)
+        force = np.where(moving, force, 0.0)  # a site at rest: no force (not 0·inf)
         if region.max_transient_force_n is None:
-            ratio = np.where(speeds > 0.0, np.inf, 0.0)
+            ratio = np.where(moving, np.inf, 0.0)
         else:
             ratio = force / region.max_transient_force_n
-        if ratio.size:
-            sample, site = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
-            worst, peak = float(ratio[sample, site]), float(force.max())
+        if ratio.shape[1]:
+            where = np.argmax(ratio, axis=1)
+            worst, peak = ratio[np.arange(grasps), where], force.max(axis=1)
         else:
-            sample = site = 0
-            worst = peak = 0.0
-        assessed.append(
-            WholeArmRegion(
-                region=region.name,
-                transient_contact_permitted=region.transient_contact_permitted,
-                worst_force_ratio=worst,
-                worst_site=int(site),
-                worst_sample=int(sample),
-                peak_contact_force_n=peak,
-                admissible=worst <= 1.0 + ADMISSIBLE_RATIO_TOLERANCE,
-                min_duration_s=duration_s * worst if worst > 0.0 else 0.0,
+            where, worst, peak = np.zeros(grasps, dtype=int), np.zeros(grasps), np.zeros(grasps)
+        columns.append((where.tolist(), worst.tolist(), peak.tolist()))
+    results = []
+    for g in range(grasps):
+        assessed = []
+        for region, (where, worst_list, peak_list) in zip(regions, columns, strict=True):
+            sample, site = divmod(where[g], count_sites) if count_sites else (0, 0)
+            worst = worst_list[g]
+            assessed.append(
+                WholeArmRegion(
+                    region=region.name,
+                    transient_contact_permitted=region.transient_contact_permitted,
+                    worst_force_ratio=worst,
+                    worst_site=int(site),
+                    worst_sample=int(sample),
+                    peak_contact_force_n=peak_list[g],
+                    admissible=worst <= 1.0 + ADMISSIBLE_RATIO_TOLERANCE,
+                    min_duration_s=durations_s[g] * worst if worst > 0.0 else 0.0,
+                )
             )
-        )
-    return tuple(assessed)
+        results.append(tuple(assessed))
+    return results
 
 
 @dataclass(frozen=True)
@@ -472,8 +379,14 @@ def _whole_arm_result(
     exposure: SiteExposure,
     regions: tuple[BodyRegion, ...],
     duration_s: float,
+    assessed: tuple[WholeArmRegion, ...] | None = None,
 ) -> WholeArmEvaluation:
-    assessed = assess_sites(exposure.speed_m_s, exposure.effective_mass_kg, duration_s, regions)
+    """The evaluation from a grasp's exposure; ``assessed``: its ``assess_sites`` when already
+    computed (with the grasp's fellows in a batch)."""
+    if assessed is None:
+        assessed = assess_sites(
+            exposure.speed_m_s, exposure.effective_mass_kg, duration_s, regions
+        )
     permitted = [a for a in assessed if a.transient_contact_permitted]
     limiting = max(permitted, key=lambda a: a.worst_force_ratio) if permitted else None
     feasible = evaluation.feasible
@@ -511,6 +424,7 @@ def evaluate_whole_arm(
     regions: Sequence[str | BodyRegion] | None = None,
     model: pin.Model | None = None,
     joint_positions: np.ndarray | None = None,
+    terms: SampleTerms | None = None,
 ) -> WholeArmEvaluation:
     """Effective mass, speed, energy and ISO/TS 15066 ratios at every site, per sample.
 
@@ -518,7 +432,9 @@ def evaluate_whole_arm(
     same samples and tip poses (e.g. RedundancyResolution.joint_positions). ``grasp`` and
     ``trajectory`` must be the ones the evaluation was computed with; ``model``: their
     ``augmented_model`` when already built (its ``armature`` is used, as everywhere M
-    appears); ``regions``: None for all.
+    appears); ``regions``: None for all; ``terms``: the grasp's ``method.terms.SampleTerms``
+    at those joint positions (then the compiled path, ``evaluate_whole_arm_on_terms`` of this
+    grasp alone; None: Pinocchio per sample, the reference, equal to rounding).
     """
     selected = select_regions(None if regions is None else list(regions))
     count_sites = len(sites)
@@ -538,17 +454,29 @@ def evaluate_whole_arm(
     )
     if positions.shape != (len(times), robot.num_joints):
         raise InvalidInputError("evaluation.joint_positions", "must have one row per sample")
+    if terms is not None:
+        batch = SampleTerms(*(array[None] for array in terms))
+        return evaluate_whole_arm_on_terms(
+            robot,
+            [evaluation],
+            [trajectory],
+            [grasp],
+            sites,
+            selected,
+            batch,
+            np.array([len(times)]),
+            [positions],
+        )[0]
     if model is None:
         model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
     q_all = np.array([robot.q_from_positions(p) for p in positions]).reshape(len(times), -1)
     kinematics = pinocchio_kinematic_terms(model, q_all)
-    twists_in_base = tip_twists_in_base(trajectory, grasp.transform_tip_to_object, times)
-    rotation = robot.transform_base_to_world.rotation
-    twists = np.concatenate(
-        [twists_in_base[:, :3] @ rotation.T, twists_in_base[:, 3:] @ rotation.T], axis=1
-    )
     velocities = tip_following_joint_velocities(
-        robot, tip_jacobians_world(robot, kinematics), twists, times, positions
+        robot,
+        tip_jacobians_world(robot, kinematics),
+        _tip_twists_in_world(robot, trajectory, grasp, times),
+        times,
+        positions,
     )
     exposure = site_exposure(
         sites, ArmTerms(*kinematics, velocities), robot.transform_base_to_world
@@ -556,6 +484,127 @@ def evaluate_whole_arm(
     return _whole_arm_result(
         evaluation, sites, times, exposure, selected, float(trajectory.duration_s)
     )
+
+
+def _tip_twists_in_world(
+    robot: RobotModel,
+    trajectory: Trajectory,
+    grasp: Grasp,
+    times: np.ndarray,
+    object_motion: ObjectMotion | None = None,
+) -> np.ndarray:
+    """(N, 6) the tip's twists (linear [m/s], angular [rad/s]), world axes."""
+    transform = grasp.transform_tip_to_object
+    twists_in_base = tip_twists_in_base(trajectory, transform, times, object_motion)
+    rotation = robot.transform_base_to_world.rotation
+    return np.concatenate(
+        [twists_in_base[:, :3] @ rotation.T, twists_in_base[:, 3:] @ rotation.T], axis=1
+    )
+
+
+def evaluate_whole_arm_on_terms(
+    robot: RobotModel,
+    evaluations: Sequence[GraspEvaluation],
+    trajectories: Sequence[Trajectory],
+    grasps: Sequence[Grasp],
+    sites: ArmSites,
+    regions: tuple[BodyRegion, ...],
+    terms: SampleTerms,
+    counts: np.ndarray,
+    joint_positions: Sequence[np.ndarray] | None = None,
+) -> list[WholeArmEvaluation]:
+    """``evaluate_whole_arm`` of G feasible grasps at once, on their shared terms
+    (``method.terms.grasps_terms`` along ``joint_positions``, default the evaluations' own:
+    axis 0 the grasp, ``counts`` samples each): q̇ from the terms' tip Jacobians (compiled,
+    ``method.points.tip_following_rates``), the sites' positions, speeds and masses by one
+    compiled call over (grasp, sample, site) (``method.points.site_masses``), ISO/TS 15066 in
+    one array pass per region.
+    Equal to the Pinocchio path to rounding; each grasp's result is the one it gets alone."""
+    grasp_count, samples = len(evaluations), terms.tip_jacobians.shape[1]
+    paths = (
+        [e.joint_positions for e in evaluations] if joint_positions is None else joint_positions
+    )
+    valid = valid_rows(counts, samples)
+    twists = np.zeros((grasp_count, samples, 6))
+    spline_rates = np.zeros((grasp_count, samples, robot.num_joints))
+    by_times: dict[bytes, list[int]] = {}
+    sampled: dict[tuple[int, bytes], ObjectMotion] = {}  # each object path sampled once
+    for g, (evaluation, trajectory, grasp) in enumerate(
+        zip(evaluations, trajectories, grasps, strict=True)
+    ):
+        times = np.asarray(evaluation.times_s, dtype=float)
+        key = (id(trajectory), times.tobytes())
+        if isinstance(trajectory, ObjectPath) and key not in sampled:
+            sampled[key] = trajectory.object_motion(times)
+        motion = sampled.get(key)
+        twists[g, : counts[g]] = _tip_twists_in_world(robot, trajectory, grasp, times, motion)
+        by_times.setdefault(key[1], []).append(g)
+    for group in by_times.values():
+        times, count = np.asarray(evaluations[group[0]].times_s, dtype=float), counts[group[0]]
+        spline_rates[group, :count] = _spline_rates(robot, times, [paths[g] for g in group])
+    rates = tip_following_rates(terms.tip_jacobians, counts, twists, spline_rates)
+    site_joints = sites.joint_ids - 1
+    positions, velocities, speeds, masses = site_masses(
+        terms,
+        counts,
+        site_joints,
+        sites.points_in_joint_m,
+        sites.support,
+        rates,
+        STATIONARY_SPEED_M_S,
+    )
+    speeds[~valid] = 0.0
+    stationary = (speeds < STATIONARY_SPEED_M_S) & valid[..., None]
+    directions = velocities / np.where(stationary | ~valid[..., None], 1.0, speeds)[..., None]
+    if stationary.any():  # the rest ends: A from the terms on arrays, then its eigenvectors
+        grasp, sample, site = np.nonzero(stationary)
+        motions = terms.joint_motions[grasp, sample]  # (S, n, 6)
+        columns = motions[..., :3] + np.cross(
+            motions[..., 3:], positions[grasp, sample, site, None]
+        )
+        jacobian = np.swapaxes(columns * sites.support[site, :, None], 1, 2)  # (S, 3, n)
+        minv = terms.mass_matrix_inverses[grasp, sample]
+        mobilities = jacobian @ minv @ np.swapaxes(jacobian, -1, -2)
+        directions[stationary], masses[stationary] = _largest_mass_directions(mobilities)
+    speeds[stationary] = 0.0
+    masses[~valid] = 1.0
+    durations = [float(t.duration_s) for t in trajectories]
+    assessed = _assess_sites_batch(speeds, masses, durations, regions)
+    base = robot.transform_base_to_world
+    results = []
+    for g, evaluation in enumerate(evaluations):
+        count = int(counts[g])
+        exposure = SiteExposure(
+            positions_in_base_m=(positions[g, :count] - base.translation) @ base.rotation,
+            directions_in_base=directions[g, :count] @ base.rotation,
+            stationary=stationary[g, :count],
+            speed_m_s=speeds[g, :count],
+            effective_mass_kg=masses[g, :count],
+        )
+        times = np.asarray(evaluation.times_s, dtype=float)
+        results.append(
+            _whole_arm_result(
+                evaluation, sites, times, exposure, regions, durations[g], assessed[g]
+            )
+        )
+    return results
+
+
+def _spline_rates(
+    robot: RobotModel, times: np.ndarray, joint_positions: Sequence[np.ndarray]
+) -> np.ndarray:
+    """q̇_s (G, N, n) of G joint paths (N, n) sampled at the same ``times``: the clamped
+    spline's rates through the samples, continuous joints unwrapped, all paths in one spline
+    (its columns are independent: each path's rates are those of a spline through it alone).
+    """
+    positions = np.array(joint_positions, dtype=float)  # (G, N, n)
+    continuous = ~np.isfinite(robot.lower_limits)
+    if continuous.any() and positions.shape[1] > 1:
+        positions[..., continuous] = np.unwrap(positions[..., continuous], axis=1)
+    grasps, count, n = positions.shape
+    columns = np.moveaxis(positions, 0, 1).reshape(count, grasps * n)
+    rates = joint_velocities_accelerations(times, columns)[0]
+    return np.moveaxis(rates.reshape(count, grasps, n), 1, 0)
 
 
 def whole_arm_score(whole_arm: WholeArmEvaluation, region: str) -> float:
@@ -607,24 +656,28 @@ class WholeArmPostureCriterion:
         trajectory: Trajectory,
         evaluations: Sequence[GraspEvaluation],
     ) -> np.ndarray:
-        """The force [N] of each feasible evaluation of ``grasp`` (one augmented model)."""
-        robot = evaluator.robot
-        model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
-        return np.array(
-            [
-                whole_arm_score(
-                    evaluate_whole_arm(
-                        robot,
-                        evaluation,
-                        object_inertia,
-                        grasp,
-                        trajectory,
-                        self.sites,
-                        [self.region],
-                        model,
-                    ),
-                    self.region,
+        """The force [N] of each feasible evaluation of ``grasp``: on their terms, in one
+        kernel call, with a compiled evaluator; else by Pinocchio (one augmented model)."""
+        robot, count, region = evaluator.robot, len(evaluations), [self.region]
+        if evaluator.ik.compiled and evaluations:
+            paths = [evaluation.joint_positions for evaluation in evaluations]
+            transforms = [grasp.transform_tip_to_object] * count
+            terms = grasps_terms(robot, evaluator.ik.chain, object_inertia, transforms, paths)
+            assessed = evaluate_whole_arm_on_terms(
+                robot,
+                evaluations,
+                [trajectory] * count,
+                [grasp] * count,
+                self.sites,
+                select_regions(region),
+                *terms,
+            )
+        else:
+            model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
+            assessed = [
+                evaluate_whole_arm(
+                    robot, e, object_inertia, grasp, trajectory, self.sites, region, model
                 )
-                for evaluation in evaluations
+                for e in evaluations
             ]
-        )
+        return np.array([whole_arm_score(result, self.region) for result in assessed])

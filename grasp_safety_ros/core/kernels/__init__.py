@@ -5,8 +5,11 @@
 least-squares step), ``ik`` (pose and trajectory IK), ``effective_mass`` (translational
 mobility), ``grasp`` (the fused kernel: IK and effective mass of a batch of grasps along
 the object's motion, sampled once by the caller, so every trajectory type runs compiled),
-``terms`` (the per-sample terms the analyses share) and ``effort`` (joint velocities,
-accelerations and torques of a batch of grasps along their joint paths). They
+``terms`` (the per-(grasp, sample) terms the analyses share), ``effort`` (joint velocities,
+accelerations and torques of a batch of grasps along their joint paths), ``points`` (the
+analyses' effective masses at points fixed to the tip or to the links, over (grasp, sample,
+point), and the joint velocities that make the tip follow its twist) and ``uncertainty``
+(effective masses of a batch of grasps over a set of object inertias). They
 mirror the Pinocchio-based Python loops of ``core.method`` operation for operation, so
 per-sample results equal the Python path's to rounding, for serial chains of revolute,
 continuous ((cos, sin) in q, as Pinocchio) and prismatic joints. Their inputs come packed,

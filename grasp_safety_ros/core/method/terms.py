@@ -1,6 +1,8 @@
 """The per-(grasp, sample) terms the analyses share, computed once along each grasp's joint
 path: joint and tip poses, the tip Jacobian and the inverse joint-space inertia of the augmented
-chain (robot + object), by the compiled kernel ``kernels.terms.sample_terms``.
+chain (robot + object), by the compiled kernel ``kernels.terms.sample_terms``: for many grasps
+in one call (``grasps_terms``, how ``analyses.safety_report.analyse`` takes them for every
+feasible grasp at once) or for one (``grasp_terms``, the same numbers bit for bit).
 
 It is the one traversal every analysis reads from (pinocchio's ``computeAllTerms`` pattern):
 exposed points (``analyses.exposed_points``), effort (``analyses.effort``) and whole-arm
@@ -13,6 +15,7 @@ reference path (``test_performance_paths`` holds both equal).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -90,10 +93,34 @@ def grasp_terms(
 ) -> SampleTerms:
     """The terms of one grasp along its joint path ((N, n) positions, chain order), axis 0
     dropped. ``chain``: ``compiled.chain_arrays(robot)`` (numba must be installed)."""
-    grasp = pin.SE3(transform_tip_to_object)
-    bodies = augmented_bodies(robot, object_inertia, grasp.rotation[None], grasp.translation[None])
-    q_all = configurations(robot, joint_positions)[None]
-    return batch_terms(chain, bodies, q_all, np.array([q_all.shape[1]])).of_grasp(0)
+    return grasps_terms(
+        robot, chain, object_inertia, [transform_tip_to_object], [joint_positions]
+    )[0].of_grasp(0)
+
+
+def grasps_terms(
+    robot: RobotModel,
+    chain: ChainArrays,
+    object_inertia: ObjectInertia,
+    transforms_tip_to_object: Sequence[pin.SE3],
+    joint_positions: Sequence[np.ndarray],
+) -> tuple[SampleTerms, np.ndarray]:
+    """The terms of G grasps along their joint paths ((N_g, n) positions each, chain order),
+    in one kernel call, and the sample counts N_g (G,). Axis 1 has max N_g rows; grasp g's
+    rows from N_g on are undefined (``SampleTerms.of_grasp(g, N_g)`` drops them). Each grasp's
+    terms are those ``grasp_terms`` gives it alone, bit for bit (the same kernel code per
+    grasp). ``chain``: ``compiled.chain_arrays(robot)`` (numba must be installed)."""
+    count = len(joint_positions)
+    grasps = [pin.SE3(transform) for transform in transforms_tip_to_object]
+    rotations = np.array([grasp.rotation for grasp in grasps]).reshape(count, 3, 3)
+    translations = np.array([grasp.translation for grasp in grasps]).reshape(count, 3)
+    bodies = augmented_bodies(robot, object_inertia, rotations, translations)
+    counts = np.array([len(positions) for positions in joint_positions], dtype=np.int64)
+    longest = int(counts.max(initial=0))
+    q_all = np.zeros((count, longest, robot.model.nq))
+    for g, positions in enumerate(joint_positions):
+        q_all[g, : counts[g]] = configurations(robot, positions)
+    return batch_terms(chain, bodies, q_all, counts), counts
 
 
 def batch_terms(
@@ -108,10 +135,11 @@ def batch_terms(
     q_all = plain_array(q_all)
     n = chain.axes.shape[0]
     out = sample_terms_buffers(q_all.shape[0], q_all.shape[1], n)
-    lower_inverse = np.empty((n, n))
-    ws = thread_workspace(n)
-    counts = np.ascontiguousarray(counts, dtype=np.int64)
-    call_kernel(sample_terms, chain, bodies, q_all, counts, out, lower_inverse, ws)
+    if q_all.shape[0]:
+        lower_inverse = np.empty((n, n))
+        ws = thread_workspace(n)
+        counts = np.ascontiguousarray(counts, dtype=np.int64)
+        call_kernel(sample_terms, chain, bodies, q_all, counts, out, lower_inverse, ws)
     return out
 
 

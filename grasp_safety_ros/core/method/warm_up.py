@@ -14,8 +14,9 @@ from .compiled import augmented_bodies
 from .dynamics import joint_dynamics
 from .effective_mass import translational_mobilities_in_base
 from .perturbed import perturbed_effective_masses
+from .points import site_masses, tip_following_rates, tip_point_masses
 from .ranking import Grasp, GraspSafetyEvaluator, sample_trajectory
-from .terms import configurations, grasp_terms
+from .terms import configurations, grasps_terms
 
 _WARM_UP_URDF = """<robot name="warm_up"><link name="base"/>
 <link name="a"><inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01"
@@ -72,7 +73,17 @@ def warm_up(evaluator: GraspSafetyEvaluator | None = None) -> float:
             robot, box, pin.SE3.Identity(), np.array([seed_q]), evaluator.ik.chain
         )
         positions = np.array([robot.default_seed_positions()])
-        grasp_terms(robot, evaluator.ik.chain, box, pin.SE3.Identity(), positions)
+        terms, counts = grasps_terms(
+            robot, evaluator.ik.chain, box, [pin.SE3.Identity()], [positions]
+        )
+        still = np.ones((1, 1, 1), dtype=bool)  # the point kernels of the analyses
+        tip_point_masses(
+            terms, counts, np.eye(3), np.zeros((1, 1, 3)), np.zeros((1, 1, 1, 3)), still, [0]
+        )
+        n = robot.model.nv
+        support, rates = np.ones((1, n), dtype=bool), np.zeros((1, 1, n))
+        site_masses(terms, counts, [0], np.zeros((1, 3)), support, rates, 1e-9)
+        tip_following_rates(terms.tip_jacobians, counts, np.zeros((1, 1, 6)), rates)
         perturbed_effective_masses(  # the inertia-uncertainty kernel
             robot,
             evaluator.ik.chain,

@@ -1,0 +1,94 @@
+"""Benchmark section: each analysis of ``safety_report.analyse`` alone, beside the ranking of
+the same run (issue 21: all default analyses together at most the ranking's time).
+
+Workload: the book scenario of ``pipeline.book_scenario`` (Baxter, G grasps along the spine,
+201 samples), ranked once (compiled, one core) and given to ``analyse`` as the ranking, with
+the options of one analysis at a time: exposed points (the box's 8 corners), ISO/TS 15066
+over every region (on the tip), the whole arm (default sites, with ISO), effort, and the scenario's
+defaults together. Each figure is the median wall time over repeats and its ratio to the
+median time of the ranking measured in the same loop (the machine is shared: ratios hold).
+Only options of ``AnalysisOptions`` are used, so the same file measures older checkouts.
+
+Run alone: .venv/bin/python bench/analyses_parts.py [--grasps 1000] [--repeats 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from pipeline import book_scenario
+
+
+def bench_parts(grasps: int, repeats: int = 3) -> dict[str, Any]:
+    """Median seconds per part and per ranking, and each part's ratio to the ranking."""
+    from grasp_safety_ros.cli.scenario import load_scenario
+    from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions, analyse
+    from grasp_safety_ros.core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
+
+    with tempfile.TemporaryDirectory() as folder:
+        scenario = load_scenario(book_scenario(grasps, Path(folder)))
+    robot = scenario.robot.load(scenario.base_dir)
+    evaluator = GraspSafetyEvaluator(robot, EvaluationConfig(metric=scenario.metric, workers=1))
+    args = (scenario.grasps, scenario.object_inertia, scenario.trajectory)
+    corners = scenario.options.points_in_object_m
+    parts = {
+        "exposed_points": AnalysisOptions(points_in_object_m=corners, iso_regions=()),
+        "iso_15066": AnalysisOptions(),
+        "whole_arm_and_iso": AnalysisOptions(whole_arm=True),
+        "effort": AnalysisOptions(effort=True, iso_regions=()),
+        "defaults": scenario.options,
+        "defaults_without_effort": replace(scenario.options, effort=False),
+    }
+
+    def rank() -> Any:
+        return evaluator.rank(*args, seed_positions=scenario.robot.seed)
+
+    ranking = rank()
+    for options in parts.values():  # warm: kernels loaded
+        analyse(evaluator, *args, options, ranking=ranking)
+    timings: dict[str, list[float]] = {name: [] for name in ("ranking", *parts)}
+    for _ in range(repeats):
+        start = time.perf_counter()
+        ranking = rank()
+        timings["ranking"].append(time.perf_counter() - start)
+        for name, options in parts.items():
+            start = time.perf_counter()
+            analyse(evaluator, *args, options, ranking=ranking)
+            timings[name].append(time.perf_counter() - start)
+    seconds = {name: statistics.median(values) for name, values in timings.items()}
+    return {
+        "grasps": grasps,
+        "feasible": sum(e.feasible for e in ranking.evaluations),
+        "seconds": seconds,
+        "vs_ranking": {name: seconds[name] / seconds["ranking"] for name in parts},
+    }
+
+
+def print_parts(results: dict[str, Any]) -> None:
+    seconds = results["seconds"]
+    print(
+        f"analyses alone, book on Baxter, {results['grasps']} grasps x 201 "
+        f"({results['feasible']} feasible); ranking {1e3 * seconds['ranking']:.0f} ms"
+    )
+    for name, ratio in results["vs_ranking"].items():
+        print(f"  {name}: {1e3 * seconds[name]:.0f} ms = x{ratio:.2f} the ranking")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--grasps", type=int, default=1000)
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args(argv)
+    print_parts(bench_parts(args.grasps, args.repeats))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

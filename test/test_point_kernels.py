@@ -1,0 +1,274 @@
+"""The compiled point kernels of the analyses (``method.points``: points fixed to the tip, sites
+fixed to the links) on the shared terms: closed forms on a one-joint arm, the tip as a point,
+and the whole report on the batched terms against one grasp at a time and against the
+Pinocchio reference path, infeasible grasps mixed in."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from conftest import BAXTER_SEED, book_trajectory, random_positions
+from test_performance_paths import (
+    BOX,
+    _terms_case,
+    assert_close_to_scale,
+    grasps_near_identity,
+    needs_numba,
+    reach_trajectory,
+)
+
+from grasp_safety_ros.core import (
+    EvaluationConfig,
+    Grasp,
+    GraspSafetyEvaluator,
+    ObjectInertia,
+    RobotModel,
+)
+from grasp_safety_ros.core.analyses.exposed_points import (
+    box_corners_in_object,
+    evaluate_exposed_points,
+)
+from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions, analyse
+from grasp_safety_ros.core.analyses.whole_arm import evaluate_whole_arm
+from grasp_safety_ros.core.method.compiled import chain_arrays
+from grasp_safety_ros.core.method.terms import grasp_terms, grasps_terms
+
+LINK_M, LINK_KG, LINK_IZZ_KGM2, ARMATURE_KGM2 = 0.4, 2.0, 0.03, 0.05
+OBJECT = ObjectInertia(0.7, np.zeros(3), np.diag([0.01, 0.02, 0.015]))
+
+ONE_JOINT_URDF = f"""<robot name="one"><link name="base"/>
+<link name="arm"><inertial><origin xyz="{LINK_M} 0 0"/><mass value="{LINK_KG}"/>
+<inertia ixx="0.01" iyy="0.02" izz="{LINK_IZZ_KGM2}" ixy="0" ixz="0" iyz="0"/></inertial></link>
+<link name="tool"/>
+<joint name="j1" type="revolute"><parent link="base"/><child link="arm"/><axis xyz="0 0 1"/>
+ <limit lower="-3" upper="3" effort="1" velocity="10"/></joint>
+<joint name="fix" type="fixed"><parent link="arm"/><child link="tool"/>
+ <origin xyz="{LINK_M} 0 0"/></joint>
+</robot>"""
+
+
+def one_joint_inertia_kgm2() -> float:
+    """I about the joint axis: link (I_zz + m L²), object at the tip (I_zz + m L²), armature."""
+    link = LINK_IZZ_KGM2 + LINK_KG * LINK_M**2
+    carried = OBJECT.inertia_about_com_kgm2[2, 2] + OBJECT.mass_kg * LINK_M**2
+    return link + carried + ARMATURE_KGM2
+
+
+@pytest.fixture
+def one_joint() -> tuple:
+    robot = RobotModel.from_urdf(ONE_JOINT_URDF, "base", "tool", armature_kgm2=[ARMATURE_KGM2])
+    angles = np.linspace(-2.0, 2.5, 7)
+    chain = chain_arrays(robot)
+    assert chain is not None
+    terms, counts = grasps_terms(robot, chain, OBJECT, [pin.SE3.Identity()], [angles[:, None]])
+    return robot, angles, terms, counts
+
+
+@needs_numba
+def test_tip_points_of_a_one_joint_arm_have_the_closed_form_mass(one_joint: tuple) -> None:
+    """A point at radius r moves on a circle: M_eff = I / r² along the tangent, and the
+    mobility is (r²/I) t tᵀ (handed back where the point is flagged at rest)."""
+    from grasp_safety_ros.core.method.points import tip_point_masses
+
+    robot, angles, terms, counts = one_joint
+    offsets = np.array([0.0, 0.1, -0.25])  # along the tool's x: radius L + d
+    points = np.column_stack([offsets, np.zeros(3), np.zeros(3)])[None]
+    tangents = np.stack([-np.sin(angles), np.cos(angles), np.zeros_like(angles)], axis=1)
+    directions = np.repeat(tangents[None, :, None], 3, axis=2)
+    still = np.zeros((1, len(angles), 3), dtype=bool)
+    still[0, 3, 1] = True  # one point flagged at rest
+    masses, mask, mobilities = tip_point_masses(
+        terms, counts, robot.transform_base_to_world.rotation, points, directions, still, [0]
+    )
+    inertia, radii = one_joint_inertia_kgm2(), LINK_M + offsets
+    expected = np.broadcast_to(inertia / radii**2, masses.shape[1:])
+    assert_close_to_scale(masses[0][~still[0]], expected[~still[0]], "I / r^2")
+    assert mask.sum() == 1 and len(mobilities) == 1
+    tangent = tangents[3]
+    assert_close_to_scale(
+        mobilities[0], radii[1] ** 2 / inertia * np.outer(tangent, tangent), "mobility"
+    )
+
+
+@needs_numba
+def test_sites_of_a_one_joint_arm_have_the_closed_form_speed_and_mass(one_joint: tuple) -> None:
+    from grasp_safety_ros.core.method.points import site_masses
+
+    _, angles, terms, counts = one_joint
+    radius, rate = 0.3, -1.7  # [m], [rad/s]
+    rates = np.full((1, len(angles), 1), rate)
+    rates[0, 2] = 0.0  # at rest: no direction, the mass is left to the caller
+    positions, velocities, speeds, masses = site_masses(
+        terms, counts, [0], [[radius, 0.0, 0.0]], [[True]], rates, 1e-9
+    )
+    circle = radius * np.stack([np.cos(angles), np.sin(angles), np.zeros_like(angles)], axis=1)
+    assert_close_to_scale(positions[0, :, 0], circle, "positions")
+    tangent = rates[0] * np.stack([-circle[:, 1], circle[:, 0], np.zeros_like(angles)], axis=1)
+    assert_close_to_scale(velocities[0, :, 0], tangent, "velocities")
+    assert_close_to_scale(speeds[0, :, 0], np.abs(rates[0, :, 0]) * radius, "speeds")
+    moving = rates[0, :, 0] != 0.0
+    expected = np.full(moving.sum(), one_joint_inertia_kgm2() / radius**2)
+    assert_close_to_scale(masses[0, moving, 0], expected, "I / r^2")
+
+
+@needs_numba
+@pytest.mark.parametrize("name", ["arm7", "baxter"])
+def test_a_point_at_the_tip_has_the_tips_effective_mass(
+    name: str, request: pytest.FixtureRequest
+) -> None:
+    robot: RobotModel = request.getfixturevalue(name)
+    grasp, evaluation, terms, motion = _terms_case(robot, 17)
+    tip_in_object = grasp.transform_tip_to_object.translation[None]
+    exposed = evaluate_exposed_points(
+        robot, evaluation, BOX, grasp, motion, tip_in_object, terms=terms
+    )
+    assert not exposed.direction_is_worst_case.any()
+    assert_close_to_scale(exposed.effective_mass_kg[:, 0], evaluation.effective_mass_kg, "mass")
+    assert_close_to_scale(
+        exposed.directions_in_base[:, 0], evaluation.directions_in_base, "direction"
+    )
+
+
+def _fields(record: object) -> dict:
+    return {k: v for k, v in vars(record).items() if isinstance(v, np.ndarray)}
+
+
+@needs_numba
+@pytest.mark.parametrize("name", ["arm7", "baxter"])
+def test_the_report_on_batched_terms_equals_one_grasp_at_a_time_and_pinocchio(
+    name: str, request: pytest.FixtureRequest
+) -> None:
+    robot: RobotModel = request.getfixturevalue(name)
+    if name == "baxter":  # the paper's book motion
+        seed, trajectory = np.array(BAXTER_SEED), book_trajectory(0.04)
+    else:
+        seed = random_positions(robot, np.random.default_rng(18))
+        trajectory = reach_trajectory(robot, seed)
+    far = Grasp(pin.SE3(np.eye(3), np.array([0.0, 0.0, 5.0])), "unreachable")
+    near = grasps_near_identity(4, 19)
+    if name == "baxter":  # along the book's spine
+        near = [
+            Grasp(pin.SE3(np.eye(3), np.array([-0.075, y, 0.0])), f"spine{y}")
+            for y in (-0.1, 0.0, 0.1)
+        ]
+    grasps = [far, *near, far]
+    corners = box_corners_in_object([0.08, 0.12, 0.2], [0.0, 0.01, -0.02])
+    options = AnalysisOptions(points_in_object_m=corners, whole_arm=True)
+    compiled = GraspSafetyEvaluator(robot, EvaluationConfig(workers=1))
+    python = GraspSafetyEvaluator(robot, EvaluationConfig(workers=1, backend="python"))
+    ranking = compiled.rank(grasps, BOX, trajectory, seed_positions=seed)
+    feasible = [k for k, e in enumerate(ranking.evaluations) if e.feasible]
+    assert 2 <= len(feasible) < len(grasps)  # both kinds
+    report = analyse(compiled, grasps, BOX, trajectory, options, ranking=ranking)
+    reference = analyse(python, grasps, BOX, trajectory, options, ranking=ranking)
+    np.testing.assert_array_equal(report.scores, reference.scores)
+    assert report.order == reference.order
+    for k, (evaluation, grasp) in enumerate(zip(ranking.evaluations, grasps, strict=True)):
+        ours = (report.exposed[k], report.whole_arm[k])
+        theirs = (reference.exposed[k], reference.whole_arm[k])
+        if k not in feasible:
+            assert not any(r.feasible for r in ours + theirs)
+            continue
+        terms = grasp_terms(
+            robot,
+            chain_arrays(robot),
+            BOX,
+            grasp.transform_tip_to_object,
+            evaluation.joint_positions,
+        )
+        alone = (
+            evaluate_exposed_points(
+                robot, evaluation, BOX, grasp, trajectory, corners, terms=terms
+            ),
+            evaluate_whole_arm(
+                robot, evaluation, BOX, grasp, trajectory, report.arm_sites, terms=terms
+            ),
+        )
+        for batch, single, slow in zip(ours, alone, theirs, strict=True):
+            for field, value in _fields(batch).items():
+                np.testing.assert_array_equal(value, getattr(single, field), err_msg=field)
+                expected = getattr(slow, field)
+                if value.dtype == bool or value.dtype.kind == "i":
+                    np.testing.assert_array_equal(value, expected, err_msg=field)
+                elif field != "effective_mass_kg" and "direction" not in field:
+                    assert_close_to_scale(value, expected, field)
+            moving = ~getattr(slow, "stationary", getattr(slow, "direction_is_worst_case", None))
+            assert_close_to_scale(
+                batch.effective_mass_kg[moving], slow.effective_mass_kg[moving], "m"
+            )
+            assert_close_to_scale(
+                batch.directions_in_base[moving], slow.directions_in_base[moving], "u"
+            )
+        assert report.whole_arm[k].regions == alone[1].regions
+
+
+@needs_numba
+@pytest.mark.parametrize("n", [4, 6, 7, 9])
+def test_tip_following_rates_equal_the_pseudo_inverses(n: int) -> None:
+    """q̇_s + J⁺(ξ − J q̇_s): compiled where J is well conditioned, the pseudo-inverse where J
+    is rank-deficient (a repeated row) or has fewer than 6 columns; both within rounding."""
+    from grasp_safety_ros.core.method.points import tip_following_rates
+
+    rng = np.random.default_rng(n)
+    jacobians = rng.normal(size=(2, 5, 6, n))
+    jacobians[1, 2, 5] = jacobians[1, 2, 4]  # rank 5: the pseudo-inverse drops a direction
+    twists, base = rng.normal(size=(2, 5, 6)), rng.normal(size=(2, 5, n))
+    counts = np.array([5, 3])
+    rates = tip_following_rates(jacobians, counts, twists, base)
+    pseudo_inverse = np.linalg.pinv(jacobians, rcond=1e-10)
+    residual = twists - (jacobians @ base[..., None])[..., 0]
+    expected = base + (pseudo_inverse @ residual[..., None])[..., 0]
+    assert_close_to_scale(rates[0], expected[0], "rates")
+    assert_close_to_scale(rates[1, :3], expected[1, :3], "rates, singular sample")
+    np.testing.assert_array_equal(rates[1, 3:], 0.0)  # beyond the grasp's count
+    if n >= 6:  # the minimum-norm solution: J q̇ = ξ where J has full row rank
+        moved = (jacobians[0] @ rates[0][..., None])[..., 0]
+        assert_close_to_scale(moved, twists[0], "J q̇ = ξ")
+
+
+@needs_numba
+def test_terms_in_small_chunks_give_the_same_report_and_progress_per_grasp(
+    arm7: RobotModel, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """One grasp per chunk and no chunk kept (every analysis computes its terms again): the
+    same report bit for bit, and progress after every grasp of every analysis, in order, so a
+    request can be abandoned between chunks."""
+    from grasp_safety_ros.core.analyses import safety_report
+
+    seed = random_positions(arm7, np.random.default_rng(18))
+    trajectory = reach_trajectory(arm7, seed)
+    far = Grasp(pin.SE3(np.eye(3), np.array([0.0, 0.0, 5.0])), "unreachable")
+    grasps = [*grasps_near_identity(3, 19), far]
+    corners = box_corners_in_object([0.08, 0.12, 0.2])
+    options = AnalysisOptions(points_in_object_m=corners, whole_arm=True, effort=True)
+    evaluator = GraspSafetyEvaluator(arm7, EvaluationConfig(workers=1))
+    ranking = evaluator.rank(grasps, BOX, trajectory, seed_positions=seed)
+    whole = analyse(evaluator, grasps, BOX, trajectory, options, ranking=ranking)
+    monkeypatch.setattr(safety_report, "TERMS_CHUNK_SAMPLES", 1)
+    monkeypatch.setattr(safety_report, "TERMS_CACHE_SAMPLES", 1)
+    calls: list[tuple[int, int]] = []
+    chunked = analyse(
+        evaluator,
+        grasps,
+        BOX,
+        trajectory,
+        options,
+        ranking=ranking,
+        progress=lambda *a: calls.append(a),
+    )
+    assert calls == [(k, 3 * len(grasps)) for k in range(1, 3 * len(grasps) + 1)]
+    for ours, theirs in zip(
+        chunked.exposed + chunked.whole_arm + chunked.effort,
+        whole.exposed + whole.whole_arm + whole.effort,
+        strict=True,
+    ):
+        for field, value in _fields(ours).items():
+            np.testing.assert_array_equal(value, getattr(theirs, field), err_msg=field)
+
+    def abandon(done: int, total: int) -> None:
+        if done == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        analyse(evaluator, grasps, BOX, trajectory, options, ranking=ranking, progress=abandon)
