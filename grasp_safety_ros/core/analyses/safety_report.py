@@ -20,7 +20,7 @@ from ..exceptions import InvalidInputError
 from ..method.effective_mass import augmented_model
 from ..method.pool import executor_for
 from ..method.ranking import Grasp, GraspEvaluation, GraspSafetyEvaluator, Ranking, aggregate
-from ..method.terms import SampleTerms, grasp_terms, grasps_terms
+from ..method.terms import SampleTerms, grasps_terms
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
 from ..model.trajectory import Trajectory
@@ -265,39 +265,31 @@ def analyse(
     chain = evaluator.ik.chain if evaluator.ik.compiled else None
     feasible_grasps = [k for k, e in enumerate(evaluations) if e.feasible]
     chunks = _chunks(feasible_grasps, [len(evaluations[k].times_s) for k in feasible_grasps])
-    place = {k: (c, row) for c, chunk in enumerate(chunks) for row, k in enumerate(chunk)}
     cached: dict[int, tuple[SampleTerms, np.ndarray]] = {}
+    reread = options.whole_arm  # the whole arm reads the exposed points' chunks again
 
     def chunk_terms(c: int) -> tuple[SampleTerms, np.ndarray]:
         """The terms of the grasps of ``chunks[c]`` (axis 0 in its order) and their counts,
-        kept while the kept chunks stay within TERMS_CACHE_SAMPLES samples."""
+        kept while the kept chunks stay within TERMS_CACHE_SAMPLES samples when a later
+        analysis reads them again (else the last chunk's buffers are reused)."""
         if c not in cached:
-            while (
-                cached
-                and sum(int(n.sum()) for _, n in cached.values())
+            recycled = None
+            while cached and (
+                not reread
+                or sum(int(n.sum()) for _, n in cached.values())
                 + sum(len(evaluations[k].times_s) for k in chunks[c])
                 > TERMS_CACHE_SAMPLES
             ):
-                cached.pop(next(iter(cached)))  # the oldest
+                recycled = cached.pop(next(iter(cached)))[0]  # the oldest
             cached[c] = grasps_terms(
                 robot,
                 chain,
                 object_inertia,
                 [grasps[k].transform_tip_to_object for k in chunks[c]],
                 [evaluations[k].joint_positions for k in chunks[c]],
+                None if reread else recycled,
             )
         return cached[c]
-
-    def terms_of(k: int, joint_positions: np.ndarray | None = None) -> SampleTerms | None:
-        """Grasp k's terms along its evaluated joint path (or along ``joint_positions``)."""
-        if chain is None or not evaluations[k].feasible:
-            return None
-        if joint_positions is not None:
-            transform = grasps[k].transform_tip_to_object
-            return grasp_terms(robot, chain, object_inertia, transform, joint_positions)
-        c, row = place[k]
-        terms, counts = chunk_terms(c)
-        return terms.of_grasp(row, int(counts[row]))
 
     def model_of(k: int) -> pin.Model | None:
         if not evaluations[k].feasible:

@@ -104,12 +104,14 @@ def grasps_terms(
     object_inertia: ObjectInertia,
     transforms_tip_to_object: Sequence[pin.SE3],
     joint_positions: Sequence[np.ndarray],
+    out: SampleTerms | None = None,
 ) -> tuple[SampleTerms, np.ndarray]:
     """The terms of G grasps along their joint paths ((N_g, n) positions each, chain order),
     in one kernel call, and the sample counts N_g (G,). Axis 1 has max N_g rows; grasp g's
     rows from N_g on are undefined (``SampleTerms.of_grasp(g, N_g)`` drops them). Each grasp's
     terms are those ``grasp_terms`` gives it alone, bit for bit (the same kernel code per
-    grasp). ``chain``: ``compiled.chain_arrays(robot)`` (numba must be installed)."""
+    grasp). ``chain``: ``compiled.chain_arrays(robot)`` (numba must be installed); ``out``:
+    terms no longer needed, overwritten when their shape is (G, max N_g) (``batch_terms``)."""
     count = len(joint_positions)
     grasps = [pin.SE3(transform) for transform in transforms_tip_to_object]
     rotations = np.array([grasp.rotation for grasp in grasps]).reshape(count, 3, 3)
@@ -120,21 +122,28 @@ def grasps_terms(
     q_all = np.zeros((count, longest, robot.model.nq))
     for g, positions in enumerate(joint_positions):
         q_all[g, : counts[g]] = configurations(robot, positions)
-    return batch_terms(chain, bodies, q_all, counts), counts
+    return batch_terms(chain, bodies, q_all, counts, out), counts
 
 
 def batch_terms(
-    chain: ChainArrays, bodies: BodyInertias, q_all: np.ndarray, counts: np.ndarray
+    chain: ChainArrays,
+    bodies: BodyInertias,
+    q_all: np.ndarray,
+    counts: np.ndarray,
+    out: SampleTerms | None = None,
 ) -> SampleTerms:
     """The terms of G grasps in one kernel call: grasp g's augmented ``bodies`` (axis 0 the
     grasp, ``compiled.augmented_bodies``) along its first counts[g] configurations of
-    ``q_all`` (G, N, nq); its rows from counts[g] on are left uninitialised."""
+    ``q_all`` (G, N, nq); its rows from counts[g] on are left uninitialised. ``out``: terms
+    no longer needed, overwritten (no new allocation, whose first touch of fresh pages costs
+    as much as the kernel) when their first two axes are (G, N); else new buffers."""
     from ..kernels.ik import thread_workspace
     from ..kernels.terms import sample_terms
 
     q_all = plain_array(q_all)
     n = chain.axes.shape[0]
-    out = sample_terms_buffers(q_all.shape[0], q_all.shape[1], n)
+    if out is None or out.tip_jacobians.shape[:2] != q_all.shape[:2]:
+        out = sample_terms_buffers(q_all.shape[0], q_all.shape[1], n)
     if q_all.shape[0]:
         lower_inverse = np.empty((n, n))
         ws = thread_workspace(n)
