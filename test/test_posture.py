@@ -415,6 +415,32 @@ def test_scrambled_halton_is_scipys_bit_for_bit() -> None:
     assert scrambled_halton(3, 0, 0).shape == (0, 3)
 
 
+def test_scrambled_halton_is_kept_per_process_and_handed_out_as_copies() -> None:
+    """The points of one (dimensions, count, seed) are computed once; a caller that writes
+    into its copy changes nobody else's."""
+    from grasp_safety_ros.core.method.posture import _scrambled_halton
+
+    first = scrambled_halton(7, 8, 99)
+    expected = first.copy()
+    first[:] = -1.0
+    hits = _scrambled_halton.cache_info().hits
+    again = scrambled_halton(7, 8, 99)
+    assert _scrambled_halton.cache_info().hits == hits + 1
+    assert np.array_equal(again, expected)
+    assert again.flags.writeable and again is not first
+
+
+def test_grasps_per_job_gives_every_worker_a_job() -> None:
+    from concurrent.futures import ThreadPoolExecutor
+
+    from grasp_safety_ros.core.method.pool import grasps_per_job
+
+    assert grasps_per_job(None, 10, 16) == 16  # serial: one kernel batch
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        # 10 grasps: two jobs of 5 (was one job of 10 and an idle worker), 40: at most 16
+        assert [grasps_per_job(pool, n, 16) for n in (1, 2, 3, 10, 17, 40)] == [1, 1, 2, 5, 9, 16]
+
+
 def test_restart_seeds_do_not_import_scipy_stats() -> None:
     """scipy.stats costs 0.5-1 s to import; posture selection's seeds do not need it."""
     import subprocess
