@@ -448,7 +448,7 @@ def select_postures(
     ]
     batches = (
         (select_posture_batch(evaluator, *job) for job in jobs)
-        if executor is None
+        if executor is None or len(jobs) == 1  # one job: no hand-off to a worker
         else evaluate_jobs(evaluator, executor, jobs, select_posture_batch)
     )
     evaluations: list[GraspEvaluation] = []
