@@ -566,6 +566,38 @@ def test_selection_is_deterministic_and_independent_of_the_workers(baxter) -> No
             )
 
 
+def test_a_small_request_shared_out_over_the_workers_keeps_every_record(baxter) -> None:
+    """10 grasps (one out of reach) on a 2-worker pool go out as two jobs of 5
+    (grasps_per_job); every evaluation and selection record equals the serial one's."""
+    trajectory = book_trajectory(dt_s=0.05)
+    grasps = [
+        Grasp(pose_from_position_quat([-0.075, y, 0.0], [0, 0, 0, 1], "g"), f"spine_{y:.3f}")
+        for y in np.linspace(-0.1, 0.1, 9)
+    ] + [Grasp(pose_from_position_quat([5.0, 0.0, 0.0], [0, 0, 0, 1], "g"), "far")]
+    kept = []
+    for workers in (1, 2):
+        evaluator = GraspSafetyEvaluator(
+            baxter, EvaluationConfig(workers=workers, parallel_min_samples=1)
+        )
+        ranking = evaluator.rank(grasps, BOOK, trajectory, seed_positions=BAXTER_SEED)
+        kept.append(
+            select_postures(
+                evaluator, grasps, BOOK, trajectory, ranking, PostureConfig(restarts=8)
+            )
+        )
+    serial, shared = kept
+    assert shared.order == serial.order
+    assert not serial.evaluations[-1].feasible and serial.evaluations[0].feasible
+    for a, b in zip(serial.evaluations, shared.evaluations, strict=True):
+        assert (a.feasible, a.reason, a.score) == (b.feasible, b.reason, b.score) or (
+            np.isnan(a.score) and np.isnan(b.score) and a.reason == b.reason
+        )
+        for name in ("joint_positions", "effective_mass_kg", "directions_in_base"):
+            assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    for a, b in zip(serial.postures, shared.postures, strict=True):
+        assert pickle.dumps(a) == pickle.dumps(b)
+
+
 def test_python_backend_selects_the_same_postures(baxter, baxter_book) -> None:
     """Without the kernels (IKSolver.solve_poses one pose at a time, no early stop) the same
     postures are kept, to rounding."""
