@@ -415,6 +415,32 @@ def test_scrambled_halton_is_scipys_bit_for_bit() -> None:
     assert scrambled_halton(3, 0, 0).shape == (0, 3)
 
 
+def test_scrambled_halton_is_kept_per_process_and_handed_out_as_copies() -> None:
+    """The points of one (dimensions, count, seed) are computed once; a caller that writes
+    into its copy changes nobody else's."""
+    from grasp_safety_ros.core.method.posture import _scrambled_halton
+
+    first = scrambled_halton(7, 8, 99)
+    expected = first.copy()
+    first[:] = -1.0
+    hits = _scrambled_halton.cache_info().hits
+    again = scrambled_halton(7, 8, 99)
+    assert _scrambled_halton.cache_info().hits == hits + 1
+    assert np.array_equal(again, expected)
+    assert again.flags.writeable and again is not first
+
+
+def test_grasps_per_job_gives_every_worker_a_job() -> None:
+    from concurrent.futures import ThreadPoolExecutor
+
+    from grasp_safety_ros.core.method.pool import grasps_per_job
+
+    assert grasps_per_job(None, 10, 16) == 16  # serial: one kernel batch
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        # 10 grasps: two jobs of 5 (was one job of 10 and an idle worker), 40: at most 16
+        assert [grasps_per_job(pool, n, 16) for n in (1, 2, 3, 10, 17, 40)] == [1, 1, 2, 5, 9, 16]
+
+
 def test_restart_seeds_do_not_import_scipy_stats() -> None:
     """scipy.stats costs 0.5-1 s to import; posture selection's seeds do not need it."""
     import subprocess
@@ -538,6 +564,38 @@ def test_selection_is_deterministic_and_independent_of_the_workers(baxter) -> No
                 b.postures_tried,
                 b.postures_feasible,
             )
+
+
+def test_a_small_request_shared_out_over_the_workers_keeps_every_record(baxter) -> None:
+    """10 grasps (one out of reach) on a 2-worker pool go out as two jobs of 5
+    (grasps_per_job); every evaluation and selection record equals the serial one's."""
+    trajectory = book_trajectory(dt_s=0.05)
+    grasps = [
+        Grasp(pose_from_position_quat([-0.075, y, 0.0], [0, 0, 0, 1], "g"), f"spine_{y:.3f}")
+        for y in np.linspace(-0.1, 0.1, 9)
+    ] + [Grasp(pose_from_position_quat([5.0, 0.0, 0.0], [0, 0, 0, 1], "g"), "far")]
+    kept = []
+    for workers in (1, 2):
+        evaluator = GraspSafetyEvaluator(
+            baxter, EvaluationConfig(workers=workers, parallel_min_samples=1)
+        )
+        ranking = evaluator.rank(grasps, BOOK, trajectory, seed_positions=BAXTER_SEED)
+        kept.append(
+            select_postures(
+                evaluator, grasps, BOOK, trajectory, ranking, PostureConfig(restarts=8)
+            )
+        )
+    serial, shared = kept
+    assert shared.order == serial.order
+    assert not serial.evaluations[-1].feasible and serial.evaluations[0].feasible
+    for a, b in zip(serial.evaluations, shared.evaluations, strict=True):
+        assert (a.feasible, a.reason, a.score) == (b.feasible, b.reason, b.score) or (
+            np.isnan(a.score) and np.isnan(b.score) and a.reason == b.reason
+        )
+        for name in ("joint_positions", "effective_mass_kg", "directions_in_base"):
+            assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    for a, b in zip(serial.postures, shared.postures, strict=True):
+        assert pickle.dumps(a) == pickle.dumps(b)
 
 
 def test_python_backend_selects_the_same_postures(baxter, baxter_book) -> None:

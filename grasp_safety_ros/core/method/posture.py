@@ -35,6 +35,7 @@ posture. A grasp is infeasible only when no start posture gives a feasible traje
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
@@ -46,7 +47,7 @@ import pinocchio as pin
 from ..exceptions import InvalidInputError
 from ..model.inertia import ObjectInertia
 from ..model.trajectory import ObjectTrajectory
-from .pool import evaluate_jobs, executor_for
+from .pool import evaluate_jobs, executor_for, grasps_per_job
 from .ranking import (
     BATCH_GRASPS,
     GraspSafetyEvaluator,
@@ -157,8 +158,16 @@ def scrambled_halton(dimensions: int, count: int, seed: int) -> np.ndarray:
     its base-b digits d_j(i) (j = 0, 1, ...) of perm_j[d_j(i)] b^-(j+1), with one random
     permutation perm_j of the digits per position j (ceil(54 / log2 b) - 1 positions, as far
     as a double resolves), drawn by ``numpy.random.default_rng(seed).shuffle`` in the order
-    of the bases and positions.
+    of the bases and positions. The points of each (dimensions, count, seed) are computed
+    once per process (a request of a few grasps spent more time here than in its IK) and
+    copied out.
     """
+    return _scrambled_halton(dimensions, count, seed).copy()
+
+
+@functools.lru_cache(maxsize=16)
+def _scrambled_halton(dimensions: int, count: int, seed: int) -> np.ndarray:
+    """``scrambled_halton``'s points, kept (read-only)."""
     rng = np.random.default_rng(seed)
     points = np.zeros((count, dimensions))
     for k, base in enumerate(_primes(dimensions)):
@@ -173,6 +182,7 @@ def scrambled_halton(dimensions: int, count: int, seed: int) -> np.ndarray:
             column += permutations[j, quotient % base] * scale
             quotient //= base
             scale /= base
+    points.setflags(write=False)
     return points
 
 
@@ -419,25 +429,26 @@ def select_postures(
         return replace(ranking, postures=postures)
     seeds = restart_seeds(evaluator, config)
     sampled = sample_trajectory(trajectory)  # once for every grasp and posture
+    # Work estimate: every grasp followed from up to restarts + 1 postures.
+    executor = executor_for(evaluator, len(grasps) * len(sampled.times_s) * (len(seeds) + 1))
+    size = grasps_per_job(executor, len(grasps), BATCH_GRASPS)  # a few grasps: every worker
     jobs = [
         (
-            grasps[first : first + BATCH_GRASPS],
+            grasps[first : first + size],
             object_inertia,
             trajectory,
-            ranking.evaluations[first : first + BATCH_GRASPS],
+            ranking.evaluations[first : first + size],
             config,
             ranking.metric,
             seeds,
             sampled,
             criterion,
         )
-        for first in range(0, len(grasps), BATCH_GRASPS)
+        for first in range(0, len(grasps), size)
     ]
-    # Work estimate: every grasp followed from up to restarts + 1 postures.
-    executor = executor_for(evaluator, len(grasps) * len(sampled.times_s) * (len(seeds) + 1))
     batches = (
         (select_posture_batch(evaluator, *job) for job in jobs)
-        if executor is None
+        if executor is None or len(jobs) == 1  # one job: no hand-off to a worker
         else evaluate_jobs(evaluator, executor, jobs, select_posture_batch)
     )
     evaluations: list[GraspEvaluation] = []
