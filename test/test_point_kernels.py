@@ -272,3 +272,37 @@ def test_terms_in_small_chunks_give_the_same_report_and_progress_per_grasp(
 
     with pytest.raises(KeyboardInterrupt):
         analyse(evaluator, grasps, BOX, trajectory, options, ranking=ranking, progress=abandon)
+
+
+@needs_numba
+def test_exposed_points_on_recycled_terms_buffers_equal_one_chunk(
+    arm7: RobotModel, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Without the whole arm no analysis reads the terms twice, so each chunk's terms are
+    computed into the previous chunk's buffers: the exposed points stay those of one chunk for
+    all grasps, bit for bit (a reader holding a view of reused buffers would differ)."""
+    from grasp_safety_ros.core.analyses import safety_report
+
+    seed = random_positions(arm7, np.random.default_rng(18))
+    trajectory = reach_trajectory(arm7, seed)
+    far = Grasp(pin.SE3(np.eye(3), np.array([0.0, 0.0, 5.0])), "unreachable")
+    grasps = [*grasps_near_identity(3, 19), far]
+    options = AnalysisOptions(points_in_object_m=box_corners_in_object([0.08, 0.12, 0.2]))
+    evaluator = GraspSafetyEvaluator(arm7, EvaluationConfig(workers=1))
+    ranking = evaluator.rank(grasps, BOX, trajectory, seed_positions=seed)
+    whole = analyse(evaluator, grasps, BOX, trajectory, options, ranking=ranking)
+    recycled: list[bool] = []
+    computed = safety_report.grasps_terms
+
+    def spy(*args: object) -> object:
+        recycled.append(args[-1] is not None)
+        return computed(*args)
+
+    monkeypatch.setattr(safety_report, "grasps_terms", spy)
+    monkeypatch.setattr(safety_report, "TERMS_CHUNK_SAMPLES", 1)
+    chunked = analyse(evaluator, grasps, BOX, trajectory, options, ranking=ranking)
+    feasible = sum(e.feasible for e in ranking.evaluations)
+    assert feasible >= 2 and recycled == [False] + [True] * (feasible - 1)  # a chunk each
+    for ours, theirs in zip(chunked.exposed, whole.exposed, strict=True):
+        for field, value in _fields(ours).items():
+            np.testing.assert_array_equal(value, getattr(theirs, field), err_msg=field)

@@ -20,8 +20,12 @@ from .qos import SERVICE
 from .ranking_job import ClientWatch
 
 SERVICE_EVENTS_KEPT = 1024
-"""Request arrivals (client GID, sequence number, time) kept to identify a request's client,
-and service events kept in the middleware until read."""
+"""Request arrivals (client GID, sequence number, time) kept to identify a request's client."""
+
+SERVICE_EVENTS_QUEUED = 4 * SERVICE_EVENTS_KEPT
+"""Service events kept in the middleware until read by hand: each request has two (request
+received, response sent), and they are read only at a ranking's first client check, so the
+depth covers twice SERVICE_EVENTS_KEPT requests in between."""
 
 
 class TakenByHand(CallbackGroup):
@@ -48,7 +52,7 @@ class ServiceClients:
     request's client GID and sequence number; ``watch`` gives a ranking its ClientWatch.
 
     The events are read when a watch first asks for its client (TakenByHand), from a history
-    of the last SERVICE_EVENTS_KEPT; an executor that ignores callback groups' ``can_execute``
+    of the last SERVICE_EVENTS_QUEUED; an executor that ignores callback groups' ``can_execute``
     runs the subscription's callback instead, with the same record.
     """
 
@@ -63,7 +67,7 @@ class ServiceClients:
         )
         kept = QoSProfile(
             history=HistoryPolicy.KEEP_LAST,  # never fills: the events' writer never waits
-            depth=SERVICE_EVENTS_KEPT,
+            depth=SERVICE_EVENTS_QUEUED,
             reliability=SERVICE.reliability,
             durability=SERVICE.durability,
         )
