@@ -31,7 +31,7 @@ import pinocchio as pin
 
 from ..exceptions import InvalidInputError
 from ..input_checks import read_only
-from ..method.compiled import augmented_bodies, chain_arrays
+from ..method.compiled import augmented_bodies, chain_arrays, pose_arrays
 from ..method.dynamics import joint_dynamics
 from ..method.effective_mass import augmented_model
 from ..method.ik import compiled_available
@@ -342,14 +342,8 @@ def evaluate_efforts(
         twist, rate = motion.tip_twists(pin.SE3.Identity(), times)
         object_twists[index, 0, : len(times)] = twist
         object_twists[index, 1, : len(times)] = rate
-    transforms = [pin.SE3(grasp.transform_tip_to_object) for grasp in grasps]
-    translations = np.array([t.translation for t in transforms]).reshape(-1, 3)
-    bodies = augmented_bodies(
-        robot,
-        object_inertia,
-        np.array([t.rotation for t in transforms]).reshape(-1, 3, 3),
-        translations,
-    )
+    rotations, translations = pose_arrays([grasp.transform_tip_to_object for grasp in grasps])
+    bodies = augmented_bodies(robot, object_inertia, rotations, translations)
     model = robot.model
     q_all = positions if model.nq == model.nv else configurations(robot, positions)
     gravity = np.asarray(model.gravity.linear, dtype=float)

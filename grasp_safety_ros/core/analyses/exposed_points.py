@@ -25,6 +25,7 @@ import pinocchio as pin
 
 from ..exceptions import InvalidInputError
 from ..input_checks import finite_array, finite_float, read_only
+from ..method.compiled import pose_arrays
 from ..method.effective_mass import STATIONARY_TANGENT_M, augmented_model
 from ..method.points import tip_point_masses
 from ..method.ranking import Grasp, GraspEvaluation, aggregate, check_metric
@@ -379,9 +380,7 @@ def evaluate_exposed_points_on_terms(
 def _points_in_tip(points: np.ndarray, grasps: Sequence[Grasp]) -> np.ndarray:
     """(G, K, 3) the object points in each grasp's tip frame [m]: R_otᵀ (p − t_ot), summed
     in a fixed order (the same bits for a grasp alone or in a batch)."""
-    poses = [pin.SE3(grasp.transform_tip_to_object) for grasp in grasps]
-    rotations = np.array([pose.rotation for pose in poses]).reshape(-1, 3, 3)
-    translations = np.array([pose.translation for pose in poses]).reshape(-1, 3)
+    rotations, translations = pose_arrays([grasp.transform_tip_to_object for grasp in grasps])
     relative = points[None] - translations[:, None]  # (G, K, 3)
     return (
         relative[..., 0, None] * rotations[:, None, 0]

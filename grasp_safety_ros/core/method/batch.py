@@ -8,12 +8,11 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-import pinocchio as pin
 
 from ..exceptions import GraspSafetyError
 from ..model.inertia import ObjectInertia
 from ..model.trajectory import ObjectMotion
-from .compiled import augmented_bodies, call_kernel, plain_array
+from .compiled import augmented_bodies, call_kernel, plain_array, pose_arrays
 from .effective_mass import STATIONARY_TANGENT_M
 from .ik import IKSolver
 from .packed import BodyInertias, CompiledGraspResult, GraspBuffers, grasp_buffers
@@ -186,14 +185,12 @@ def _kernel_inputs(
     chain, settings, robot = solver.chain, solver.settings, solver.robot
     if chain is None or settings is None:
         raise GraspSafetyError("the compiled kernels do not support this chain")
-    grasps = [pin.SE3(transform) for transform in transforms_tip_to_object]
-    rotations = np.array([grasp.rotation for grasp in grasps]).reshape(-1, 3, 3)
-    translations = np.array([grasp.translation for grasp in grasps]).reshape(-1, 3)
+    rotations, translations = pose_arrays(transforms_tip_to_object)
+    count = len(rotations)
     bodies = augmented_bodies(robot, object_inertia, rotations, translations)
     if motion_is_tip:
-        rotations = np.repeat(np.eye(3)[None], len(grasps), axis=0)
-        translations = np.zeros((len(grasps), 3))
-    count = len(grasps)
+        rotations = np.repeat(np.eye(3)[None], count, axis=0)
+        translations = np.zeros((count, 3))
     times_s = plain_array(times_s)
     nq = robot.model.nq
     out = grasp_buffers(count, len(times_s), nq)

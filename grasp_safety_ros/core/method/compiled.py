@@ -8,6 +8,7 @@ The kernels (``core.kernels``, numba) are imported only when first called.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -121,6 +122,15 @@ def call_kernel(kernel: Any, *args: Any) -> Any:
     if compiled is not None:
         _ENTRY_POINTS[kernel] = compiled.entry_point
     return result
+
+
+def pose_arrays(poses: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:
+    """Rotations (P, 3, 3) and translations (P, 3) [m] of P poses (``pin.SE3`` or anything
+    it takes, e.g. the grasps' ``transform_tip_to_object``), as the kernels take them."""
+    frames = [pin.SE3(pose) for pose in poses]
+    rotations = np.array([frame.rotation for frame in frames]).reshape(-1, 3, 3)
+    translations = np.array([frame.translation for frame in frames]).reshape(-1, 3)
+    return rotations, translations
 
 
 def augmented_bodies(

@@ -15,14 +15,13 @@ from functools import partial
 from typing import Any
 
 import numpy as np
-import pinocchio as pin
 
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
-from .compiled import call_kernel, plain_array
+from .compiled import call_kernel, plain_array, pose_arrays
 from .effective_mass import robot_inertia_arrays
 from .packed import BodyInertias, ChainArrays
-from .terms import configurations
+from .terms import padded_configurations
 
 GRASP_CHUNK = 16
 """Grasps per kernel call: bounds the spatial inertias (inertias x chunk x 36 floats) and the
@@ -126,20 +125,15 @@ def _chunk_masses(
     )
     bodies = BodyInertias(*(plain_array(array[None]) for array in robot_inertia_arrays(robot)))
     positions = joint_positions[chunk]
-    counts = np.array([len(p) for p in positions], dtype=np.int64)
-    count, longest = len(counts), int(counts.max(initial=0))
-    grasps = [pin.SE3(transform) for transform in transforms_tip_to_object[chunk]]
-    rotations = np.array([grasp.rotation for grasp in grasps]).reshape(-1, 3, 3)
-    translations = np.array([grasp.translation for grasp in grasps]).reshape(-1, 3)
-    spatial = spatial_inertias_in_tip(inertias, rotations, translations)
-    q_all = np.zeros((count, longest, robot.model.nq))
+    q_all, counts = padded_configurations(robot, positions)
+    count, longest = q_all.shape[:2]
+    spatial = spatial_inertias_in_tip(inertias, *pose_arrays(transforms_tip_to_object[chunk]))
     directions = np.zeros((count, longest, 3))
     slots = np.full((count, longest), -1, dtype=np.int64)
     flagged = 0
     for g, (p, d, w) in enumerate(
         zip(positions, directions_in_base[chunk], worst[chunk], strict=True)
     ):
-        q_all[g, : len(p)] = configurations(robot, p)
         directions[g, : len(p)] = d
         marked = np.flatnonzero(w)
         slots[g, marked] = flagged + np.arange(len(marked))

@@ -23,7 +23,7 @@ import pinocchio as pin
 
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
-from .compiled import augmented_bodies, call_kernel, plain_array
+from .compiled import augmented_bodies, call_kernel, plain_array, pose_arrays
 from .packed import BodyInertias, ChainArrays
 
 
@@ -112,17 +112,21 @@ def grasps_terms(
     terms are those ``grasp_terms`` gives it alone, bit for bit (the same kernel code per
     grasp). ``chain``: ``compiled.chain_arrays(robot)`` (numba must be installed); ``out``:
     terms no longer needed, overwritten when their shape is (G, max N_g) (``batch_terms``)."""
-    count = len(joint_positions)
-    grasps = [pin.SE3(transform) for transform in transforms_tip_to_object]
-    rotations = np.array([grasp.rotation for grasp in grasps]).reshape(count, 3, 3)
-    translations = np.array([grasp.translation for grasp in grasps]).reshape(count, 3)
-    bodies = augmented_bodies(robot, object_inertia, rotations, translations)
+    bodies = augmented_bodies(robot, object_inertia, *pose_arrays(transforms_tip_to_object))
+    q_all, counts = padded_configurations(robot, joint_positions)
+    return batch_terms(chain, bodies, q_all, counts, out), counts
+
+
+def padded_configurations(
+    robot: RobotModel, joint_positions: Sequence[np.ndarray]
+) -> tuple[np.ndarray, np.ndarray]:
+    """The ``configurations`` (G, max N_g, nq) of G joint paths ((N_g, n) chain positions
+    each), zero past each path's end, and the counts N_g (G,), as the kernels take them."""
     counts = np.array([len(positions) for positions in joint_positions], dtype=np.int64)
-    longest = int(counts.max(initial=0))
-    q_all = np.zeros((count, longest, robot.model.nq))
+    q_all = np.zeros((len(counts), int(counts.max(initial=0)), robot.model.nq))
     for g, positions in enumerate(joint_positions):
         q_all[g, : counts[g]] = configurations(robot, positions)
-    return batch_terms(chain, bodies, q_all, counts, out), counts
+    return q_all, counts
 
 
 def batch_terms(
