@@ -250,6 +250,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     batch.add_argument("--resume", action="store_true", help="keep parts already written")
     batch.add_argument("--per-sample", action="store_true", help="add per-sample series")
+    batch.add_argument(
+        "--allow-refused",
+        action="store_true",
+        help="exit 0 when source files are refused (each is still printed with its reason)",
+    )
     batch.set_defaults(handler=_command_batch)
     return parser
 

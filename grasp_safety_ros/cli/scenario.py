@@ -356,10 +356,6 @@ def _check_size(value: Any, field: str) -> None:
         raise InvalidInputError(field, f"must be at most {MAX_OBJECT_SIZE_M:g} m, got {size:g} m")
 
 
-_LEGACY = frozenset({"name", "quality"})
-"""Keys start and goal have always tolerated (ignored)."""
-
-
 def _pose(section: Any, field: str, allowed: frozenset[str] = frozenset()):
     pose = _mapping(section, field)
     _check_keys(pose, {"position_m", "quat_xyzw"} | allowed, field)
@@ -391,8 +387,8 @@ def parse_trajectory(section: Any) -> ObjectTrajectory | WaypointTrajectory:
         )
     _check_keys(trajectory, {"start", "goal", "duration_s", "dt_s"}, "trajectory")
     return ObjectTrajectory(
-        _pose(_required(trajectory, "start", "trajectory"), "trajectory.start", _LEGACY),
-        _pose(_required(trajectory, "goal", "trajectory"), "trajectory.goal", _LEGACY),
+        _pose(_required(trajectory, "start", "trajectory"), "trajectory.start"),
+        _pose(_required(trajectory, "goal", "trajectory"), "trajectory.goal"),
         finite_float(_required(trajectory, "duration_s", "trajectory"), "trajectory.duration_s"),
         finite_float(_required(trajectory, "dt_s", "trajectory"), "trajectory.dt_s"),
     )

@@ -390,6 +390,7 @@ def summarise(out_dir: Path, failures: Sequence[Failure]) -> dict[str, Any]:
         "infeasible": failed.num_rows - unreadable.num_rows,
         "unreadable_grasps": unreadable.num_rows,
         "files_refused": len(failures),
+        "refused_files": [{"file": f.file, "key": f.key, "reason": f.reason} for f in failures],
         "failures_by_reason": dict(sorted(by_reason.items(), key=lambda kv: (-kv[1], kv[0]))),
         "failures": listed[:MAX_LISTED_FAILURES],
     }

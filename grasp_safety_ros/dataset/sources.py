@@ -202,9 +202,14 @@ def _acronym_transforms(h5: Any) -> Any:
 
 
 def _acronym_inertia(h5: Any, spec: BatchSpec) -> ObjectInertia:
-    """The file's object/mass, object/com, object/inertia; the SPEC's object where the file
-    has no mass; neither: refused naming object/mass."""
+    """The file's object/mass and object/inertia (about the CoM; both or neither) and
+    object/com (default the origin); the SPEC's object where the file has none of the three;
+    neither: refused naming object/mass. A mass alone does not say how it is distributed, and
+    the SPEC's shape is not the file's object: refused naming object/inertia."""
     if "object/mass" not in h5:
+        given = [key for key in ("object/inertia", "object/com") if key in h5]
+        if given:
+            raise InvalidInputError("object/mass", f"is required when {given[0]} is given")
         if spec.object_defaults is None:
             raise InvalidInputError(
                 "object/mass", "is missing and the SPEC gives no object defaults"

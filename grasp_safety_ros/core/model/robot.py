@@ -181,13 +181,16 @@ def example_robot_data_urdf(name: str) -> Path:
             f"example-robot-data robot '{name}' names {len(shared)} URDFs; give the path form: "
             f"{forms}",
         )
+    from .bundled_robots import BUNDLED_ROBOTS  # it imports this module
+
     close = difflib.get_close_matches(name, list(names), n=3, cutoff=0.5)
     hint = f"did you mean {' or '.join(repr(n) for n in close)}? " if close else ""
     raise InvalidInputError(
         "robot.urdf",
         f"example-robot-data robot '{name}' not found; {hint}bundled names: "
-        f"{', '.join(sorted(EXAMPLE_ROBOT_DATA_URDFS))}; `grasp-safety robots` lists every "
-        f"name; or give a path relative to {folders[0]}: '{EXAMPLE_ROBOT_DATA_PREFIX}<path>'",
+        f"{', '.join(robot.name for robot in BUNDLED_ROBOTS)}; `grasp-safety robots` lists "
+        f"every name; or give a path relative to {folders[0]}: "
+        f"'{EXAMPLE_ROBOT_DATA_PREFIX}<path>'",
     )
 
 
