@@ -7,6 +7,9 @@
   ACRONYM-format HDF5 file, a GraspGen ``isaac_grasp`` YAML file, the SPEC that labels both
   on the bundled Panda, and a SPEC that also asks for a file the batch refuses (an object
   mass without its inertia) and a glob that matches nothing.
+- ``whole_arm/book.yaml``: the paper's book on Baxter (config/book_baxter.yaml) with a point
+  on the forearm, three body regions, and grasps ranked (and postures chosen) by the whole
+  arm's chest force (docs/whole_arm.md).
 
 The object starts at the tip's pose at the robot's IK seed, so every grasp (a small offset
 from it) is reachable. Usage, from the repository root::
@@ -209,6 +212,16 @@ def dataset_spec(start: pin.SE3, sources: list[dict[str, str]]) -> dict[str, Any
     }
 
 
+def whole_arm_book() -> dict[str, Any]:
+    """The bundled book scenario, ranked by the whole arm."""
+    book = yaml.safe_load((ROOT.parent / "config" / "book_baxter.yaml").read_text())
+    book["robot"]["exposed_points_m"] = {"right_lower_forearm": [[0.0, 0.0, 0.1]]}
+    book["iso_ts_15066"] = {"regions": ["chest", "upper_arm_elbow", "hand_fingers"]}
+    book["whole_arm"] = {"enabled": True, "region": "chest"}
+    book["rank_by"] = "whole_arm"
+    return book
+
+
 def write_examples(root: Path = ROOT) -> list[Path]:
     """Write every example below ``root``; the paths written."""
     written = []
@@ -239,6 +252,7 @@ def write_examples(root: Path = ROOT) -> list[Path]:
     refused = [*sources, {"format": "acronym", "path": "refused/*.h5"}]
     refused.append({"format": "graspgen", "path": "missing/*.yaml"})
     text("dataset/spec_refused.yaml", header + _flow(dataset_spec(start, refused)))
+    text("whole_arm/book.yaml", header + _flow(whole_arm_book()))
     return written
 
 

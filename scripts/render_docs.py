@@ -51,7 +51,14 @@ NODE_COMMAND = (
 """How the docs start the node; the ``node`` blocks run against it."""
 ABBREVIATED = (re.compile(r"poses=\[.*\]\)$", re.M), "poses=[...])")
 """Echoes shortened in the docs (the publishers' echo of a whole message)."""
+TIMINGS = (
+    (re.compile(r"^(batch: \d+/\d+ chunks, )\d+(?:\.\d+)? s$", re.M), r"\1… s"),
+    (re.compile(r", \d+ \(grasp, sample\)/s"), ", … (grasp, sample)/s"),
+)
+"""Times and rates in outputs, shown as ``…``: they differ from run to run, so no test can
+hold them (measured speeds are in the generated bench blocks)."""
 BENCH = ROOT / "bench" / "results.json"
+BENCH_BATCH = ROOT / "bench" / "results_batch.json"
 
 
 def doc_files(root: Path = ROOT) -> list[Path]:
@@ -284,11 +291,97 @@ def render_bench_service() -> str:
     return "\n".join(lines) + "\n"
 
 
+def render_bench_batch() -> str:
+    """The batch's throughput, per-chunk overhead and the ACRONYM estimate, from
+    bench/results_batch.json."""
+    batch = json.loads(BENCH_BATCH.read_text())
+    runs = (
+        ("local_1", "local, `--workers 1`", 1),
+        ("local_2", "local, `--workers 2` (package pool, threads)", 2),
+        ("dask_2", "Dask `LocalCluster`, 2 worker processes x 1 thread", 2),
+    )
+    lines = [
+        "| run | (grasp, sample)/s | per worker | wall of the 3 runs [s] | peak memory per worker "
+        "[MiB] |",
+        "| --- | ---: | ---: | ---: | ---: |",
+    ]
+    for key, label, workers in runs:
+        run = batch[key]
+        rate = run["grasp_samples_per_s"]
+        walls = ", ".join(f"{wall:.1f}" for wall in run["wall_s_repeats"])
+        lines.append(
+            f"| {label} | {rate:.0f} | {rate / workers:.0f} | {walls} | "
+            f"{run['peak_memory_per_worker_mib']:.0f} |"
+        )
+    one = batch["local_1"]["grasp_samples_per_s"]
+    samples = batch["local_1"]["grasp_samples"] // batch["grasps"]
+    overhead = batch["per_chunk_overhead_s"]
+    chunk_s = batch["chunk_grasps"] * samples / one
+    repeats = ", ".join(f"{1000 * x:.0f}" for x in batch["per_chunk_overhead_s_repeats"])
+    local_efficiency = batch["local_2"]["grasp_samples_per_s"] / (2 * one)
+    hours, ideal = batch["acronym_hours"], batch["acronym_hours_ideal"]
+    counts = list(hours)
+    lines += [
+        "",
+        f"- Per-chunk overhead: {1000 * overhead:.0f} ms (median of {repeats} ms: "
+        f"{batch['chunks_of_1']['chunks']} chunks of 1 grasp against "
+        f"{batch['chunk_per_file']['chunks']} chunks of "
+        f"{batch['chunks_of_1']['chunks'] // batch['chunk_per_file']['chunks']}, 1 local "
+        f"worker); a chunk of {batch['chunk_grasps']} grasps is {batch['chunk_grasps']} x "
+        f"{samples} / {one:.0f} = {chunk_s:.2f} s of work at the 1-worker rate, so the "
+        f"overhead is about {100 * overhead / chunk_s:.0f} %.",
+        f"- 2-worker efficiency (2-worker rate / twice the 1-worker rate): Dask "
+        f"{batch['dask_efficiency_2_workers']:.2f}, local pool {local_efficiency:.2f}. The Dask "
+        f"parts were {'' if batch['dask_parts_identical_to_local'] else 'not '}byte-identical "
+        "to the local ones.",
+        f"- All of ACRONYM (17.7 M grasps x {samples} samples) at the 1-worker rate: "
+        f"{batch['acronym_core_hours']:.0f} core-hours; with one Dask worker per core:",
+        "",
+        "| machines of 16 cores | " + " | ".join(counts) + " |",
+        "| --- |" + " ---: |" * len(counts),
+        f"| hours at the measured efficiency {batch['dask_efficiency_2_workers']:.2f} | "
+        + " | ".join(f"{hours[c]:.2g}" for c in counts)
+        + " |",
+        "| hours at ideal scaling | " + " | ".join(f"{ideal[c]:.2g}" for c in counts) + " |",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def render_bench_whole_arm() -> str:
+    """The whole-arm analysis' cost per (grasp, sample) and of posture selection by it, from
+    bench/results.json."""
+    arms = _bench()["whole_arm"]
+    lines = [
+        "| arm | whole arm on the shared compiled terms, per (grasp, sample) | the Pinocchio "
+        "reference path | the compiled ranking, same run | posture selection by the tip score, "
+        "per grasp | by the whole arm (chest) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name, arm in arms.items():
+        posture = arm["posture_ms_per_grasp"]
+        lines.append(
+            f"| {name.capitalize()} | {arm['us_per_sample']:.1f} µs | "
+            f"{arm['us_per_sample_pinocchio']:.1f} µs | {arm['ranking_us_per_sample']:.1f} µs | "
+            f"{posture['score']:.1f} ms | {posture['whole_arm']:.1f} ms "
+            f"(×{posture['whole_arm'] / posture['score']:.1f}) |"
+        )
+    first = next(iter(arms.values()))
+    lines += [
+        "",
+        f"{first['feasible_grasps']} feasible grasps x "
+        f"{first['samples'] // first['feasible_grasps']} samples, {first['sites']} sites, "
+        f"posture selection with {first['posture_restarts']} restarts.",
+    ]
+    return "\n".join(lines) + "\n"
+
+
 GENERATORS: dict[str, Callable[[], str]] = {
     "parameters": render_parameters,
     "bench-arms": render_bench_arms,
     "bench-postures": render_bench_postures,
     "bench-service": render_bench_service,
+    "bench-batch": render_bench_batch,
+    "bench-whole-arm": render_bench_whole_arm,
 }
 """Every generated block's renderer, by the name its marker gives."""
 
@@ -342,8 +435,16 @@ def run_shown(command: str, root: Path = ROOT, cwd: Path | None = None) -> str:
         text=True,
         timeout=600,
     )
-    output = (done.stdout + done.stderr).replace(str(root), "<checkout>")
-    return ABBREVIATED[0].sub(ABBREVIATED[1], output)
+    return as_shown(done.stdout + done.stderr, root)
+
+
+def as_shown(output: str, root: Path = ROOT) -> str:
+    """An output as the docs show it: the checkout's path as ``<checkout>``, whole messages
+    abbreviated, times and rates as ``…``."""
+    output = ABBREVIATED[0].sub(ABBREVIATED[1], output.replace(str(root), "<checkout>"))
+    for pattern, replacement in TIMINGS:
+        output = pattern.sub(replacement, output)
+    return output
 
 
 class NodeSession:

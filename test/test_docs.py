@@ -1,14 +1,16 @@
 """README.md and docs/: links resolve, generated parts are fresh, and what they show still holds.
 
 Hermetic: the link and render checks read files only; the captured ``grasp-safety`` commands
-run in-process on the bundled scenarios (a few seconds), and the grasp orders they print are
-compared with the orders shown (not every digit: ``make docs`` re-captures those).
+run in-process on the bundled scenarios and examples (a few seconds), the other captured
+commands as shown; what they print is compared with what the pages show, every number to its
+last digit (``make docs`` re-captures them).
 """
 
 from __future__ import annotations
 
 import re
 import shlex
+import subprocess
 import sys
 from contextlib import redirect_stderr, redirect_stdout
 from io import StringIO
@@ -129,21 +131,50 @@ def test_readme_scenario_is_the_bundled_book() -> None:
 
 # --- captured outputs -------------------------------------------------------------------------
 
-
-def grasp_orders(output: str) -> list[list[int]]:
-    """The grasp indices of every ranking table of a ``grasp-safety`` output, in rank order."""
-    orders: list[list[int]] = []
-    for line in output.splitlines():
-        if re.match(r"\s*rank\s+index\b", line):
-            orders.append([])
-        elif orders and (row := re.match(r"\s*(\d+)\s+(\d+)\s", line)):
-            orders[-1].append(int(row.group(2)))
-    return orders
+NUMBER = re.compile(r"-?\d+(?:\.(\d+))?(?:[eE]([-+]?\d+))?")
 
 
-def test_grasp_orders_reads_a_ranking_table() -> None:
-    table = "head\nrank  index  name\n---\n   1      2  c  1.0\n   2      0  a  1.1\n\nx 3 4\n"
-    assert grasp_orders(table) == [[2, 0]]
+def differences(shown: list[str], produced: list[str]) -> list[str]:
+    """Where ``produced`` differs from ``shown``: the text between numbers exactly, each
+    integer exactly, each decimal to one unit of its last shown digit (a value on a rounding
+    boundary may print one unit apart on another CPU: last-bit differences)."""
+    if len(shown) != len(produced):
+        return [f"{len(shown)} lines shown, {len(produced)} produced:", *produced]
+    return [
+        f"shown {old!r}, produced {new!r}"
+        for old, new in zip(shown, produced, strict=True)
+        if not _same_line(old, new)
+    ]
+
+
+def _same_line(old: str, new: str) -> bool:
+    if NUMBER.sub("#", old) != NUMBER.sub("#", new):
+        return False
+    for a, b in zip(NUMBER.finditer(old), NUMBER.finditer(new), strict=True):
+        (digits, exponent), (other_digits, other_exponent) = a.groups(), b.groups()
+        decimal = digits is not None and other_digits is not None
+        if not decimal or len(digits) != len(other_digits) or exponent != other_exponent:
+            if a.group() != b.group():  # an integer, or other digits or exponent shown
+                return False
+            continue
+        unit = 10.0 ** (int(exponent or 0) - len(digits))
+        if abs(float(a.group()) - float(b.group())) > 1.000001 * unit:
+            return False
+    return True
+
+
+def test_differences_allow_one_unit_of_the_last_digit_only() -> None:
+    shown = ["rank 1 of 3: 1.0189 kg..1.0396 kg, x1.30, 5.1e-4"]
+    assert differences(shown, ["rank 1 of 3: 1.0190 kg..1.0395 kg, x1.31, 5.2e-4"]) == []
+    for stale in (
+        "rank 1 of 3: 1.0191 kg..1.0396 kg, x1.30, 5.1e-4",  # two units
+        "rank 2 of 3: 1.0189 kg..1.0396 kg, x1.30, 5.1e-4",  # an integer
+        "rank 1 of 3: 1.0189 kg..1.0396 kg, x1.30, 5.1e-3",  # an exponent
+        "rank 1 of 3: 1.0189 kg..1.0396 kg, x1.3, 5.1e-4",  # the digits shown
+        "rank 1 of 3: 1.0189 kg..1.0396 kg, ×1.30, 5.1e-4",  # the text
+    ):
+        assert differences(shown, [stale]) != [], stale
+    assert differences(shown, [*shown, "more"]) != []
 
 
 def captured_blocks(mode: str | None) -> list[tuple[Path, str, list[str]]]:
@@ -157,38 +188,67 @@ def captured_blocks(mode: str | None) -> list[tuple[Path, str, list[str]]]:
     return found
 
 
-CLI = [
-    block
-    for block in captured_blocks(None)
-    if block[1].startswith(".venv/bin/grasp-safety ") and "<(" not in block[1]
-]
+SINGLE_CLI = re.compile(r"\.venv/bin/grasp-safety [^;&<>|\n]*")
+"""One ``grasp-safety`` command (its output may be piped into a filter)."""
+CLI = [block for block in captured_blocks(None) if SINGLE_CLI.fullmatch(block[1].split(" | ")[0])]
 CLI_COMMANDS = sorted({command.split(" | ")[0] for _, command, _ in CLI})
-"""Each distinct command (without a filter it is piped into) runs once; every block that shows
-it is compared."""
+"""Each distinct command (without a filter it is piped into) runs once, in this process;
+every block that shows it is compared."""
 
 
-def test_docs_show_the_demo() -> None:
+def test_docs_show_the_demo_the_examples_and_the_batch() -> None:
     assert ".venv/bin/grasp-safety demo" in CLI_COMMANDS
+    shown = " ".join(CLI_COMMANDS)
+    for example in ("examples/mjcf/", "examples/dataset/spec.yaml", "spec_refused.yaml"):
+        assert example in shown, example
+
+
+def test_cli_page_lists_every_command() -> None:
+    """The command list of docs/cli.md names every command of the parser."""
+    from grasp_safety_ros.cli.main import build_parser
+
+    page = (ROOT / "docs" / "cli.md").read_text()
+    block = re.search(r"## Commands\n\n```bash\n(.*?)```", page, re.S)
+    assert block is not None
+    listed = [line.split()[1] for line in block.group(1).splitlines()]
+    parser = build_parser()
+    (commands,) = [a for a in parser._actions if a.dest == "command"]  # the subparsers
+    assert listed == list(commands.choices)
 
 
 @pytest.mark.parametrize("command", CLI_COMMANDS)
-def test_shown_ranking_is_the_one_produced(
+def test_shown_cli_output_is_the_one_produced(
     command: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """The command runs (exit 0) and prints the grasp orders that every block showing it
-    shows (piped into a filter such as ``sed -n 1,13p`` or not)."""
-    (tmp_path / "config").symlink_to(ROOT / "config")
-    monkeypatch.chdir(tmp_path)  # the demo writes demo_output/ here
+    """The command prints what every block showing it shows (piped into a filter such as
+    ``sed -n 1,13p`` or not), numbers to their last digit; it exits 2 where the output shown
+    is an error, else 0."""
+    for name in ("config", "examples"):
+        (tmp_path / name).symlink_to(ROOT / name)
+    monkeypatch.chdir(tmp_path)  # the outputs (demo_output/, out/) are written here
     out, err = StringIO(), StringIO()
     with redirect_stdout(out), redirect_stderr(err):
         status = grasp_safety(shlex.split(command)[1:])
-    assert status == 0, err.getvalue()
-    produced = grasp_orders(out.getvalue())
+    produced = out.getvalue() + err.getvalue()
     for path, shown_command, shown in CLI:
-        if shown_command.split(" | ")[0] == command:
-            shown_orders = grasp_orders("\n".join(shown))
-            assert shown_orders, f"{path}: no ranking table shown for {command}"
-            assert produced == shown_orders, f"{path} is stale: run make docs"
+        if shown_command.split(" | ")[0] != command:
+            continue
+        output = produced
+        if " | " in shown_command:
+            filtered = subprocess.run(
+                ["bash", "-c", shown_command.split(" | ", 1)[1]],
+                input=output,
+                capture_output=True,
+                text=True,
+                check=True,
+            )
+            output = filtered.stdout
+        output = render_docs.as_shown(output)
+        assert differences(shown, output.rstrip("\n").splitlines()) == [], (
+            f"{path} is stale: run make docs"
+        )
+        error = any(line.startswith("grasp-safety: error:") for line in shown)
+        assert status == (2 if error else 0), err.getvalue()
 
 
 SHELL = [block for block in captured_blocks(None) if block not in CLI]
@@ -197,14 +257,22 @@ SHELL = [block for block in captured_blocks(None) if block not in CLI]
 @pytest.mark.parametrize(
     "path, command, shown", SHELL, ids=[f"{p.relative_to(ROOT)}: {c}" for p, c, _ in SHELL]
 )
-def test_shown_one_line_outputs_are_current(path: Path, command: str, shown: list[str]) -> None:
-    """Other captured commands (one-line outputs, such as an error) print exactly that."""
+def test_shown_shell_outputs_are_current(path: Path, command: str, shown: list[str]) -> None:
+    """Other captured commands (run as shown, from the checkout) print that, numbers to
+    their last digit."""
     output = render_docs.run_shown(command, ROOT)
-    assert output.rstrip("\n").splitlines() == shown, f"{path}: run make docs"
+    assert differences(shown, output.rstrip("\n").splitlines()) == [], f"{path}: run make docs"
 
 
 def test_capture_rewrites_outputs(tmp_path: Path) -> None:
     page = "x\n<!-- captured -->\n```text\n$ echo 'a\nb'\nold\n$ printf c\n```\ny\n"
     assert render_docs.capture(page, tmp_path) == (
         "x\n<!-- captured -->\n```text\n$ echo 'a\nb'\na\nb\n$ printf c\nc\n```\ny\n"
+    )
+
+
+def test_times_are_shown_as_ellipses() -> None:
+    output = "batch: 3/3 chunks, 1.4 s\nwrote out: 10 grasps, 3 of 3 chunks, 80 (grasp, sample)/s"
+    assert render_docs.as_shown(output) == (
+        "batch: 3/3 chunks, … s\nwrote out: 10 grasps, 3 of 3 chunks, … (grasp, sample)/s"
     )
