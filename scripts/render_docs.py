@@ -375,6 +375,44 @@ def render_bench_whole_arm() -> str:
     return "\n".join(lines) + "\n"
 
 
+_UNITS = {"s": " s", "ms": " ms", "us": " µs", "x": ""}
+
+
+def _target_value(value: float, unit: str) -> str:
+    if unit == "x":
+        return f"×{value:.1f}"
+    return (f"{value:,.0f}" if value >= 100 else f"{value:.3g}") + _UNITS[unit]
+
+
+def render_bench_targets() -> str:
+    """Issue 21's targets: each measure of the last ``make bench``, its target and whether it
+    was met, from bench/results.json."""
+    lines = ["| measure | this run | target | |", "|---|---|---|---|"]
+    for row in _bench()["issue21_targets"]:
+        unit = row["unit"]
+        bound = "≤ " + _target_value(row["target"], unit)
+        lines.append(
+            f"| {row['measure']} | {_target_value(row['value'], unit)} | {bound} | "
+            f"{'met' if row['met'] else 'not met'} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def render_bench_start_up() -> str:
+    """The start-up spans of a ranking command (fresh process, medians), from
+    bench/results.json."""
+    spans = _bench()["pipeline"]["cli"]["start_up"]
+    names = {
+        "interpreter_s": "interpreter",
+        "numpy_pinocchio_s": "numpy + Pinocchio",
+        "numba_s": "numba",
+        "package_s": "the package",
+        "kernels_from_cache_s": "loading the compiled kernels from numba's cache",
+    }
+    text = ", ".join(f"{label} {spans[key]:.2f} s" for key, label in names.items())
+    return f"Start-up of a ranking command (fresh process, medians): {text}.\n"
+
+
 GENERATORS: dict[str, Callable[[], str]] = {
     "parameters": render_parameters,
     "bench-arms": render_bench_arms,
@@ -382,6 +420,8 @@ GENERATORS: dict[str, Callable[[], str]] = {
     "bench-service": render_bench_service,
     "bench-batch": render_bench_batch,
     "bench-whole-arm": render_bench_whole_arm,
+    "bench-targets": render_bench_targets,
+    "bench-start-up": render_bench_start_up,
 }
 """Every generated block's renderer, by the name its marker gives."""
 
