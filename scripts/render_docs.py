@@ -59,6 +59,8 @@ TIMINGS = (
 hold them (measured speeds are in the generated bench blocks)."""
 BENCH = ROOT / "bench" / "results.json"
 BENCH_BATCH = ROOT / "bench" / "results_batch.json"
+VALIDATION = ROOT / "docs" / "validation" / "results.json"
+"""The committed full run of ``grasp-safety reproduce --out docs/validation``."""
 
 
 def doc_files(root: Path = ROOT) -> list[Path]:
@@ -413,6 +415,76 @@ def render_bench_start_up() -> str:
     return f"Start-up of a ranking command (fresh process, medians): {text}.\n"
 
 
+# --- the committed MuJoCo validation run (docs/validation/results.json) -------------------------
+
+
+def _validation() -> dict[str, Any]:
+    return json.loads(VALIDATION.read_text())
+
+
+def _force_span(grasps: list[dict[str, Any]]) -> str:
+    forces = sorted(grasp["peak_force_n"] for grasp in grasps)
+    return f"{forces[0]:.1f} N to {forces[-1]:.1f} N"
+
+
+def render_validation_results() -> str:
+    """The validation's headline figures against the paper's, from the committed full run."""
+    run = _validation()
+    tensor, book, path = run["tensor_object"], run["book"], run["book_waypoints"]
+    impulse = run["impulse_check"]
+    lines = [
+        "| | this simulation (MuJoCo) | paper (Gazebo) |",
+        "|---|---|---|",
+        f"| tensor object: Spearman(M_eff at impact, peak force), {len(tensor['grasps'])} "
+        f'configurations | **{tensor["spearman_meff_vs_peak_force"]:.3f}** | "in accordance" |',
+        f"| book: peak force, safest to least safe grasp | {_force_span(book['grasps'])} | "
+        "100 N to 130 N |",
+        f"| book: peak force ratio worst/best | **{book['peak_force_ratio_worst_to_best']:.3f}** "
+        "| 1.30 |",
+        f"| impulse check: worst relative error over {impulse['cases']} cases | "
+        f"**{impulse['worst_rel_error']:.1e}** | — |",
+        f"| book on a 3-waypoint path: peak force, safest to least safe grasp | "
+        f"{_force_span(path['grasps'])} | — |",
+        "| book on a 3-waypoint path: peak force / M_eff at impact, ratio worst/best | "
+        f"**{path['peak_force_ratio_worst_to_best']:.3f}** / "
+        f"{path['effective_mass_ratio_worst_to_best']:.3f} | — |",
+        "",
+        f"Engine against core: MuJoCo's own 1/(uᵀJM⁻¹Jᵀu) equals the core's effective mass to "
+        f"{impulse['engine_vs_core_effective_mass_max_rel_diff']:.0e} (relative). The committed "
+        f"run took {run['timing_s']['total']:.0f} s (`timing_s` in `results.json`).",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def render_validation_armature() -> str:
+    """The free impacts of the Panda with the FR3 armature, from the committed full run."""
+    check = _validation()["impulse_check_armature"]
+    return (
+        f"With the full run's {check['valid_cases']} impacts: the measured impulse matches "
+        f"(1 + e)·M_eff·v with the effective mass *with* armature to "
+        f"{check['worst_rel_error']:.1e} (worst relative error); it exceeds the links-only "
+        f"prediction by {100 * check['links_only_min_rel_error']:.1f} % or more (median "
+        f"{100 * check['links_only_median_rel_error']:.1f} %). The peak contact force follows "
+        f"the same mass: peak / (M_eff·v) varies by ×{check['peak_force_per_mass_spread']:.3f} "
+        f"over the impacts with the armature's M_eff and by "
+        f"×{check['links_only_peak_force_per_mass_spread']:.3f} with the links-only one.\n"
+    )
+
+
+def render_validation_elbow() -> str:
+    """The free impact at an elbow site, from the committed full run."""
+    elbow = _validation()["elbow_impact"]
+    relative = abs(elbow["engine_effective_mass_kg"] / elbow["effective_mass_kg"] - 1.0)
+    return (
+        f'Site `{elbow["site"]}` (link `{elbow["link"]}`), grasp "{elbow["grasp"]}", '
+        f"t = {elbow['time_s']:g} s, {elbow['speed_m_s']:.2f} m/s: whole-arm M_eff "
+        f"{elbow['effective_mass_kg']:.3f} kg, MuJoCo's own 1/(uᵀJM⁻¹Jᵀu) equal to "
+        f"{relative:.0e} (relative); impulse error {elbow['rel_error']:.1e}; with the tip's "
+        f"effective mass ({elbow['tip_effective_mass_kg']:.3f} kg) in its place the error is "
+        f"{elbow['rel_error_with_tip_mass']:.2f}.\n"
+    )
+
+
 GENERATORS: dict[str, Callable[[], str]] = {
     "parameters": render_parameters,
     "bench-arms": render_bench_arms,
@@ -422,6 +494,9 @@ GENERATORS: dict[str, Callable[[], str]] = {
     "bench-whole-arm": render_bench_whole_arm,
     "bench-targets": render_bench_targets,
     "bench-start-up": render_bench_start_up,
+    "validation-results": render_validation_results,
+    "validation-armature": render_validation_armature,
+    "validation-elbow": render_validation_elbow,
 }
 """Every generated block's renderer, by the name its marker gives."""
 
