@@ -415,6 +415,34 @@ def render_bench_start_up() -> str:
     return f"Start-up of a ranking command (fresh process, medians): {text}.\n"
 
 
+# --- limits of the command line's input -------------------------------------------------------
+
+
+def _count(value: float) -> str:
+    return f"{int(value):,}".replace(",", " ")
+
+
+def render_cli_limits() -> str:
+    """The bounds on a scenario file and its robot description, from the constants the code
+    checks them with."""
+    sys.path.insert(0, str(ROOT))
+    from grasp_safety_ros.cli import scenario as limits
+    from grasp_safety_ros.core.model.robot import MAX_URDF_BYTES
+
+    return (
+        f"A scenario file is at most {limits.MAX_SCENARIO_BYTES / 1e6:g} MB of UTF-8 text, "
+        f"nested at most {limits.MAX_NESTING_DEPTH} levels, and may expand to at most "
+        f"{_count(limits.MAX_EXPANDED_NODES)} YAML nodes with aliases counted at full size (so "
+        'a "billion laughs" file is refused at once); at most '
+        f"{_count(limits.MAX_GRASPS)} grasps, {_count(limits.MAX_GRASP_SAMPLES)} grasps × "
+        f"trajectory samples, {_count(limits.MAX_POINTS)} `object.points_m` and "
+        f"{_count(limits.MAX_UNCERTAINTY_SAMPLES)} `uncertainty.samples`; an object of at most "
+        f"{_count(limits.MAX_OBJECT_MASS_KG)} kg and {limits.MAX_OBJECT_SIZE_M:g} m (edges, "
+        "radii, CoM offset, radius of gyration); a URDF or MJCF description is at most "
+        f"{MAX_URDF_BYTES / 1e6:g} MB.\n"
+    )
+
+
 # --- the committed MuJoCo validation run (docs/validation/results.json) -------------------------
 
 
@@ -486,6 +514,7 @@ def render_validation_elbow() -> str:
 
 
 GENERATORS: dict[str, Callable[[], str]] = {
+    "cli-limits": render_cli_limits,
     "parameters": render_parameters,
     "bench-arms": render_bench_arms,
     "bench-postures": render_bench_postures,
