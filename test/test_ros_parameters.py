@@ -59,7 +59,7 @@ def test_every_parameter_is_documented() -> None:
 
     page = (root / "docs" / "ros" / "parameters.md").read_text()
     blocks = dict(render_docs.generated_blocks(page))
-    assert blocks["parameters"] == render_docs.render_parameters(), "stale: run make docs"
+    assert blocks["parameters"] == render_docs.GENERATORS["parameters"](), "stale: run make docs"
     for name in PARAMETERS:
         assert f"| `{name}` |" in blocks["parameters"], name
 
@@ -70,7 +70,7 @@ def test_parameter_reference_gives_type_unit_and_constraints() -> None:
 
     rows = {
         line.split(" | ")[0].strip("| `"): line.split(" | ")
-        for line in render_docs.render_parameters().splitlines()[2:]
+        for line in render_docs.GENERATORS["parameters"]().splitlines()[2:]
     }
     assert set(rows) == set(PARAMETERS)
     assert rows["posture.restarts"][1:4] == ["integer", "`8`", "in [0, 1,000]"]

@@ -1,0 +1,481 @@
+"""The generated blocks of the docs: Markdown rendered from the code (the node's parameters,
+the command line's input bounds) or from committed measurements (``bench/results*.json``, the
+MuJoCo validation run ``docs/validation/results.json``), one renderer per block name
+(GENERATORS; ``scripts/render_docs.py`` finds the blocks and calls them)."""
+
+from __future__ import annotations
+
+import json
+import re
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+BENCH = ROOT / "bench" / "results.json"
+BENCH_BATCH = ROOT / "bench" / "results_batch.json"
+VALIDATION = ROOT / "docs" / "validation" / "results.json"
+"""The committed full run of ``grasp-safety reproduce --out docs/validation``."""
+
+
+# --- the parameter reference ------------------------------------------------------------------
+
+_UNIT_SUFFIXES = {"_kgm2": "kg m²", "_kg": "kg", "_m": "m", "_s": "s"}
+_TYPE_NAMES = {bool: "bool", int: "integer", float: "double", str: "string"}
+
+
+def parameter_type(spec: Any) -> str:
+    """The declared ROS type of a ParameterSpec in words (as ``ros2 param describe`` says)."""
+    if isinstance(spec.default, (list, tuple)):
+        item = spec.item_type or type(spec.default[0])
+        return f"{_TYPE_NAMES[item]} array"
+    return _TYPE_NAMES[type(spec.default)]
+
+
+def parameter_unit(name: str, description: str) -> str:
+    """The unit: from the name's suffix (``_s``, ``_m``, ``_kg``, ``_kgm2``), else the first
+    bracketed unit of the description (``[rad or m]``); empty for plain numbers."""
+    for suffix, unit in _UNIT_SUFFIXES.items():
+        if name.endswith(suffix):
+            return unit
+    match = re.search(r"\[([a-zA-Z][^\]]*)\]", description)
+    return match.group(1).replace("^2", "²") if match else ""
+
+
+def _default(value: Any) -> str:
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, str):
+        return f'"{value}"'
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_default(item) for item in value) + "]"
+    return repr(value)
+
+
+def _cell(text: str) -> str:
+    return text.replace("|", "\\|").replace("<", "&lt;")
+
+
+def _number(value: float) -> str:
+    return f"{int(value):,}" if float(value).is_integer() else f"{value:g}"
+
+
+def render_parameters() -> str:
+    """The node's parameters as a Markdown table: type, default, constraints, unit, meaning."""
+    sys.path.insert(0, str(ROOT))
+    from grasp_safety_ros.ros.parameters import PARAMETERS, parameter_constraints
+
+    rows = [
+        "| Parameter | Type | Default | Constraints | Unit | Description |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name, spec in PARAMETERS.items():
+        constraints = parameter_constraints(name)
+        limits = [constraints.text] if constraints.text else []
+        if constraints.value_range is not None:
+            low, high = constraints.value_range
+            limits.insert(0, f"in [{_number(low)}, {_number(high)}]")
+        if spec.read_only:
+            limits.append("read-only (start-up only)")
+        cells = [
+            f"`{name}`",
+            parameter_type(spec),
+            f"`{_default(spec.default)}`",
+            _cell("; ".join(limits)),
+            parameter_unit(name, spec.description),
+            _cell(spec.description),
+        ]
+        rows.append("| " + " | ".join(cells) + " |")
+    return "\n".join(rows) + "\n"
+
+
+# --- tables of the committed benchmark results --------------------------------------------------
+
+
+def _bench() -> dict[str, Any]:
+    return json.loads(BENCH.read_text())
+
+
+def render_bench_arms() -> str:
+    """The ranking's speed per (grasp, sample) on Panda and Baxter, from bench/results.json."""
+    arms = _bench()["arms"]
+    names = [name for name in ("panda", "baxter") if name in arms]
+
+    def row(label: str, pick: Callable[[dict[str, Any]], str]) -> str:
+        return f"| {label} | " + " | ".join(pick(arms[name]) for name in names) + " |"
+
+    def ours(arm: dict[str, Any]) -> str:
+        figure = arm["us_per_sample_with_ik"]
+        return f"**{figure['median']:.2f}** [{figure['min']:.2f}..{figure['max']:.2f}]"
+
+    lines = [
+        "| µs per (grasp, sample) | " + " | ".join(name.capitalize() for name in names) + " |",
+        "|---" * (len(names) + 1) + "|",
+        row("ours, 1 core, IK included", ours),
+        row(
+            "ours, 1 core, effective mass only, per grasp (the analyses' path)",
+            lambda a: f"{a['us_per_sample_without_ik']['median']:.2f}",
+        ),
+        row(
+            "ours, 2 cores",
+            lambda a: (
+                f"{a['us_per_sample_with_ik_parallel']['median']:.2f} "
+                f"(×{a['parallel_speedup']:.2f})"
+            ),
+        ),
+        row("Python/Pinocchio path", lambda a: f"{a['python_backend_us_per_sample_with_ik']:.0f}"),
+        row(
+            "first implementation (`bench/reference.py`)",
+            lambda a: f"{a['reference']['us_per_sample_with_ik']:.0f}",
+        ),
+    ]
+    if all("pykdl" in arms[name] for name in names):
+        lines += [
+            row(
+                "PyKDL pipeline, IK included",
+                lambda a: f"{a['pykdl']['us_per_sample_with_ik']['median']:.0f}",
+            ),
+            row("speed-up over PyKDL, same run", lambda a: f"**×{a['speedup_vs_pykdl']:.0f}**"),
+            row(
+                "KDL's solver calls alone (FK, Jacobian, mass matrix)",
+                lambda a: f"{a['pykdl']['kdl_calls_us_per_sample']:.1f}",
+            ),
+        ]
+    lines += [
+        row(
+            "Gauss-Newton iterations per sample (after sample 0)",
+            lambda a: f"{a['ik_iterations_per_sample_excluding_first']:.3f}",
+        ),
+        row("feasible grasps of 100", lambda a: f"{a['feasible_grasps']}"),
+        row("physical floor (flop count)", lambda a: f"{a['floor_us_per_sample']:.2f}"),
+    ]
+    results = _bench()
+    continuous = results.get("continuous_arm")
+    if continuous:
+        figure = continuous["us_per_sample_with_ik"]
+        lines += [
+            "",
+            "| continuous joints (Kinova Jaco2), same run | |",
+            "|---|---|",
+            f"| ours, 1 core, IK included | {figure['median']:.2f} "
+            f"[{figure['min']:.2f}..{figure['max']:.2f}] µs per sample, "
+            f"**×{results['continuous_vs_revolute_cpu']:.2f}** the slowest revolute arm "
+            "(CPU time) |",
+            f"| Python/Pinocchio path | {continuous['python_backend_us_per_sample_with_ik']:.0f} "
+            "µs per sample |",
+            f"| compiled vs Python: max rel. diff of M_eff | "
+            f"{continuous['python_backend_max_rel_diff']:.1e} |",
+            f"| feasible grasps of {continuous['grasps']} | {continuous['feasible_grasps']} |",
+        ]
+    machine = results["machine"]
+    lines += [
+        "",
+        f"Machine: {machine['cores_available']} cores, Python {machine['python']}, load average "
+        f"{machine['load_average_1min_before']:.1f} before and "
+        f"{machine['load_average_1min_after']:.1f} after the run.",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def render_bench_postures() -> str:
+    """CPU cost and score gain of posture selection per restart count, from bench/results.json."""
+    workloads = _bench()["posture_selection"]
+    counts = [row["restarts"] for row in next(iter(workloads.values())) if row["restarts"]]
+    header = " | ".join(f"**{c}**" if c == 8 else str(c) for c in counts)
+    lines = [f"| restarts | {header} |", "|---" * (len(counts) + 1) + "|"]
+    for name, rows in workloads.items():
+        by_count = {row["restarts"]: row for row in rows}
+        cells = []
+        for count in counts:
+            row = by_count[count]
+            cell = f"{row['cpu_ms_per_grasp']:.1f} / {row['mean_gain_percent']:.1f} %"
+            cells.append(f"**{cell}**" if count == 8 else cell)
+        lines.append(f"| {name}: ms per grasp / mean gain | " + " | ".join(cells) + " |")
+    lines.append("")
+    for name, rows in workloads.items():
+        row = next(row for row in rows if row["restarts"] == 8)
+        lines.append(
+            f"- {name}, 8 restarts: largest gain of one grasp {row['max_gain_percent']:.1f} %, "
+            f"{row['postures_tried_mean']:.1f} distinct start postures on average, "
+            f"{row['feasible']} feasible, {row['rescued_by_selection']} feasible only with "
+            "selection."
+        )
+    return "\n".join(lines) + "\n"
+
+
+_SERVICE_ROWS = (
+    (None, "`posture.restarts: 0`, default response"),
+    ("per_sample_off", "same, `response.per_sample: false`"),
+    ("node_defaults", "node defaults (`posture.restarts: 8`)"),
+    ("least_response", "the least the node returns"),
+)
+
+
+def render_bench_service() -> str:
+    """The service round trip per configuration, from bench/results.json."""
+    service = _bench()["service"]
+    lines = [
+        "| | 10 × 101 median, p90 | ranking alone | ratio | 1,000 × 201 end to end | response |",
+        "|---|---|---|---|---|---|",
+    ]
+    for key, label in _SERVICE_ROWS:
+        figures = service if key is None else service.get(key)
+        if figures is None:
+            continue
+        large = figures["end_to_end_1000x201"]
+        latency = figures["latency_ms"]
+        lines.append(
+            f"| {label} | {latency['median']:.1f}, {latency['p90']:.1f} ms | "
+            f"{figures['ranking_ms']['median']:.1f} ms | ×{figures['latency_over_ranking']:.1f} | "
+            f"{large['wall_s']:.2f} s | {large['response_bytes']:,} B |"
+        )
+    spans = ", ".join(f"{name} {value:.1f}" for name, value in service["spans_ms"].items())
+    lines += [
+        "",
+        f"Where 10 × 101 goes, `posture.restarts: 0`, default response (ms, medians): {spans}.",
+        f"The floor of an empty request: {service['empty_request_ms']['median']:.1f} ms with "
+        f"`EventsExecutor`, {service['empty_request_spin_once_ms']['median']:.1f} with a "
+        f"`spin_once` loop, {service['empty_request_spin_until_ms']['median']:.1f} with "
+        "`spin_until_future_complete`; the 10 × 101 ranking "
+        f"{service['latency_ms']['median']:.1f}, {service['latency_spin_once_ms']['median']:.1f} "
+        f"and {service['latency_spin_until_ms']['median']:.1f} ms.",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def render_bench_batch() -> str:
+    """The batch's throughput, per-chunk overhead and the ACRONYM estimate, from
+    bench/results_batch.json."""
+    batch = json.loads(BENCH_BATCH.read_text())
+    runs = (
+        ("local_1", "local, `--workers 1`", 1),
+        ("local_2", "local, `--workers 2` (package pool, threads)", 2),
+        ("dask_2", "Dask `LocalCluster`, 2 worker processes x 1 thread", 2),
+    )
+    lines = [
+        "| run | (grasp, sample)/s | per worker | wall of the 3 runs [s] | peak memory per worker "
+        "[MiB] |",
+        "| --- | ---: | ---: | ---: | ---: |",
+    ]
+    for key, label, workers in runs:
+        run = batch[key]
+        rate = run["grasp_samples_per_s"]
+        walls = ", ".join(f"{wall:.1f}" for wall in run["wall_s_repeats"])
+        lines.append(
+            f"| {label} | {rate:.0f} | {rate / workers:.0f} | {walls} | "
+            f"{run['peak_memory_per_worker_mib']:.0f} |"
+        )
+    one = batch["local_1"]["grasp_samples_per_s"]
+    samples = batch["local_1"]["grasp_samples"] // batch["grasps"]
+    overhead = batch["per_chunk_overhead_s"]
+    chunk_s = batch["chunk_grasps"] * samples / one
+    repeats = ", ".join(f"{1000 * x:.0f}" for x in batch["per_chunk_overhead_s_repeats"])
+    local_efficiency = batch["local_2"]["grasp_samples_per_s"] / (2 * one)
+    hours, ideal = batch["acronym_hours"], batch["acronym_hours_ideal"]
+    counts = list(hours)
+    lines += [
+        "",
+        f"- Per-chunk overhead: {1000 * overhead:.0f} ms (median of {repeats} ms: "
+        f"{batch['chunks_of_1']['chunks']} chunks of 1 grasp against "
+        f"{batch['chunk_per_file']['chunks']} chunks of "
+        f"{batch['chunks_of_1']['chunks'] // batch['chunk_per_file']['chunks']}, 1 local "
+        f"worker); a chunk of {batch['chunk_grasps']} grasps is {batch['chunk_grasps']} x "
+        f"{samples} / {one:.0f} = {chunk_s:.2f} s of work at the 1-worker rate, so the "
+        f"overhead is about {100 * overhead / chunk_s:.0f} %.",
+        f"- 2-worker efficiency (2-worker rate / twice the 1-worker rate): Dask "
+        f"{batch['dask_efficiency_2_workers']:.2f}, local pool {local_efficiency:.2f}. The Dask "
+        f"parts were {'' if batch['dask_parts_identical_to_local'] else 'not '}byte-identical "
+        "to the local ones.",
+        f"- All of ACRONYM (17.7 M grasps x {samples} samples) at the 1-worker rate: "
+        f"{batch['acronym_core_hours']:.0f} core-hours; with one Dask worker per core:",
+        "",
+        "| machines of 16 cores | " + " | ".join(counts) + " |",
+        "| --- |" + " ---: |" * len(counts),
+        f"| hours at the measured efficiency {batch['dask_efficiency_2_workers']:.2f} | "
+        + " | ".join(f"{hours[c]:.2g}" for c in counts)
+        + " |",
+        "| hours at ideal scaling | " + " | ".join(f"{ideal[c]:.2g}" for c in counts) + " |",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def render_bench_whole_arm() -> str:
+    """The whole-arm analysis' cost per (grasp, sample) and of posture selection by it, from
+    bench/results.json."""
+    arms = _bench()["whole_arm"]
+    lines = [
+        "| arm | whole arm on the shared compiled terms, per (grasp, sample) | the Pinocchio "
+        "reference path | the compiled ranking, same run | posture selection by the tip score, "
+        "per grasp | by the whole arm (chest) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name, arm in arms.items():
+        posture = arm["posture_ms_per_grasp"]
+        lines.append(
+            f"| {name.capitalize()} | {arm['us_per_sample']:.1f} µs | "
+            f"{arm['us_per_sample_pinocchio']:.1f} µs | {arm['ranking_us_per_sample']:.1f} µs | "
+            f"{posture['score']:.1f} ms | {posture['whole_arm']:.1f} ms "
+            f"(×{posture['whole_arm'] / posture['score']:.1f}) |"
+        )
+    first = next(iter(arms.values()))
+    lines += [
+        "",
+        f"{first['feasible_grasps']} feasible grasps x "
+        f"{first['samples'] // first['feasible_grasps']} samples, {first['sites']} sites, "
+        f"posture selection with {first['posture_restarts']} restarts.",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+_UNITS = {"s": " s", "ms": " ms", "us": " µs", "x": ""}
+
+
+def _target_value(value: float, unit: str) -> str:
+    if unit == "x":
+        return f"×{value:.1f}"
+    return (f"{value:,.0f}" if value >= 100 else f"{value:.3g}") + _UNITS[unit]
+
+
+def render_bench_targets() -> str:
+    """Issue 21's targets: each measure of the last ``make bench``, its target and whether it
+    was met, from bench/results.json."""
+    lines = ["| measure | this run | target | |", "|---|---|---|---|"]
+    for row in _bench()["issue21_targets"]:
+        unit = row["unit"]
+        bound = "≤ " + _target_value(row["target"], unit)
+        lines.append(
+            f"| {row['measure']} | {_target_value(row['value'], unit)} | {bound} | "
+            f"{'met' if row['met'] else 'not met'} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def render_bench_start_up() -> str:
+    """The start-up spans of a ranking command (fresh process, medians), from
+    bench/results.json."""
+    spans = _bench()["pipeline"]["cli"]["start_up"]
+    names = {
+        "interpreter_s": "interpreter",
+        "numpy_pinocchio_s": "numpy + Pinocchio",
+        "numba_s": "numba",
+        "package_s": "the package",
+        "kernels_from_cache_s": "loading the compiled kernels from numba's cache",
+    }
+    text = ", ".join(f"{label} {spans[key]:.2f} s" for key, label in names.items())
+    return f"Start-up of a ranking command (fresh process, medians): {text}.\n"
+
+
+# --- limits of the command line's input -------------------------------------------------------
+
+
+def _count(value: float) -> str:
+    return f"{int(value):,}".replace(",", " ")
+
+
+def render_cli_limits() -> str:
+    """The bounds on a scenario file and its robot description, from the constants the code
+    checks them with."""
+    sys.path.insert(0, str(ROOT))
+    from grasp_safety_ros.cli import scenario as limits
+    from grasp_safety_ros.core.model.robot import MAX_URDF_BYTES
+
+    return (
+        f"A scenario file is at most {limits.MAX_SCENARIO_BYTES / 1e6:g} MB of UTF-8 text, "
+        f"nested at most {limits.MAX_NESTING_DEPTH} levels, and may expand to at most "
+        f"{_count(limits.MAX_EXPANDED_NODES)} YAML nodes with aliases counted at full size (so "
+        'a "billion laughs" file is refused at once); at most '
+        f"{_count(limits.MAX_GRASPS)} grasps, {_count(limits.MAX_GRASP_SAMPLES)} grasps × "
+        f"trajectory samples, {_count(limits.MAX_POINTS)} `object.points_m` and "
+        f"{_count(limits.MAX_UNCERTAINTY_SAMPLES)} `uncertainty.samples`; an object of at most "
+        f"{_count(limits.MAX_OBJECT_MASS_KG)} kg and {limits.MAX_OBJECT_SIZE_M:g} m (edges, "
+        "radii, CoM offset, radius of gyration); a URDF or MJCF description is at most "
+        f"{MAX_URDF_BYTES / 1e6:g} MB.\n"
+    )
+
+
+# --- the committed MuJoCo validation run (docs/validation/results.json) -------------------------
+
+
+def _validation() -> dict[str, Any]:
+    return json.loads(VALIDATION.read_text())
+
+
+def _force_span(grasps: list[dict[str, Any]]) -> str:
+    forces = sorted(grasp["peak_force_n"] for grasp in grasps)
+    return f"{forces[0]:.1f} N to {forces[-1]:.1f} N"
+
+
+def render_validation_results() -> str:
+    """The validation's headline figures against the paper's, from the committed full run."""
+    run = _validation()
+    tensor, book, path = run["tensor_object"], run["book"], run["book_waypoints"]
+    impulse = run["impulse_check"]
+    lines = [
+        "| | this simulation (MuJoCo) | paper (Gazebo) |",
+        "|---|---|---|",
+        f"| tensor object: Spearman(M_eff at impact, peak force), {len(tensor['grasps'])} "
+        f'configurations | **{tensor["spearman_meff_vs_peak_force"]:.3f}** | "in accordance" |',
+        f"| book: peak force, safest to least safe grasp | {_force_span(book['grasps'])} | "
+        "100 N to 130 N |",
+        f"| book: peak force ratio worst/best | **{book['peak_force_ratio_worst_to_best']:.3f}** "
+        "| 1.30 |",
+        f"| impulse check: worst relative error over {impulse['cases']} cases | "
+        f"**{impulse['worst_rel_error']:.1e}** | — |",
+        f"| book on a 3-waypoint path: peak force, safest to least safe grasp | "
+        f"{_force_span(path['grasps'])} | — |",
+        "| book on a 3-waypoint path: peak force / M_eff at impact, ratio worst/best | "
+        f"**{path['peak_force_ratio_worst_to_best']:.3f}** / "
+        f"{path['effective_mass_ratio_worst_to_best']:.3f} | — |",
+        "",
+        f"Engine against core: MuJoCo's own 1/(uᵀJM⁻¹Jᵀu) equals the core's effective mass to "
+        f"{impulse['engine_vs_core_effective_mass_max_rel_diff']:.0e} (relative). The committed "
+        f"run took {run['timing_s']['total']:.0f} s (`timing_s` in `results.json`).",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def render_validation_armature() -> str:
+    """The free impacts of the Panda with the FR3 armature, from the committed full run."""
+    check = _validation()["impulse_check_armature"]
+    return (
+        f"With the full run's {check['valid_cases']} impacts: the measured impulse matches "
+        f"(1 + e)·M_eff·v with the effective mass *with* armature to "
+        f"{check['worst_rel_error']:.1e} (worst relative error); it exceeds the links-only "
+        f"prediction by {100 * check['links_only_min_rel_error']:.1f} % or more (median "
+        f"{100 * check['links_only_median_rel_error']:.1f} %). The peak contact force follows "
+        f"the same mass: peak / (M_eff·v) varies by ×{check['peak_force_per_mass_spread']:.3f} "
+        f"over the impacts with the armature's M_eff and by "
+        f"×{check['links_only_peak_force_per_mass_spread']:.3f} with the links-only one.\n"
+    )
+
+
+def render_validation_elbow() -> str:
+    """The free impact at an elbow site, from the committed full run."""
+    elbow = _validation()["elbow_impact"]
+    relative = abs(elbow["engine_effective_mass_kg"] / elbow["effective_mass_kg"] - 1.0)
+    return (
+        f'Site `{elbow["site"]}` (link `{elbow["link"]}`), grasp "{elbow["grasp"]}", '
+        f"t = {elbow['time_s']:g} s, {elbow['speed_m_s']:.2f} m/s: whole-arm M_eff "
+        f"{elbow['effective_mass_kg']:.3f} kg, MuJoCo's own 1/(uᵀJM⁻¹Jᵀu) equal to "
+        f"{relative:.0e} (relative); impulse error {elbow['rel_error']:.1e}; with the tip's "
+        f"effective mass ({elbow['tip_effective_mass_kg']:.3f} kg) in its place the error is "
+        f"{elbow['rel_error_with_tip_mass']:.2f}.\n"
+    )
+
+
+GENERATORS: dict[str, Callable[[], str]] = {
+    "cli-limits": render_cli_limits,
+    "parameters": render_parameters,
+    "bench-arms": render_bench_arms,
+    "bench-postures": render_bench_postures,
+    "bench-service": render_bench_service,
+    "bench-batch": render_bench_batch,
+    "bench-whole-arm": render_bench_whole_arm,
+    "bench-targets": render_bench_targets,
+    "bench-start-up": render_bench_start_up,
+    "validation-results": render_validation_results,
+    "validation-armature": render_validation_armature,
+    "validation-elbow": render_validation_elbow,
+}
+"""Every generated block's renderer, by the name its marker gives."""
