@@ -260,7 +260,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point; returns the exit code (2 on bad input, with one line on stderr)."""
+    """Entry point; returns the exit code (2 on bad input, with one line on stderr naming the
+    field; ``batch`` lists each refused input on a line of its own before it)."""
     args = build_parser().parse_args(argv)
     try:
         return int(args.handler(args))
