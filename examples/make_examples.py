@@ -237,7 +237,8 @@ def write_examples(root: Path = ROOT) -> list[Path]:
     header = "# Written by examples/make_examples.py.\n"
     text("mjcf/scenario.yaml", header + _flow(mjcf_scenario(_tip_pose(arm, ARM_SEED))))
     panda = next(robot for robot in BUNDLED_ROBOTS if robot.name == "panda")
-    start = _tip_pose(panda.load(), panda.seed)
+    panda_model = RobotModel.from_urdf(panda.urdf, panda.base_frame, panda.tip_frame)
+    start = _tip_pose(panda_model, panda.seed)
     grippers = _offsets(6)  # T_object_gripper; the gripper is the tip (gripper_to_tip identity)
     _write_acronym(root / "dataset" / "acronym" / "box.h5", grippers)
     written.append(root / "dataset" / "acronym" / "box.h5")

@@ -579,7 +579,7 @@ def test_the_docs_spec_example_is_valid(tmp_path: Path) -> None:
     import re
 
     docs = Path(__file__).resolve().parents[1] / "docs" / "batch.md"
-    example = re.search(r"## The SPEC file\n\n```yaml\n(.*?)```", docs.read_text(), re.S)
+    example = re.search(r"## The SPEC file\n\n.*?```yaml\n(.*?)```", docs.read_text(), re.S)
     assert example is not None
     spec = parse_spec(yaml.safe_load(example.group(1)), tmp_path)
     assert [s.format for s in spec.sources] == ["acronym", "graspgen", "scenarios"]

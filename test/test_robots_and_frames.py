@@ -33,7 +33,7 @@ MIN_SINGULAR_VALUE = 0.03
 
 @pytest.mark.parametrize("entry", BUNDLED_ROBOTS, ids=lambda entry: entry.name)
 def test_each_listed_robot_loads_and_ranks_from_its_seed(entry) -> None:
-    robot = entry.load()
+    robot = RobotModel.from_urdf(entry.urdf, entry.base_frame, entry.tip_frame)
     assert robot.num_joints == len(entry.seed)
     seed = robot.check_positions(entry.seed, "seed")  # within the joint limits
     tip_in_base = robot.transform_tip_to_base(seed)

@@ -10,7 +10,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .robot import EXAMPLE_ROBOT_DATA_PREFIX, RobotModel
+EXAMPLE_ROBOT_DATA_PREFIX = "example-robot-data:"
+"""How a robot description names a URDF of the example-robot-data wheel (robot.resolve_urdf,
+which imports this module: the unknown-name message lists BUNDLED_ROBOTS)."""
 
 
 @dataclass(frozen=True)
@@ -35,10 +37,6 @@ class BundledRobot:
     def urdf(self) -> str:
         """The robot description as the scenario and the node take it."""
         return f"{EXAMPLE_ROBOT_DATA_PREFIX}{self.name}"
-
-    def load(self) -> RobotModel:
-        """The chain model."""
-        return RobotModel.from_urdf(self.urdf, self.base_frame, self.tip_frame)
 
 
 BUNDLED_ROBOTS: tuple[BundledRobot, ...] = (

@@ -22,8 +22,7 @@ import pinocchio as pin
 
 from ..exceptions import FrameNotFoundError, InvalidInputError
 from ..input_checks import finite_array
-
-EXAMPLE_ROBOT_DATA_PREFIX = "example-robot-data:"
+from .bundled_robots import BUNDLED_ROBOTS, EXAMPLE_ROBOT_DATA_PREFIX
 
 EXAMPLE_ROBOT_DATA_URDFS: Mapping[str, str] = {
     "baxter": "baxter_description/urdf/baxter.urdf",
@@ -181,8 +180,6 @@ def example_robot_data_urdf(name: str) -> Path:
             f"example-robot-data robot '{name}' names {len(shared)} URDFs; give the path form: "
             f"{forms}",
         )
-    from .bundled_robots import BUNDLED_ROBOTS  # it imports this module
-
     close = difflib.get_close_matches(name, list(names), n=3, cutoff=0.5)
     hint = f"did you mean {' or '.join(repr(n) for n in close)}? " if close else ""
     raise InvalidInputError(
