@@ -226,11 +226,11 @@ class GraspSafetyNode(Node):
     def _on_message_lost(self, source: str, info: QoSMessageLostInfo) -> None:
         """The middleware reports messages of a topic lost before the node took them."""
         with self._state_lock:
-            lost = self._status.lost_by_source
-            lost[source] = lost.get(source, 0) + info.total_count_change
+            increase = self._status.record_lost(source, info.total_count, info.total_count_change)
+            total = self._status.lost_by_source[source]
         self.get_logger().warning(
-            f"{source}: {info.total_count_change} message(s) lost before the node took them "
-            f"({info.total_count} in all)"
+            f"{source}: {increase} message(s) lost before the node took them ({total} in all; "
+            f"the middleware reported {info.total_count_change} of {info.total_count})"
         )
 
     def abandon_rankings(self) -> None:
