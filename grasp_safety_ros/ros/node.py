@@ -92,6 +92,7 @@ from .ranking_job import (
     Snapshot,
     progress_check,
 )
+from .read_only import answer_read_only_parameters
 from .robot_bundle import RobotBundle, build_robot
 from .robot_group import PENDING_FIELDS, ROBOT_GROUP, group_complete, pending_reason
 from .service_clients import ServiceClients
@@ -141,6 +142,7 @@ class GraspSafetyNode(Node):
         self._trim_pending = False
 
         self.add_pre_set_parameters_callback(typed_parameters)
+        answer_read_only_parameters(self)  # ros2 param load of a dump: not "failed"
         self.add_on_set_parameters_callback(self._on_set_parameters)
         try:
             declare_node_parameters(self)
