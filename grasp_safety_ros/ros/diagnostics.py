@@ -36,9 +36,11 @@ class NodeStatus:
     robot_description_error: str = ""  # why the last /robot_description was not used
     robot_parameters_pending: str = ""  # why the robot group is not applied yet
     abandoned: int = 0  # rankings abandoned at shut-down
+    heap_trims: int = 0  # freed heap given back to the system (memory.IdleTrim)
     ignored_descriptions: int = 0  # /robot_description messages ignored (parameters rule)
     refused_by_source: dict[str, int] = field(default_factory=dict)
     lost_by_source: dict[str, int] = field(default_factory=dict)  # the middleware's count
+    skipped_by_source: dict[str, int] = field(default_factory=dict)  # overwritten in queues
 
     def record_ranking(
         self, source: str, compute_time_s: float, feasible: int, total: int
@@ -125,7 +127,9 @@ def status_msg(
         "ignored_robot_descriptions": status.ignored_descriptions,
         **{f"refused.{k}": n for k, n in sorted(status.refused_by_source.items())},
         **{f"lost.{k}": n for k, n in sorted(status.lost_by_source.items())},
+        **{f"skipped.{k}": n for k, n in sorted(status.skipped_by_source.items())},
         **{f"memory.{k}": n for k, n in memory_kib().items()},
+        "memory.heap_trims": status.heap_trims,
     }
     return DiagnosticStatus(
         level=level,
