@@ -461,3 +461,29 @@ def test_unknown_published_armature_entry_names_its_parameter() -> None:
         InvalidInputError, match=r"^robot\.armature_published: no published armature for"
     ):
         build_robot(settings, None)
+
+
+def test_planned_velocities_beyond_the_bound_are_refused_naming_the_request_field() -> None:
+    """The node's field names reach the core's rate check: the request field, the point, the
+    message column and the joint (1e30 rad/s was accepted and handed back as executable)."""
+    from conftest import ARM6_AXES, serial_arm_urdf
+
+    from grasp_safety_ros.core.method.joint_trajectory import JointSpaceTrajectory
+    from grasp_safety_ros.core.model.robot import RobotModel
+
+    robot = RobotModel.from_urdf(serial_arm_urdf(ARM6_AXES), "base_link", "tool")
+    names = list(reversed(robot.joint_names))  # message column 0 is the chain's last joint
+    points = [
+        JointTrajectoryPoint(
+            positions=[0.0] * 6,
+            velocities=[1e30 if k == 50 else 0.0] + [0.0] * 5,
+            time_from_start=Duration(sec=k // 10, nanosec=(k % 10) * 100_000_000),
+        )
+        for k in range(60)
+    ]
+    message = JointTrajectory(joint_names=names, points=points)
+    (grasp,) = grasps_with_joint_trajectories([Grasp(pin.SE3.Identity(), "g0")], [message])
+    with pytest.raises(InvalidInputError) as error:
+        JointSpaceTrajectory(robot, grasp.joint_trajectory, pin.SE3.Identity())
+    assert error.value.field == "joint_trajectories[0].points[50].velocities[0]"
+    assert error.value.reason.startswith(f"joint '{robot.joint_names[-1]}' at 1e+30 rad/s: ")
