@@ -48,9 +48,6 @@ from rclpy.exceptions import (
 from rclpy.executors import Executor, ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import (
-    qos_profile_sensor_data,
-)
 from rclpy.subscription import Subscription
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, Header, String
@@ -82,7 +79,7 @@ from .message_checks import check_finite_result, check_no_subnormals
 from .on_demand import OnDemandPublisher
 from .parameters import PARAMETERS, NodeSettings, check_parameter, settings_from_parameters
 from .process import run_node
-from .qos import INPUT_DEPTHS, LATCHED, SERVICE, input_qos
+from .qos import INPUT_DEPTHS, LATCHED, SERVICE, subscription_qos
 from .ranking_inputs import compute_ranking, markers_builder, ranking_inputs
 from .ranking_job import (
     ClientWatch,
@@ -189,12 +186,11 @@ class GraspSafetyNode(Node):
         self._input_subscriptions: dict[str, Subscription] = {}
         for msg_type, topic, callback, group in inputs:
             source = topic.removeprefix("~/")
-            qos = input_qos(source) if source in INPUT_DEPTHS else qos_profile_sensor_data
             self._input_subscriptions[source] = self.create_subscription(
                 msg_type,
                 topic,
                 self._guarded(source, callback),
-                LATCHED if source == "/robot_description" else qos,
+                subscription_qos(source),
                 callback_group=group,
                 event_callbacks=SubscriptionEventCallbacks(
                     message_lost=partial(self._on_message_lost, source)

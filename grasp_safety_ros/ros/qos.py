@@ -7,6 +7,7 @@ from rclpy.qos import (
     HistoryPolicy,
     QoSProfile,
     ReliabilityPolicy,
+    qos_profile_sensor_data,
 )
 
 LATCHED = QoSProfile(
@@ -30,8 +31,14 @@ middleware reports lost (``lost.<topic>``). Only the latest inputs matter: a can
 pairs with the trajectory received last before it (topic_inputs.TopicInputs)."""
 
 
-def input_qos(source: str) -> QoSProfile:
-    """The QoS of input topic ``source`` (a key of INPUT_DEPTHS)."""
+def subscription_qos(source: str) -> QoSProfile:
+    """The QoS of the node's subscription to ``source``: an input topic (INPUT_DEPTHS),
+    ``/joint_states`` (sensor data: only the latest matters) or ``/robot_description``
+    (LATCHED: only the latest matters, late joiners get it)."""
+    if source == "/robot_description":
+        return LATCHED
+    if source not in INPUT_DEPTHS:
+        return qos_profile_sensor_data
     return QoSProfile(
         history=HistoryPolicy.KEEP_LAST,
         depth=INPUT_DEPTHS[source],
