@@ -96,9 +96,7 @@ def test_a_set_after_a_flood_is_ranked_with_the_trajectory_received_before_it(
             return taken - before >= 600
 
         assert ros.spin_until(flood_taken, 120.0)
-        assert ros.spin_until(lambda: last_is(want[3.0]), 60.0), [
-            scores(r) for r in rankings[-3:]
-        ]
+        assert ros.spin_until(lambda: last_is(want[3.0]), 60.0), [scores(r) for r in rankings[-3:]]
     finally:
         ros.client.destroy_subscription(subscription)
         ros.client.destroy_publisher(grasps_pub)
