@@ -201,3 +201,31 @@ def test_a_plan_without_velocities_exports_the_analysed_splines_rates(baxter) ->
     )
     np.testing.assert_allclose(rates, velocities, rtol=0, atol=1e-12)
     np.testing.assert_allclose(seconds, accelerations, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("rate", [1e30, 1e200])
+@pytest.mark.parametrize("name", ["velocities", "accelerations"])
+def test_planned_rates_beyond_a_multiple_of_the_limit_are_refused(baxter, name, rate) -> None:
+    """Rates beyond RATE_LIMIT_MULTIPLE x the URDF velocity limit (per the shortest interval
+    for accelerations) are refused naming the point, the column and the joint; at the bound
+    they are accepted. 1e30 rad/s was accepted and handed back as executable; 1e200 failed
+    later as an ISO/TS 15066 speed of an internal field."""
+    from grasp_safety_ros.core.method.joint_trajectory import RATE_LIMIT_MULTIPLE
+
+    evaluator, trajectory = GraspSafetyEvaluator(baxter), book_trajectory()
+    names = tuple(reversed(baxter.joint_names))  # column 2 is chain joint 4 (right_w0)
+    joint, limit = baxter.joint_names[4], float(baxter.velocity_limits[4])
+    at_bound = RATE_LIMIT_MULTIPLE * limit / (0.5 if name == "accelerations" else 1.0)
+    for value, refused in ((rate, True), (-rate, True), (at_bound, False)):
+        rates = np.zeros((3, 7))
+        rates[1, 2] = value
+        positions = np.tile(np.array(BAXTER_SEED)[::-1], (3, 1))
+        planned = _planned(baxter, joint_names=names, positions=positions, **{name: rates})
+        grasp = Grasp(GRASP, joint_trajectory=planned)
+        if not refused:
+            evaluator.evaluate(grasp, BOOK, trajectory)
+            continue
+        with pytest.raises(InvalidInputError, match=f"joint '{joint}' at ") as error:
+            evaluator.rank([Grasp(GRASP), grasp], BOOK, trajectory)
+        assert error.value.field == f"grasps[1].joint_trajectory.points[1].{name}[2]"
+        assert f"beyond 10 x its velocity limit {limit:g} rad/s" in error.value.reason

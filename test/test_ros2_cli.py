@@ -30,6 +30,7 @@ from ros_domains import claim_ros_domain
 
 from grasp_safety_ros.paths import config_file
 from grasp_safety_ros.ros.parameters import PARAMETERS
+from grasp_safety_ros.ros.read_only import UNCHANGED
 
 BIN = Path(sys.executable).parent
 ROS2 = BIN / "ros2"
@@ -352,7 +353,10 @@ def test_param_set_good_and_bad(node: RunningNode) -> None:
             ("metric", "bogus"): "metric: must be one of mean, max, integral, got 'bogus'",
             ("safety_weight", "1.5"): "Parameter safety_weight out of range",
             ("max_grasps", "lots"): "Wrong parameter type, expected 'Type.INTEGER'",
-            ("robot_description_timeout_s", "5.0"): "Trying to set a read-only parameter",
+            ("robot_description_timeout_s", "5.0"): (
+                "read-only: robot_description_timeout_s is read at start-up (now 10.0); give 5.0 "
+                "in the params file or with -p when starting the node"
+            ),
         }
         gets = [param("get", name) for name in ("metric", "trajectory.duration_s")]
         gets.append(param("get", "iso_ts_15066.regions"))
@@ -429,6 +433,25 @@ def test_param_dump_restarts_the_node_unchanged(
     assert response_field(answered.stdout, "order") == cli_ranking["ranking"]
     want = [g["score"] for g in cli_ranking["grasps"]]
     assert scores(answered.stdout) == pytest.approx(want, rel=1e-9)
+
+
+def test_param_load_of_the_dump_reports_no_failure(node: RunningNode, tmp_path: Path) -> None:
+    """``ros2 param load`` of the node's own ``ros2 param dump``: every parameter is set, the
+    read-only ones (already that value) say so; rclpy's own answer printed "Set parameter
+    robot_description_timeout_s failed: Trying to set a read-only parameter" (and the same
+    for start_type_description_service)."""
+    dump = ros2_ok(node.env, "param", "dump", *WAIT, NODE)
+    params_file = tmp_path / "dump.yaml"
+    params_file.write_text(dump)
+    loaded = ros2(node.env, "param", "load", *WAIT, NODE, str(params_file))
+    assert loaded.returncode == 0 and loaded.stderr == "", loaded
+    lines = loaded.stdout.splitlines()
+    names = set(flatten(yaml.safe_load(dump)[NODE]["ros__parameters"]))
+    assert {line.split()[2] for line in lines} == names, lines
+    for name in ("robot_description_timeout_s", "start_type_description_service"):
+        assert f"Set parameter {name} successful: {UNCHANGED}" in lines, lines
+    assert all(re.fullmatch(r"Set parameter \S+ successful(: .+)?", line) for line in lines)
+    assert ros2_ok(node.env, "param", "dump", *WAIT, NODE) == dump
 
 
 def flatten(tree: dict[str, Any], prefix: str = "") -> dict[str, Any]:

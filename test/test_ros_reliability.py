@@ -11,22 +11,41 @@ import time
 import numpy as np
 import pinocchio as pin
 import pytest
-from geometry_msgs.msg import Inertia, Point, Pose, PoseArray, PoseStamped, Quaternion
+import yaml
+from builtin_interfaces.msg import Duration
+from geometry_msgs.msg import (
+    Inertia,
+    Point,
+    Pose,
+    PoseArray,
+    PoseStamped,
+    Quaternion,
+    Transform,
+    Vector3,
+)
 from grasp_safety_msgs.msg import GraspEvaluation, GraspRanking
 from grasp_safety_msgs.srv import RankGrasps
 from nav_msgs.msg import Path
-from std_msgs.msg import Float64MultiArray
-from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+from std_msgs.msg import Float64MultiArray, Header
+from trajectory_msgs.msg import (
+    JointTrajectory,
+    JointTrajectoryPoint,
+    MultiDOFJointTrajectory,
+    MultiDOFJointTrajectoryPoint,
+)
 
 from grasp_safety_ros.cli import scenario
 from grasp_safety_ros.core.exceptions import InvalidInputError
 from grasp_safety_ros.core.method.ranking import Grasp
+from grasp_safety_ros.paths import config_file
 from grasp_safety_ros.ros import parameters
 from grasp_safety_ros.ros.conversions import (
     geometry,
     grasps_with_joint_trajectories,
     object_inertia_from_msg,
+    trajectory_from_msg,
 )
+from grasp_safety_ros.ros.diagnostics import NodeStatus
 from grasp_safety_ros.ros.executor import join_started
 from grasp_safety_ros.ros.message_checks import (
     INT_AS_FLOAT_HINT,
@@ -37,6 +56,7 @@ from grasp_safety_ros.ros.message_checks import (
 )
 from grasp_safety_ros.ros.parameters import check_parameter, parameter_constraints
 from grasp_safety_ros.ros.ranking_job import ClientWatch, FairComputeLock
+from grasp_safety_ros.ros.robot_bundle import build_robot
 from grasp_safety_ros.ros.topic_inputs import MAX_ABS_GRASP_QUALITY, check_quality
 
 # --- Count parameters (D) ----------------------------------------------------------------------
@@ -340,3 +360,130 @@ def test_a_paused_pooled_ranking_leaves_the_workers_to_others() -> None:
         time.sleep(0.2)  # the caller pauses: the workers idle after the jobs submitted ahead
         assert len(started) <= 1 + 2 * 2, sorted(started)
         assert list(stream) == list(range(1, 100))  # then everything, in order
+
+
+# --- Hostile values found by the fuzzer (issue 27) ----------------------------------------------
+
+
+def test_arm_points_are_bounded_like_the_requests_points() -> None:
+    """1e300 m on the arm was accepted and every later ranking failed (LinAlgError): the node
+    parameter and the scenario key are refused, naming them, beyond +/-1000 m."""
+    bound = geometry.MAX_ABS_POSITION_M
+    assert check_parameter("whole_arm.points_m", [0.0, 0.0, bound]) == (0.0, 0.0, bound)
+    for value in (1e300, 2000.0, -1000.5):
+        with pytest.raises(
+            InvalidInputError,
+            match=r"^whole_arm\.points_m: point 1: must be within \+/-1000 m per coordinate",
+        ):
+            check_parameter("whole_arm.points_m", [0.0, 0.0, 0.1, 0.0, 0.0, value])
+
+
+def test_scenario_arm_points_are_bounded_like_the_nodes() -> None:
+    data = yaml.safe_load(config_file("book_baxter.yaml").read_text())
+    data["robot"]["exposed_points_m"] = {"right_lower_forearm": [[0.0, 0.0, 1e300]]}
+    with pytest.raises(
+        InvalidInputError,
+        match=r"^robot\.exposed_points_m\.right_lower_forearm: must be within \+/-1000 m",
+    ):
+        scenario.parse_scenario(data, config_file("book_baxter.yaml").parent)
+    data["robot"]["exposed_points_m"] = {"right_lower_forearm": [[0.0, 0.0, 1000.0]]}
+    scenario.parse_scenario(data, config_file("book_baxter.yaml").parent)
+
+
+def multi_dof(x_m: float) -> MultiDOFJointTrajectory:
+    points = [
+        MultiDOFJointTrajectoryPoint(
+            transforms=[Transform(translation=Vector3(x=x, y=0.0, z=0.5))],
+            time_from_start=Duration(sec=sec),
+        )
+        for x, sec in ((0.6, 0), (x_m, 2))
+    ]
+    return MultiDOFJointTrajectory(
+        header=Header(frame_id="base"), joint_names=["o"], points=points
+    )
+
+
+def path_to(x_m: float) -> Path:
+    poses = [PoseStamped(pose=Pose(position=Point(x=x, z=0.5))) for x in (0.6, x_m)]
+    return Path(header=Header(frame_id="base"), poses=poses)
+
+
+@pytest.mark.parametrize("x_m", [1e30, 2000.0, -1000.001])
+def test_multi_dof_trajectory_is_bounded_like_the_path(x_m: float) -> None:
+    """Both object trajectory messages refuse a position beyond +/-1000 m naming the field
+    (the multi-DOF one answered success with an empty order)."""
+    with pytest.raises(
+        InvalidInputError,
+        match=r"^object_multi_dof_trajectory\.points\[1\]\.transforms\[0\]\.translation: must "
+        r"be within \+/-1000 m per coordinate",
+    ):
+        trajectory_from_msg(multi_dof(x_m), "base", 0.1, 5.0, 20_000)
+    with pytest.raises(
+        InvalidInputError,
+        match=r"^object_trajectory\.poses\[1\]\.pose\.position: must be within \+/-1000 m",
+    ):
+        trajectory_from_msg(path_to(x_m), "base", 0.1, 5.0, 20_000)
+    at_bound = math.copysign(1000.0, x_m)
+    trajectory_from_msg(multi_dof(at_bound), "base", 0.1, 5.0, 20_000)
+    trajectory_from_msg(path_to(at_bound), "base", 0.1, 5.0, 20_000)
+
+
+def test_lost_messages_are_counted_through_a_wrapped_change() -> None:
+    """The middleware reported a change of 18446744071562067968 (-2^31 cast to size_t) and
+    /diagnostics showed lost./joint_states = 18446744073709551620: the count is the running
+    total; a wrapped change or total leaves it unchanged; a plausible change is added where
+    the total is not plausible."""
+    status = NodeStatus()
+    assert status.record_lost("joint_states", 4, 4) == 4
+    assert status.record_lost("joint_states", 4, 18446744071562067968) == 0
+    assert status.lost_by_source["joint_states"] == 4
+    assert status.record_lost("joint_states", 2**64 - 1, 2**64 - 1) == 0  # -1 both: nothing
+    assert status.record_lost("joint_states", 2**64 - 5, 3) == 3  # total wrapped, change not
+    assert status.record_lost("joint_states", 9, 2) == 2  # the total is the count again
+    assert status.lost_by_source == {"joint_states": 9}
+    assert status.record_lost("candidate_grasps", 2**31, 2**31) == 0  # no 32-bit count
+
+
+def test_unknown_published_armature_entry_names_its_parameter() -> None:
+    with pytest.raises(
+        InvalidInputError, match=r"^robot\.armature_published: no published entry 'nope'"
+    ):
+        check_parameter("robot.armature_published", "published:nope")
+    settings = parameters.settings_from_parameters(
+        {
+            "urdf": "example-robot-data:baxter",
+            "base_frame": "base",
+            "tip_frame": "right_gripper",
+            "robot.armature_published": "published",
+        }
+    )
+    with pytest.raises(
+        InvalidInputError, match=r"^robot\.armature_published: no published armature for"
+    ):
+        build_robot(settings, None)
+
+
+def test_planned_velocities_beyond_the_bound_are_refused_naming_the_request_field() -> None:
+    """The node's field names reach the core's rate check: the request field, the point, the
+    message column and the joint (1e30 rad/s was accepted and handed back as executable)."""
+    from conftest import ARM6_AXES, serial_arm_urdf
+
+    from grasp_safety_ros.core.method.joint_trajectory import JointSpaceTrajectory
+    from grasp_safety_ros.core.model.robot import RobotModel
+
+    robot = RobotModel.from_urdf(serial_arm_urdf(ARM6_AXES), "base_link", "tool")
+    names = list(reversed(robot.joint_names))  # message column 0 is the chain's last joint
+    points = [
+        JointTrajectoryPoint(
+            positions=[0.0] * 6,
+            velocities=[1e30 if k == 50 else 0.0] + [0.0] * 5,
+            time_from_start=Duration(sec=k // 10, nanosec=(k % 10) * 100_000_000),
+        )
+        for k in range(60)
+    ]
+    message = JointTrajectory(joint_names=names, points=points)
+    (grasp,) = grasps_with_joint_trajectories([Grasp(pin.SE3.Identity(), "g0")], [message])
+    with pytest.raises(InvalidInputError) as error:
+        JointSpaceTrajectory(robot, grasp.joint_trajectory, pin.SE3.Identity())
+    assert error.value.field == "joint_trajectories[0].points[50].velocities[0]"
+    assert error.value.reason.startswith(f"joint '{robot.joint_names[-1]}' at 1e+30 rad/s: ")

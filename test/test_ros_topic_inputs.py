@@ -5,7 +5,7 @@ from __future__ import annotations
 from geometry_msgs.msg import Pose, PoseArray
 from nav_msgs.msg import Path
 
-from grasp_safety_ros.ros.topic_inputs import TopicInputs
+from grasp_safety_ros.ros.topic_inputs import PublisherSequences, TopicInputs
 
 
 def candidates(count: int) -> PoseArray:
@@ -58,3 +58,52 @@ def test_an_empty_quality_clears_a_waiting_one() -> None:
     inputs.set_trajectory(Path())
     taken = inputs.take()
     assert taken is not None and taken[2] is None
+
+
+def test_a_set_pairs_with_the_trajectory_received_last_before_it() -> None:
+    """Reception times, not the order the node takes the messages, pair a set with its
+    trajectory: one received before the set but taken after it ranks the set again with it;
+    one received after the set does not."""
+    inputs, grasps = TopicInputs(), candidates(2)
+    first, late, after = Path(), Path(), Path()
+    inputs.set_trajectory(first, received_ns=100)
+    inputs.set_candidates(grasps, received_ns=300)
+    taken = inputs.take()
+    assert taken is not None and taken[1] is first
+    inputs.set_trajectory(after, received_ns=400)  # after the set: not its trajectory
+    assert inputs.take() is None
+    inputs.set_trajectory(late, received_ns=200)  # before the set, taken after it
+    taken = inputs.take()
+    assert taken is not None and taken[1] is late
+    assert inputs.take() is None
+    inputs.set_candidates(candidates(2), received_ns=500)
+    taken = inputs.take()
+    assert taken is not None and taken[1] is after
+
+
+def test_a_set_before_any_trajectory_takes_the_first_then_one_received_before_it() -> None:
+    inputs, grasps = TopicInputs(), candidates(2)
+    inputs.set_candidates(grasps, received_ns=300)
+    after, before = Path(), Path()
+    inputs.set_trajectory(after, received_ns=400)
+    taken = inputs.take()
+    assert taken is not None and taken[1] is after
+    inputs.set_trajectory(before, received_ns=200)
+    taken = inputs.take()
+    assert taken is not None and taken[1] is before
+
+
+def test_skipped_messages_are_the_gaps_of_each_publishers_numbers() -> None:
+    sequences = PublisherSequences()
+    assert [sequences.skipped(n) for n in (1, 2, 5, 6)] == [0, 0, 2, 0]
+    assert sequences.skipped(1) == 0  # a second publisher starts
+    assert [sequences.skipped(n) for n in (2, 7, 4, 10)] == [0, 0, 1, 2]
+    assert sequences.skipped(None) == 0 and sequences.skipped(2**64 - 1) == 0  # unsupported
+
+
+def test_with_one_publisher_a_number_continues_the_last_taken() -> None:
+    """A publisher gone (its numbers up to 5) and a new one whose 2..7 were overwritten: with
+    one publisher matched the gap is counted from the new one's 1, not the old one's 5."""
+    sequences = PublisherSequences()
+    assert [sequences.skipped(n, publishers=1) for n in (1, 2, 5)] == [0, 0, 2]
+    assert [sequences.skipped(n, publishers=1) for n in (1, 8)] == [0, 6]

@@ -20,9 +20,14 @@ from ..core.analyses.safety_report import (
     posture_criterion,
 )
 from ..core.analyses.uncertainty import InertiaUncertainty, analyse_armature_range
-from ..core.analyses.whole_arm import DEFAULT_RANK_REGION
+from ..core.analyses.whole_arm import DEFAULT_RANK_REGION, check_exposed_points_m
 from ..core.exceptions import InvalidInputError
-from ..core.input_checks import finite_array, finite_float, pose_from_position_quat
+from ..core.input_checks import (
+    check_within_reach,
+    finite_array,
+    finite_float,
+    pose_from_position_quat,
+)
 from ..core.method.joint_trajectory import PlannedJointTrajectory
 from ..core.method.posture import DEFAULT_RESTARTS, PostureConfig, select_postures
 from ..core.method.ranking import METRICS, Grasp, GraspSafetyEvaluator, check_metric
@@ -523,6 +528,8 @@ def parse_options(
     whole_arm = _mapping(root.get("whole_arm", {}), "whole_arm")
     _check_keys(whole_arm, {"enabled", "region"}, "whole_arm")
     arm_points = _mapping(root.get("robot", {}), "robot").get("exposed_points_m")
+    for link, link_points in check_exposed_points_m(arm_points or {}).items():
+        check_within_reach(link_points, f"robot.exposed_points_m.{link}")  # 1e300: LinAlgError
     rank_by = root.get("rank_by", "safety")
     if rank_by not in RANK_BY:
         raise InvalidInputError("rank_by", f"must be one of {', '.join(RANK_BY)}, got {rank_by!r}")

@@ -12,6 +12,10 @@ from .exceptions import InvalidInputError
 
 QUATERNION_NORM_TOLERANCE = 1e-3
 """Accepted deviation of a quaternion's norm from 1 before it is normalised."""
+MAX_ABS_POSITION_M = 1000.0
+"""Positions (poses, object CoMs, points on the arm) beyond this per coordinate are refused:
+no manipulator reaches them, and absurd values made the IK search for seconds (1e300 m poses),
+the effective mass NaN (CoM) or the whole-arm eigen-solver fail (points on the arm)."""
 
 
 def read_only(array: Any, copy: bool = False) -> np.ndarray:
@@ -35,6 +39,21 @@ def finite_array(value: Any, field: str, shape: tuple[int, ...] | None = None) -
         raise InvalidInputError(field, f"must be finite, got {array.tolist()}")
     array.setflags(write=False)
     return array
+
+
+def check_within_reach(values: Any, field: str) -> None:
+    """Refuse finite coordinates [m] (x y z per point) beyond +/- MAX_ABS_POSITION_M, naming
+    ``field`` and, for more than one point, the first point beyond."""
+    points = np.asarray(values, dtype=float).reshape(-1, 3)
+    beyond = np.flatnonzero(np.any(np.abs(points) > MAX_ABS_POSITION_M, axis=1))
+    if beyond.size:
+        index = int(beyond[0])
+        which = "" if len(points) == 1 else f"point {index}: "
+        raise InvalidInputError(
+            field,
+            f"{which}must be within +/-{MAX_ABS_POSITION_M:g} m per coordinate, got "
+            f"{points[index].tolist()}",
+        )
 
 
 def finite_float(

@@ -11,6 +11,15 @@ from .memory import memory_kib
 from .parameters import NodeSettings
 from .robot_bundle import RobotBundle
 
+_INT32_LIMIT = 2**31
+"""DDS counts messages in signed 32-bit integers: a count at or beyond is not one."""
+
+
+def _signed(value: int) -> int:
+    """A size_t from rmw read as the signed 64-bit value it was cast from."""
+    value = int(value)
+    return value - 2**64 if value >= 2**63 else value
+
 
 @dataclass
 class NodeStatus:
@@ -27,9 +36,11 @@ class NodeStatus:
     robot_description_error: str = ""  # why the last /robot_description was not used
     robot_parameters_pending: str = ""  # why the robot group is not applied yet
     abandoned: int = 0  # rankings abandoned at shut-down
+    heap_trims: int = 0  # freed heap given back to the system (memory.IdleTrim)
     ignored_descriptions: int = 0  # /robot_description messages ignored (parameters rule)
     refused_by_source: dict[str, int] = field(default_factory=dict)
     lost_by_source: dict[str, int] = field(default_factory=dict)  # the middleware's count
+    skipped_by_source: dict[str, int] = field(default_factory=dict)  # overwritten in queues
 
     def record_ranking(
         self, source: str, compute_time_s: float, feasible: int, total: int
@@ -41,6 +52,26 @@ class NodeStatus:
         self.last_infeasible = total - feasible
         self.last_source = source
         self.last_was_error = False
+
+    def record_lost(self, source: str, total_count: int, total_count_change: int) -> int:
+        """Count the messages of ``source`` the middleware reports lost; the increase.
+
+        The middleware's counters are unsigned in rmw but signed 32-bit in DDS: a negative
+        value arrives wrapped (a change of 18446744071562067968 is -2^31), which added as it
+        came made the count 1.8e19. The count is the report's running total (the subscription's
+        own, never decreasing); where that total is not a plausible count (wrapped, or below
+        the count so far), a positive change is added, and anything else leaves it unchanged.
+        """
+        total, change = _signed(total_count), _signed(total_count_change)
+        previous = self.lost_by_source.get(source, 0)
+        if 0 <= total < _INT32_LIMIT and total >= previous:
+            count = total
+        elif 0 < change < _INT32_LIMIT:
+            count = previous + change
+        else:
+            count = previous
+        self.lost_by_source[source] = count
+        return count - previous
 
     def record_refusal(self, source: str, error: BaseException | str) -> None:
         """Count an input of ``source`` refused with ``error``."""
@@ -96,7 +127,9 @@ def status_msg(
         "ignored_robot_descriptions": status.ignored_descriptions,
         **{f"refused.{k}": n for k, n in sorted(status.refused_by_source.items())},
         **{f"lost.{k}": n for k, n in sorted(status.lost_by_source.items())},
+        **{f"skipped.{k}": n for k, n in sorted(status.skipped_by_source.items())},
         **{f"memory.{k}": n for k, n in memory_kib().items()},
+        "memory.heap_trims": status.heap_trims,
     }
     return DiagnosticStatus(
         level=level,

@@ -22,7 +22,6 @@ have had a subscriber; a late transient-local subscriber gets the latest (OnDema
 from __future__ import annotations
 
 import os
-import signal
 import sys
 import threading
 import time
@@ -31,8 +30,6 @@ from collections.abc import Callable, Sequence
 from functools import partial
 from typing import Any, NoReturn
 
-import rclpy
-import rclpy.utilities
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import Inertia, InertiaStamped, PoseArray
 from grasp_safety_msgs.msg import GraspRanking
@@ -48,13 +45,10 @@ from rclpy.exceptions import (
     InvalidParameterTypeException,
     InvalidParameterValueException,
 )
-from rclpy.executors import Executor, ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import Executor, ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import (
-    qos_profile_sensor_data,
-)
-from rclpy.signals import SignalHandlerOptions
+from rclpy.subscription import Subscription
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, Header, String
 from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
@@ -79,12 +73,13 @@ from .errors import (
     ShuttingDownError,
     StartupError,
 )
-from .executor import NodeExecutor, join_callbacks, join_started, request_header, spin_until
-from .memory import release_free_heap
+from .executor import request_header
+from .memory import IdleTrim
 from .message_checks import check_finite_result, check_no_subnormals
 from .on_demand import OnDemandPublisher
 from .parameters import PARAMETERS, NodeSettings, check_parameter, settings_from_parameters
-from .qos import INPUT, LATCHED, SERVICE
+from .process import run_node
+from .qos import INPUT_DEPTHS, LATCHED, SERVICE, subscription_qos
 from .ranking_inputs import compute_ranking, markers_builder, ranking_inputs
 from .ranking_job import (
     ClientWatch,
@@ -92,15 +87,18 @@ from .ranking_job import (
     Snapshot,
     progress_check,
 )
+from .read_only import answer_read_only_parameters
 from .robot_bundle import RobotBundle, build_robot
 from .robot_group import PENDING_FIELDS, ROBOT_GROUP, group_complete, pending_reason
 from .service_clients import ServiceClients
-from .topic_inputs import TopicInputs, check_quality
+from .topic_inputs import PublisherSequences, TopicInputs, check_quality
 
 NODE_NAME = "grasp_safety"
 EXECUTOR_THREADS = 4
 """Service calls, topic input and parameter/diagnostics callbacks each get a thread."""
 
+_TIMED_SOURCES = ("candidate_grasps", "object_trajectory", "object_multi_dof_trajectory")
+"""Input topics whose callbacks get the reception time (to pair a set with its trajectory)."""
 _STANDARD_OVERRIDES = ("use_sim_time", "qos_overrides.", "start_type_description_service")
 
 
@@ -138,9 +136,10 @@ class GraspSafetyNode(Node):
         self._inertia_override: ObjectInertia | None = None
         self._status = NodeStatus()
         self._pending_robot: dict[str, Any] = {}  # robot group values accepted, not applied
-        self._trim_pending = False
+        self._idle_trim = IdleTrim()
 
         self.add_pre_set_parameters_callback(typed_parameters)
+        answer_read_only_parameters(self)  # ros2 param load of a dump: not "failed"
         self.add_on_set_parameters_callback(self._on_set_parameters)
         try:
             declare_node_parameters(self)
@@ -171,27 +170,27 @@ class GraspSafetyNode(Node):
         )
         self._request_clients = ServiceClients(self, self._service, RankGrasps.Event)
         inputs = (
-            (PoseArray, "~/candidate_grasps", self._on_candidates, INPUT, topics),
-            (Float64MultiArray, "~/candidate_grasp_quality", self._on_quality, INPUT, topics),
-            (Path, "~/object_trajectory", self._on_trajectory, INPUT, topics),
+            (PoseArray, "~/candidate_grasps", self._on_candidates, topics),
+            (Float64MultiArray, "~/candidate_grasp_quality", self._on_quality, topics),
+            (Path, "~/object_trajectory", self._on_trajectory, topics),
             (
                 MultiDOFJointTrajectory,
                 "~/object_multi_dof_trajectory",
                 self._on_trajectory,
-                INPUT,
                 topics,
             ),
-            (InertiaStamped, "~/object_inertia", self._on_inertia, INPUT, topics),
-            (JointState, "/joint_states", self._on_joint_states, qos_profile_sensor_data, None),
-            (String, "/robot_description", self._on_robot_description, LATCHED, None),
+            (InertiaStamped, "~/object_inertia", self._on_inertia, topics),
+            (JointState, "/joint_states", self._on_joint_states, None),
+            (String, "/robot_description", self._on_robot_description, None),
         )
-        for msg_type, topic, callback, qos, group in inputs:
+        self._input_subscriptions: dict[str, Subscription] = {}
+        for msg_type, topic, callback, group in inputs:
             source = topic.removeprefix("~/")
-            self.create_subscription(
+            self._input_subscriptions[source] = self.create_subscription(
                 msg_type,
                 topic,
                 self._guarded(source, callback),
-                qos,
+                subscription_qos(source),
                 callback_group=group,
                 event_callbacks=SubscriptionEventCallbacks(
                     message_lost=partial(self._on_message_lost, source)
@@ -204,19 +203,32 @@ class GraspSafetyNode(Node):
         if self._robot is not None:
             self._log_robot(self._robot)
 
-    def _guarded(self, source: str, callback: Callable[[Any], None]) -> Callable[[Any], None]:
+    def _guarded(self, source: str, callback: Callable[..., None]) -> Callable[[Any, Any], None]:
         """``callback`` for a topic, after refusing a message with a subnormal float (an int
-        sent as a float); an unexpected exception (a bug) is logged and reported on
-        /diagnostics instead of stopping the executor."""
+        sent as a float) and counting the messages skipped before it (input topics); the
+        candidate set and trajectory callbacks also get the reception time [ns]. An
+        unexpected exception (a bug) is logged and reported on /diagnostics instead of
+        stopping the executor."""
+        sequences = PublisherSequences() if source in INPUT_DEPTHS else None
+        timed = source in _TIMED_SOURCES
 
-        def guarded(msg: Any) -> None:
+        def guarded(msg: Any, info: dict[str, Any]) -> None:
+            if sequences is not None and (
+                n := sequences.skipped(
+                    info["publication_sequence_number"],
+                    self._input_subscriptions[source].get_publisher_count(),
+                )
+            ):
+                with self._state_lock:
+                    skipped = self._status.skipped_by_source
+                    skipped[source] = skipped.get(source, 0) + n
             try:
                 check_no_subnormals(msg, source)
             except GraspSafetyError as error:
                 self._report_error(source, error)
                 return
             try:
-                callback(msg)
+                callback(msg, info["received_timestamp"]) if timed else callback(msg)
             except Exception as error:  # last resort: keep serving
                 self.get_logger().error(f"{source}: internal error:\n{traceback.format_exc()}")
                 self._report_error(source, _internal_error(error))
@@ -226,11 +238,11 @@ class GraspSafetyNode(Node):
     def _on_message_lost(self, source: str, info: QoSMessageLostInfo) -> None:
         """The middleware reports messages of a topic lost before the node took them."""
         with self._state_lock:
-            lost = self._status.lost_by_source
-            lost[source] = lost.get(source, 0) + info.total_count_change
+            increase = self._status.record_lost(source, info.total_count, info.total_count_change)
+            total = self._status.lost_by_source[source]
         self.get_logger().warning(
-            f"{source}: {info.total_count_change} message(s) lost before the node took them "
-            f"({info.total_count} in all)"
+            f"{source}: {increase} message(s) lost before the node took them ({total} in all; "
+            f"the middleware reported {info.total_count_change} of {info.total_count})"
         )
 
     def abandon_rankings(self) -> None:
@@ -474,7 +486,7 @@ class GraspSafetyNode(Node):
 
     # --- Topics ------------------------------------------------------------------------------
 
-    def _on_candidates(self, msg: PoseArray) -> None:
+    def _on_candidates(self, msg: PoseArray, received_ns: int) -> None:
         settings = self._snapshot().settings
         try:
             check_grasp_array(
@@ -487,7 +499,7 @@ class GraspSafetyNode(Node):
         except GraspSafetyError as error:
             self._report_error("candidate_grasps", error)
             return
-        discarded = self._topic_inputs.set_candidates(msg)
+        discarded = self._topic_inputs.set_candidates(msg, received_ns)
         if discarded is not None:
             self._report_error(
                 "candidate_grasp_quality",
@@ -510,7 +522,7 @@ class GraspSafetyNode(Node):
         if self._topic_inputs.set_quality(quality):
             self._rank_topics()
 
-    def _on_trajectory(self, msg: Path | MultiDOFJointTrajectory) -> None:
+    def _on_trajectory(self, msg: Path | MultiDOFJointTrajectory, received_ns: int) -> None:
         settings = self._snapshot().settings
         source = (
             "object_multi_dof_trajectory"
@@ -528,7 +540,7 @@ class GraspSafetyNode(Node):
         except GraspSafetyError as error:
             self._report_error(source, error)
             return
-        self._topic_inputs.set_trajectory(msg)
+        self._topic_inputs.set_trajectory(msg, received_ns)
         self._rank_topics()
 
     def _on_inertia(self, msg: InertiaStamped) -> None:
@@ -654,13 +666,13 @@ class GraspSafetyNode(Node):
         feasible = sum(1 for e in ranking.evaluations if e.feasible)
         with self._state_lock:
             self._status.record_ranking(source, compute_time_s, feasible, len(ranking.evaluations))
-            self._trim_pending = True
         # Debug, not info: an rclpy log call that is emitted costs about 2 ms here (its caller
         # lookup, inspect.getmodule, scans every loaded module); /diagnostics has the counts.
         self.get_logger().debug(
             f"{source}: ranked {len(grasps)} grasps ({feasible} feasible) in "
             f"{compute_time_s:.3f} s; order {list(report.order)}"
         )
+        self._idle_trim.ranking_done()
         self._publish_diagnostics()
         return result
 
@@ -678,18 +690,12 @@ class GraspSafetyNode(Node):
             return status_msg(self._status, self._settings, self._robot, NODE_NAME)
 
     def _on_diagnostics_timer(self) -> None:
-        """Give the heap freed by the last rankings back to the system while none runs (the
-        allocator keeps its high-water mark otherwise), then publish the status."""
-        with self._state_lock:
-            trim, self._trim_pending = self._trim_pending, False
-        if trim and self._compute_lock.acquire(timeout=0.0):  # malloc_trim holds the heap:
-            try:  # a ranking starting meanwhile waits in the queue, not on its compute time
-                release_free_heap()
-            finally:
-                self._compute_lock.release()
-        elif trim:
+        """Give the heap freed by the last rankings back to the system once the node is idle
+        (memory.IdleTrim; the allocator keeps its high-water mark otherwise), then publish
+        the status."""
+        if self._idle_trim.run(self._compute_lock):
             with self._state_lock:
-                self._trim_pending = True  # next time
+                self._status.heap_trims = self._idle_trim.trims
         self._publish_diagnostics()
 
     def _publish_diagnostics(self) -> None:
@@ -713,87 +719,16 @@ def _internal_error(error: BaseException) -> str:
     return f"internal error: {type(error).__name__}: {error}"
 
 
-class _Stop(Exception):  # noqa: N818  (a signal, not an error)
-    """SIGINT or SIGTERM arrived: raised in the main thread by the node's signal handler."""
-
-
-def _raise_stop(signal_number: int, frame: Any) -> None:
-    raise _Stop(signal.Signals(signal_number).name)
-
-
 def main(args: list[str] | None = None) -> NoReturn:
-    """The console script: run the node (``run``), then leave the process at once with its
-    status. Everything is shut down and logged by then; the interpreter's teardown would
-    destroy what native code still holds in an order that ends in std::terminate about one
-    stop in two ("terminate called without an active exception", SIGABRT, after the last
+    """The console script: run the node (process.run_node), then leave the process at once
+    with its status. Everything is shut down and logged by then; the interpreter's teardown
+    would destroy what native code still holds in an order that ends in std::terminate about
+    one stop in two ("terminate called without an active exception", SIGABRT, after the last
     line; measured by repeated SIGINT stops of the node)."""
-    status = run(args)
+    status = run_node(GraspSafetyNode, NODE_NAME, EXECUTOR_THREADS, args)
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(status)
-
-
-def run(args: list[str] | None = None) -> int:
-    """Run the node until SIGINT or SIGTERM. Exit status 1 on a start-up error (one log line).
-
-    The node handles the signals itself (rclpy's handlers would shut the context down at
-    once, under the running callbacks: their responses and log lines then failed with "Failed
-    to publish log message to rosout" and "exception was never retrieved"): the executor spins
-    in a thread, the main thread waits; at a signal the rankings are abandoned, their requests
-    answered, the callbacks joined, the node destroyed, and one last line logged.
-    """
-    logger = rclpy.logging.get_logger(NODE_NAME)
-    try:
-        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    except RuntimeError as error:  # rclpy's RCLError: bad --ros-args or params file
-        first_line = str(error).strip().splitlines()[0] if str(error).strip() else "rcl error"
-        logger.error(f"start-up failed: {first_line}")
-        return 1
-    previous = {n: signal.signal(n, _raise_stop) for n in (signal.SIGINT, signal.SIGTERM)}
-    node: GraspSafetyNode | None = None
-    executor: MultiThreadedExecutor | None = None
-    spinner: threading.Thread | None = None
-    spinning = threading.Event()
-    spinning.set()
-    status, reason = 0, "the context was shut down"
-    try:
-        node = GraspSafetyNode()
-        executor = NodeExecutor(num_threads=EXECUTOR_THREADS)
-        executor.add_node(node)
-        node.wait_for_robot(executor)
-        spinner = threading.Thread(
-            target=spin_until, args=(executor, spinning), name="executor", daemon=True
-        )
-        spinner.start()
-        spinner.join()  # interrupted by the signal handler's exception
-    except StartupError as error:
-        logger.error(f"start-up failed: {error}")
-        status = 1
-    except _Stop as stop:
-        reason = str(stop)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        for number, handler in previous.items():  # a second signal no longer interrupts
-            signal.signal(number, signal.SIG_IGN if handler is _raise_stop else handler)
-        if node is not None:
-            node.abandon_rankings()
-        if executor is not None:
-            spinning.clear()  # the spin thread leaves its wait before the executor goes
-            if spinner is not None:  # its start may have been cut short by the signal
-                join_started(spinner, 10.0)
-            executor.shutdown()
-            join_callbacks(executor)
-        abandoned = 0 if node is None else node.abandoned_rankings  # None: signal at start-up
-        if node is not None:
-            node.destroy_node()
-        if status == 0:
-            logger.info(
-                f"shut down ({reason}); {abandoned} ranking(s) abandoned, their requests answered"
-            )
-        rclpy.try_shutdown()
-        rclpy.utilities.get_default_context().destroy()  # the middleware's participant goes
-    return status
 
 
 if __name__ == "__main__":

@@ -26,10 +26,15 @@ from ..core.analyses.safety_report import RANK_BY, AnalysisOptions
 from ..core.analyses.uncertainty import InertiaUncertainty
 from ..core.analyses.whole_arm import DEFAULT_RANK_REGION, MAX_SITES
 from ..core.exceptions import InvalidInputError
-from ..core.input_checks import finite_array, finite_float
+from ..core.input_checks import (
+    MAX_ABS_POSITION_M,
+    check_within_reach,
+    finite_array,
+    finite_float,
+)
 from ..core.method.posture import DEFAULT_RESTARTS, MAX_RESTARTS, PostureConfig
 from ..core.method.ranking import METRICS
-from ..core.model.armature import PUBLISHED
+from ..core.model.armature import PUBLISHED, published_armatures
 from ..core.model.inertia import ObjectInertia
 from .arm_points import arm_points, check_point_links
 from .conversions.geometry import inertia_tensor_from_components
@@ -226,6 +231,8 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
 }
 """Every parameter of the node, by name."""
 
+PUBLISHED_PARAMETER = "robot.armature_published"
+
 ROBOT_PARAMETERS = ("robot_description", "urdf", "base_frame", "tip_frame")
 ROBOT_PARAMETERS += ("robot.armature_kgm2", "robot.armature_joint_names")
 ROBOT_PARAMETERS += ("robot.armature_published",)
@@ -369,10 +376,8 @@ def check_parameter(name: str, value: Any) -> Any:
             )
         if name == "object_frame" and not text:
             raise InvalidInputError(name, "must be a non-empty frame name")
-        if name == "robot.armature_published" and text and text.partition(":")[0] != PUBLISHED:
-            raise InvalidInputError(
-                name, f"must be empty, '{PUBLISHED}' or '{PUBLISHED}:<entry>', got {text!r}"
-            )
+        if name == PUBLISHED_PARAMETER and text:
+            _check_published(text)
         return text
     if name in _FLAGS:
         if not isinstance(value, bool):
@@ -409,8 +414,10 @@ def check_parameter(name: str, value: Any) -> Any:
         return _regions(name, value)
     if name == "whole_arm.point_links":
         return check_point_links(value)
-    if name == "whole_arm.points_m":
-        return _points(name, value, MAX_SITES)
+    if name == "whole_arm.points_m":  # 1e300 m: every later ranking failed (LinAlgError)
+        points = _points(name, value, MAX_SITES)
+        check_within_reach(points, name)
+        return points
     if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
         raise InvalidInputError(name, f"must be a number, got {show(value)}")
     if name in _POSITIVE:
@@ -425,6 +432,21 @@ def check_parameter(name: str, value: Any) -> Any:
     # object.mass_kg (0 = none), robot_description_timeout_s (0 = for ever),
     # object.cylinder_* (0 = none), uncertainty.com_offset_m (0 = exact)
     return finite_float(value, name, minimum=0.0)
+
+
+def _check_published(text: str) -> None:
+    """``robot.armature_published`` on its own: ``published`` or a table entry."""
+    prefix, _, entry = text.partition(":")
+    if prefix != PUBLISHED:
+        raise InvalidInputError(
+            PUBLISHED_PARAMETER,
+            f"must be empty, '{PUBLISHED}' or '{PUBLISHED}:<entry>', got {text!r}",
+        )
+    if entry and entry not in published_armatures():
+        raise InvalidInputError(
+            PUBLISHED_PARAMETER,
+            f"no published entry '{entry}'; entries: {', '.join(published_armatures())}",
+        )
 
 
 def _points(name: str, value: Any, maximum: int = _MAX_POINTS) -> tuple[float, ...]:
@@ -515,7 +537,10 @@ def parameter_constraints(name: str) -> ParameterConstraints:
     elif name == "whole_arm.point_links":
         text = f"links of the robot, one per point of whole_arm.points_m, at most {MAX_SITES}"
     elif name == "whole_arm.points_m":
-        text = "x y z (3 finite values) per entry of whole_arm.point_links"
+        text = (
+            f"x y z (3 finite values, within +/-{MAX_ABS_POSITION_M:g} m) per entry of "
+            "whole_arm.point_links"
+        )
     elif name in PARAMETERS and isinstance(PARAMETERS[name].default, float):
         text = ">= 0"
     return ParameterConstraints(closed, text)

@@ -7,17 +7,45 @@ from rclpy.qos import (
     HistoryPolicy,
     QoSProfile,
     ReliabilityPolicy,
+    qos_profile_sensor_data,
 )
 
 LATCHED = QoSProfile(
     depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
 )
 """Results: late subscribers (RViz, ``ros2 topic echo``) get the last ranking."""
-INPUT = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
-"""Candidate grasps, their quality, the object trajectory and inertia: every message counts
-(the pairing rules follow their order), so none is overwritten in the node's queue (keep the
-last 10 dropped the oldest of a burst unreported); a reliable publisher is slowed down
-instead, and what the middleware still loses is counted (``lost.<topic>`` on /diagnostics)."""
+INPUT_DEPTHS = {
+    "candidate_grasps": 10,
+    "candidate_grasp_quality": 10,
+    "object_trajectory": 4,
+    "object_multi_dof_trajectory": 4,
+    "object_inertia": 10,
+}
+"""Queue depth of each input topic (keep the last, reliable): what the node has not taken yet
+is bounded by depth x message size (a trajectory of max_samples poses is about 1 MB at the
+default 20,000: 4 of them per trajectory topic). Keeping every message (as before) let a flood
+of malformed messages queue about 1 GB, never released, and the topics, served in turn, fell
+behind one another. A message overwritten before the node took it is counted
+(``skipped.<topic>`` on /diagnostics, topic_inputs.PublisherSequences), as is what the
+middleware reports lost (``lost.<topic>``). Only the latest inputs matter: a candidate set
+pairs with the trajectory received last before it (topic_inputs.TopicInputs)."""
+
+
+def subscription_qos(source: str) -> QoSProfile:
+    """The QoS of the node's subscription to ``source``: an input topic (INPUT_DEPTHS),
+    ``/joint_states`` (sensor data: only the latest matters) or ``/robot_description``
+    (LATCHED: only the latest matters, late joiners get it)."""
+    if source == "/robot_description":
+        return LATCHED
+    if source not in INPUT_DEPTHS:
+        return qos_profile_sensor_data
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=INPUT_DEPTHS[source],
+        reliability=ReliabilityPolicy.RELIABLE,
+    )
+
+
 SERVICE = QoSProfile(
     history=HistoryPolicy.KEEP_ALL,
     reliability=ReliabilityPolicy.RELIABLE,

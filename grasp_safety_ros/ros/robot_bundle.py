@@ -11,7 +11,7 @@ from ..core.method.warm_up import warm_up
 from ..core.model.armature import published_for, published_values
 from ..core.model.robot import RobotModel
 from .arm_points import check_arm_point_links
-from .parameters import NodeSettings
+from .parameters import PUBLISHED_PARAMETER, NodeSettings
 
 
 @dataclass(frozen=True)
@@ -53,8 +53,12 @@ def _with_armature_parameters(
 ) -> RobotModel:
     """The chain with the armature of the ``robot.armature_*`` parameters (if any)."""
     if settings.armature_published:
-        entry = published_for(settings.armature_published, source, robot.joint_names)
-        return robot.with_armature(published_values(entry, robot.joint_names))
+        try:
+            entry = published_for(settings.armature_published, source, robot.joint_names)
+            values = published_values(entry, robot.joint_names)
+        except InvalidInputError as error:  # the core names its scenario key
+            raise InvalidInputError(PUBLISHED_PARAMETER, error.reason) from None
+        return robot.with_armature(values)
     values = settings.armature_kgm2
     names = settings.armature_joint_names
     if not values and not names:

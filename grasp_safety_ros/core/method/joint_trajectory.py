@@ -27,6 +27,18 @@ from ..model.robot import RobotModel
 from ..model.trajectory import TipMotion, quintic_time_scaling
 from .effective_mass import STATIONARY_TANGENT_M
 
+RATE_LIMIT_MULTIPLE = 10.0
+"""Planned joint velocities beyond this multiple of the joint's URDF velocity limit are
+refused: the ranking only reports a speed above the limit (the executable output carries the
+planner's velocities), but ten times the limit is no robot's motion: degrees per second sent
+as radians per second are 57 times the value, and 1e30 rad/s was handed back as executable
+(1e200 overflowed in the ISO/TS 15066 check). Accelerations (the URDF has no limit) are bounded
+alike over the point's shortest interval: beyond RATE_LIMIT_MULTIPLE x limit / interval, the
+velocity would change by more than that multiple of its limit within the interval."""
+UNLIMITED_JOINT_RATE = 100.0
+"""The velocity limit taken for a joint whose URDF gives none (0 or not finite) [rad/s or
+m/s]: above any arm's joint speed (a fast arm's joints turn at 3-6 rad/s)."""
+
 
 @dataclass(frozen=True)
 class PlannedJointTrajectory:
@@ -38,6 +50,8 @@ class PlannedJointTrajectory:
         times_s: (N,) point times [s], finite and strictly increasing, N >= 2.
         positions: (N, K) joint positions [rad or m].
         velocities: (N, K) joint velocities [rad/s or m/s], or None (then a cubic spline).
+        accelerations: (N, K) joint accelerations [rad/s² or m/s²] as the planner sent them,
+            or None; checked (finite, bounded: ``check_rates``), not used.
         field: Name of this input in error messages (e.g. ``grasps[2].joint_trajectory``).
     """
 
@@ -46,6 +60,7 @@ class PlannedJointTrajectory:
     positions: np.ndarray
     velocities: np.ndarray | None = None
     field: str = "joint_trajectory"
+    accelerations: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         f = self.field
@@ -67,14 +82,14 @@ class PlannedJointTrajectory:
                     f"got {t:g}",
                 )
         rows = self._rows(self.positions, "positions", len(times), len(names))
-        velocity_rows = None
-        if self.velocities is not None:
-            velocity_rows = self._rows(self.velocities, "velocities", len(times), len(names))
+        for name in ("velocities", "accelerations"):
+            if getattr(self, name) is not None:
+                rates = self._rows(getattr(self, name), name, len(times), len(names))
+                object.__setattr__(self, name, rates)
         times.setflags(write=False)
         object.__setattr__(self, "joint_names", names)
         object.__setattr__(self, "times_s", times)
         object.__setattr__(self, "positions", rows)
-        object.__setattr__(self, "velocities", velocity_rows)
 
     def _rows(self, values: Any, name: str, count: int, width: int) -> np.ndarray:
         if len(values) != count:
@@ -98,6 +113,36 @@ class PlannedJointTrajectory:
                 f"chain: {', '.join(robot.joint_names)}",
             )
         return np.array([index[name] for name in robot.joint_names])
+
+    def check_rates(self, robot: RobotModel) -> None:
+        """Refuse velocities beyond RATE_LIMIT_MULTIPLE x the joint's velocity limit and
+        accelerations beyond RATE_LIMIT_MULTIPLE x limit / the point's shortest interval
+        (UNLIMITED_JOINT_RATE where the URDF gives no limit), naming the point, the column
+        and the joint."""
+        columns = self.chain_columns(robot)
+        limits = np.array(robot.velocity_limits, dtype=float)
+        limits[~(np.isfinite(limits) & (limits > 0.0))] = UNLIMITED_JOINT_RATE
+        steps = np.diff(self.times_s)
+        shortest_s = np.minimum(np.append(steps, np.inf), np.insert(steps, 0, np.inf))
+        for name in ("velocities", "accelerations"):
+            values = None if getattr(self, name) is None else getattr(self, name)[:, columns]
+            per_s = shortest_s[:, None] if name == "accelerations" else np.ones((1, 1))
+            if values is None or not np.any(
+                beyond := np.abs(values) > RATE_LIMIT_MULTIPLE * limits / per_s
+            ):
+                continue
+            k, j = (int(v) for v in np.argwhere(beyond)[0])
+            unit = (
+                "m" if robot.model.joints[j + 1].shortname().startswith("JointModelP") else "rad"
+            )
+            bound = f"{RATE_LIMIT_MULTIPLE:g} x its velocity limit {limits[j]:g} {unit}/s"
+            if name == "accelerations":
+                bound += f" per {shortest_s[k]:g} s (the point's shortest interval)"
+            raise InvalidInputError(
+                f"{self.field}.points[{k}].{name}[{columns[j]}]",
+                f"joint '{robot.joint_names[j]}' at {values[k, j]:g} {unit}/s"
+                f"{'^2' if name == 'accelerations' else ''}: beyond {bound}",
+            )
 
     def chain_positions(self, robot: RobotModel) -> np.ndarray:
         """(N, n) positions in chain order, checked against the joint limits (1e-9 slack)."""
@@ -137,6 +182,7 @@ class JointSpaceTrajectory:
         from scipy.interpolate import CubicHermiteSpline, CubicSpline
 
         positions = self.planned.chain_positions(self.robot)
+        self.planned.check_rates(self.robot)
         times = self.planned.times_s
         if self.planned.velocities is not None:
             velocities = self.planned.velocities[:, self.planned.chain_columns(self.robot)]

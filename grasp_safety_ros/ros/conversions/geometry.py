@@ -16,6 +16,10 @@ from geometry_msgs.msg import Point, Pose, Quaternion, Transform, Vector3
 
 from ...core.exceptions import InvalidInputError
 from ...core.input_checks import (
+    MAX_ABS_POSITION_M as MAX_ABS_POSITION_M,
+)
+from ...core.input_checks import (
+    check_within_reach,
     finite_array,
     quat_xyzw_from_rotation,
     rotation_from_quat_xyzw,
@@ -24,9 +28,6 @@ from ...core.input_checks import (
 MAX_OBJECT_SIZE_M = 100.0
 """Largest radius of gyration of an object [m] (the CLI's scenario limit; a test keeps them
 equal)."""
-MAX_ABS_POSITION_M = 1000.0
-"""Pose coordinates and object CoMs beyond this are refused: no manipulator reaches them, and
-absurd values (1e300) made the IK search for seconds (poses) or the effective mass NaN (CoM)."""
 
 
 # --- Poses -----------------------------------------------------------------------------------
@@ -51,12 +52,7 @@ def transform_from_pose_msg(pose: Pose, field: str) -> pin.SE3:
     position = finite_array(
         [pose.position.x, pose.position.y, pose.position.z], f"{field}.position", (3,)
     )
-    if np.max(np.abs(position)) > MAX_ABS_POSITION_M:
-        raise InvalidInputError(
-            f"{field}.position",
-            f"must be within +/-{MAX_ABS_POSITION_M:g} m per coordinate, got "
-            f"{[float(v) for v in position]}",
-        )
+    check_within_reach(position, f"{field}.position")
     return pin.SE3(rotation, np.array(position))
 
 
@@ -102,10 +98,12 @@ def duration_to_seconds(duration: Duration) -> float:
 
 
 def transform_from_transform_msg(transform: Transform, field: str) -> pin.SE3:
-    """Rigid transform of a geometry_msgs/Transform; checks finiteness and a unit quaternion."""
+    """Rigid transform of a geometry_msgs/Transform; checks finiteness, a unit quaternion and
+    coordinates within +/- MAX_ABS_POSITION_M (as a Pose's)."""
     rotation = rotation_from_quat_xyzw(quat_xyzw_from_msg(transform.rotation), f"{field}.rotation")
     t = transform.translation
     translation = finite_array([t.x, t.y, t.z], f"{field}.translation", (3,))
+    check_within_reach(translation, f"{field}.translation")  # 1e30: success with no order
     return pin.SE3(rotation, np.array(translation))
 
 

@@ -18,7 +18,9 @@ from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 
 from ...core.exceptions import InvalidInputError
 from ...core.input_checks import (
+    MAX_ABS_POSITION_M,
     QUATERNION_NORM_TOLERANCE,
+    check_within_reach,
     finite_array,
     finite_float,
 )
@@ -29,7 +31,6 @@ from ...core.model.robot import RobotModel
 from ...core.model.trajectory import ObjectTrajectory
 from ...core.model.waypoint_trajectory import WaypointTrajectory
 from .geometry import (
-    MAX_ABS_POSITION_M,
     _pose_numbers,
     check_frame_id,
     duration_to_seconds,
@@ -171,7 +172,8 @@ def planned_from_joint_trajectory(
     points (IK for that grasp).
 
     Times are ``time_from_start`` (strictly increasing); ``velocities`` are used when every
-    point has one per joint, ignored when every point has none; accelerations are not used.
+    point has one per joint, ignored when every point has none; accelerations, given alike,
+    are checked (finite, bounded by the joints' velocity limits), not used.
     Joint names may be in any order and include joints off the chain.
     """
     points = trajectory.points
@@ -185,18 +187,22 @@ def planned_from_joint_trajectory(
                 f"must be > points[{k - 1}].time_from_start={times[k - 1]:.9f} s (strictly "
                 f"increasing), got {times[k]:.9f} s",
             )
-    with_velocities = [len(p.velocities) > 0 for p in points]
-    if any(with_velocities) and not all(with_velocities):
-        k = with_velocities.index(not with_velocities[0])
-        raise InvalidInputError(
-            f"{field}.points[{k}].velocities", "give velocities for every point or for none"
-        )
+    rates = {}
+    for name in ("velocities", "accelerations"):
+        given = [len(getattr(p, name)) > 0 for p in points]
+        if any(given) and not all(given):
+            k = given.index(not given[0])
+            raise InvalidInputError(
+                f"{field}.points[{k}].{name}", f"give {name} for every point or for none"
+            )
+        rates[name] = [list(getattr(p, name)) for p in points] if all(given) else None
     return PlannedJointTrajectory(
         tuple(trajectory.joint_names),
         np.array(times),
         [list(p.positions) for p in points],
-        [list(p.velocities) for p in points] if all(with_velocities) else None,
+        rates["velocities"],
         field,
+        rates["accelerations"],
     )
 
 
@@ -342,12 +348,7 @@ def object_inertia_from_msg(
             f"{field}.m", f"must be at most max_mass_kg={max_mass_kg:g}, got {mass:g}"
         )
     com = finite_array([inertia.com.x, inertia.com.y, inertia.com.z], f"{field}.com", (3,))
-    if np.max(np.abs(com)) > MAX_ABS_POSITION_M:  # 1e300 m gave NaN effective masses
-        raise InvalidInputError(
-            f"{field}.com",
-            f"must be within +/-{MAX_ABS_POSITION_M:g} m per coordinate, got "
-            f"{[float(v) for v in com]}",
-        )
+    check_within_reach(com, f"{field}.com")  # 1e300 m gave NaN effective masses
     components = [inertia.ixx, inertia.ixy, inertia.ixz, inertia.iyy, inertia.iyz, inertia.izz]
     tensor = inertia_tensor_from_components(components, f"{field}.ixx..izz", mass)
     try:

@@ -1,0 +1,103 @@
+"""The node's process: start-up, signals, the spin thread and an orderly shut-down."""
+
+from __future__ import annotations
+
+import signal
+import threading
+from collections.abc import Callable
+from typing import Any, Protocol
+
+import rclpy
+import rclpy.utilities
+from rclpy.executors import Executor, ExternalShutdownException, MultiThreadedExecutor
+from rclpy.signals import SignalHandlerOptions
+
+from .errors import StartupError
+from .executor import NodeExecutor, join_callbacks, join_started, spin_until
+
+
+class ServedNode(Protocol):
+    """What run_node needs of a node (GraspSafetyNode)."""
+
+    @property
+    def abandoned_rankings(self) -> int: ...
+
+    def wait_for_robot(self, executor: Executor) -> None: ...
+
+    def abandon_rankings(self) -> None: ...
+
+    def destroy_node(self) -> None: ...
+
+
+class _Stop(Exception):  # noqa: N818  (a signal, not an error)
+    """SIGINT or SIGTERM arrived: raised in the main thread by the node's signal handler."""
+
+
+def _raise_stop(signal_number: int, frame: Any) -> None:
+    raise _Stop(signal.Signals(signal_number).name)
+
+
+def run_node(
+    make_node: Callable[[], ServedNode], name: str, threads: int, args: list[str] | None
+) -> int:
+    """Run the node ``make_node()`` makes until SIGINT or SIGTERM, its executor on ``threads``
+    threads. Exit status 1 on a start-up error (one log line).
+
+    The node handles the signals itself (rclpy's handlers would shut the context down at
+    once, under the running callbacks: their responses and log lines then failed with "Failed
+    to publish log message to rosout" and "exception was never retrieved"): the executor spins
+    in a thread, the main thread waits; at a signal the rankings are abandoned, their requests
+    answered, the callbacks joined, the node destroyed, and one last line logged.
+    """
+    logger = rclpy.logging.get_logger(name)
+    try:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except RuntimeError as error:  # rclpy's RCLError: bad --ros-args or params file
+        first_line = str(error).strip().splitlines()[0] if str(error).strip() else "rcl error"
+        logger.error(f"start-up failed: {first_line}")
+        return 1
+    previous = {n: signal.signal(n, _raise_stop) for n in (signal.SIGINT, signal.SIGTERM)}
+    node: ServedNode | None = None
+    executor: MultiThreadedExecutor | None = None
+    spinner: threading.Thread | None = None
+    spinning = threading.Event()
+    spinning.set()
+    status, reason = 0, "the context was shut down"
+    try:
+        node = make_node()
+        executor = NodeExecutor(num_threads=threads)
+        executor.add_node(node)
+        node.wait_for_robot(executor)
+        spinner = threading.Thread(
+            target=spin_until, args=(executor, spinning), name="executor", daemon=True
+        )
+        spinner.start()
+        spinner.join()  # interrupted by the signal handler's exception
+    except StartupError as error:
+        logger.error(f"start-up failed: {error}")
+        status = 1
+    except _Stop as stop:
+        reason = str(stop)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        for number, handler in previous.items():  # a second signal no longer interrupts
+            signal.signal(number, signal.SIG_IGN if handler is _raise_stop else handler)
+        if node is not None:
+            node.abandon_rankings()
+        if executor is not None:
+            spinning.clear()  # the spin thread leaves its wait before the executor goes
+            if spinner is not None:  # its start may have been cut short by the signal
+                join_started(spinner, 10.0)
+            executor.shutdown()
+            join_callbacks(executor)
+        abandoned = 0 if node is None else node.abandoned_rankings  # None: signal at start-up
+        if node is not None:
+            node.destroy_node()
+        if status == 0:
+            logger.info(
+                f"shut down ({reason}); {abandoned} ranking(s) abandoned, their requests answered"
+            )
+        rclpy.try_shutdown()
+        rclpy.utilities.get_default_context().destroy()  # the middleware's participant goes
+    return status

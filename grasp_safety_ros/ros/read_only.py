@@ -1,0 +1,60 @@
+"""Read-only parameters in ``ros2 param load``: a file that repeats their value is not an error.
+
+``ros2 param dump`` writes every parameter, the read-only ones too (``robot_description_timeout_s``
+and rclpy's ``start_type_description_service``); loading that file back with ``ros2 param load``
+printed "Set parameter ... failed: Trying to set a read-only parameter" for each, which reads as
+if the load had gone wrong. rclpy refuses a read-only parameter before any node callback sees
+it, so the node answers them on its ``set_parameters`` service itself (the service's callback
+wrapped: rclpy has no public hook there): the current value again is a success that says
+nothing changed; another value is refused with what to do instead. Everything else goes to
+rclpy's own callback unchanged.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from rcl_interfaces.msg import SetParametersResult
+from rcl_interfaces.srv import SetParameters
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+UNCHANGED = "unchanged: read-only, and already this value (read at start-up)"
+
+
+def read_only_result(name: str, value: Any, current: Any) -> SetParametersResult:
+    """The answer to setting read-only parameter ``name`` to ``value`` (now ``current``)."""
+    if value == current:
+        return SetParametersResult(successful=True, reason=UNCHANGED)
+    return SetParametersResult(
+        successful=False,
+        reason=(
+            f"read-only: {name} is read at start-up (now {current!r}); give {value!r} in the "
+            "params file or with -p when starting the node"
+        ),
+    )
+
+
+def answer_read_only_parameters(node: Node) -> None:
+    """Wrap ``node``'s ``set_parameters`` service so that read-only parameters are answered by
+    read_only_result (module docstring)."""
+    name = f"{node.get_fully_qualified_name()}/set_parameters"
+    service = next(s for s in node.services if s.service_name == name)
+    delegate = service.callback
+
+    def set_parameters(
+        request: SetParameters.Request, response: SetParameters.Response
+    ) -> SetParameters.Response:
+        for message in request.parameters:
+            parameter = Parameter.from_parameter_msg(message)
+            if node.has_parameter(parameter.name) and (
+                node.describe_parameter(parameter.name).read_only
+            ):
+                current = node.get_parameter(parameter.name).value
+                response.results.append(read_only_result(parameter.name, parameter.value, current))
+            else:
+                alone = SetParameters.Request(parameters=[message])
+                response.results.extend(delegate(alone, SetParameters.Response()).results)
+        return response
+
+    service.callback = set_parameters
