@@ -1,7 +1,7 @@
 """Imports run one way and in no circle (read from the source with ``ast``).
 
 Layers, lowest first: ``core.exceptions`` and ``core.input_checks`` <- ``core.model`` <-
-``core.method`` <- ``core.analyses`` <- the adapters (``cli``, ``ros``, ``validation``,
+``core.method`` <- ``core.analyses`` <- ``core.pipeline`` <- the adapters (``cli``, ``ros``, ``validation``,
 ``dataset``, ``paths``). A module may import its own layer or lower ones. ``core.kernels``
 imports only itself and is imported only by ``core.method``; ``core`` never imports rclpy, ROS
 interface packages or an adapter; neither ``core`` nor the ROS node (with all it imports)
@@ -24,6 +24,7 @@ LAYERS = (
     ("core.model",),
     ("core.method",),
     ("core.analyses", "core"),  # core/__init__.py re-exports model and method names
+    ("core.pipeline",),
     ("cli", "ros", "validation", "dataset", "paths"),
 )
 """Module prefixes (below the package) of each layer, lowest first."""

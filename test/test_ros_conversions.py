@@ -48,9 +48,10 @@ from grasp_safety_ros.core.analyses.exposed_points import box_corners_in_object
 from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions, SafetyReport, analyse
 from grasp_safety_ros.core.analyses.uncertainty import InertiaUncertainty
 from grasp_safety_ros.core.method.executable import joint_velocities_accelerations
-from grasp_safety_ros.core.method.posture import PostureConfig, select_postures
+from grasp_safety_ros.core.method.posture import PostureConfig
 from grasp_safety_ros.core.method.ranking import GraspEvaluation, Ranking
 from grasp_safety_ros.core.model.waypoint_trajectory import WaypointTrajectory
+from grasp_safety_ros.core.pipeline import PipelineRequest, run_pipeline
 from grasp_safety_ros.ros import conversions
 from grasp_safety_ros.ros.conversions import (
     _fast,
@@ -371,10 +372,10 @@ def test_duration_message_rounds_to_the_nanosecond_with_carry() -> None:
 
 
 def test_joint_trajectory_and_posture_fields_round_trip(arm6: RobotModel) -> None:
-    ranking, grasps, trajectory = _ranking(arm6)
-    evaluator = GraspSafetyEvaluator(arm6)
+    _, grasps, trajectory = _ranking(arm6)
     obj = solid_box(0.5, [0.1, 0.1, 0.1])
-    selected = select_postures(evaluator, grasps, obj, trajectory, ranking, PostureConfig(4))
+    request = PipelineRequest(tuple(grasps), obj, trajectory, posture=PostureConfig(4))
+    selected = run_pipeline(GraspSafetyEvaluator(arm6), request).ranking
     request = PoseArray(
         header=Header(frame_id="object"),
         poses=[pose_msg_from_transform(g.transform_tip_to_object) for g in grasps],

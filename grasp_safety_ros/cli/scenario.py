@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, replace
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -12,20 +12,14 @@ import numpy as np
 import yaml
 
 from ..core.analyses.exposed_points import box_corners_in_object, cylinder_rim_points_in_object
-from ..core.analyses.safety_report import (
-    RANK_BY,
-    AnalysisOptions,
-    SafetyReport,
-    analyse,
-    posture_criterion,
-)
-from ..core.analyses.uncertainty import InertiaUncertainty, analyse_armature_range
+from ..core.analyses.safety_report import RANK_BY, AnalysisOptions
+from ..core.analyses.uncertainty import InertiaUncertainty
 from ..core.analyses.whole_arm import DEFAULT_RANK_REGION
 from ..core.exceptions import InvalidInputError
 from ..core.input_checks import finite_array, finite_float, pose_from_position_quat
 from ..core.method.joint_trajectory import PlannedJointTrajectory
-from ..core.method.posture import DEFAULT_RESTARTS, PostureConfig, select_postures
-from ..core.method.ranking import METRICS, Grasp, GraspSafetyEvaluator, check_metric
+from ..core.method.posture import DEFAULT_RESTARTS, PostureConfig
+from ..core.method.ranking import METRICS, Grasp, check_metric
 from ..core.model.armature import (
     PUBLISHED,
     ArmatureRange,
@@ -38,6 +32,7 @@ from ..core.model.inertia import ObjectInertia, solid_box, solid_cylinder, solid
 from ..core.model.robot import RobotModel
 from ..core.model.trajectory import ObjectTrajectory
 from ..core.model.waypoint_trajectory import WaypointTrajectory
+from ..core.pipeline import PipelineRequest
 
 MAX_SCENARIO_BYTES = 4_000_000
 """Largest scenario file read [bytes]."""
@@ -196,6 +191,20 @@ class Scenario:
     base_dir: Path
     options: AnalysisOptions = field(default_factory=AnalysisOptions)
     posture: PostureConfig = field(default_factory=lambda: PostureConfig(DEFAULT_RESTARTS))
+
+    def request(self, robot: RobotModel) -> PipelineRequest:
+        """The pipeline's request (core.pipeline) for ``robot``, the chain ``self.robot``
+        loaded (its armature range, if any, from ``robot.armature_kgm2``); the metric is the
+        evaluator's."""
+        return PipelineRequest(
+            grasps=self.grasps,
+            object_inertia=self.object_inertia,
+            trajectory=self.trajectory,
+            options=self.options,
+            posture=self.posture,
+            seed_positions=self.robot.seed,
+            armature_range=self.robot.armature_range(robot),
+        )
 
 
 def _mapping(value: Any, field: str) -> Mapping[str, Any]:
@@ -616,50 +625,3 @@ def read_yaml_file(path: str | Path, field: str = "scenario") -> Any:
 def load_scenario(path: str | Path) -> Scenario:
     """Read and validate a scenario YAML file (at most MAX_SCENARIO_BYTES, UTF-8)."""
     return parse_scenario(read_yaml_file(path), Path(path).resolve().parent)
-
-
-def rank_with_evaluator(
-    scenario: Scenario,
-    evaluator: GraspSafetyEvaluator,
-    progress: Callable[[int, int], None] | None = None,
-) -> SafetyReport:
-    """Rank the scenario's grasps with ``evaluator`` (built for its robot; its metric is the
-    one used), select their postures and run the analyses the scenario asks for."""
-    ranking = evaluator.rank(
-        scenario.grasps,
-        scenario.object_inertia,
-        scenario.trajectory,
-        seed_positions=scenario.robot.seed,
-        progress=progress,
-    )
-    ranking = select_postures(
-        evaluator,
-        scenario.grasps,
-        scenario.object_inertia,
-        scenario.trajectory,
-        ranking,
-        scenario.posture,
-        criterion=posture_criterion(evaluator.robot, scenario.options),
-    )
-    report = analyse(
-        evaluator,
-        scenario.grasps,
-        scenario.object_inertia,
-        scenario.trajectory,
-        scenario.options,
-        ranking=ranking,
-    )
-    bounds = scenario.robot.armature_range(evaluator.robot)
-    if bounds is None or not bounds.is_range:
-        return report
-    spread = analyse_armature_range(
-        evaluator.robot,
-        ranking.evaluations,
-        scenario.grasps,
-        scenario.object_inertia,
-        bounds.lower_kgm2,
-        bounds.upper_kgm2,
-        ranking.metric,
-        compiled=evaluator.ik.compiled,
-    )
-    return replace(report, armature_range=spread)

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from ..core.exceptions import FrameNotFoundError, GraspSafetyError, InvalidInputError
 from ..core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
 from ..core.method.warm_up import warm_up
-from ..core.model.armature import published_for, published_values
+from ..core.model.armature import ArmatureRange, published_for, published_values
 from ..core.model.robot import RobotModel
 from .arm_points import check_arm_point_links
 from .parameters import NodeSettings
@@ -20,12 +20,15 @@ class RobotBundle:
 
     Attributes:
         origin: Where the description came from: a parameter name or the topic.
+        armature_range: The armature bounds when some joint has a range (the chain carries
+            the upper ends); None otherwise.
     """
 
     robot: RobotModel
     evaluator: GraspSafetyEvaluator
     seed: tuple[float, ...] | None
     origin: str
+    armature_range: ArmatureRange | None = None
 
 
 _CORE_FIELDS = {

@@ -2,8 +2,10 @@
 
 Combines, on top of GraspSafetyEvaluator.rank: effective mass at exposed object points
 (``metric_point``), ISO/TS 15066 power and force limiting, inertia uncertainty, grasp quality
-(weighted sum + Pareto set), null-space redundancy resolution and joint effort. The CLI and
-the ROS node both serialise a SafetyReport; neither computes anything itself.
+(weighted sum + Pareto set), null-space redundancy resolution, joint effort and the whole
+arm's exposure. ``analyse`` is the analyses stage of ``core.pipeline.run_pipeline`` (after the
+ranking and posture selection), which every adapter calls; the adapters serialise the
+SafetyReport it returns.
 """
 
 from __future__ import annotations
