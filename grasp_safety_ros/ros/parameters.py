@@ -78,6 +78,13 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
         "description's own: an MJCF's, else 0); empty: all chain joints in order",
         item_type=str,
     ),
+    "robot.armature_lower_kgm2": ParameterSpec(
+        [],
+        "lower ends of armature ranges, for the joints of robot.armature_kgm2 (then the upper "
+        "ends, which the chain carries) [kg m^2; kg for prismatic joints], 0 <= lower <= "
+        "upper; the response gives the order at both ends; empty: no ranges",
+        item_type=float,
+    ),
     "robot.armature_published": ParameterSpec(
         "",
         "published | published:<entry>: the armature of data/armature_published.yaml (see "
@@ -228,7 +235,7 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
 
 ROBOT_PARAMETERS = ("robot_description", "urdf", "base_frame", "tip_frame")
 ROBOT_PARAMETERS += ("robot.armature_kgm2", "robot.armature_joint_names")
-ROBOT_PARAMETERS += ("robot.armature_published",)
+ROBOT_PARAMETERS += ("robot.armature_published", "robot.armature_lower_kgm2")
 """Parameters whose change rebuilds the robot model."""
 
 _STRINGS = ("robot_description", "urdf", "base_frame", "tip_frame", "object_frame", "metric")
@@ -284,8 +291,8 @@ class NodeSettings:
         response: What the result messages carry (``response.*``).
         ik_seed: The seed parameter, or None when empty (length checked against the robot
             in build_robot).
-        armature_kgm2, armature_joint_names, armature_published: The ``robot.armature_*``
-            parameters (checked against the chain in build_robot).
+        armature_kgm2, armature_joint_names, armature_published, armature_lower_kgm2: The
+            ``robot.armature_*`` parameters (checked against the chain in build_robot).
     """
 
     robot_description: str
@@ -315,6 +322,7 @@ class NodeSettings:
     armature_kgm2: tuple[float, ...] = ()
     armature_joint_names: tuple[str, ...] = ()
     armature_published: str = ""
+    armature_lower_kgm2: tuple[float, ...] = ()
 
     @property
     def robot_source(self) -> str:
@@ -382,7 +390,7 @@ def check_parameter(name: str, value: Any) -> Any:
         return _integer(name, value, *_COUNT_LIMITS[name])
     if name == "ik_seed":
         return _numbers(name, value, None)
-    if name == "robot.armature_kgm2":
+    if name in ("robot.armature_kgm2", "robot.armature_lower_kgm2"):
         values = _numbers(name, value, None)
         negative = [k for k, x in enumerate(values) if x < 0.0]
         if negative:
@@ -663,4 +671,5 @@ def settings_from_parameters(values: Mapping[str, Any]) -> NodeSettings:
         armature_kgm2=v["robot.armature_kgm2"],
         armature_joint_names=v["robot.armature_joint_names"],
         armature_published=v["robot.armature_published"],
+        armature_lower_kgm2=v["robot.armature_lower_kgm2"],
     )
