@@ -499,9 +499,13 @@ def test_report_message_with_default_options_is_the_ranking_message(arm6: RobotM
         for name in ("index", "feasible", "effective_mass_kg", "time_from_start_s"):
             assert getattr(got, name) == getattr(old, name)
         assert got.score == old.score or (math.isnan(got.score) and math.isnan(old.score))
-        for name in ("grasp_quality", "combined_score", "worst_case_score", "effort_score"):
+        for name in ("grasp_quality", "combined_score", "worst_case_score"):
             assert math.isnan(getattr(got, name)), name
-        assert len(got.leading_point_effective_mass_kg) == len(got.peak_abs_torque) == 0
+        assert len(got.leading_point_effective_mass_kg) == 0
+        # effort is on by default (core.options): the torques, without changing the order
+        effort = report.effort[got.index]
+        assert got.effort_score == effort.score() or math.isnan(effort.score())
+        assert len(got.peak_abs_torque) == (len(message.joint_names) if got.feasible else 0)
         assert not got.redundancy_applied and math.isnan(got.score_without_redundancy)
         if got.feasible:
             assert got.safety_score == got.score
@@ -804,6 +808,10 @@ def test_evaluation_messages_equal_the_keyword_constructor_and_share_nothing() -
         whole_arm_worst_energy_j=nan,
         links_only_effective_mass_kg=[1.0, 1.5],  # no armature: the same masses
         links_only_mean_effective_mass_kg=1.25,
+        score_armature_lower=nan,
+        score_armature_upper=nan,
+        armature_min_effective_mass_kg=nan,
+        armature_max_effective_mass_kg=nan,
     )
     first, second = (conversions.evaluation_msg(evaluation) for _ in range(2))
     assert repr(first) == repr(expected)  # every field; NaN-safe, unlike ==

@@ -946,8 +946,9 @@ def test_default_analyses_leave_the_paper_fields_and_order(
     for evaluation in ranking.evaluations:
         assert evaluation.safety_score == evaluation.score
         assert math.isnan(evaluation.grasp_quality) and math.isnan(evaluation.combined_score)
-        assert math.isnan(evaluation.worst_case_score) and math.isnan(evaluation.effort_score)
-        assert not evaluation.redundancy_applied and len(evaluation.peak_abs_torque) == 0
+        assert math.isnan(evaluation.worst_case_score) and not evaluation.redundancy_applied
+        # effort is on by default (core.options): its torques, the order unchanged
+        assert len(evaluation.peak_abs_torque) == len(ranking.joint_names)
         # the box gives the exposed points; they do not change the tip score
         count = len(evaluation.effective_mass_kg)
         assert len(evaluation.leading_point_effective_mass_kg) == count

@@ -45,7 +45,6 @@ from grasp_safety_ros.ros.topic_inputs import MAX_ABS_GRASP_QUALITY, check_quali
 def test_count_parameter_limits_are_the_clis() -> None:
     assert parameters.MAX_GRASPS_LIMIT == scenario.MAX_GRASPS
     assert parameters.MAX_SAMPLES_LIMIT == scenario.MAX_GRASP_SAMPLES
-    assert parameters.MAX_UNCERTAINTY_SAMPLES == scenario.MAX_UNCERTAINTY_SAMPLES
     assert geometry.MAX_OBJECT_SIZE_M == scenario.MAX_OBJECT_SIZE_M
 
 

@@ -14,11 +14,10 @@ import yaml
 from ..core.analyses.exposed_points import box_corners_in_object, cylinder_rim_points_in_object
 from ..core.analyses.safety_report import RANK_BY, AnalysisOptions
 from ..core.analyses.uncertainty import InertiaUncertainty
-from ..core.analyses.whole_arm import DEFAULT_RANK_REGION
 from ..core.exceptions import InvalidInputError
 from ..core.input_checks import finite_array, finite_float, pose_from_position_quat
 from ..core.method.joint_trajectory import PlannedJointTrajectory
-from ..core.method.posture import DEFAULT_RESTARTS, PostureConfig
+from ..core.method.posture import PostureConfig
 from ..core.method.ranking import METRICS, Grasp, check_metric
 from ..core.model.armature import (
     PUBLISHED,
@@ -32,6 +31,7 @@ from ..core.model.inertia import ObjectInertia, solid_box, solid_cylinder, solid
 from ..core.model.robot import RobotModel
 from ..core.model.trajectory import ObjectTrajectory
 from ..core.model.waypoint_trajectory import WaypointTrajectory
+from ..core.options import LIMITS, bounds, default
 from ..core.pipeline import PipelineRequest
 
 MAX_SCENARIO_BYTES = 4_000_000
@@ -43,22 +43,22 @@ MAX_NESTING_DEPTH = 64
 MAX_EXPANDED_NODES = 1_000_000
 """Most YAML nodes a scenario may expand to, aliases (``*name``) counted at full size."""
 
-MAX_GRASPS = 10_000
-"""Most grasps in a scenario."""
+MAX_GRASPS = int(LIMITS["grasps"].value)
+"""Most grasps in a scenario (core.options.LIMITS, as every limit here but the file's)."""
 
-MAX_GRASP_SAMPLES = 10_000_000
+MAX_GRASP_SAMPLES = int(LIMITS["grasp_samples"].value)
 """Most grasps x trajectory samples (IK solves) in a scenario."""
 
-MAX_POINTS = 1_000
+MAX_POINTS = int(LIMITS["points"].value)
 """Most exposed points (``object.points_m``)."""
 
-MAX_UNCERTAINTY_SAMPLES = 10_000
+MAX_UNCERTAINTY_SAMPLES = int(LIMITS["uncertainty_samples"].value)
 """Most random inertia samples (``uncertainty.samples``)."""
 
 MAX_OBJECT_MASS_KG = 10_000.0
 """Heaviest object [kg]."""
 
-MAX_OBJECT_SIZE_M = 100.0
+MAX_OBJECT_SIZE_M = LIMITS["object_size_m"].value
 """Largest object dimension, CoM offset and radius of gyration [m] (far beyond any gripper;
 much larger objects make the augmented mass matrix numerically singular)."""
 
@@ -180,7 +180,7 @@ class Scenario:
     Attributes:
         options: The analyses beyond the paper (metric point, ISO/TS 15066, uncertainty,
             grasp quality, redundancy, effort), from the optional sections of the file.
-        posture: Posture selection (section ``posture``; default DEFAULT_RESTARTS restarts).
+        posture: Posture selection (section ``posture``; defaults: core.options).
     """
 
     robot: RobotSpec
@@ -190,7 +190,7 @@ class Scenario:
     metric: str
     base_dir: Path
     options: AnalysisOptions = field(default_factory=AnalysisOptions)
-    posture: PostureConfig = field(default_factory=lambda: PostureConfig(DEFAULT_RESTARTS))
+    posture: PostureConfig = field(default_factory=PostureConfig)
 
     def request(self, robot: RobotModel) -> PipelineRequest:
         """The pipeline's request (core.pipeline) for ``robot``, the chain ``self.robot``
@@ -488,7 +488,7 @@ def parse_posture(section: Any) -> PostureConfig:
     posture = _mapping(section, "posture")
     _check_keys(posture, {"restarts", "seed"}, "posture")
     return PostureConfig(
-        restarts=posture.get("restarts", DEFAULT_RESTARTS), seed=posture.get("seed", 0)
+        restarts=posture.get("restarts", default("posture.restarts")), seed=posture.get("seed", 0)
     )
 
 
@@ -536,10 +536,10 @@ def parse_options(
     whole_arm = _mapping(root.get("whole_arm", {}), "whole_arm")
     _check_keys(whole_arm, {"enabled", "region"}, "whole_arm")
     arm_points = _mapping(root.get("robot", {}), "robot").get("exposed_points_m")
-    rank_by = root.get("rank_by", "safety")
+    rank_by = root.get("rank_by", default("rank_by"))
     if rank_by not in RANK_BY:
         raise InvalidInputError("rank_by", f"must be one of {', '.join(RANK_BY)}, got {rank_by!r}")
-    metric_point = root.get("metric_point", "tip")
+    metric_point = root.get("metric_point", default("metric_point"))
     if metric_point != "tip" and points is None:
         raise InvalidInputError(
             "metric_point",
@@ -552,14 +552,20 @@ def parse_options(
             iso_regions=None if regions is None else tuple(regions),
             uncertainty=uncertainty,
             grasp_quality=quality,
-            safety_weight=finite_float(root.get("safety_weight", 0.5), "safety_weight", 0.0, 1.0),
-            redundancy=_flag(root.get("redundancy", False), "redundancy"),
-            effort=_flag(effort.get("enabled", True), "effort.enabled"),
+            safety_weight=finite_float(
+                root.get("safety_weight", default("safety_weight")),
+                "safety_weight",
+                *bounds("safety_weight"),
+            ),
+            redundancy=_flag(root.get("redundancy", default("redundancy.enabled")), "redundancy"),
+            effort=_flag(effort.get("enabled", default("effort.enabled")), "effort.enabled"),
             rank_by=rank_by,
-            effort_criterion=effort.get("criterion", "peak_fraction"),
-            whole_arm=_flag(whole_arm.get("enabled", False), "whole_arm.enabled"),
+            effort_criterion=effort.get("criterion", default("effort.criterion")),
+            whole_arm=_flag(
+                whole_arm.get("enabled", default("whole_arm.enabled")), "whole_arm.enabled"
+            ),
             arm_points_m=arm_points,
-            whole_arm_region=whole_arm.get("region", DEFAULT_RANK_REGION),
+            whole_arm_region=whole_arm.get("region", default("whole_arm.region")),
         )
     except InvalidInputError as error:  # the core says iso15066.<field>; the file iso_ts_15066
         if not error.field.startswith("iso15066."):
@@ -573,7 +579,7 @@ def parse_scenario(data: Any, base_dir: Path) -> Scenario:
     root = _mapping(data, "scenario")
     required = {"robot", "object", "trajectory", "grasps", "metric"}
     _check_keys(root, required | OPTIONAL_SECTIONS, "")
-    metric = root.get("metric", "mean")
+    metric = root.get("metric", default("metric"))
     if not isinstance(metric, str):
         raise InvalidInputError("metric", f"must be one of {', '.join(METRICS)}, got {metric!r}")
     object_inertia, points = parse_object(_required(root, "object", ""))

@@ -24,7 +24,7 @@ from .analyses.whole_arm import DEFAULT_RANK_REGION
 from .method.metrics import METRICS
 from .method.posture import DEFAULT_RESTARTS, MAX_RESTARTS
 
-__all__ = ["LIMITS", "OPTIONS", "Limit", "Option", "default", "help_text"]
+__all__ = ["LIMITS", "OPTIONS", "Limit", "Option", "bounds", "default", "help_text"]
 
 MAX_UNCERTAINTY_SAMPLES = 10_000
 """Most random inertias per request (``uncertainty.samples`` = 10^9 asked for 52 GiB)."""
@@ -40,7 +40,8 @@ class Option:
         default: Its value when not given, in every interface.
         help: One line on what it does.
         unit: Its unit (``s``, ``m``, ``%``, ...); empty: none.
-        bounds: Inclusive [low, high] of a number; None: unbounded or not a number.
+        bounds: Closed [low, high] of a number; None: unbounded, half-open (the fractions'
+            [0, 1), stated in the help) or not a number.
         choices: The allowed strings; empty: any.
         scenario: The scenario file's key when it differs from ``key``; None: same.
     """
@@ -133,7 +134,6 @@ OPTIONS: Mapping[str, Option] = MappingProxyType(
                 float,
                 0.0,
                 "relative object mass error bound, in [0, 1); all three bounds 0: no analysis",
-                bounds=(0.0, 1.0),  # 1 excluded: InertiaUncertainty refuses it
             ),
             Option(
                 "uncertainty.com_offset_m",
@@ -147,14 +147,12 @@ OPTIONS: Mapping[str, Option] = MappingProxyType(
                 float,
                 0.0,
                 "relative error bound of the principal moments of inertia, in [0, 1)",
-                bounds=(0.0, 1.0),  # 1 excluded, as mass_fraction
             ),
             Option(
                 "uncertainty.samples",
                 int,
                 64,
-                "random inertias drawn in the error box (besides the nominal one and the "
-                "corners)",
+                "random inertias drawn in the error box (besides the nominal one and the corners)",
                 bounds=(0, MAX_UNCERTAINTY_SAMPLES),
             ),
             Option(
@@ -185,23 +183,25 @@ class Limit:
         name: What is bounded.
         value: The limit (the scenario's, and the node parameter's upper bound).
         unit: Its unit; empty: a count.
-        node: The node parameter bounded by it and its default (the per-request budget of a
-            service shared by clients: lower than what a file may ask), or None.
+        node: The node parameter bounded by it; empty: none.
+        budget: That parameter's default: the per-request budget of a service shared by
+            clients, lower than what a file may ask.
     """
 
     name: str
     value: float
     unit: str = ""
-    node: tuple[str, float] | None = None
+    node: str = ""
+    budget: int = 0
 
 
 LIMITS: Mapping[str, Limit] = MappingProxyType(
     {
         limit.name: limit
         for limit in (
-            Limit("grasps", 10_000, node=("max_grasps", 1000)),
-            Limit("grasp_samples", 10_000_000, node=("max_total_samples", 500_000)),
-            Limit("trajectory_samples", 10_000_000, node=("max_samples", 20_000)),
+            Limit("grasps", 10_000, node="max_grasps", budget=1000),
+            Limit("grasp_samples", 10_000_000, node="max_total_samples", budget=500_000),
+            Limit("trajectory_samples", 10_000_000, node="max_samples", budget=20_000),
             Limit("points", 1_000),
             Limit("uncertainty_samples", MAX_UNCERTAINTY_SAMPLES),
             Limit("object_size_m", 100.0, "m"),
@@ -214,6 +214,14 @@ LIMITS: Mapping[str, Limit] = MappingProxyType(
 def default(key: str) -> bool | int | float | str:
     """The default of option ``key`` (OPTIONS)."""
     return OPTIONS[key].default
+
+
+def bounds(key: str) -> tuple[float, float]:
+    """The bounds of numeric option ``key``; ValueError if it has none."""
+    option = OPTIONS[key]
+    if option.bounds is None:
+        raise ValueError(f"option {key} has no bounds")
+    return option.bounds
 
 
 def help_text(key: str) -> str:

@@ -38,6 +38,7 @@ from ..core.method.posture import PostureConfig
 from ..core.method.ranking import check_metric
 from ..core.model.inertia import ObjectInertia
 from ..core.model.waypoint_trajectory import WaypointTrajectory
+from ..core.options import default
 
 FORMATS = ("acronym", "graspgen", "scenarios")
 """Source formats: ACRONYM HDF5, GraspGen ``isaac_grasp`` YAML, scenario files."""
@@ -187,7 +188,7 @@ def parse_spec(data: Any, base_dir: Path) -> BatchSpec:
         defaults, points = parse_object(root["object"])
     if any(s.format == "graspgen" for s in sources) and defaults is None:
         raise InvalidInputError("object", "is required for graspgen sources (they carry no mass)")
-    metric = root.get("metric", "mean")
+    metric = root.get("metric", default("metric"))
     if not isinstance(metric, str):
         raise InvalidInputError("metric", f"must be a string, got {metric!r}")
     return BatchSpec(

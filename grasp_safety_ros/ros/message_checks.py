@@ -156,7 +156,7 @@ def check_finite_result(ranking: Any) -> None:
     any evaluation an infinite one: no success answer ranks a grasp by a non-finite number.
 
     Scores of analyses that ran are checked too: ``combined_score`` and ``grasp_quality``
-    when a quality was given (``safety_weight`` finite), ``effort_score`` when effort ran,
+    when a quality was given (``safety_weight`` finite), ``effort_score`` when it orders,
     ``worst_case_score`` and ``percentile_score`` when the uncertainty analysis ran, the
     scores at both ends of the armature ranges when those ran (``armature_order_*`` ordered).
 
@@ -166,7 +166,7 @@ def check_finite_result(ranking: Any) -> None:
     names = list(_SCORES)
     if math.isfinite(ranking.safety_weight):
         names += ["combined_score", "grasp_quality"]
-    if ranking.effort_criterion:
+    if ranking.rank_by == "effort":  # else NaN is an answer: no effort limit known
         names.append("effort_score")
     if math.isfinite(ranking.order_stability):
         names += ["worst_case_score", "percentile_score"]

@@ -79,7 +79,8 @@ the whole arm's worst predicted force for ``whole_arm_region``."""
 
 @dataclass(frozen=True)
 class AnalysisOptions:
-    """What to compute beyond the tip effective mass (all off except ISO/TS 15066 by default).
+    """What to compute beyond the tip effective mass (ISO/TS 15066 and effort by default; the
+    defaults are core.options.OPTIONS', checked by test/test_options.py).
 
     Attributes:
         metric_point: ``tip`` (the paper), ``leading_point`` or ``worst_point`` of the object.
@@ -109,7 +110,7 @@ class AnalysisOptions:
     grasp_quality: tuple[float, ...] | None = None
     safety_weight: float = 0.5
     redundancy: bool = False
-    effort: bool = False
+    effort: bool = True
     rank_by: str = "safety"
     effort_criterion: str = "peak_fraction"
     whole_arm: bool = False
