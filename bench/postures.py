@@ -75,7 +75,7 @@ def bench_postures(grasps: int = 20, repeats: int = 3) -> dict[str, Any]:
             tuple(candidates),
             inertia,
             trajectory,
-            options=AnalysisOptions(iso_regions=()),
+            options=AnalysisOptions(iso_regions=(), effort=False),
             seed_positions=seed,
         )
 

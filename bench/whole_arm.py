@@ -131,10 +131,10 @@ def bench_whole_arm(arm: ArmWorkload, grasps: int = 10, repeats: int = 5) -> dic
         return stages["postures_process_cpu"]
 
     def postures_by_score() -> float:
-        return postures(AnalysisOptions(iso_regions=()))
+        return postures(AnalysisOptions(iso_regions=(), effort=False))
 
     def postures_by_whole_arm() -> float:
-        return postures(AnalysisOptions(rank_by="whole_arm"))
+        return postures(AnalysisOptions(rank_by="whole_arm", effort=False))
 
     timings: dict[str, list[float]] = {
         "compiled": [],
