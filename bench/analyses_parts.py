@@ -28,9 +28,9 @@ from pipeline import book_scenario
 
 def bench_parts(grasps: int, repeats: int = 3) -> dict[str, Any]:
     """Median seconds per part and per ranking, and each part's ratio to the ranking."""
-    from grasp_safety_ros.cli.scenario import load_scenario
     from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions, analyse
     from grasp_safety_ros.core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
+    from grasp_safety_ros.scenario.schema import load_scenario
 
     with tempfile.TemporaryDirectory() as folder:
         scenario = load_scenario(book_scenario(grasps, Path(folder)))

@@ -121,11 +121,11 @@ def bench_cli(folder: Path, repeats: int = 3) -> dict[str, Any]:
 def bench_in_process(grasps: int, folder: Path, repeats: int = 3) -> dict[str, Any]:
     """Ranking, posture selection and analyses of the book scenario in this process (one
     core), medians [s], and their ratios to the ranking's time."""
-    from grasp_safety_ros.cli.scenario import load_scenario
     from grasp_safety_ros.core.analyses.effort import evaluate_efforts
     from grasp_safety_ros.core.analyses.safety_report import analyse
     from grasp_safety_ros.core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
     from grasp_safety_ros.core.pipeline import run_pipeline
+    from grasp_safety_ros.scenario.schema import load_scenario
 
     scenario = load_scenario(book_scenario(grasps, folder))
     robot = scenario.robot.load(scenario.base_dir)

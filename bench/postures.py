@@ -24,12 +24,12 @@ from typing import Any
 import numpy as np
 from workload import ARMS, box_object, grasps_around_box
 
-from grasp_safety_ros.cli.scenario import load_scenario
 from grasp_safety_ros.core import EvaluationConfig, GraspSafetyEvaluator
 from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions
 from grasp_safety_ros.core.method.posture import PostureConfig
 from grasp_safety_ros.core.pipeline import PipelineRequest, run_pipeline
 from grasp_safety_ros.paths import config_file
+from grasp_safety_ros.scenario.schema import load_scenario
 
 RESTARTS = (0, 2, 4, 8, 16, 32, 64)
 

@@ -11,13 +11,13 @@ from typing import Any
 import pytest
 import yaml
 
-from grasp_safety_ros.cli.scenario import parse_scenario
 from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions
 from grasp_safety_ros.core.analyses.uncertainty import InertiaUncertainty
 from grasp_safety_ros.core.exceptions import InvalidInputError
 from grasp_safety_ros.core.method.posture import PostureConfig
 from grasp_safety_ros.core.options import LIMITS, OPTIONS, default, help_text
 from grasp_safety_ros.paths import config_file
+from grasp_safety_ros.scenario.schema import parse_scenario
 
 BOOK = yaml.safe_load(config_file("book_baxter.yaml").read_text())
 

@@ -20,9 +20,9 @@ pytest.importorskip("rclpy")
 from test_ros_node import BOOK, BOOK_YAML, NodeUnderTest, book_request
 
 from grasp_safety_ros.cli.main import rank_scenario
-from grasp_safety_ros.cli.scenario import load_scenario
 from grasp_safety_ros.core.method.ranking import GraspSafetyEvaluator
 from grasp_safety_ros.core.pipeline import STAGES, run_pipeline
+from grasp_safety_ros.scenario.schema import load_scenario
 
 DT_S = 0.1
 LOWER_KGM2 = [0.0, 0.05, 0.0, 0.05, 0.0, 0.02, 0.0]

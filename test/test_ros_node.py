@@ -37,7 +37,6 @@ from ros_domains import claim_ros_domain
 from std_msgs.msg import Float64MultiArray, Header, String
 from visualization_msgs.msg import Marker, MarkerArray
 
-from grasp_safety_ros.cli.scenario import load_scenario
 from grasp_safety_ros.core import (
     Grasp,
     GraspSafetyEvaluator,
@@ -60,6 +59,7 @@ from grasp_safety_ros.paths import config_file
 from grasp_safety_ros.ros.conversions import inertia_msg_from_object, pose_msg_from_transform
 from grasp_safety_ros.ros.executor import NodeExecutor, join_callbacks
 from grasp_safety_ros.ros.node import EXECUTOR_THREADS, GraspSafetyNode
+from grasp_safety_ros.scenario.schema import load_scenario
 
 BOOK = load_scenario(config_file("book_baxter.yaml"))
 BOOK_GRASPS = [Grasp(g.transform_tip_to_object, f"grasp_{i}") for i, g in enumerate(BOOK.grasps)]

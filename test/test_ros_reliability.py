@@ -18,7 +18,6 @@ from nav_msgs.msg import Path
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from grasp_safety_ros.cli import scenario
 from grasp_safety_ros.core.exceptions import InvalidInputError
 from grasp_safety_ros.core.method.ranking import Grasp
 from grasp_safety_ros.ros import parameters
@@ -38,6 +37,7 @@ from grasp_safety_ros.ros.message_checks import (
 from grasp_safety_ros.ros.parameters import check_parameter, parameter_constraints
 from grasp_safety_ros.ros.ranking_job import ClientWatch, FairComputeLock
 from grasp_safety_ros.ros.topic_inputs import MAX_ABS_GRASP_QUALITY, check_quality
+from grasp_safety_ros.scenario import schema as scenario
 
 # --- Count parameters (D) ----------------------------------------------------------------------
 

@@ -16,7 +16,7 @@ from ..paths import config_file
 
 if TYPE_CHECKING:
     from ..core.analyses.safety_report import SafetyReport
-    from .scenario import Scenario
+    from ..scenario.schema import Scenario
 
 # The commands import the core, the scenario reader and the report writer when they run, so
 # ``grasp-safety --help`` and argument errors stay fast (docs/performance_pipeline.md).
@@ -135,8 +135,8 @@ def _write_outputs(
 
 
 def _command_rank(args: argparse.Namespace) -> int:
+    from ..scenario.schema import load_scenario
     from .report import report_text
-    from .scenario import load_scenario
 
     scenario = load_scenario(args.scenario)
     report = rank_scenario(scenario, args.metric)
@@ -147,8 +147,8 @@ def _command_rank(args: argparse.Namespace) -> int:
 
 
 def _command_demo(args: argparse.Namespace) -> int:
+    from ..scenario.schema import load_scenario
     from .report import report_text
-    from .scenario import load_scenario
 
     path = config_file(DEMO_SCENARIO)
     print(f"demo: the paper's book experiment on Baxter ({path})")

@@ -1,7 +1,7 @@
 """The one table of options: each option's key, type, unit, default, bounds and help.
 
 Every interface takes its defaults and bounds from here: the scenario file's parser
-(``cli.scenario``), the node's parameters (``ros.parameters``: defaults, help, ranges; their
+(``scenario.schema``), the node's parameters (``ros.parameters``: defaults, help, ranges; their
 typed declaration and ``docs/ros/parameters.md`` follow from those), the batch SPEC (the
 scenario's parser) and the core's own dataclasses (``AnalysisOptions``, ``PostureConfig``,
 ``InertiaUncertainty``: checked equal by ``test/test_options.py``). The few values an

@@ -31,12 +31,13 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from .. import __version__
-from ..cli.scenario import Scenario, read_yaml_file
 from ..core.exceptions import GraspSafetyError, InvalidInputError
 from ..core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
 from ..core.method.warm_up import warm_up
 from ..core.model.robot import resolve_urdf
 from ..core.pipeline import run_pipeline
+from ..scenario.fields import read_yaml_file
+from ..scenario.schema import Scenario
 from .rows import block_columns
 from .schema import SCHEMA_VERSION, grasp_schema, table
 from .sources import Failure, GraspBlock, SourceFile, discover, load_block, scenario_of
