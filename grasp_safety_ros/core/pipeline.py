@@ -38,7 +38,8 @@ import numpy as np
 from .analyses.safety_report import AnalysisOptions, SafetyReport, analyse, posture_criterion
 from .analyses.uncertainty import analyse_armature_range
 from .method.posture import PostureConfig, select_postures
-from .method.ranking import Grasp, GraspSafetyEvaluator
+from .method.ranking import GraspSafetyEvaluator
+from .method.results import Grasp
 from .model.armature import ArmatureRange
 from .model.inertia import ObjectInertia
 from .model.trajectory import ObjectTrajectory
@@ -54,7 +55,7 @@ class Progress(Protocol):
     """``progress(stage, done, total)``: ``done`` of ``total`` units of ``stage`` (one of
     STAGES) are done; raise to abandon the request."""
 
-    def __call__(self, stage: str, done: int, total: int) -> None: ...
+    def __call__(self, stage: str, done: int, total: int, /) -> None: ...
 
 
 @dataclass(frozen=True)
