@@ -10,6 +10,7 @@ import re
 import sys
 from collections.abc import Callable
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -87,6 +88,37 @@ def render_parameters() -> str:
             _cell(spec.description),
         ]
         rows.append("| " + " | ".join(cells) + " |")
+    return "\n".join(rows) + "\n"
+
+
+def render_options() -> str:
+    """The one table of options (core.options) as Markdown: the scenario key, the node
+    parameter, type, default (every interface's), bounds, unit, meaning; then the limits."""
+    sys.path.insert(0, str(ROOT))
+    from grasp_safety_ros.core.options import LIMITS, OPTIONS
+
+    rows = [
+        "| Scenario key | Node parameter | Type | Default | Bounds | Unit | Meaning |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for key, option in OPTIONS.items():
+        bounds = option.bounds
+        cells = [
+            f"`{option.scenario_key}`",
+            f"`{key}`",
+            option.type.__name__,
+            f"`{_default(option.default)}`",
+            "" if bounds is None else f"[{_number(bounds[0])}, {_number(bounds[1])}]",
+            option.unit,
+            _cell(option.help),
+        ]
+        rows.append("| " + " | ".join(cells) + " |")
+    rows += ["", "| Limit | Scenario (and top of the node parameter) | Node parameter: default |"]
+    rows.append("|---|---|---|")
+    for limit in LIMITS.values():
+        node = f"`{limit.node}`: {_number(limit.budget)}" if limit.node else ""
+        unit = f" {limit.unit}" if limit.unit else ""
+        rows.append(f"| {limit.name} | {_number(limit.value)}{unit} | {node} |")
     return "\n".join(rows) + "\n"
 
 
@@ -377,8 +409,12 @@ def render_cli_limits() -> str:
     """The bounds on a scenario file and its robot description, from the constants the code
     checks them with."""
     sys.path.insert(0, str(ROOT))
-    from grasp_safety_ros.cli import scenario as limits
     from grasp_safety_ros.core.model.robot import MAX_URDF_BYTES
+    from grasp_safety_ros.scenario import fields, schema
+
+    limits = SimpleNamespace(
+        **vars(fields), **{k: v for k, v in vars(schema).items() if k.startswith("MAX_")}
+    )
 
     return (
         f"A scenario file is at most {limits.MAX_SCENARIO_BYTES / 1e6:g} MB of UTF-8 text, "
@@ -467,6 +503,7 @@ def render_validation_elbow() -> str:
 GENERATORS: dict[str, Callable[[], str]] = {
     "cli-limits": render_cli_limits,
     "parameters": render_parameters,
+    "options": render_options,
     "bench-arms": render_bench_arms,
     "bench-postures": render_bench_postures,
     "bench-service": render_bench_service,

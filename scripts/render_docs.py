@@ -4,7 +4,8 @@ Two kinds of marked blocks, both rewritten in place:
 
 - ``<!-- generated: NAME -->`` ... ``<!-- end generated -->``: Markdown rendered from the code
   or from committed measurements by GENERATORS[NAME] (``scripts/doc_tables.py``): the node's
-  parameter reference, the command line's input bounds, the benchmark tables (from
+  parameter reference, the table of options (``core.options``), the command line's input
+  bounds, the benchmark tables (from
   ``bench/results*.json``) and the MuJoCo validation's figures (from
   ``docs/validation/results.json``). Cheap and deterministic: the tests compare every such
   block with a fresh render (``check``); timing figures belong here, not in captured blocks.

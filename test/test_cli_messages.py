@@ -12,10 +12,10 @@ import pytest
 import yaml
 
 from grasp_safety_ros.cli.robots import robots_text
-from grasp_safety_ros.cli.scenario import parse_scenario
 from grasp_safety_ros.core.exceptions import InvalidInputError
 from grasp_safety_ros.core.model.robot import example_robot_data_urdf
 from grasp_safety_ros.paths import config_file
+from grasp_safety_ros.scenario.schema import parse_scenario
 
 BOOK = yaml.safe_load(config_file("book_baxter.yaml").read_text())
 POSE = {"position_m": [0, 0, 0], "quat_xyzw": [0, 0, 0, 1]}

@@ -34,7 +34,6 @@ from trajectory_msgs.msg import (
     MultiDOFJointTrajectoryPoint,
 )
 
-from grasp_safety_ros.cli import scenario
 from grasp_safety_ros.core.exceptions import InvalidInputError
 from grasp_safety_ros.core.method.ranking import Grasp
 from grasp_safety_ros.paths import config_file
@@ -58,6 +57,7 @@ from grasp_safety_ros.ros.parameters import check_parameter, parameter_constrain
 from grasp_safety_ros.ros.ranking_job import ClientWatch, FairComputeLock
 from grasp_safety_ros.ros.robot_bundle import build_robot
 from grasp_safety_ros.ros.topic_inputs import MAX_ABS_GRASP_QUALITY, check_quality
+from grasp_safety_ros.scenario import schema as scenario
 
 # --- Count parameters (D) ----------------------------------------------------------------------
 
@@ -65,7 +65,6 @@ from grasp_safety_ros.ros.topic_inputs import MAX_ABS_GRASP_QUALITY, check_quali
 def test_count_parameter_limits_are_the_clis() -> None:
     assert parameters.MAX_GRASPS_LIMIT == scenario.MAX_GRASPS
     assert parameters.MAX_SAMPLES_LIMIT == scenario.MAX_GRASP_SAMPLES
-    assert parameters.MAX_UNCERTAINTY_SAMPLES == scenario.MAX_UNCERTAINTY_SAMPLES
     assert geometry.MAX_OBJECT_SIZE_M == scenario.MAX_OBJECT_SIZE_M
 
 
@@ -487,3 +486,28 @@ def test_planned_velocities_beyond_the_bound_are_refused_naming_the_request_fiel
         JointSpaceTrajectory(robot, grasp.joint_trajectory, pin.SE3.Identity())
     assert error.value.field == "joint_trajectories[0].points[50].velocities[0]"
     assert error.value.reason.startswith(f"joint '{robot.joint_names[-1]}' at 1e+30 rad/s: ")
+
+
+def test_a_nan_effort_score_is_refused_only_when_it_orders() -> None:
+    """Effort is on by default: a grasp of an arm without effort limits has a NaN effort score,
+    an answer (not computable), unless rank_by effort orders by it."""
+    result = ranking([0.2, 0.061, 0.0], [0, 1, 2])
+    result.effort_criterion = "peak_fraction"
+    for evaluation in result.evaluations:
+        evaluation.effort_score = math.nan
+    check_finite_result(result)  # rank_by safety
+    result.rank_by = "effort"
+    with pytest.raises(NonFiniteResultError, match="effort_score = nan"):
+        check_finite_result(result)
+
+
+def test_the_armature_range_orders_are_guarded_too() -> None:
+    result = ranking([0.2, 0.061, 0.0], [0, 1, 2])
+    result.armature_range_message = "ranking stable over the armature ranges: [0, 1, 2]"
+    result.armature_order_lower = [0, 1, 2]
+    for evaluation in result.evaluations:
+        evaluation.score_armature_lower = evaluation.score_armature_upper = 1.0
+    check_finite_result(result)
+    result.evaluations[2].score_armature_upper = math.nan
+    with pytest.raises(NonFiniteResultError, match="score_armature_upper = nan"):
+        check_finite_result(result)

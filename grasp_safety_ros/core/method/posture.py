@@ -39,7 +39,7 @@ import functools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import Any, Protocol
+from typing import Protocol
 
 import numpy as np
 import pinocchio as pin
@@ -47,6 +47,7 @@ import pinocchio as pin
 from ..exceptions import InvalidInputError
 from ..model.inertia import ObjectInertia
 from ..model.trajectory import ObjectTrajectory
+from ..model.waypoint_trajectory import WaypointTrajectory
 from .pool import evaluate_jobs, executor_for, grasps_per_job
 from .ranking import (
     BATCH_GRASPS,
@@ -61,7 +62,7 @@ MAX_RESTARTS = 1000
 """Largest number of posture restarts accepted per grasp."""
 
 DEFAULT_RESTARTS = 8
-"""Default restarts of the CLI and the node (docs/analyses.md, "Posture selection")."""
+"""Default restarts everywhere (core.options; docs/analyses.md, "Posture selection")."""
 
 FOLLOW_ROWS = 64
 """Start postures per kernel call in ``select_posture_batch`` (bounds its buffers: ~45 floats
@@ -74,7 +75,8 @@ class PostureConfig:
 
     Attributes:
         restarts: Start postures tried besides the single IK's, in [0, MAX_RESTARTS];
-            0: the paper's single IK only (the ranking is returned unchanged).
+            0: the paper's single IK only (the ranking is returned unchanged); default
+            DEFAULT_RESTARTS.
         seed: Seed of the scrambled Halton sequence of the IK seeds (repeatable results).
         duplicate_tolerance_rad: Start postures closer than this (largest joint difference)
             [rad or m] to one already found are not followed again.
@@ -85,7 +87,7 @@ class PostureConfig:
             lower bound of a worse one exceeds the best only near the end.
     """
 
-    restarts: int = 0
+    restarts: int = DEFAULT_RESTARTS
     seed: int = 0
     duplicate_tolerance_rad: float = 1e-3
     early_stop: bool = False
@@ -127,10 +129,10 @@ class PostureCriterion(Protocol):
 
     def __call__(
         self,
-        evaluator: Any,
+        evaluator: GraspSafetyEvaluator,
         grasp: Grasp,
         object_inertia: ObjectInertia,
-        trajectory: ObjectTrajectory,
+        trajectory: ObjectTrajectory | WaypointTrajectory,
         evaluations: Sequence[GraspEvaluation],
     ) -> np.ndarray:
         """One finite value per (feasible) evaluation of ``grasp``, in their order."""
@@ -145,7 +147,8 @@ def restart_seeds(evaluator: GraspSafetyEvaluator, config: PostureConfig) -> np.
     lower = np.where(np.isfinite(robot.lower_limits), robot.lower_limits, -np.pi)
     upper = np.where(np.isfinite(robot.upper_limits), robot.upper_limits, np.pi)
     unit = scrambled_halton(robot.num_joints, config.restarts, config.seed)
-    return lower + unit * (upper - lower)
+    seeds: np.ndarray = lower + unit * (upper - lower)
+    return seeds
 
 
 def scrambled_halton(dimensions: int, count: int, seed: int) -> np.ndarray:
@@ -219,7 +222,7 @@ def select_posture(
     evaluator: GraspSafetyEvaluator,
     grasp: Grasp,
     object_inertia: ObjectInertia,
-    trajectory: ObjectTrajectory,
+    trajectory: ObjectTrajectory | WaypointTrajectory,
     single_ik: GraspEvaluation,
     config: PostureConfig,
     metric: str,
@@ -263,7 +266,7 @@ def select_posture_batch(
     evaluator: GraspSafetyEvaluator,
     grasps: Sequence[Grasp],
     object_inertia: ObjectInertia,
-    trajectory: ObjectTrajectory,
+    trajectory: ObjectTrajectory | WaypointTrajectory,
     single_iks: Sequence[GraspEvaluation],
     config: PostureConfig,
     metric: str,
@@ -339,7 +342,7 @@ def select_posture_batch(
 
 def _choose(
     evaluator: GraspSafetyEvaluator,
-    case: tuple[Grasp, ObjectInertia, ObjectTrajectory],
+    case: tuple[Grasp, ObjectInertia, ObjectTrajectory | WaypointTrajectory],
     single_ik: GraspEvaluation,
     followed: list[GraspEvaluation | None],
     config_tried_reached: tuple[PostureConfig, int, bool],
@@ -401,7 +404,7 @@ def select_postures(
     evaluator: GraspSafetyEvaluator,
     grasps: Sequence[Grasp],
     object_inertia: ObjectInertia,
-    trajectory: ObjectTrajectory,
+    trajectory: ObjectTrajectory | WaypointTrajectory,
     ranking: Ranking,
     config: PostureConfig,
     progress: Callable[[int, int], None] | None = None,
