@@ -22,6 +22,7 @@ import pinocchio as pin
 
 from ..exceptions import FrameNotFoundError, InvalidInputError
 from ..input_checks import finite_array
+from .mjcf_frames import place_frames_as_mujoco
 
 EXAMPLE_ROBOT_DATA_PREFIX = "example-robot-data:"
 
@@ -327,7 +328,9 @@ def load_mjcf_model(text: str, is_xml: bool) -> pin.Model:
     Pinocchio's MJCF reader; joint ``armature`` comes with it (``model.armature``).
 
     Meshes are not read: every body with geoms needs an explicit ``<inertial>`` (MuJoCo's
-    ``mj_saveLastXML`` writes a model's compiled inertials), else it is refused.
+    ``mj_saveLastXML`` writes a model's compiled inertials), else it is refused. Body and site
+    frames are placed where MuJoCo places them (``mjcf_frames``: Pinocchio's reader misplaces
+    sites below jointless bodies).
     """
     where = "MJCF XML" if is_xml else f"'{text}'"
     try:
@@ -347,11 +350,14 @@ def load_mjcf_model(text: str, is_xml: bool) -> pin.Model:
             with tempfile.TemporaryDirectory() as folder:
                 path = Path(folder) / "robot.xml"
                 path.write_text(text)
-                return pin.buildModelFromMJCF(str(path))
-        return pin.buildModelFromMJCF(text)
+                model = pin.buildModelFromMJCF(str(path))
+        else:
+            model = pin.buildModelFromMJCF(text)
     except (RuntimeError, ValueError) as error:
         message = " ".join(str(error).split()) or "parse error"
         raise InvalidInputError("robot.urdf", f"cannot read {where}: {message}") from None
+    place_frames_as_mujoco(model, text, is_xml)
+    return model
 
 
 @dataclass(frozen=True)
