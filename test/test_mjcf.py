@@ -214,7 +214,8 @@ def chain_bodies(depth: int) -> list[tuple]:
     """(name, parent, pos, rotation, joint axis or None, sites) of an arm whose two hinges are
     followed by ``depth`` jointless bodies, each offset and turned, then a 'hand' (turned 90°
     about z, site 'tcp' at x 0.1) and a hinged 'wrist' carrying a jointless 'palm' and
-    below it a jointless 'finger' (site 'pad'). The base body 'base_link' sits at the world origin."""
+    below it a jointless 'finger' (site 'pad'). The base body 'base_link' sits at the world
+    origin."""
     bodies = [
         ("link1", "base_link", (0.0, 0.0, 0.1), turn(0, 0, 0), (0, 0, 1), []),
         ("link2", "link1", (0.0, 0.05, 0.25), turn(0.2, 0, 0), (0, 1, 0), []),
@@ -389,3 +390,20 @@ def test_a_tip_site_below_jointless_bodies_ranks_as_the_same_urdf() -> None:
         a.evaluations[0].effective_mass_kg, b.evaluations[0].effective_mass_kg, "mass", tolerance
     )
     assert a.order == b.order
+
+
+def test_a_frame_that_cannot_be_placed_as_mujoco_is_refused_naming_it() -> None:
+    """A frame that a fixed offset from its Pinocchio joint cannot put where MuJoCo puts it at
+    both configurations (here: MuJoCo reads a description whose second hinge sits elsewhere)
+    is refused, naming the frame."""
+    from grasp_safety_ros.core.model.mjcf_frames import place_frames_as_mujoco
+    from grasp_safety_ros.core.model.robot import load_urdf_model
+
+    bodies = chain_bodies(1)
+    model = load_urdf_model(chain_mjcf(bodies))
+    moved = [
+        (name, parent, (0.1, 0.2, 0.3) if name == "link2" else pos, rotation, axis, sites)
+        for name, parent, pos, rotation, axis, sites in bodies
+    ]
+    with pytest.raises(InvalidInputError, match=r"robot\.urdf: MJCF frame 'link2'"):
+        place_frames_as_mujoco(model, chain_mjcf(moved), is_xml=True)
