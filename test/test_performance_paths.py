@@ -811,6 +811,27 @@ def mass_matrices(robot: RobotModel, model: pin.Model, joint_positions: np.ndarr
     return np.array(matrices)
 
 
+def path_tolerance(
+    robot: RobotModel, object_inertia: ObjectInertia, grasp: Grasp, joint_positions: np.ndarray
+) -> float:
+    """``dynamics_tolerance`` of a grasp's joint path without its terms: k · cond · eps, cond
+    the worse of M's (the chain carrying the object) and the tip Jacobian's along the path."""
+    model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
+    data, jacobians = robot.model.createData(), []
+    for positions in joint_positions:
+        pin.computeJointJacobians(robot.model, data, robot.q_from_positions(positions))
+        jacobians.append(
+            pin.getFrameJacobian(
+                robot.model, data, robot.tip_frame_id, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+            )
+        )
+    condition = max(
+        condition_number(mass_matrices(robot, model, joint_positions)),
+        condition_number(jacobians, PSEUDO_INVERSE_RCOND),
+    )
+    return rounding_tolerance(condition, ROUNDINGS_PER_JOINT * robot.num_joints)
+
+
 def effort_tolerances(
     robot: RobotModel,
     evaluation: GraspEvaluation,
