@@ -312,15 +312,28 @@ def test_the_issue_case_a_site_below_a_jointless_body_lands_where_mujoco_puts_it
     np.testing.assert_allclose(tcp.rotation, turn(0, 0, np.pi / 2), rtol=0, atol=PLACED_M)
 
 
-@pytest.mark.parametrize("depth", [1, 2, 3])
-def test_sites_and_bodies_below_jointless_chains_match_mujoco(depth: int) -> None:
+WRIST = '<joint name="wrist_joint" axis="1 0 0" range="-3 3"/>'
+WRISTS = {  # the wrist's hinge as written, unbounded, with a reference angle, or sliding
+    "hinge": WRIST,
+    "unbounded": '<joint name="wrist_joint" axis="1 0 0"/>',
+    "ref": '<joint name="wrist_joint" axis="1 0 0" range="-3 3" ref="0.7"/>',
+    "slide": '<joint name="wrist_joint" type="slide" axis="1 0 0" range="-0.3 0.3"/>',
+}
+
+
+@pytest.mark.parametrize(
+    ("depth", "wrist"),
+    [(1, "hinge"), (2, "hinge"), (3, "hinge"), (2, "unbounded"), (3, "ref"), (1, "slide")],
+)
+def test_sites_and_bodies_below_jointless_chains_match_mujoco(depth: int, wrist: str) -> None:
     """Oracle: MuJoCo's own forward kinematics (xpos/xmat, site_xpos/site_xmat) of the same
-    MJCF at random configurations, every body and site."""
+    MJCF at random configurations (Pinocchio's q: MuJoCo's qpos minus qpos0, the joints'
+    ``ref``), every body and site."""
     import mujoco
 
     from grasp_safety_ros.core.model.robot import load_urdf_model
 
-    xml = chain_mjcf(chain_bodies(depth))
+    xml = chain_mjcf(chain_bodies(depth)).replace(WRIST, WRISTS[wrist])
     model, mj_model = load_urdf_model(xml), mujoco.MjModel.from_xml_string(xml)
     mj_data, data = mujoco.MjData(mj_model), model.createData()
     rng = np.random.default_rng(depth)
@@ -331,7 +344,8 @@ def test_sites_and_bodies_below_jointless_chains_match_mujoco(depth: int) -> Non
         q = np.zeros(model.nq)
         for joint_id in range(1, model.njoints):
             index = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_JOINT, model.names[joint_id])
-            q[model.joints[joint_id].idx_q] = angles[mj_model.jnt_qposadr[index]]
+            address = mj_model.jnt_qposadr[index]
+            q[model.joints[joint_id].idx_q] = angles[address] - mj_model.qpos0[address]
         pin.framesForwardKinematics(model, data, q)
         for kind, names, origins, axes in (
             (

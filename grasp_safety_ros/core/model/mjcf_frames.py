@@ -59,37 +59,41 @@ def _compile_with_mujoco(text: str, is_xml: bool) -> Any:
 
 
 def _configurations(model: pin.Model) -> Iterator[np.ndarray]:
-    """Pinocchio's zero configuration, then a generic one (fixed fractions of each joint's
-    range; 0.3 + 0.2 k rad or m where a joint is unbounded)."""
-    yield pin.neutral(model)
-    values = []
-    for k in range(model.nv):
-        lower, upper = model.lowerPositionLimit[k], model.upperPositionLimit[k]
-        bounded = np.isfinite(lower) and np.isfinite(upper) and upper - lower < 1e3
-        values.append(
-            lower + (0.35 + 0.1 * (k % 4)) * (upper - lower) if bounded else 0.3 + 0.2 * k
-        )
-    yield pin.integrate(model, pin.neutral(model), np.array(values))
+    """Pinocchio's zero configuration, then a generic one: each one-degree-of-freedom joint at
+    a fixed fraction of its range (0.3 + 0.2 k rad or m where unbounded); ball and free joints
+    stay at their zero (MuJoCo's qpos0)."""
+    zero = pin.neutral(model)
+    yield zero
+    step = np.zeros(model.nv)
+    for k, joint in enumerate(model.joints[1:]):
+        if joint.nv != 1:
+            continue
+        lower = model.lowerPositionLimit[joint.idx_q]
+        upper = model.upperPositionLimit[joint.idx_q]
+        fraction = 0.35 + 0.1 * (k % 4)
+        bounded = joint.nq == 1 and np.isfinite(lower) and np.isfinite(upper)
+        bounded = bounded and upper - lower < 1e3
+        step[joint.idx_v] = fraction * (upper - lower) + lower if bounded else 0.3 + 0.2 * k
+    yield pin.integrate(model, zero, step)
 
 
 def _mujoco_positions(model: pin.Model, mj_model: Any, q: np.ndarray) -> np.ndarray:
-    """MuJoCo's qpos of Pinocchio's configuration q (joints matched by name; hinge and slide
-    joints measured from their ``ref``, as MuJoCo's qpos0)."""
+    """MuJoCo's qpos of Pinocchio's configuration q: one-degree-of-freedom joints matched by
+    name, measured from their ``ref`` (MuJoCo's qpos0); the others at qpos0."""
     import mujoco
 
     qpos = mj_model.qpos0.copy()
-    zero = pin.neutral(model)
+    step = pin.difference(model, pin.neutral(model), q)
     for joint_id in range(1, model.njoints):
-        name = model.names[joint_id]
+        joint, name = model.joints[joint_id], model.names[joint_id]
+        if joint.nv != 1:
+            continue
         mj_joint = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_JOINT, name)
-        joint = model.joints[joint_id]
-        if mj_joint < 0 or joint.nv != 1:
+        if mj_joint < 0:
             raise InvalidInputError(
-                "robot.urdf",
-                f"MJCF joint '{name}': only hinge and slide joints can be checked against MuJoCo",
+                "robot.urdf", f"MJCF joint '{name}': MuJoCo has no joint of that name"
             )
-        step = pin.difference(model, zero, q)[joint.idx_v]
-        qpos[mj_model.jnt_qposadr[mj_joint]] += step
+        qpos[mj_model.jnt_qposadr[mj_joint]] += step[joint.idx_v]
     return qpos
 
 
@@ -127,7 +131,7 @@ def place_frames_as_mujoco(model: pin.Model, text: str, is_xml: bool) -> list[st
     same description (XML text or a file path); return the names of the frames moved.
 
     InvalidInputError (``robot.urdf``) naming the frame where a moved frame still differs from
-    MuJoCo at the generic configuration, naming the joint where a joint cannot be matched.
+    MuJoCo at the generic configuration, naming the joint where MuJoCo has none of its name.
     """
     mj_model = _compile_with_mujoco(text, is_xml)
     data = model.createData()
