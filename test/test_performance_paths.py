@@ -54,11 +54,16 @@ from grasp_safety_ros.core.model.trajectory import TipMotion, exp3_batch
 
 needs_numba = pytest.mark.skipif(not compiled_available(), reason="numba is not installed")
 RTOL = 1e-9
+"""Rankings of two backends: each IK stops within its own tolerance, so the postures (and the
+masses and worst-case directions there) agree to that, not to rounding."""
 ROUNDING = rounding_tolerance(1.0, 8) * 6.0
 """Kernel vs Pinocchio on single joint operations (integrate, difference), absolute [rad]: the
 kernels fuse multiply-adds (one rounding instead of two, ``kernels._jit``), so they agree to
 rounding, not bit for bit: k = 8 roundings (sine, cosine, atan2, products) of angles up to
 6 rad (condition 1)."""
+TIP_MOTION = rounding_tolerance(1.0, 32)
+"""The tip's direction and speed along the object's motion (the trajectory's, not the arm's):
+a few SE(3) compositions, a norm and a division (condition 1); k = 32 (3 eps measured)."""
 BOX = solid_box(0.8, [0.08, 0.12, 0.2], [0.0, 0.01, -0.02])
 
 
@@ -93,8 +98,12 @@ def assert_same_ranking(a: Ranking, b: Ranking, rtol: float = RTOL) -> None:
         np.testing.assert_array_equal(x.direction_is_worst_case, y.direction_is_worst_case)
         np.testing.assert_allclose(x.effective_mass_kg, y.effective_mass_kg, rtol=rtol)
         np.testing.assert_allclose(x.joint_positions, y.joint_positions, rtol=0, atol=1e-8)
-        np.testing.assert_allclose(x.directions_in_base, y.directions_in_base, atol=1e-12)
-        np.testing.assert_allclose(x.tip_speed_m_s, y.tip_speed_m_s, rtol=1e-12, atol=1e-15)
+        assert_close_to_scale(x.tip_speed_m_s, y.tip_speed_m_s, "speeds", TIP_MOTION)
+        along = ~x.direction_is_worst_case  # the motion's direction; else M's eigenvector,
+        for rows, tolerance in ((along, TIP_MOTION), (~along, rtol)):  # as the masses
+            if rows.any():
+                ours, theirs = x.directions_in_base[rows], y.directions_in_base[rows]
+                assert_close_to_scale(ours, theirs, "directions", tolerance)
         assert x.score == pytest.approx(y.score, rel=rtol)
 
 
