@@ -127,39 +127,3 @@ def random_rotation(rng: np.random.Generator) -> np.ndarray:
     quat = rng.normal(size=4)
     quat /= np.linalg.norm(quat)
     return pin.Quaternion(*quat).toRotationMatrix()
-
-
-# --- Tolerances of compiled vs reference comparisons, derived from the problem -----------------
-
-EPS = float(np.finfo(float).eps)
-"""Unit roundoff of float64 (2.2e-16)."""
-
-
-def condition_number(matrices: np.ndarray, rcond: float = 0.0) -> float:
-    """The largest 2-norm condition number σ_max / σ_min over a stack (..., m, n) of matrices;
-    singular values at or below ``rcond`` σ_max are dropped, as a pseudo-inverse with that
-    ``rcond`` drops them (a rank-deficient J is conditioned by the directions it keeps)."""
-    values = np.linalg.svd(np.asarray(matrices, dtype=float), compute_uv=False)
-    values = values.reshape(-1, values.shape[-1])
-    largest = values[:, :1]
-    kept = np.where(values > rcond * largest, values, np.inf)
-    return float(np.max(largest[:, 0] / kept.min(axis=1)))
-
-
-def rounding_tolerance(condition: float, k: float) -> float:
-    """k · cond · eps: the relative error two float64 evaluations of the same quantity may
-    show when they round differently (another summation order, fused multiply-adds, another
-    CPU or numba target), for a problem of condition number ``cond``. ``k`` counts the
-    roundings each path commits (stated by each caller)."""
-    return k * condition * EPS
-
-
-def assert_close_to_scale(
-    actual: np.ndarray, expected: np.ndarray, what: str, tolerance: float
-) -> None:
-    """max |actual - expected| <= tolerance · max |expected| (a relative error of the array,
-    so that entries near zero are held to their array's scale, not to their own)."""
-    assert np.shape(actual) == np.shape(expected), what
-    scale = max(float(np.max(np.abs(expected))), 1e-300)
-    error = float(np.max(np.abs(np.asarray(actual) - expected))) / scale
-    assert error <= tolerance, f"{what}: relative error {error:.2e} > {tolerance:.2e}"

@@ -10,18 +10,17 @@ from dataclasses import replace
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import ARM7_AXES, assert_close_to_scale, serial_arm_urdf
+from conftest import ARM7_AXES, serial_arm_urdf
 from test_performance_paths import (  # noqa: F401 - fixtures
     BOX,
     TERM_ARMS,
     _terms_case,
     continuous_arm,
-    effort_tolerances,
     geared_arm,
-    kinematics_tolerance,
     needs_numba,
     prismatic_arm,
 )
+from tolerances import assert_close_to_scale, effort_tolerances, kinematics_tolerance
 
 from grasp_safety_ros.core import (
     Grasp,

@@ -8,13 +8,12 @@ import pytest
 from conftest import (
     ARM6_AXES,
     BAXTER_SEED,
-    assert_close_to_scale,
     book_trajectory,
     random_positions,
     random_rotation,
     serial_arm_urdf,
 )
-from test_performance_paths import path_tolerance
+from tolerances import assert_close_to_scale, path_tolerance
 
 from grasp_safety_ros.core import (
     Grasp,

@@ -9,6 +9,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from conftest import random_positions
+from tolerances import assert_close_to_scale, condition_number, rounding_tolerance
 
 from grasp_safety_ros.core import (
     EvaluationConfig,
@@ -369,12 +370,9 @@ def test_sites_and_bodies_below_jointless_chains_match_mujoco(depth: int, wrist:
 
 def test_a_tip_site_below_jointless_bodies_ranks_as_the_same_urdf() -> None:
     """tip_frame on the MJCF site 'pad' (two jointless bodies below a hinged wrist, itself below
-    two jointless bodies) ranks
-    as the URDF of the same geometry with a 'pad' link: same tip poses, same masses along the
-    same planned joint path (both Pinocchio; fixed joints merged in another order: rounding,
-    k · cond(M) · eps)."""
-    from conftest import assert_close_to_scale, condition_number, rounding_tolerance
-
+    two jointless bodies) ranks as the URDF of the same geometry with a 'pad' link: same tip
+    poses, same masses along the same planned joint path (both Pinocchio; fixed joints merged
+    in another order: rounding, k · cond(M) · eps)."""
     bodies = chain_bodies(2)
     mjcf = RobotModel.from_urdf(chain_mjcf(bodies), "base_link", "pad")
     urdf = RobotModel.from_urdf(chain_urdf(bodies), "base_link", "pad")

@@ -8,21 +8,19 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import (
-    BAXTER_SEED,
-    assert_close_to_scale,
-    book_trajectory,
-    condition_number,
-    random_positions,
-    rounding_tolerance,
-)
+from conftest import BAXTER_SEED, book_trajectory, random_positions
 from test_performance_paths import (
     BOX,
     _terms_case,
-    dynamics_tolerance,
     grasps_near_identity,
     needs_numba,
     reach_trajectory,
+)
+from tolerances import (
+    assert_close_to_scale,
+    condition_number,
+    dynamics_tolerance,
+    rounding_tolerance,
 )
 
 from grasp_safety_ros.core import (

@@ -8,7 +8,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from conftest import ARM7_AXES, BAXTER_SEED, book_trajectory, random_positions, serial_arm_urdf
-from test_performance_paths import path_tolerance
+from tolerances import path_tolerance
 
 from grasp_safety_ros.core import (
     EvaluationConfig,

@@ -10,15 +10,14 @@ from dataclasses import replace
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import (
-    ARM7_AXES,
+from conftest import ARM7_AXES, random_positions, serial_arm_urdf
+from tolerances import (
+    ROUNDINGS_PER_JOINT,
     assert_close_to_scale,
     condition_number,
-    random_positions,
+    mass_matrices,
     rounding_tolerance,
-    serial_arm_urdf,
 )
-from test_performance_paths import ROUNDINGS_PER_JOINT, mass_matrices
 
 from grasp_safety_ros.core import (
     Grasp,

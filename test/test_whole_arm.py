@@ -9,7 +9,8 @@ import math
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import BAXTER_SEED, book_trajectory, random_positions, rounding_tolerance
+from conftest import BAXTER_SEED, book_trajectory, random_positions
+from tolerances import rounding_tolerance
 
 from grasp_safety_ros.core import (
     Grasp,
