@@ -201,6 +201,26 @@ def run_cli(tmp_path, data: dict, name: str, capsys) -> tuple[int, dict | None, 
     return code, json.loads(out.read_text()) if code == 0 else None, captured.out + captured.err
 
 
+def test_armature_given_as_zero_is_given_not_missing(tmp_path, capsys) -> None:
+    """A direct-drive arm (armature_kgm2: zeros, stated) has known rotor inertia, nil: no
+    "not given ... a lower bound" note, in the core, the CLI's text and its JSON; leaving it
+    out still gives the note. Its masses are the links' (equal to the plain arm's)."""
+    from grasp_safety_ros.core.model.robot import NO_ARMATURE_NOTE
+
+    urdf = serial_arm_urdf(ARM6_AXES)
+    stated = RobotModel.from_urdf(urdf, "base_link", "tool", armature_kgm2=[0.0] * 6)
+    assert stated.armature_given and stated.links_only() is stated
+    np.testing.assert_array_equal(stated.model.armature, 0.0)
+    assert not RobotModel.from_urdf(urdf, "base_link", "tool").armature_given
+    code, direct, text = run_cli(tmp_path, arm_scenario(tmp_path, [0.0] * 6), "direct", capsys)
+    assert code == 0 and NO_ARMATURE_NOTE not in text
+    assert direct["armature"]["given"] is True and direct["armature"]["note"] == ""
+    code, plain, text = run_cli(tmp_path, arm_scenario(tmp_path, None), "plain", capsys)
+    assert code == 0 and text.count(NO_ARMATURE_NOTE) == 1 and not plain["armature"]["given"]
+    for ours, theirs in zip(direct["grasps"], plain["grasps"], strict=True):
+        assert ours["samples"]["effective_mass_kg"] == theirs["samples"]["effective_mass_kg"]
+
+
 def test_scenario_armature_gives_both_columns_and_the_note_once(tmp_path, capsys) -> None:
     from grasp_safety_ros.core.model.robot import NO_ARMATURE_NOTE
 
@@ -365,7 +385,9 @@ def test_response_carries_both_masses_the_ratio_and_the_note(geared: RobotModel,
     grasps = grasps_near_identity(2)
     poses = PoseArray(poses=[Pose(), Pose()])
     config = EvaluationConfig(backend=backend, workers=1)
-    for robot in (geared, plain):
+    direct_drive = plain.with_armature(np.zeros(plain.num_joints))  # given as zero: given
+    assert direct_drive.armature_given and not plain.armature_given
+    for robot in (geared, plain, direct_drive):
         ranking = GraspSafetyEvaluator(robot, config).rank(grasps, BOX, trajectory, seed)
         message = ranking_msg(ranking, poses, "base_link", Time(), 0.0)
         assert message.armature_given == robot.armature_given

@@ -9,6 +9,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from conftest import random_positions
+from tolerances import assert_close_to_scale, condition_number, rounding_tolerance
 
 from grasp_safety_ros.core import (
     EvaluationConfig,
@@ -198,3 +199,223 @@ def test_node_takes_an_mjcf_robot_description() -> None:
     )
     assert from_topic is not None and from_topic.origin == "/robot_description"
     assert from_topic.robot.joint_names == ("j1", "j2", "j3", "j4")
+
+
+# --- Frames below jointless bodies: where MuJoCo places them ----------------------------------
+
+PLACED_M = 1e-9
+"""Frames agree with MuJoCo's to this distance [m] and angle [rad] (both rounding-level)."""
+
+
+def turn(x: float, y: float, z: float) -> np.ndarray:
+    return pin.exp3(np.array([x, y, z]))
+
+
+def chain_bodies(depth: int) -> list[tuple]:
+    """(name, parent, pos, rotation, joint axis or None, sites) of an arm whose two hinges are
+    followed by ``depth`` jointless bodies, each offset and turned, then a 'hand' (turned 90°
+    about z, site 'tcp' at x 0.1) and a hinged 'wrist' carrying a jointless 'palm' and
+    below it a jointless 'finger' (site 'pad'). The base body 'base_link' sits at the world
+    origin."""
+    bodies = [
+        ("link1", "base_link", (0.0, 0.0, 0.1), turn(0, 0, 0), (0, 0, 1), []),
+        ("link2", "link1", (0.0, 0.05, 0.25), turn(0.2, 0, 0), (0, 1, 0), []),
+    ]
+    parent = "link2"
+    for k in range(depth):
+        name = f"fixed{k + 1}"
+        rotation = turn(0.3 * (k + 1), -0.2, 0.4)
+        bodies.append((name, parent, (0.5, 0.1 * k, 0.05), rotation, None, []))
+        parent = name
+    bodies += [
+        ("hand", parent, (0.2, 0.0, 0.0), turn(0, 0, np.pi / 2), None, [("tcp", (0.1, 0, 0))]),
+        ("wrist", parent, (0.0, 0.1, 0.2), turn(0, 0.3, 0), (1, 0, 0), []),
+        ("palm", "wrist", (0.05, 0.0, 0.1), turn(0, 0.2, 0.1), None, []),
+        ("finger", "palm", (0.15, 0.0, 0.05), turn(0.5, 0, 0.2), None, [("pad", (0.1, 0, 0))]),
+    ]
+    return bodies
+
+
+def chain_mjcf(bodies: list[tuple]) -> str:
+    children: dict[str, list[tuple]] = {}
+    for body in bodies:
+        children.setdefault(body[1], []).append(body)
+
+    def body_xml(name: str, parent: str, pos, rotation, axis, sites) -> str:
+        quat = pin.Quaternion(rotation)
+        joint = f'<joint name="{name}_joint" axis="{vector(axis)}" range="-3 3"/>' if axis else ""
+        return (
+            f'<body name="{name}" pos="{vector(pos)}" '
+            f'quat="{quat.w!r} {quat.x!r} {quat.y!r} {quat.z!r}">{joint}'
+            '<inertial pos="0.05 0.01 0.02" mass="0.7" diaginertia="0.01 0.02 0.015"/>'
+            + "".join(f'<site name="{s}" pos="{vector(p)}"/>' for s, p in sites)
+            + "".join(body_xml(*child) for child in children.get(name, []))
+            + "</body>"
+        )
+
+    inner = "".join(body_xml(*child) for child in children["base_link"])
+    return (
+        '<mujoco model="chain"><compiler angle="radian"/><worldbody><body name="base_link">'
+        f"{inner}</body></worldbody></mujoco>"
+    )
+
+
+def chain_urdf(bodies: list[tuple]) -> str:
+    """The same geometry in URDF: hinges as revolute joints, the rest fixed, sites as links."""
+    parts = ['<robot name="chain"><link name="base_link"/>']
+    inertial = (
+        '<inertial><origin xyz="0.05 0.01 0.02"/><mass value="0.7"/>'
+        '<inertia ixx="0.01" ixy="0" ixz="0" iyy="0.02" iyz="0" izz="0.015"/></inertial>'
+    )
+    for name, parent, pos, rotation, axis, sites in bodies:
+        kind = "revolute" if axis else "fixed"
+        rpy = " ".join(repr(float(v)) for v in pin.rpy.matrixToRpy(rotation))
+        parts.append(
+            f'<link name="{name}">{inertial}</link><joint name="{name}_joint" type="{kind}">'
+            f'<parent link="{parent}"/><child link="{name}"/>'
+            f'<origin xyz="{vector(pos)}" rpy="{rpy}"/>'
+            + (
+                f'<axis xyz="{vector(axis)}"/><limit lower="-3" upper="3" effort="50" '
+                'velocity="2"/>'
+                if axis
+                else ""
+            )
+            + "</joint>"
+        )
+        for site, offset in sites:
+            parts.append(
+                f'<link name="{site}"/><joint name="{site}_site" type="fixed">'
+                f'<parent link="{name}"/><child link="{site}"/><origin xyz="{vector(offset)}"/>'
+                "</joint>"
+            )
+    return "".join(parts) + "</robot>"
+
+
+def test_the_issue_case_a_site_below_a_jointless_body_lands_where_mujoco_puts_it() -> None:
+    """A hinge body, a jointless body at x 0.5, a body at x 0.2 turned 90° about z with a site
+    at x 0.1: MuJoCo places the site at (0.7, 0.1, 0) (Pinocchio 4.1 alone: (0.2, 0.1, 0))."""
+    from grasp_safety_ros.core.model.robot import load_urdf_model
+
+    xml = (
+        '<mujoco><worldbody><body name="arm"><joint name="j1" axis="0 0 1"/>'
+        '<inertial pos="0.1 0 0" mass="1" diaginertia="0.01 0.01 0.01"/>'
+        '<body name="plate" pos="0.5 0 0">'
+        '<inertial pos="0 0 0" mass="0.5" diaginertia="0.01 0.01 0.01"/>'
+        '<body name="hand" pos="0.2 0 0" euler="0 0 90">'
+        '<inertial pos="0 0 0" mass="0.3" diaginertia="0.01 0.01 0.01"/>'
+        '<site name="tcp" pos="0.1 0 0"/></body></body></body></worldbody></mujoco>'
+    )
+    model = load_urdf_model(xml)
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, pin.neutral(model))
+    tcp = data.oMf[model.getFrameId("tcp")]
+    np.testing.assert_allclose(tcp.translation, [0.7, 0.1, 0.0], rtol=0, atol=PLACED_M)
+    np.testing.assert_allclose(tcp.rotation, turn(0, 0, np.pi / 2), rtol=0, atol=PLACED_M)
+
+
+WRIST = '<joint name="wrist_joint" axis="1 0 0" range="-3 3"/>'
+WRISTS = {  # the wrist's hinge as written, unbounded, with a reference angle, or sliding
+    "hinge": WRIST,
+    "unbounded": '<joint name="wrist_joint" axis="1 0 0"/>',
+    "ref": '<joint name="wrist_joint" axis="1 0 0" range="-3 3" ref="0.7"/>',
+    "slide": '<joint name="wrist_joint" type="slide" axis="1 0 0" range="-0.3 0.3"/>',
+}
+
+
+@pytest.mark.parametrize(
+    ("depth", "wrist"),
+    [(1, "hinge"), (2, "hinge"), (3, "hinge"), (2, "unbounded"), (3, "ref"), (1, "slide")],
+)
+def test_sites_and_bodies_below_jointless_chains_match_mujoco(depth: int, wrist: str) -> None:
+    """Oracle: MuJoCo's own forward kinematics (xpos/xmat, site_xpos/site_xmat) of the same
+    MJCF at random configurations (Pinocchio's q: MuJoCo's qpos minus qpos0, the joints'
+    ``ref``), every body and site."""
+    import mujoco
+
+    from grasp_safety_ros.core.model.robot import load_urdf_model
+
+    xml = chain_mjcf(chain_bodies(depth)).replace(WRIST, WRISTS[wrist])
+    model, mj_model = load_urdf_model(xml), mujoco.MjModel.from_xml_string(xml)
+    mj_data, data = mujoco.MjData(mj_model), model.createData()
+    rng = np.random.default_rng(depth)
+    for _ in range(5):
+        angles = rng.uniform(-3.0, 3.0, mj_model.nq)
+        mj_data.qpos[:] = angles
+        mujoco.mj_kinematics(mj_model, mj_data)
+        q = np.zeros(model.nq)
+        for joint_id in range(1, model.njoints):
+            index = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_JOINT, model.names[joint_id])
+            address = mj_model.jnt_qposadr[index]
+            q[model.joints[joint_id].idx_q] = angles[address] - mj_model.qpos0[address]
+        pin.framesForwardKinematics(model, data, q)
+        for kind, names, origins, axes in (
+            (
+                mujoco.mjtObj.mjOBJ_BODY,
+                ("hand", "wrist", "palm", "finger"),
+                mj_data.xpos,
+                mj_data.xmat,
+            ),
+            (mujoco.mjtObj.mjOBJ_SITE, ("tcp", "pad"), mj_data.site_xpos, mj_data.site_xmat),
+        ):
+            for name in names:
+                index = mujoco.mj_name2id(mj_model, kind, name)
+                placement = data.oMf[model.getFrameId(name)]
+                np.testing.assert_allclose(
+                    placement.translation, origins[index], rtol=0, atol=PLACED_M, err_msg=name
+                )
+                np.testing.assert_allclose(
+                    placement.rotation.ravel(), axes[index], rtol=0, atol=PLACED_M, err_msg=name
+                )
+
+
+def test_a_tip_site_below_jointless_bodies_ranks_as_the_same_urdf() -> None:
+    """tip_frame on the MJCF site 'pad' (two jointless bodies below a hinged wrist, itself below
+    two jointless bodies) ranks as the URDF of the same geometry with a 'pad' link: same tip
+    poses, same masses along the same planned joint path (both Pinocchio; fixed joints merged
+    in another order: rounding, k · cond(M) · eps)."""
+    bodies = chain_bodies(2)
+    mjcf = RobotModel.from_urdf(chain_mjcf(bodies), "base_link", "pad")
+    urdf = RobotModel.from_urdf(chain_urdf(bodies), "base_link", "pad")
+    assert mjcf.joint_names == urdf.joint_names
+    times = np.linspace(0.0, 1.0, 6)
+    positions = np.array([0.3, -0.4, 0.9]) + np.outer(times, [0.3, -0.2, 0.4])
+    for row in positions:
+        np.testing.assert_allclose(
+            mjcf.transform_tip_to_base(row).homogeneous,
+            urdf.transform_tip_to_base(row).homogeneous,
+            rtol=0,
+            atol=PLACED_M,
+        )
+    plan = PlannedJointTrajectory(urdf.joint_names, times, positions)
+    start = urdf.transform_tip_to_base(positions[0])
+    trajectory = ObjectTrajectory(start, start, 1.0, 0.1)  # unused: the grasp has its plan
+    box = solid_box(0.3, [0.05, 0.05, 0.08])
+    grasps = [Grasp(pin.SE3.Identity(), "tip", plan)]
+    config = EvaluationConfig(workers=1)
+    a = GraspSafetyEvaluator(mjcf, config).rank(grasps, box, trajectory, positions[0])
+    b = GraspSafetyEvaluator(urdf, config).rank(grasps, box, trajectory, positions[0])
+    assert a.evaluations[0].feasible and b.evaluations[0].feasible
+    data = urdf.model.createData()
+    masses = [symmetric(pin.crba(urdf.model, data, urdf.q_from_positions(p))) for p in positions]
+    tolerance = rounding_tolerance(condition_number(masses), 16 * urdf.num_joints)
+    assert_close_to_scale(
+        a.evaluations[0].effective_mass_kg, b.evaluations[0].effective_mass_kg, "mass", tolerance
+    )
+    assert a.order == b.order
+
+
+def test_a_frame_that_cannot_be_placed_as_mujoco_is_refused_naming_it() -> None:
+    """A frame that a fixed offset from its Pinocchio joint cannot put where MuJoCo puts it at
+    both configurations (here: MuJoCo reads a description whose second hinge sits elsewhere)
+    is refused, naming the frame."""
+    from grasp_safety_ros.core.model.mjcf_frames import place_frames_as_mujoco
+    from grasp_safety_ros.core.model.robot import load_urdf_model
+
+    bodies = chain_bodies(1)
+    model = load_urdf_model(chain_mjcf(bodies))
+    moved = [
+        (name, parent, (0.1, 0.2, 0.3) if name == "link2" else pos, rotation, axis, sites)
+        for name, parent, pos, rotation, axis, sites in bodies
+    ]
+    with pytest.raises(InvalidInputError, match=r"robot\.urdf: MJCF frame 'link2'"):
+        place_frames_as_mujoco(model, chain_mjcf(moved), is_xml=True)

@@ -10,6 +10,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from conftest import BAXTER_SEED, book_trajectory, random_positions
+from tolerances import rounding_tolerance
 
 from grasp_safety_ros.core import (
     Grasp,
@@ -285,6 +286,69 @@ def test_iso_over_sites_is_the_worst_per_site_assessment(book: tuple) -> None:
     assert energy == pytest.approx(
         0.5 * result.effective_mass_kg[sample, site] * result.speed_m_s[sample, site] ** 2
     )
+
+
+def iso_force_n(speed_m_s: float, robot_mass_kg: float, region: BodyRegion) -> float:
+    """ISO/TS 15066 Annex A, written out: F = v · sqrt(μ k), μ = (1/m_h + 1/m_r)⁻¹."""
+    reduced = 1.0 / (1.0 / region.effective_mass_kg + 1.0 / robot_mass_kg)
+    return speed_m_s * math.sqrt(reduced * region.spring_constant_n_per_m)
+
+
+WHERE_TOLERANCE = rounding_tolerance(1.0, 8)
+"""The ISO formula recomputed from the reported mass and speed vs the reported peak: the same
+six operations (condition 1) in another order: k = 8."""
+
+
+def test_every_regions_where_fields_reproduce_its_peak_force(
+    baxter: RobotModel, book: tuple
+) -> None:
+    """For every region, those without transient contact too (ratio inf wherever a site
+    moves), the reported site and sample give, through their speed and mass, the reported
+    peak force, and that is the largest force over every site and sample (the compiled and
+    the Pinocchio paths; the tip's own assessment likewise)."""
+    from grasp_safety_ros.core.method.ik import compiled_available
+    from grasp_safety_ros.core.method.terms import grasp_terms
+
+    trajectory, evaluations, sites, whole = book
+    forbidden = {r.name for r in BODY_REGIONS.values() if not r.transient_contact_permitted}
+    assert {"skull_forehead", "face", "neck"} <= forbidden
+    chain = GraspSafetyEvaluator(baxter).ik.chain
+    results = list(whole)  # the Pinocchio path
+    if compiled_available():  # and the compiled one, on the shared terms
+        for evaluation, grasp in zip(evaluations, GRASPS, strict=True):
+            pose = grasp.transform_tip_to_object
+            terms = grasp_terms(baxter, chain, BOOK, pose, evaluation.joint_positions)
+            results.append(
+                evaluate_whole_arm(baxter, evaluation, BOOK, grasp, trajectory, sites, terms=terms)
+            )
+    for result in results:
+        assert {r.region for r in result.regions} >= forbidden
+        speeds, masses = result.speed_m_s, result.effective_mass_kg
+        for assessed in result.regions:
+            region = BODY_REGIONS[assessed.region]
+            site, sample = assessed.worst_site, assessed.worst_sample
+            at_peak = iso_force_n(speeds[sample, site], masses[sample, site], region)
+            assert at_peak == pytest.approx(assessed.peak_contact_force_n, rel=WHERE_TOLERANCE), (
+                assessed.region
+            )
+            moving = speeds > 0.0
+            forces = [
+                iso_force_n(v, m, region)
+                for v, m in zip(speeds[moving], masses[moving], strict=True)
+            ]
+            assert at_peak >= max(forces) * (1.0 - WHERE_TOLERANCE), assessed.region
+            if not region.transient_contact_permitted:
+                assert assessed.worst_force_ratio == math.inf
+    tip = assess_motion(
+        evaluations[0].tip_speed_m_s,
+        evaluations[0].effective_mass_kg,
+        trajectory.duration_s,
+        ["face", "chest"],
+    )
+    for assessed in tip.regions:
+        sample = assessed.worst_sample
+        assert assessed.contact_force_n[sample] == assessed.peak_contact_force_n
+        assert assessed.peak_contact_force_n == assessed.contact_force_n.max() > 0.0
 
 
 def test_whole_arm_ranking(book: tuple) -> None:

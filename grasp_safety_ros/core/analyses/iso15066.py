@@ -240,7 +240,8 @@ class RegionAssessment:
         force_ratio: F(t)/F_tr; where transient contact is not permitted: inf where the tip
             moves, 0 where it is at rest.
         worst_force_ratio: max_t of force_ratio (0 for an empty or motionless trajectory).
-        worst_sample: Sample index of the worst ratio (first one on ties).
+        worst_sample: Sample index of the peak force (first one on ties), where the ratio is
+            worst too (F_tr is a constant; inf wherever moving if not permitted).
         peak_contact_force_n: max_t F(t) [N].
         admissible: worst_force_ratio <= 1 (+ ADMISSIBLE_RATIO_TOLERANCE).
         min_duration_s: T · worst_force_ratio [s]: the shortest duration of the same quintic
@@ -404,10 +405,10 @@ def _region_arrays(
     if not_permitted.any():
         v_max[not_permitted] = 0.0
         ratio[not_permitted] = np.where(speed_m_s > 0.0, np.inf, 0.0)
-    if shape[2]:
-        worst_sample = np.argmax(ratio, axis=2)
+    if shape[2]:  # at the peak force (where F/F_tr is largest, or inf wherever moving)
+        worst_sample = np.argmax(force, axis=2)
         worst = np.take_along_axis(ratio, worst_sample[:, :, None], axis=2)[:, :, 0]
-        peak = force.max(axis=2)
+        peak = np.take_along_axis(force, worst_sample[:, :, None], axis=2)[:, :, 0]
     else:
         worst_sample = np.zeros(shape[:2], dtype=int)
         worst = peak = np.zeros(shape[:2])

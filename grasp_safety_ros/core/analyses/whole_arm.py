@@ -233,7 +233,8 @@ class WholeArmRegion:
         region: Region name.
         transient_contact_permitted: False where the TS permits none (ratio inf when moving).
         worst_force_ratio: max over samples and sites of F/F_tr (0 when nothing moves).
-        worst_site, worst_sample: Where it occurs (first on ties, sample-major).
+        worst_site, worst_sample: Where the peak force occurs (first on ties, sample-major):
+            its site's speed and mass there give peak_contact_force_n.
         peak_contact_force_n: max over samples and sites of F = v·sqrt(μ k) [N].
         admissible: worst_force_ratio <= 1 (+ ADMISSIBLE_RATIO_TOLERANCE).
         min_duration_s: T · worst_force_ratio [s] (0 when nothing moves).
@@ -283,9 +284,10 @@ def _assess_sites_batch(
             ratio = np.where(moving, np.inf, 0.0)
         else:
             ratio = force / region.max_transient_force_n
-        if ratio.shape[1]:
-            where = np.argmax(ratio, axis=1)
-            worst, peak = ratio[np.arange(grasps), where], force.max(axis=1)
+        if ratio.shape[1]:  # at the peak force: F/F_tr's maximum, or inf wherever moving
+            where = np.argmax(force, axis=1)
+            rows = np.arange(grasps)
+            worst, peak = ratio[rows, where], force[rows, where]
         else:
             where, worst, peak = np.zeros(grasps, dtype=int), np.zeros(grasps), np.zeros(grasps)
         columns.append((where.tolist(), worst.tolist(), peak.tolist()))

@@ -102,8 +102,9 @@ class Ranking:
             order; empty when posture selection was not run.
         backend: What ran: ``compiled`` or ``python``, with the reason when ``auto`` fell
             back, e.g. ``python (numba not installed)``; empty when not recorded.
-        armature_given: Whether the chain had armature (reflected rotor inertia); False: the
-            effective masses are the links' only (a lower bound, robot.NO_ARMATURE_NOTE).
+        armature_given: Whether the chain's armature (reflected rotor inertia) was given,
+            zeros included (RobotModel.armature_given); False: not given, the effective masses
+            are the links' only (a lower bound, robot.NO_ARMATURE_NOTE).
     """
 
     joint_names: tuple[str, ...]

@@ -23,6 +23,7 @@ import pinocchio as pin
 from ..exceptions import FrameNotFoundError, InvalidInputError
 from ..input_checks import finite_array
 from .bundled_robots import BUNDLED_ROBOTS, EXAMPLE_ROBOT_DATA_PREFIX
+from .mjcf_frames import place_frames_as_mujoco
 
 EXAMPLE_ROBOT_DATA_URDFS: Mapping[str, str] = {
     "baxter": "baxter_description/urdf/baxter.urdf",
@@ -327,7 +328,9 @@ def load_mjcf_model(text: str, is_xml: bool) -> pin.Model:
     Pinocchio's MJCF reader; joint ``armature`` comes with it (``model.armature``).
 
     Meshes are not read: every body with geoms needs an explicit ``<inertial>`` (MuJoCo's
-    ``mj_saveLastXML`` writes a model's compiled inertials), else it is refused.
+    ``mj_saveLastXML`` writes a model's compiled inertials), else it is refused. Body and site
+    frames are placed where MuJoCo places them (``mjcf_frames``: Pinocchio's reader misplaces
+    sites below jointless bodies).
     """
     where = "MJCF XML" if is_xml else f"'{text}'"
     try:
@@ -347,11 +350,14 @@ def load_mjcf_model(text: str, is_xml: bool) -> pin.Model:
             with tempfile.TemporaryDirectory() as folder:
                 path = Path(folder) / "robot.xml"
                 path.write_text(text)
-                return pin.buildModelFromMJCF(str(path))
-        return pin.buildModelFromMJCF(text)
+                model = pin.buildModelFromMJCF(str(path))
+        else:
+            model = pin.buildModelFromMJCF(text)
     except (RuntimeError, ValueError) as error:
         message = " ".join(str(error).split()) or "parse error"
         raise InvalidInputError("robot.urdf", f"cannot read {where}: {message}") from None
+    place_frames_as_mujoco(model, text, is_xml)
+    return model
 
 
 @dataclass(frozen=True)
@@ -533,8 +539,10 @@ class RobotModel:
         armature_kgm2: Reflected rotor inertia per chain joint, chain order [kg m^2, kg for
             prismatic joints]; written to ``model.armature``, so every Pinocchio call on the
             model or a copy of it (crba, rnea, aba, computeMinverse) includes it.
-        armature_given: Whether the armature was given (explicitly, or non-zero in the
-            description, e.g. an MJCF); False: the effective masses are the links' only.
+        armature_given: Whether the armature was given: explicitly (zeros included: a
+            direct-drive arm's rotor inertia is known to be nil), or non-zero in the
+            description (an MJCF's); False: not given, the effective masses are the links'
+            only and a lower bound (NO_ARMATURE_NOTE).
     """
 
     def __init__(
@@ -611,7 +619,7 @@ class RobotModel:
         self.armature_kgm2 = armature_from_input(
             own if armature_kgm2 is None else armature_kgm2, self.joint_names, base=own
         )
-        self.armature_given = bool(np.any(self.armature_kgm2 > 0.0))
+        self.armature_given = armature_kgm2 is not None or bool(np.any(own > 0.0))
         self.model.armature = np.array(self.armature_kgm2)
         self._links_only: RobotModel | None = None
         self._continuous = np.array([j.nq == 2 for j in self.model.joints[1:]])
@@ -677,23 +685,24 @@ class RobotModel:
     def with_armature(
         self, armature_kgm2: Sequence[float] | Mapping[str, float] | np.ndarray
     ) -> RobotModel:
-        """This chain with another armature (validated as in the constructor; a mapping
+        """This chain with another armature, given (validated as in the constructor; a mapping
         changes the joints it names, the others keep this chain's)."""
         values = armature_from_input(armature_kgm2, self.joint_names, base=self.armature_kgm2)
         robot = copy.copy(self)
         robot.model = self.model.copy()
         robot.model.armature = np.array(values)
         robot.armature_kgm2 = values
-        robot.armature_given = bool(np.any(values > 0.0))
+        robot.armature_given = True
         robot._links_only = None
         return robot
 
     def links_only(self) -> RobotModel:
         """This chain without armature (the links' inertia only): itself when it has none."""
-        if not self.armature_given:
+        if not np.any(self.armature_kgm2 > 0.0):
             return self
         if self._links_only is None:
             self._links_only = self.with_armature(np.zeros(self.num_joints))
+            self._links_only.armature_given = False
         return self._links_only
 
     @property
