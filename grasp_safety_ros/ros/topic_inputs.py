@@ -86,6 +86,11 @@ class TopicInputs:
         with self._lock:
             self._trajectory = msg
 
+    def latest_trajectory(self) -> Path | MultiDOFJointTrajectory | None:
+        """The latest object trajectory (None before the first)."""
+        with self._lock:
+            return self._trajectory
+
     def take(
         self,
     ) -> tuple[PoseArray, Path | MultiDOFJointTrajectory, tuple[float, ...] | None] | None:
