@@ -43,12 +43,12 @@ def robot_trajectory_cost(
         metric: ``mean`` | ``max`` | ``integral`` of the per-sample effective mass.
 
     Returns:
-        The score (kg, or kg s for ``integral``); ``math.inf`` when the motion is infeasible
-        for the model (a joint limit, or a sample where the effective mass is undefined), so
-        MTC ranks it last.
+        The score (kg, or kg s for ``integral``); ``math.inf`` when the model finds the motion
+        infeasible (the evaluation's ``reason``), so MTC ranks it last.
 
     Raises:
-        InvalidInputError: a malformed trajectory, naming the field.
+        InvalidInputError: a malformed trajectory or a position outside the joint limits,
+            naming the field (e.g. ``trajectory.joint_trajectory.points[2].positions``).
     """
     if trajectory.multi_dof_joint_trajectory.points:
         raise InvalidInputError(
