@@ -25,6 +25,7 @@ import pytest
 import rclpy
 import yaml
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion
+from grasp_safety_msgs.msg import GraspEvaluation, GraspRanking
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
@@ -42,7 +43,11 @@ pytest.importorskip("moveit_msgs.msg", reason="moveit_msgs not built (make setup
 from moveit_msgs.msg import CollisionObject, Grasp, MoveItErrorCodes
 from moveit_msgs.srv import GraspPlanning
 
-from grasp_safety_ros.ros.moveit.grasps import planner_qualities, pose_array_of_grasps
+from grasp_safety_ros.ros.moveit.grasps import (
+    planner_qualities,
+    pose_array_of_grasps,
+    ranked_grasps,
+)
 
 FAKE_PLANNER = Path(__file__).with_name("fake_grasp_planner.py")
 START = {"position_m": [1.0, 0.0, 0.03], "quat_xyzw": [0.5, 0.5, 0.5, 0.5]}
@@ -313,3 +318,36 @@ def test_non_finite_planner_quality_counts_as_the_lowest() -> None:
     grasps = [grasp_msg(g) for g in GRASPS]
     assert planner_qualities(grasps) == (0.9, 0.8, 0.2, 0.2)
     assert planner_qualities([grasp_msg({**GRASPS[0], "quality": math.inf})]) is None
+
+
+def synthetic_ranking(rank_by: str, order: list[int], **keys: list[float]) -> GraspRanking:
+    """A GraspRanking of len(values) grasps whose evaluations hold ``keys`` (field: values)."""
+    count = len(next(iter(keys.values())))
+    evaluations = [GraspEvaluation(index=k, **{f: v[k] for f, v in keys.items()})
+                   for k in range(count)]
+    return GraspRanking(rank_by=rank_by, order=order, evaluations=evaluations,
+                        safety_weight=math.nan)
+
+
+@pytest.mark.parametrize(
+    ("rank_by", "field"),
+    [("safety", "safety_score"), ("effort", "effort_score"),
+     ("whole_arm", "whole_arm_rank_force_n")],
+)
+def test_quality_is_one_over_one_plus_the_ordering_key(rank_by: str, field: str) -> None:
+    grasps = [grasp_msg(g) for g in GRASPS]
+    ranking = synthetic_ranking(rank_by, [2, 0, 3], **{field: [0.5, math.nan, 0.25, math.nan]})
+    answer = ranked_grasps(grasps, ranking, "append")
+    assert [g.id for g in answer] == ["spine_mid", "spine_minus", "spine_plus", "out_of_reach"]
+    # 1/(1+0.25), 1/(1+0.5), a key not computed (NaN): 0, the infeasible one appended: 0
+    assert [g.grasp_quality for g in answer] == [0.8, 1.0 / 1.5, 0.0, 0.0]
+    assert [g.id for g in ranked_grasps(grasps, ranking, "drop")] == [
+        "spine_mid", "spine_minus", "spine_plus"]
+    assert grasps[0].grasp_quality == 0.9  # the given messages are left as they were
+
+
+def test_an_unknown_order_gives_qualities_by_position() -> None:
+    grasps = [grasp_msg(g) for g in GRASPS]
+    ranking = synthetic_ranking("safe_duration", [3, 1, 0, 2], safety_score=[1.0] * 4)
+    answer = ranked_grasps(grasps, ranking, "append")
+    assert [g.grasp_quality for g in answer] == [1.0, 0.75, 0.5, 0.25]

@@ -10,6 +10,7 @@ Safety quality (``grasp_quality`` of the answer; higher is safer, in [0, 1]):
 - otherwise 1 / (1 + key), key ≥ 0 the value the node's ``rank_by`` orders by, lowest first:
   ``safety_score`` (kg, kg·s for the integral metric), ``effort_score`` (fraction of the
   effort limits) or ``whole_arm_rank_force_n`` (N); a key the node did not compute: 0;
+  another ``rank_by``: (n − position) / n down the order of n grasps;
 - a grasp outside the node's order (infeasible: IK or joint limits fail along the motion)
   has 0, and comes last (``moveit.infeasible: append``) or is left out (``drop``).
 Each is a decreasing function of the key the order sorts by, so the answer's qualities never
@@ -103,7 +104,10 @@ def safety_qualities(ranking: GraspRanking) -> dict[int, float]:
     docstring)."""
     if not math.isnan(ranking.safety_weight) and ranking.rank_by == "safety":
         return {k: ranking.evaluations[k].combined_score for k in ranking.order}
-    key = _KEYS[ranking.rank_by]
+    key = _KEYS.get(ranking.rank_by)
+    if key is None:  # an order this module does not know the key of: by position
+        count = len(ranking.order)
+        return {k: (count - position) / count for position, k in enumerate(ranking.order)}
     qualities = {}
     for k in ranking.order:
         value = getattr(ranking.evaluations[k], key)
