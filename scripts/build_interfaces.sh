@@ -41,7 +41,8 @@ PY=$VENV/bin/python
 SHARED=${SHARED_INTERFACES:-$ROOT/../shared/interfaces}
 OUT=$ROOT/build/interfaces
 CACHE_ROOT=${XDG_CACHE_HOME:-$HOME/.cache}/grasp_safety_ros/interfaces
-OUTSIDE_PREFIXES=${AMENT_PREFIX_PATH:-}  # a sourced ROS installation, read before step 3 resets it
+# a sourced ROS installation, read before step 3 resets the environment
+OUTSIDE_PREFIXES=${AMENT_PREFIX_PATH:-} OUTSIDE_PYTHONPATH=${PYTHONPATH:-}
 
 export PATH=$VENV/bin:$PATH  # venv tools (colcon, maybe cmake) and its python first
 
@@ -134,14 +135,20 @@ install_pkg() {
 }
 
 # provided_outside PKG: true when a ROS installation (a prefix of AMENT_PREFIX_PATH other
-# than the venv) has PKG in its ament index
+# than the venv) has PKG in its ament index and the venv's Python imports PKG from there with
+# the caller's PYTHONPATH (a ROS built for another Python does not count)
 provided_outside() {
-  local prefix
+  local prefix module
   IFS=: read -ra prefixes <<<"$OUTSIDE_PREFIXES"
   for prefix in "${prefixes[@]}"; do
     [ -n "$prefix" ] && [ -d "$prefix" ] || continue
-    [ "$(cd "$prefix" && pwd -P)" = "$(cd "$VENV" && pwd -P)" ] && continue
-    [ -e "$prefix/share/ament_index/resource_index/packages/$1" ] && return 0
+    prefix=$(cd "$prefix" && pwd -P)
+    [ "$prefix" = "$(cd "$VENV" && pwd -P)" ] && continue
+    [ -e "$prefix/share/ament_index/resource_index/packages/$1" ] || continue
+    module=$(PYTHONPATH=$OUTSIDE_PYTHONPATH "$PY" -c "import os, $1.msg as m
+from rosidl_generator_py import import_type_support as load; load('$1')  # its C extension
+print(os.path.realpath(m.__file__))" 2>/dev/null) || continue
+    [[ $module == "$prefix"/* ]] && return 0
   done
   return 1
 }
@@ -166,6 +173,11 @@ done
 STAGE=$OUT/upstream/src
 STAGED_LIST=$("$PY" "$ROOT/scripts/stage_interfaces.py" "$SHARED" "$STAGE" --skip "${SKIP[@]}")
 mapfile -t STAGED <<<"$STAGED_LIST"
+for pkg in $(ls "$SHARED"); do  # our copies of packages no longer built (ROS provides them)
+  if [ -f "$VENV/.$pkg.files" ] && ! printf '%s\n' "${STAGED[@]}" | grep -qx "$pkg"; then
+    uninstall "$pkg"
+  fi
+done
 [ -n "$STAGED_LIST" ] || { echo "upstream interfaces: all provided by ROS (${SKIP[*]})"; exit 0; }
 KEY=$( { echo "$PYINC"; "$PY" -c 'import sys; print(sys.version)'
   ls "$VENV/$SITE_REL" | grep -E '^(ros_|numpy-).*\.dist-info$'
@@ -192,6 +204,5 @@ for pkg in "${STAGED[@]}"; do
       "$VENV/share/ament_index/resource_index/parent_prefix_path/$pkg" || true; } \
     | xargs -0 -r sed -i "s#$BUILT_IN#$VENV#g"
 done
-for pkg in "${SKIP[@]}"; do [ -f "$VENV/.$pkg.files" ] && uninstall "$pkg"; done
 echo "upstream interfaces: ${STAGED[*]} (subsets) installed into $VENV from" \
   "$CACHED${SKIP[*]:+ (provided by ROS: ${SKIP[*]})}"
