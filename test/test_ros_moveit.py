@@ -24,8 +24,10 @@ import numpy as np
 import pytest
 import rclpy
 import yaml
+from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion
 from grasp_safety_msgs.msg import GraspEvaluation, GraspRanking
+from nav_msgs.msg import Path as PathMsg
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
@@ -38,6 +40,7 @@ from grasp_safety_ros.core.analyses.multi_objective import rank_with_quality
 from grasp_safety_ros.core.exceptions import InvalidInputError
 from grasp_safety_ros.ros.executor import NodeExecutor, join_callbacks
 from grasp_safety_ros.ros.node import EXECUTOR_THREADS, GraspSafetyNode
+from grasp_safety_ros.ros.qos import INPUT
 
 pytest.importorskip("moveit_msgs.msg", reason="moveit_msgs not built (make setup)")
 from moveit_msgs.msg import CollisionObject, Grasp, MoveItErrorCodes
@@ -297,6 +300,36 @@ def test_candidate_grasps_without_a_planner(defaults: Harness, cli_result: dict)
         "out_of_reach"]
     assert_refused(defaults.call(request()), MoveItErrorCodes.FAILURE, "candidate_grasps",
                    "moveit.grasp_planner_service")
+
+
+def test_goal_from_the_object_trajectory_topic(defaults: Harness, cli_result: dict) -> None:
+    """moveit.object_goal empty: the goal and duration are the latest ~/object_trajectory's
+    (2 s, the CLI's; trajectory.duration_s set to 4 s meanwhile must not be used)."""
+    defaults.set(object_goal=[])
+    defaults.node.set_parameters([Parameter("trajectory.duration_s", value=4.0)])
+    try:
+        assert_refused(defaults.call(request()), MoveItErrorCodes.FAILURE,
+                       "moveit.object_goal", "~/object_trajectory")
+        header = Header(frame_id="base")
+        path = PathMsg(header=header, poses=[
+            PoseStamped(header=header, pose=pose(START)),
+            PoseStamped(header=Header(frame_id="base", stamp=Time(sec=2)), pose=pose(GOAL))])
+        topic = "/grasp_safety/object_trajectory"
+        defaults.client_node.create_publisher(PathMsg, topic, INPUT).publish(path)
+        deadline = time.monotonic() + 30.0
+        answer = defaults.call(request())
+        while answer.error_code.val != MoveItErrorCodes.SUCCESS and time.monotonic() < deadline:
+            time.sleep(0.2)  # until the node has taken the trajectory
+            answer = defaults.call(request())
+    finally:
+        defaults.node.set_parameters([Parameter("trajectory.duration_s", value=2.0)])
+        defaults.set(object_goal=[*GOAL["position_m"], *GOAL["quat_xyzw"]])
+    assert answer.error_code.val == MoveItErrorCodes.SUCCESS, answer.error_code.message
+    scores = {g["name"]: g["safety_score"] for g in cli_result["grasps"]}
+    ids = [g.id for g in answer.grasps]
+    assert ids[:3] == [GRASPS[k]["id"] for k in cli_result["ranking"]]
+    np.testing.assert_allclose([g.grasp_quality for g in answer.grasps[:3]],
+                               [1.0 / (1.0 + scores[i]) for i in ids[:3]], rtol=1e-12)
 
 
 def test_object_goal_parameter_is_checked(ros: Harness) -> None:
