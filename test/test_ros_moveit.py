@@ -314,9 +314,12 @@ def test_goal_from_the_object_trajectory_topic(defaults: Harness, cli_result: di
         path = PathMsg(header=header, poses=[
             PoseStamped(header=header, pose=pose(START)),
             PoseStamped(header=Header(frame_id="base", stamp=Time(sec=2)), pose=pose(GOAL))])
-        topic = "/grasp_safety/object_trajectory"
-        defaults.client_node.create_publisher(PathMsg, topic, INPUT).publish(path)
+        publisher = defaults.client_node.create_publisher(
+            PathMsg, "/grasp_safety/object_trajectory", INPUT)
         deadline = time.monotonic() + 30.0
+        while publisher.get_subscription_count() == 0 and time.monotonic() < deadline:
+            time.sleep(0.05)  # matched: the message is not sent before the node reads
+        publisher.publish(path)
         answer = defaults.call(request())
         while answer.error_code.val != MoveItErrorCodes.SUCCESS and time.monotonic() < deadline:
             time.sleep(0.2)  # until the node has taken the trajectory
