@@ -125,6 +125,13 @@ class Harness:
             [sys.executable, str(FAKE_PLANNER), json.dumps(PLANNERS)],
             env=env, stdout=subprocess.PIPE, text=True, start_new_session=True,
         )
+        try:
+            self._start(cli_result)
+        except BaseException:
+            self._stop_planner()
+            raise
+
+    def _start(self, cli_result: dict[str, Any]) -> None:
         watchdog = threading.Timer(120.0, self.planner.kill)
         watchdog.start()
         assert self.planner.stdout.readline().strip() == "ready"
@@ -175,8 +182,12 @@ class Harness:
         self.node.destroy_node()
         self.client_node.destroy_node()
         rclpy.shutdown(context=self.context)
-        os.killpg(self.planner.pid, signal.SIGTERM)
-        self.planner.wait(timeout=10.0)
+        self._stop_planner()
+
+    def _stop_planner(self) -> None:
+        if self.planner.poll() is None:
+            os.killpg(self.planner.pid, signal.SIGTERM)
+            self.planner.wait(timeout=10.0)
         self.claim.release()
 
 
