@@ -163,7 +163,7 @@ class GraspPlanningServer:
         timeout_s = float(self._parameter("planner_timeout_s"))
         deadline = time.monotonic() + timeout_s
         client = self._client(service)
-        if not client.wait_for_service(timeout_sec=timeout_s):
+        if not self._wait(client.service_is_ready, deadline):
             raise PlannerError(
                 MoveItErrorCodes.COMMUNICATION_FAILURE,
                 f"the grasp planner service {service} is not available (waited "
@@ -172,18 +172,26 @@ class GraspPlanningServer:
         future = client.call_async(request)
         done = threading.Event()
         future.add_done_callback(lambda _: done.set())
-        while not done.wait(WAIT_STEP_S):
-            if self._stopping.is_set() or time.monotonic() > deadline:
-                client.remove_pending_request(future)
-                future.cancel()
-                if self._stopping.is_set():
-                    raise ShuttingDownError("the node is shutting down")
-                raise PlannerError(
-                    MoveItErrorCodes.TIMED_OUT,
-                    f"the grasp planner {service} did not answer within "
-                    f"moveit.planner_timeout_s={timeout_s:g} s",
-                )
+        if not self._wait(done.is_set, deadline):
+            client.remove_pending_request(future)
+            future.cancel()
+            raise PlannerError(
+                MoveItErrorCodes.TIMED_OUT,
+                f"the grasp planner {service} did not answer within "
+                f"moveit.planner_timeout_s={timeout_s:g} s",
+            )
         return future.result()
+
+    def _wait(self, condition: Callable[[], bool], deadline: float) -> bool:
+        """Wait until ``condition()`` (True) or ``deadline`` (time.monotonic, False), looking
+        every WAIT_STEP_S; raises ShuttingDownError once the node shuts down."""
+        while not condition():
+            if self._stopping.is_set():
+                raise ShuttingDownError("plan_grasps abandoned: the node is shutting down")
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(WAIT_STEP_S)
+        return True
 
     def _rerank(self, request: GraspPlanning.Request, grasps: list[Any], field: str) -> list[Any]:
         """The grasps in the node's order, with their safety qualities (moveit.grasps)."""
