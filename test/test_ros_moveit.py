@@ -352,6 +352,17 @@ def test_object_goal_parameter_is_checked(ros: Harness) -> None:
     assert "moveit.object_goal" in results[0].reason and "7 numbers" in results[0].reason
 
 
+def test_shutdown_answers_a_request_waiting_for_the_planner(ros: Harness) -> None:
+    """Last test of the node: it starts the node's shut-down (abandon_rankings)."""
+    ros.set(grasp_planner_service="/fake/slow", planner_timeout_s=60.0)
+    future = ros.client.call_async(request())
+    ros.client_executor.spin_until_future_complete(future, timeout_sec=1.0)  # it waits
+    ros.node.abandon_rankings()
+    ros.client_executor.spin_until_future_complete(future, timeout_sec=30.0)
+    assert future.done(), "no answer after the shut-down began"
+    assert_refused(future.result(), MoveItErrorCodes.PREEMPTED, "shutting down")
+
+
 # --- Grasp lists (no ROS graph) -----------------------------------------------------------------
 
 
