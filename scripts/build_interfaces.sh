@@ -195,13 +195,14 @@ if [ ! -d "$CACHED" ]; then
   mv -T "$tmp" "$CACHED" 2>/dev/null || rm -rf "$tmp"  # another checkout cached it meanwhile
   echo "upstream interfaces: built ${STAGED[*]} in $((SECONDS - start)) s, cached in $CACHED"
 fi
-# the CMake exports and ament index name the venv that built the tree: this one instead
+# the CMake exports name the venv that built the tree, the ament index its install dirs:
+# this venv instead (every dependency is in it)
 BUILT_IN=$(cat "$CACHED/.venv_path")
 for pkg in "${STAGED[@]}"; do
   install_pkg "$CACHED" "$pkg"
+  printf '%s' "$VENV" >"$VENV/share/ament_index/resource_index/parent_prefix_path/$pkg"
   [ "$BUILT_IN" = "$VENV" ] && continue
-  { grep -rlZ -F "$BUILT_IN" "$VENV/share/$pkg" \
-      "$VENV/share/ament_index/resource_index/parent_prefix_path/$pkg" || true; } \
+  { grep -rlZ -F "$BUILT_IN" "$VENV/share/$pkg" || true; } \
     | xargs -0 -r sed -i "s#$BUILT_IN#$VENV#g"
 done
 echo "upstream interfaces: ${STAGED[*]} (subsets) installed into $VENV from" \
