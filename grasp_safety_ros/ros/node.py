@@ -76,6 +76,7 @@ from .errors import (
 from .executor import request_header
 from .memory import IdleTrim
 from .message_checks import check_finite_result, check_no_subnormals
+from .moveit import offer_plan_grasps
 from .on_demand import OnDemandPublisher
 from .parameters import PARAMETERS, NodeSettings, check_parameter, settings_from_parameters
 from .process import run_node
@@ -169,6 +170,14 @@ class GraspSafetyNode(Node):
             callback_group=self._service_group,
         )
         self._request_clients = ServiceClients(self, self._service, RankGrasps.Event)
+        self._plan_grasps = offer_plan_grasps(  # ~/plan_grasps (moveit_msgs/GraspPlanning)
+            self,
+            rank=self._rank,
+            snapshot=self._snapshot,
+            report_error=self._report_error,
+            latest_trajectory=self._topic_inputs.latest_trajectory,
+            stopping=self._stopping,
+        )
         inputs = (
             (PoseArray, "~/candidate_grasps", self._on_candidates, topics),
             (Float64MultiArray, "~/candidate_grasp_quality", self._on_quality, topics),

@@ -42,6 +42,10 @@ from .conversions.geometry import inertia_tensor_from_components
 from .response import MAX_COUNT, ResponseContent
 from .values import show, string_list
 
+INFEASIBLE_CHOICES = ("append", "drop")
+"""What ``~/plan_grasps`` does with grasps outside the node's order (``moveit.infeasible``):
+last, with quality 0, or left out."""
+
 
 @dataclass(frozen=True)
 class ParameterSpec:
@@ -198,6 +202,29 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
         "fill the per-sample arrays of every evaluation (time_from_start_s, effective_mass_kg, "
         "direction_xyz, ...); false: leave them empty (the scores and aggregates stay)",
     ),
+    # --- ~/plan_grasps, the MoveIt GraspPlanning service (docs/ros/moveit.md) ---
+    "moveit.grasp_planner_service": ParameterSpec(
+        "",
+        "the upstream planner's moveit_msgs/srv/GraspPlanning service whose grasps "
+        "~/plan_grasps ranks; empty: none (it ranks the request's candidate_grasps)",
+    ),
+    "moveit.planner_timeout_s": ParameterSpec(
+        10.0, "how long ~/plan_grasps waits for the planner's service and answer [s]"
+    ),
+    "moveit.infeasible": ParameterSpec(
+        "append",
+        f"{' | '.join(INFEASIBLE_CHOICES)}: grasps outside the order come last (quality 0) or "
+        "are left out of the answer",
+    ),
+    "moveit.planner_quality": ParameterSpec(
+        False, "weigh the planner's grasp_quality into the order (safety_weight)"
+    ),
+    "moveit.object_goal": ParameterSpec(
+        [],
+        "the object's goal pose for ~/plan_grasps: x y z [m] qx qy qz qw, base frame; empty: "
+        "the last pose of the latest ~/object_trajectory",
+        item_type=float,
+    ),
     # --- The whole arm's exposure (core.analyses.whole_arm, docs/whole_arm.md) ---
     "whole_arm.enabled": _option("whole_arm.enabled"),
     "whole_arm.region": _option("whole_arm.region"),
@@ -232,13 +259,14 @@ _STRINGS: tuple[str, ...] = (
     "metric",
 )
 _STRINGS += ("metric_point", "effort.criterion", "rank_by", "robot.armature_published")
-_STRINGS += ("whole_arm.region",)
+_STRINGS += ("whole_arm.region", "moveit.grasp_planner_service", "moveit.infeasible")
 _CHOICES: Mapping[str, Collection[str]] = {
     "metric": METRICS,
     "metric_point": METRIC_POINTS,
     "effort.criterion": EFFORT_CRITERIA,
     "rank_by": RANK_BY,
     "whole_arm.region": BODY_REGIONS,
+    "moveit.infeasible": INFEASIBLE_CHOICES,
 }
 _FLAGS: tuple[str, ...] = (
     "use_joint_states_seed",
@@ -246,14 +274,14 @@ _FLAGS: tuple[str, ...] = (
     "effort.enabled",
     "response.per_sample",
 )
-_FLAGS += ("whole_arm.enabled",)
+_FLAGS += ("whole_arm.enabled", "moveit.planner_quality")
 _POSITIVE: tuple[str, ...] = (
     "trajectory.dt_s",
     "trajectory.duration_s",
     "max_mass_kg",
     "max_compute_time_s",
 )
-_POSITIVE += ("service_busy_timeout_s", "diagnostics_period_s")
+_POSITIVE += ("service_busy_timeout_s", "diagnostics_period_s", "moveit.planner_timeout_s")
 _FRACTIONS = ("uncertainty.mass_fraction", "uncertainty.inertia_fraction")
 _RANGES: Mapping[str, tuple[float, float]] = {
     key: bounds(key) for key in ("uncertainty.percentile", "safety_weight")
@@ -408,6 +436,13 @@ def check_parameter(name: str, value: Any) -> Any:
                 name, f"must be empty or 3 edge lengths > 0 [m], got {show(list(size))}"
             )
         return size
+    if name == "moveit.object_goal":
+        goal = _numbers(name, value, None)
+        if goal and len(goal) != 7:
+            raise InvalidInputError(
+                name, f"must be empty or x y z qx qy qz qw (7 numbers), got {len(goal)}"
+            )
+        return goal
     if name == "iso_ts_15066.regions":
         return _regions(name, value)
     if name == "whole_arm.point_links":

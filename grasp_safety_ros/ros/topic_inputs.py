@@ -147,6 +147,11 @@ class TopicInputs:
             if ranked_with is not None and ranked_with < received <= self._candidates_received_ns:
                 self._candidates_pending = True
 
+    def latest_trajectory(self) -> Path | MultiDOFJointTrajectory | None:
+        """The latest object trajectory (None before the first)."""
+        with self._lock:
+            return self._trajectory
+
     def take(
         self,
     ) -> tuple[PoseArray, Path | MultiDOFJointTrajectory, tuple[float, ...] | None] | None:

@@ -1,0 +1,250 @@
+"""``~/plan_grasps``: a moveit_msgs/srv/GraspPlanning server that answers a grasp planner's
+grasps safest first (docs/ros/moveit.md).
+
+The grasps come from the upstream planner (parameter ``moveit.grasp_planner_service``; the
+request forwarded as is) or, with no planner, from the request's ``candidate_grasps``. They
+are ranked by the node's ranking (its robot, object and settings; the object moves from
+``target.pose`` to the goal: ``moveit.object_goal``, or the last pose of the latest
+``~/object_trajectory``), and answered as the same Grasp messages in the node's order
+(moveit.grasps). Threads: the service and the planner's client share a reentrant callback
+group, so in the node's multi-threaded executor the planner's answer is taken by another
+thread while the request waits for it, at most ``moveit.planner_timeout_s``.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+import traceback
+from collections.abc import Callable
+from typing import Any
+
+from geometry_msgs.msg import Pose
+from moveit_msgs.msg import MoveItErrorCodes
+from moveit_msgs.srv import GraspPlanning
+from nav_msgs.msg import Path
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.node import Node
+from trajectory_msgs.msg import MultiDOFJointTrajectory
+
+from ...core.exceptions import GraspSafetyError, InvalidInputError
+from ..conversions.geometry import (
+    check_frame_id,
+    duration_to_seconds,
+    stamp_to_seconds,
+)
+from ..conversions.requests import transforms_from_pose_msgs
+from ..errors import ShuttingDownError
+from ..message_checks import check_no_subnormals
+from ..qos import SERVICE
+from ..ranking_job import Snapshot
+from .grasps import goal_pose, object_path, planner_qualities, pose_array_of_grasps, ranked_grasps
+
+SOURCE = "grasp_safety"
+"""``error_code.source`` of the answers this server makes itself."""
+WAIT_STEP_S = 0.05
+"""How often a request waiting for the planner looks whether the node is shutting down [s]."""
+
+
+class PlannerError(Exception):
+    """No usable answer from the upstream planner: ``code`` (MoveItErrorCodes) and why."""
+
+    def __init__(self, code: int, message: str) -> None:
+        super().__init__(message)
+        self.code = code
+
+
+class GraspPlanningServer:
+    """The ``~/plan_grasps`` service of a node.
+
+    Args:
+        node: The node serving it (spun by a multi-threaded executor).
+        rank: The node's ranking: (PoseArray, Path, inertia or None, metric, source=,
+            grasps_field=, quality=, quality_field=) -> grasp_safety_msgs/GraspRanking;
+            raises GraspSafetyError.
+        snapshot: The node's settings and state now.
+        report_error: Logs a refusal and reports it on /diagnostics: (source, error).
+        latest_trajectory: The latest ``~/object_trajectory`` message, or None.
+        stopping: Set when the node shuts down.
+    """
+
+    def __init__(
+        self,
+        node: Node,
+        rank: Callable[..., Any],
+        snapshot: Callable[[], Snapshot],
+        report_error: Callable[[str, BaseException | str], None],
+        latest_trajectory: Callable[[], Path | MultiDOFJointTrajectory | None],
+        stopping: threading.Event,
+    ) -> None:
+        self._node = node
+        self._rank = rank
+        self._snapshot = snapshot
+        self._report_error = report_error
+        self._latest_trajectory = latest_trajectory
+        self._stopping = stopping
+        self._group = ReentrantCallbackGroup()
+        self._clients: dict[str, Any] = {}
+        self._clients_lock = threading.Lock()
+        self.service = node.create_service(
+            GraspPlanning,
+            "~/plan_grasps",
+            self._on_plan_grasps,
+            qos_profile=SERVICE,
+            callback_group=self._group,
+        )
+
+    def _parameter(self, name: str) -> Any:
+        return self._node.get_parameter(f"moveit.{name}").value
+
+    def _on_plan_grasps(
+        self, request: GraspPlanning.Request, response: GraspPlanning.Response
+    ) -> GraspPlanning.Response:
+        code = response.error_code
+        code.source = SOURCE
+        try:
+            check_no_subnormals(request)
+            grasps, field = self._grasps_to_rank(request)
+            response.grasps = self._rerank(request, grasps, field)
+            code.val = MoveItErrorCodes.SUCCESS
+        except PlannerError as error:
+            code.val, code.message = error.code, str(error)
+            self._report_error("plan_grasps", error)
+        except ShuttingDownError as error:  # answered, not reported: the node is going
+            code.val, code.message = MoveItErrorCodes.PREEMPTED, str(error)
+        except GraspSafetyError as error:
+            code.val, code.message = MoveItErrorCodes.FAILURE, str(error)
+            self._report_error("plan_grasps", error)
+        except Exception as error:  # last resort: answer and log rather than drop the request
+            trace = traceback.format_exc()
+            self._node.get_logger().error(f"plan_grasps: internal error:\n{trace}")
+            code.val = MoveItErrorCodes.FAILURE
+            code.message = f"internal error: {type(error).__name__}: {error}"
+            self._report_error("plan_grasps", code.message)
+        return response
+
+    def _grasps_to_rank(self, request: GraspPlanning.Request) -> tuple[list[Any], str]:
+        """The grasps to rank and their field name: the planner's answer, or without a
+        planner the request's candidate_grasps."""
+        service = self._parameter("grasp_planner_service")
+        if service:
+            answer = self._call_planner(service, request)
+            if answer.error_code.val != MoveItErrorCodes.SUCCESS:
+                raise PlannerError(
+                    answer.error_code.val,
+                    answer.error_code.message
+                    or f"the grasp planner {service} failed with error code "
+                    f"{answer.error_code.val}",
+                )
+            return list(answer.grasps), "grasps"
+        if not request.candidate_grasps:
+            raise InvalidInputError(
+                "candidate_grasps",
+                "is empty and no grasp planner is set (parameter moveit.grasp_planner_service): "
+                "give the grasps to rank, or set the planner whose grasps to rank",
+            )
+        return list(request.candidate_grasps), "candidate_grasps"
+
+    def _client(self, service: str) -> Any:
+        with self._clients_lock:
+            if service not in self._clients:
+                try:
+                    self._clients[service] = self._node.create_client(
+                        GraspPlanning, service, callback_group=self._group
+                    )
+                except Exception as error:  # rclpy's invalid-name exceptions
+                    raise InvalidInputError(
+                        "moveit.grasp_planner_service", f"{service!r}: {error}"
+                    ) from None
+            return self._clients[service]
+
+    def _call_planner(self, service: str, request: GraspPlanning.Request) -> Any:
+        """The planner's answer within moveit.planner_timeout_s (PlannerError otherwise)."""
+        timeout_s = float(self._parameter("planner_timeout_s"))
+        deadline = time.monotonic() + timeout_s
+        client = self._client(service)
+        if not self._wait(client.service_is_ready, deadline):
+            raise PlannerError(
+                MoveItErrorCodes.COMMUNICATION_FAILURE,
+                f"the grasp planner service {service} is not available (waited "
+                f"moveit.planner_timeout_s={timeout_s:g} s)",
+            )
+        future = client.call_async(request)
+        done = threading.Event()
+        future.add_done_callback(lambda _: done.set())
+        if not self._wait(done.is_set, deadline):
+            client.remove_pending_request(future)
+            future.cancel()
+            raise PlannerError(
+                MoveItErrorCodes.TIMED_OUT,
+                f"the grasp planner {service} did not answer within "
+                f"moveit.planner_timeout_s={timeout_s:g} s",
+            )
+        return future.result()
+
+    def _wait(self, condition: Callable[[], bool], deadline: float) -> bool:
+        """Wait until ``condition()`` (True) or ``deadline`` (time.monotonic, False), looking
+        every WAIT_STEP_S; raises ShuttingDownError once the node shuts down."""
+        while not condition():
+            if self._stopping.is_set():
+                raise ShuttingDownError("plan_grasps abandoned: the node is shutting down")
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(WAIT_STEP_S)
+        return True
+
+    def _rerank(self, request: GraspPlanning.Request, grasps: list[Any], field: str) -> list[Any]:
+        """The grasps in the node's order, with their safety qualities (moveit.grasps)."""
+        settings = self._snapshot().settings
+        poses = pose_array_of_grasps(grasps, field)
+        check_frame_id(
+            poses.header.frame_id,
+            [settings.object_frame, settings.base_frame],
+            f"{field}[0].grasp_pose.header.frame_id",
+        )
+        transforms_from_pose_msgs(poses.poses, field, ".grasp_pose.pose")  # names a bad one
+        goal, duration_s = self._goal()
+        path = object_path(request.target, settings.base_frame, goal, duration_s)
+        quality = planner_qualities(grasps) if self._parameter("planner_quality") else None
+        ranking = self._rank(
+            poses,
+            path,
+            None,
+            "",
+            source="plan_grasps",
+            grasps_field=field,
+            quality=quality,
+            quality_field=f"{field}[].grasp_quality",
+        )
+        return ranked_grasps(grasps, ranking, self._parameter("infeasible"))
+
+    def _goal(self) -> tuple[Pose, float]:
+        """The object's goal pose (base frame) and the motion's duration [s] (0: the node's
+        trajectory.duration_s): moveit.object_goal, else the end of ~/object_trajectory."""
+        values = self._parameter("object_goal")
+        if len(values) == 7:
+            return goal_pose(values), 0.0
+        latest = self._latest_trajectory()
+        if isinstance(latest, Path) and latest.poses:
+            first, last = latest.poses[0], latest.poses[-1]
+            duration = stamp_to_seconds(last.header.stamp) - stamp_to_seconds(first.header.stamp)
+            return last.pose, max(duration, 0.0)
+        if isinstance(latest, MultiDOFJointTrajectory) and latest.points:
+            first, last = latest.points[0], latest.points[-1]
+            end = last.transforms[0]
+            pose = Pose()
+            pose.position.x, pose.position.y, pose.position.z = (
+                end.translation.x,
+                end.translation.y,
+                end.translation.z,
+            )
+            pose.orientation = end.rotation
+            duration = duration_to_seconds(last.time_from_start) - duration_to_seconds(
+                first.time_from_start
+            )
+            return pose, max(duration, 0.0)
+        raise InvalidInputError(
+            "moveit.object_goal",
+            "is empty and no ~/object_trajectory has arrived: set the object's goal pose "
+            "(x y z qx qy qz qw, base frame) or publish its trajectory",
+        )
