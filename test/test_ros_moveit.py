@@ -27,6 +27,7 @@ import yaml
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion
 from grasp_safety_msgs.msg import GraspEvaluation, GraspRanking
+from grasp_safety_ros.cli.scenario import load_scenario
 from nav_msgs.msg import Path as PathMsg
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -35,7 +36,6 @@ from ros_domains import claim_ros_domain
 from std_msgs.msg import Header
 
 from grasp_safety_ros.cli.main import main as cli_main
-from grasp_safety_ros.cli.scenario import load_scenario
 from grasp_safety_ros.core.analyses.multi_objective import rank_with_quality
 from grasp_safety_ros.core.exceptions import InvalidInputError
 from grasp_safety_ros.ros.executor import NodeExecutor, join_callbacks

@@ -198,7 +198,8 @@ class GraspSafetyNode(Node):
             self._input_subscriptions[source] = self.create_subscription(
                 msg_type,
                 topic,
-                self._guarded(source, callback),
+                self._guarded(source, callback),  # type: ignore[arg-type]  # rclpy passes
+                # (msg, MessageInfo) to a two-argument callback; its hint names one argument
                 subscription_qos(source),
                 callback_group=group,
                 event_callbacks=SubscriptionEventCallbacks(

@@ -5,11 +5,12 @@ from __future__ import annotations
 import signal
 import threading
 from collections.abc import Callable
-from typing import Any, Protocol
+from typing import Any, Protocol, cast
 
 import rclpy
 import rclpy.utilities
 from rclpy.executors import Executor, ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 from .errors import StartupError
@@ -66,7 +67,7 @@ def run_node(
     try:
         node = make_node()
         executor = NodeExecutor(num_threads=threads)
-        executor.add_node(node)
+        executor.add_node(cast(Node, node))  # a ServedNode is an rclpy Node
         node.wait_for_robot(executor)
         spinner = threading.Thread(
             target=spin_until, args=(executor, spinning), name="executor", daemon=True

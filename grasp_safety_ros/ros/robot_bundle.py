@@ -73,10 +73,10 @@ def _with_armature_parameters(
             )
         try:
             entry = published_for(settings.armature_published, source, robot.joint_names)
-            values = published_values(entry, robot.joint_names)
+            published = published_values(entry, robot.joint_names)
         except InvalidInputError as error:  # the core names its scenario key
             raise InvalidInputError(PUBLISHED_PARAMETER, error.reason) from None
-        return robot.with_armature(values), None
+        return robot.with_armature(published), None
     values = settings.armature_kgm2
     names = settings.armature_joint_names
     if not values and not names and not lower:
