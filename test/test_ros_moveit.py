@@ -27,7 +27,6 @@ import yaml
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion
 from grasp_safety_msgs.msg import GraspEvaluation, GraspRanking
-from grasp_safety_ros.cli.scenario import load_scenario
 from nav_msgs.msg import Path as PathMsg
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -40,7 +39,8 @@ from grasp_safety_ros.core.analyses.multi_objective import rank_with_quality
 from grasp_safety_ros.core.exceptions import InvalidInputError
 from grasp_safety_ros.ros.executor import NodeExecutor, join_callbacks
 from grasp_safety_ros.ros.node import EXECUTOR_THREADS, GraspSafetyNode
-from grasp_safety_ros.ros.qos import INPUT
+from grasp_safety_ros.ros.qos import subscription_qos
+from grasp_safety_ros.scenario.schema import load_scenario
 
 pytest.importorskip("moveit_msgs.msg", reason="moveit_msgs not built (make setup)")
 from moveit_msgs.msg import CollisionObject, Grasp, MoveItErrorCodes
@@ -385,7 +385,7 @@ def test_goal_from_the_object_trajectory_topic(defaults: Harness, cli_result: di
             ],
         )
         publisher = defaults.client_node.create_publisher(
-            PathMsg, "/grasp_safety/object_trajectory", INPUT
+            PathMsg, "/grasp_safety/object_trajectory", subscription_qos("object_trajectory")
         )
         deadline = time.monotonic() + 30.0
         while publisher.get_subscription_count() == 0 and time.monotonic() < deadline:
