@@ -146,7 +146,7 @@ def evaluate_effort(
             (shared across analyses).
         terms: The grasp's ``method.terms.SampleTerms`` at these joint positions: then
             the compiled path (``evaluate_efforts``) runs on them; None: Pinocchio per
-            sample (the reference; equal to rounding, test_performance_paths).
+            sample (the reference; equal to rounding, test_terms).
     """
     limits = effort_limits(robot)
     if not evaluation.feasible:
