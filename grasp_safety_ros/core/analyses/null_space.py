@@ -58,21 +58,23 @@ class SampleProblem:
             return float(1.0 / np.linalg.eigvalsh(0.5 * (mobility + mobility.T))[0])
         return float(1.0 / (direction @ mobility @ direction))
 
-    def pose_error(self, q: np.ndarray, target_in_world: pin.SE3) -> tuple[pin.SE3, float, float]:
+    def pose_error(
+        self, q: np.ndarray, transform_target_to_world: pin.SE3
+    ) -> tuple[pin.SE3, float, float]:
         pin.forwardKinematics(self.robot.model, self.kinematics, q)
         current = pin.updateFramePlacement(
             self.robot.model, self.kinematics, self.robot.tip_frame_id
         )
-        error = current.actInv(target_in_world)
+        error = current.actInv(transform_target_to_world)
         position = float(np.linalg.norm(error.translation))
         angle = float(np.linalg.norm(pin.log3(error.rotation)))
         return error, position, angle
 
-    def project(self, q: np.ndarray, target_in_world: pin.SE3) -> np.ndarray | None:
+    def project(self, q: np.ndarray, transform_target_to_world: pin.SE3) -> np.ndarray | None:
         """Gauss-Newton (minimum-norm steps) onto the tip pose; None if it fails."""
         model = self.robot.model
         for _ in range(30):
-            error_transform, position, angle = self.pose_error(q, target_in_world)
+            error_transform, position, angle = self.pose_error(q, transform_target_to_world)
             if position <= PROJECTION_TOLERANCE and angle <= PROJECTION_TOLERANCE:
                 return q
             error = pin.log6(error_transform).vector

@@ -323,7 +323,8 @@ def grasps_from_pose_array(
 
     frame_id ``object_frame``: the poses are the tip in the object frame. frame_id
     ``base_frame``: the poses are the tip in the base frame with the object at the start of
-    ``trajectory``; T_object_tip = T_base_object(start)⁻¹ · T_base_tip.
+    ``trajectory``: transform_tip_to_object =
+    transform_object_to_base(start)⁻¹ · transform_tip_to_base.
     """
     poses = check_grasp_array(grasps, object_frame, base_frame, max_grasps, field)
     if grasps.header.frame_id == base_frame:
