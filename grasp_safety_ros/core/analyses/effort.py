@@ -154,7 +154,7 @@ def evaluate_effort(
     times = np.asarray(evaluation.times_s, dtype=float)
     positions = _checked_positions(robot, evaluation, joint_positions)
     chain = chain_arrays(robot) if terms is not None and compiled_available() else None
-    if chain is not None:
+    if chain is not None and terms is not None:
         batched = SampleTerms(*(array[None] for array in terms))
         return evaluate_efforts(
             robot, [evaluation], object_inertia, [grasp], trajectory, [positions], batched, chain

@@ -229,7 +229,7 @@ def is_mjcf(text: str, is_xml: bool) -> bool:
     match = re.search(
         r"<\s*([A-Za-z_][\w.-]*)", re.sub(r"<(\?|!--).*?(\?|--)>", "", text, flags=re.S)
     )
-    return bool(match) and match.group(1) == "mujoco"
+    return match is not None and match.group(1) == "mujoco"
 
 
 def _mjcf_bodies_without_inertial(root: ElementTree.Element) -> list[str]:
