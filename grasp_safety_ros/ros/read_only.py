@@ -54,7 +54,8 @@ def answer_read_only_parameters(node: Node) -> None:
                 response.results.append(read_only_result(parameter.name, parameter.value, current))
             else:
                 alone = SetParameters.Request(parameters=[message])
-                response.results.extend(delegate(alone, SetParameters.Response()).results)
+                answer: SetParameters.Response = delegate(alone, SetParameters.Response())
+                response.results.extend(answer.results)
         return response
 
     service.callback = set_parameters

@@ -150,7 +150,7 @@ class TopicInputs:
     def latest_trajectory(self) -> Path | MultiDOFJointTrajectory | None:
         """The latest object trajectory (None before the first)."""
         with self._lock:
-            return self._trajectory
+            return self._trajectories[-1][1] if self._trajectories else None
 
     def take(
         self,

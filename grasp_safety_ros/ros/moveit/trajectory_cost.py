@@ -17,6 +17,7 @@ import pinocchio as pin
 from moveit_msgs.msg import RobotTrajectory
 
 from ...core.exceptions import InvalidInputError
+from ...core.method.joint_trajectory import JointSpaceTrajectory
 from ...core.method.ranking import Grasp, GraspSafetyEvaluator
 from ...core.model.inertia import ObjectInertia
 from ..conversions.requests import planned_from_joint_trajectory
@@ -64,6 +65,6 @@ def robot_trajectory_cost(
         "trajectory",
         planned,
     )
-    motion = evaluator.trajectory_for(grasp, None)
+    motion = JointSpaceTrajectory(evaluator.robot, planned, grasp.transform_tip_to_object)
     evaluation = evaluator.evaluate(grasp, payload, motion, metric=metric)
     return float(evaluation.score) if evaluation.feasible else math.inf
