@@ -164,8 +164,7 @@ def _variant(summary: dict[str, Any], key: str) -> dict[str, Any] | None:
 def _variant_of_both(
     tensor: dict[str, Any], book: dict[str, Any], key: str
 ) -> tuple[dict[str, Any], dict[str, Any]] | None:
-    """The variant ``key`` of the tensor and of the book experiment, or None if it was not run
-    (both experiments run the same variants)."""
+    """Variant ``key`` of the tensor and the book experiment (both run the same), or None."""
     ours = _variant(tensor, key)
     return None if ours is None else (ours, book["variants"][key])
 
