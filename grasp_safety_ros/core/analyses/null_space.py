@@ -22,7 +22,8 @@ def bernstein_basis(degree: int, s_values: np.ndarray) -> np.ndarray:
     s = np.clip(np.asarray(s_values, dtype=float), 0.0, 1.0)[:, None]
     k = np.arange(degree + 1)[None, :]
     binomials = np.array([comb(degree, j) for j in range(degree + 1)], dtype=float)
-    return binomials * s**k * (1.0 - s) ** (degree - k)
+    basis: np.ndarray = binomials * s**k * (1.0 - s) ** (degree - k)
+    return basis
 
 
 def metric_weights(masses: np.ndarray, times_s: np.ndarray, metric: str) -> np.ndarray:
