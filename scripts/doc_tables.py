@@ -409,7 +409,7 @@ def render_cli_limits() -> str:
     """The bounds on a scenario file and its robot description, from the constants the code
     checks them with."""
     sys.path.insert(0, str(ROOT))
-    from grasp_safety_ros.core.model.robot import MAX_URDF_BYTES
+    from grasp_safety_ros.core.model.description import MAX_URDF_BYTES
     from grasp_safety_ros.scenario import fields, schema
 
     limits = SimpleNamespace(

@@ -99,6 +99,33 @@ def baxter() -> RobotModel:
     return RobotModel.from_urdf("example-robot-data:baxter", "base", "right_gripper")
 
 
+@pytest.fixture(scope="session")
+def prismatic_arm() -> RobotModel:
+    """The 7-DOF arm with a prismatic third joint."""
+    urdf = serial_arm_urdf(ARM7_AXES).replace(
+        '<joint name="j3" type="revolute"', '<joint name="j3" type="prismatic"'
+    )
+    return RobotModel.from_urdf(urdf, "base_link", "tool")
+
+
+@pytest.fixture(scope="session")
+def geared_arm() -> RobotModel:
+    """The 7-DOF arm with reflected rotor inertia on every joint: M, M⁻¹ and RNEA include it
+    (once)."""
+    armature = [0.3, 0.25, 0.2, 0.1, 0.05, 0.04, 0.02]
+    return RobotModel.from_urdf(
+        serial_arm_urdf(ARM7_AXES), "base_link", "tool", armature_kgm2=armature
+    )
+
+
+@pytest.fixture(scope="session")
+def continuous_arm() -> RobotModel:
+    """The 7-DOF arm with continuous joints (nq = 14, nv = 7)."""
+    return RobotModel.from_urdf(
+        serial_arm_urdf(ARM7_AXES, joint_type="continuous"), "base_link", "tool"
+    )
+
+
 BAXTER_SEED = (0.0, -0.55, 0.0, 0.75, 0.0, 1.26, 0.0)
 
 

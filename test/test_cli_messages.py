@@ -13,7 +13,7 @@ import yaml
 
 from grasp_safety_ros.cli.robots import robots_text
 from grasp_safety_ros.core.exceptions import InvalidInputError
-from grasp_safety_ros.core.model.robot import example_robot_data_urdf
+from grasp_safety_ros.core.model.description import example_robot_data_urdf
 from grasp_safety_ros.paths import config_file
 from grasp_safety_ros.scenario.schema import parse_scenario
 

@@ -11,15 +11,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from conftest import ARM7_AXES, serial_arm_urdf
-from test_performance_paths import (  # noqa: F401 - fixtures
-    BOX,
-    TERM_ARMS,
-    _terms_case,
-    continuous_arm,
-    geared_arm,
-    needs_numba,
-    prismatic_arm,
-)
+from fast_paths import BOX, TERM_ARMS, needs_numba, terms_case
 from tolerances import assert_close_to_scale, effort_tolerances, kinematics_tolerance
 
 from grasp_safety_ros.core import (
@@ -98,8 +90,8 @@ def test_batch_equals_pinocchio_per_grasp(name: str, request: pytest.FixtureRequ
     with and without the shared terms, vs the Pinocchio loop of each grasp."""
     robot: RobotModel = request.getfixturevalue(name)
     chain = GraspSafetyEvaluator(robot).ik.chain
-    first, evaluation1, _, motion1 = _terms_case(robot, 21)
-    second, evaluation2, _, motion2 = _terms_case(robot, 22)
+    first, evaluation1, _, motion1 = terms_case(robot, 21)
+    second, evaluation2, _, motion2 = terms_case(robot, 22)
     far, infeasible = infeasible_case(robot, motion1)
     evaluations = [evaluation1, infeasible, replace(evaluation2, index=2)]
     grasps, motions = [first, far, second], [motion1, motion1, motion2]
@@ -136,7 +128,7 @@ def test_a_batch_gives_each_grasp_what_it_gives_it_alone(
 ) -> None:
     robot: RobotModel = request.getfixturevalue(name)
     chain = GraspSafetyEvaluator(robot).ik.chain
-    first, evaluation1, _, motion = _terms_case(robot, 23)
+    first, evaluation1, _, motion = terms_case(robot, 23)
     far, infeasible = infeasible_case(robot, motion)
     second = Grasp(first.transform_tip_to_object * pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.01])))
     evaluation2 = GraspSafetyEvaluator(robot).evaluate(
@@ -157,7 +149,7 @@ def test_a_batch_gives_each_grasp_what_it_gives_it_alone(
 def test_single_sample(name: str, request: pytest.FixtureRequest) -> None:
     """One sample mid-way: no finite differences (no self-motion), the tip's twist only."""
     robot: RobotModel = request.getfixturevalue(name)
-    grasp, evaluation, _, motion = _terms_case(robot, 24)
+    grasp, evaluation, _, motion = terms_case(robot, 24)
     middle = len(evaluation.times_s) // 2
     single = replace(
         evaluation,
@@ -177,7 +169,7 @@ def test_a_static_arm_holds_the_gravity_torques(name: str, request: pytest.Fixtu
     """Start = goal: q̇ = q̈ = 0 and τ = g(q) of the arm with the object (Pinocchio's
     generalised gravity of the augmented model; armature plays no part)."""
     robot: RobotModel = request.getfixturevalue(name)
-    grasp, evaluation, _, motion = _terms_case(robot, 25)
+    grasp, evaluation, _, motion = terms_case(robot, 25)
     start = motion.transform_object_to_base_start
     still = ObjectTrajectory(start, start, 1.0, 0.1)
     evaluation = GraspSafetyEvaluator(robot).evaluate(
@@ -209,7 +201,7 @@ def _override_case(robot: RobotModel, positions: np.ndarray) -> tuple:
     """An arm7 evaluation's samples and motion with the joint path replaced by ``positions``
     (N, n) for ``robot`` (the analysis takes any path: RedundancyResolution's)."""
     arm7 = RobotModel.from_urdf(serial_arm_urdf(ARM7_AXES), "base_link", "tool")
-    grasp, evaluation, _, motion = _terms_case(arm7, 26)
+    grasp, evaluation, _, motion = terms_case(arm7, 26)
     count = len(evaluation.times_s)
     path = np.broadcast_to(positions, (count, robot.num_joints)).copy()
     return grasp, replace(evaluation, joint_positions=path), motion
@@ -246,7 +238,7 @@ def test_rank_deficient_and_short_chains(joints: int) -> None:
 
 def test_without_the_kernels_the_batch_is_the_reference(arm7: RobotModel) -> None:
     """chain None: Pinocchio grasp by grasp, the same objects as ``evaluate_effort``."""
-    grasp, evaluation, _, motion = _terms_case(arm7, 27)
+    grasp, evaluation, _, motion = terms_case(arm7, 27)
     batched = evaluate_efforts(arm7, [evaluation], BOX, [grasp], motion)[0]
     assert_effort_identical(batched, evaluate_effort(arm7, evaluation, BOX, grasp, motion))
 
@@ -254,7 +246,7 @@ def test_without_the_kernels_the_batch_is_the_reference(arm7: RobotModel) -> Non
 def test_a_path_of_the_wrong_shape_is_refused(arm7: RobotModel) -> None:
     from grasp_safety_ros.core import InvalidInputError
 
-    grasp, evaluation, _, motion = _terms_case(arm7, 28)
+    grasp, evaluation, _, motion = terms_case(arm7, 28)
     chain = GraspSafetyEvaluator(arm7).ik.chain
     with pytest.raises(InvalidInputError, match="joint_positions"):
         evaluate_efforts(arm7, [evaluation], BOX, [grasp], motion, [np.zeros((3, 7))], chain=chain)
@@ -291,7 +283,7 @@ def test_planned_joint_trajectories_in_a_batch(baxter: RobotModel) -> None:
 def test_batches_without_a_feasible_grasp(arm7: RobotModel) -> None:
     chain = GraspSafetyEvaluator(arm7).ik.chain
     assert evaluate_efforts(arm7, [], BOX, [], [], chain=chain) == ()
-    _, _, _, motion = _terms_case(arm7, 29)
+    _, _, _, motion = terms_case(arm7, 29)
     far, infeasible = infeasible_case(arm7, motion)
     efforts = evaluate_efforts(arm7, [infeasible] * 2, BOX, [far] * 2, motion, chain=chain)
     for effort in efforts:

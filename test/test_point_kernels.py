@@ -9,13 +9,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from conftest import BAXTER_SEED, book_trajectory, random_positions
-from test_performance_paths import (
-    BOX,
-    _terms_case,
-    grasps_near_identity,
-    needs_numba,
-    reach_trajectory,
-)
+from fast_paths import BOX, grasps_near_identity, needs_numba, reach_trajectory, terms_case
 from tolerances import (
     assert_close_to_scale,
     condition_number,
@@ -131,7 +125,7 @@ def test_a_point_at_the_tip_has_the_tips_effective_mass(
     name: str, request: pytest.FixtureRequest
 ) -> None:
     robot: RobotModel = request.getfixturevalue(name)
-    grasp, evaluation, terms, motion = _terms_case(robot, 17)
+    grasp, evaluation, terms, motion = terms_case(robot, 17)
     tip_in_object = grasp.transform_tip_to_object.translation[None]
     exposed = evaluate_exposed_points(
         robot, evaluation, BOX, grasp, motion, tip_in_object, terms=terms

@@ -20,11 +20,10 @@ from grasp_safety_ros.core import (
     solid_box,
 )
 from grasp_safety_ros.core.analyses.effort import evaluate_effort
+from grasp_safety_ros.core.analyses.null_space import bernstein_basis, metric_weights
 from grasp_safety_ros.core.analyses.redundancy import (
     RedundancyConfig,
     RedundancyResolution,
-    bernstein_basis,
-    metric_weights,
     resolve_redundancy,
 )
 from grasp_safety_ros.core.input_checks import pose_from_position_quat

@@ -12,7 +12,8 @@ from conftest import ARM6_AXES, ARM7_AXES, random_positions, serial_arm_urdf
 from grasp_safety_ros.core import InvalidInputError, RobotModel, solid_sphere
 from grasp_safety_ros.core.method.compiled import chain_arrays
 from grasp_safety_ros.core.method.effective_mass import translational_mobilities_in_base
-from grasp_safety_ros.core.model.robot import find_frame, resolve_urdf
+from grasp_safety_ros.core.model.description import resolve_urdf
+from grasp_safety_ros.core.model.robot import find_frame
 from grasp_safety_ros.ros.parameters import settings_from_parameters
 from grasp_safety_ros.ros.robot_bundle import build_robot
 

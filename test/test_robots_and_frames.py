@@ -13,18 +13,19 @@ import pytest
 from conftest import serial_arm_urdf
 
 from grasp_safety_ros.cli.main import main
+from grasp_safety_ros.cli.robots import load_any_model
 from grasp_safety_ros.core.exceptions import FrameNotFoundError, InvalidInputError
 from grasp_safety_ros.core.method.ranking import EvaluationConfig, Grasp, GraspSafetyEvaluator
 from grasp_safety_ros.core.model.bundled_robots import BUNDLED_ROBOTS
-from grasp_safety_ros.core.model.inertia import solid_box
-from grasp_safety_ros.core.model.robot import (
-    RobotModel,
+from grasp_safety_ros.core.model.description import (
     example_robot_data_dirs,
     example_robot_data_names,
-    frames_by_kind,
+    is_mjcf,
     load_urdf_model,
     resolve_urdf,
 )
+from grasp_safety_ros.core.model.inertia import solid_box
+from grasp_safety_ros.core.model.robot import RobotModel, frames_by_kind
 from grasp_safety_ros.core.model.trajectory import ObjectTrajectory
 
 MIN_SINGULAR_VALUE = 0.03
@@ -158,3 +159,31 @@ def test_frames_command_reads_mjcf_and_names(
     assert main(["frames", "talos_left_amr"]) == 2
     err = capsys.readouterr().err
     assert "did you mean 'talos_left_arm'" in err and len(err.splitlines()) == 1
+
+
+_MJCF_WITH_PROLOGUE = """<?xml version="1.0"?>
+<!-- converted from <robot name="two"> -->
+<mujoco model="two"><worldbody><body name="upper" pos="0 0 0.1">
+<joint name="shoulder" type="hinge" axis="0 0 1"/>
+<inertial pos="0 0 0" mass="1" diaginertia="0.01 0.01 0.001"/>
+<body name="lower" pos="0 0 0.2"><joint name="elbow" type="hinge" axis="0 1 0"/>
+<inertial pos="0 0 0" mass="1" diaginertia="0.01 0.01 0.001"/></body></body></worldbody>
+</mujoco>"""
+
+
+@pytest.mark.parametrize(
+    ("text", "mjcf"),
+    [(_MJCF_WITH_PROLOGUE, True), (serial_arm_urdf(("z", "y")), False)],
+    ids=["mjcf", "urdf"],
+)
+def test_one_mjcf_detector_for_frames_and_loading(tmp_path: Path, text: str, mjcf: bool) -> None:
+    """`grasp-safety frames` and the core loader tell MJCF from URDF with the one detector
+    (a file and the same XML as text alike), and read the same joints from either form."""
+    path = tmp_path / "robot.xml"
+    path.write_text(text)
+    assert is_mjcf(str(path), False) is mjcf
+    assert is_mjcf(text, True) is mjcf
+    model, where = load_any_model(str(path))
+    assert where.endswith("(MJCF)") is mjcf
+    assert list(model.names) == list(load_urdf_model(text).names)
+    assert list(model.names) == list(load_urdf_model(str(path)).names)

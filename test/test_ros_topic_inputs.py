@@ -93,6 +93,18 @@ def test_a_set_before_any_trajectory_takes_the_first_then_one_received_before_it
     assert taken is not None and taken[1] is before
 
 
+def test_the_latest_trajectory_is_the_one_received_last() -> None:
+    """What ~/plan_grasps ranks along: None before any, then the latest by reception time (a
+    message received earlier but handed over later does not replace it)."""
+    inputs, first, second, late = TopicInputs(), Path(), Path(), Path()
+    assert inputs.latest_trajectory() is None
+    inputs.set_trajectory(first, received_ns=10)
+    assert inputs.latest_trajectory() is first
+    inputs.set_trajectory(second, received_ns=30)
+    inputs.set_trajectory(late, received_ns=20)
+    assert inputs.latest_trajectory() is second
+
+
 def test_skipped_messages_are_the_gaps_of_each_publishers_numbers() -> None:
     sequences = PublisherSequences()
     assert [sequences.skipped(n) for n in (1, 2, 5, 6)] == [0, 0, 2, 0]

@@ -10,7 +10,7 @@ from dataclasses import replace
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import ARM7_AXES, random_positions, serial_arm_urdf
+from conftest import random_positions
 from tolerances import (
     ROUNDINGS_PER_JOINT,
     assert_close_to_scale,
@@ -51,30 +51,6 @@ BOX = solid_box(0.8, [0.08, 0.12, 0.2], [0.0, 0.01, -0.02])
 UNCERTAINTY = InertiaUncertainty(0.3, 0.03, 0.4, num_random_samples=6, seed=2)
 """1 nominal + 2^7 corners + 6 random inertias."""
 ARMS = ("arm6", "arm7", "baxter", "prismatic_arm", "continuous_arm", "geared_arm")
-
-
-@pytest.fixture(scope="module")
-def prismatic_arm() -> RobotModel:
-    urdf = serial_arm_urdf(ARM7_AXES).replace(
-        '<joint name="j3" type="revolute"', '<joint name="j3" type="prismatic"'
-    )
-    return RobotModel.from_urdf(urdf, "base_link", "tool")
-
-
-@pytest.fixture(scope="module")
-def geared_arm() -> RobotModel:
-    """Reflected rotor inertia on every joint (the ranking's M includes it)."""
-    armature = [0.3, 0.25, 0.2, 0.1, 0.05, 0.04, 0.02]
-    return RobotModel.from_urdf(
-        serial_arm_urdf(ARM7_AXES), "base_link", "tool", armature_kgm2=armature
-    )
-
-
-@pytest.fixture(scope="module")
-def continuous_arm() -> RobotModel:
-    return RobotModel.from_urdf(
-        serial_arm_urdf(ARM7_AXES, joint_type="continuous"), "base_link", "tool"
-    )
 
 
 def mass_tolerance(robot: RobotModel, evaluations: list, grasps: list[Grasp]) -> float:

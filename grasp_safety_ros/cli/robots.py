@@ -3,20 +3,19 @@
 from __future__ import annotations
 
 import difflib
-import xml.etree.ElementTree as ElementTree
 from pathlib import Path
 
 import pinocchio as pin
 
 from ..core.exceptions import InvalidInputError
-from ..core.model.bundled_robots import BUNDLED_ROBOTS
-from ..core.model.robot import (
-    EXAMPLE_ROBOT_DATA_PREFIX,
+from ..core.model.bundled_robots import BUNDLED_ROBOTS, EXAMPLE_ROBOT_DATA_PREFIX
+from ..core.model.description import (
     example_robot_data_names,
-    frames_by_kind,
+    is_mjcf,
     load_urdf_model,
     resolve_urdf,
 )
+from ..core.model.robot import frames_by_kind
 
 _JOINT_TYPES = {"RUB": "continuous", "R": "revolute", "P": "prismatic", "FreeFlyer": "floating"}
 
@@ -47,13 +46,6 @@ def robots_text() -> str:
     return "\n".join(lines)
 
 
-def _is_mjcf(path: str) -> bool:
-    try:
-        return next(ElementTree.iterparse(path, events=("start",)))[1].tag == "mujoco"
-    except (ElementTree.ParseError, OSError, StopIteration):
-        return False
-
-
 def load_any_model(source: str) -> tuple[pin.Model, str]:
     """The full Pinocchio model of a URDF or MJCF file, URDF XML, ``example-robot-data:<name>``
     or a bare example-robot-data name; and how to name it in ``robot.urdf``."""
@@ -71,7 +63,7 @@ def load_any_model(source: str) -> tuple[pin.Model, str]:
                 "`grasp-safety robots` lists the names",
             )
     resolved, is_xml = resolve_urdf(text)
-    if not is_xml and _is_mjcf(resolved):
+    if not is_xml and is_mjcf(resolved, is_xml):
         try:
             return pin.buildModelFromMJCF(resolved), f"{resolved} (MJCF)"
         except (RuntimeError, ValueError) as error:

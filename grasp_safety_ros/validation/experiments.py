@@ -147,7 +147,7 @@ def book_experiment() -> Experiment:
         for y in BOOK_GRASP_Y_M
     )
     start, goal = tip_start_goal()  # the paper's poses, used here for the book's frame
-    half = tuple(0.5 * s for s in BOOK_SIZE_M)
+    half = (0.5 * BOOK_SIZE_M[0], 0.5 * BOOK_SIZE_M[1], 0.5 * BOOK_SIZE_M[2])
     return Experiment(
         key="book",
         title="Book (22 x 15 x 1.5 cm, 0.34 kg, 3 grasps on the spine)",
@@ -523,7 +523,8 @@ def summarise_impulses(
     experiments: Sequence[tuple[str, Sequence[GraspRun]]], setup: ImpulseSetup
 ) -> dict[str, Any]:
     """The impulse_check part of results.json."""
-    per_case = []
+    per_case: list[dict[str, str | float | bool]] = []
+    cases = [case for _, runs in experiments for run in runs for _, case in run.impulse_cases]
     for key, runs in experiments:
         for run in runs:
             for sample_time, case in run.impulse_cases:
@@ -542,12 +543,9 @@ def summarise_impulses(
                         "joint_limit_active": case.limit_active,
                     }
                 )
-    errors = [case["rel_error"] for case in per_case]
-    engine = [
-        abs(case["engine_effective_mass_kg"] / case["effective_mass_kg"] - 1.0)
-        for case in per_case
-    ]
-    restitution = [case["restitution"] for case in per_case]
+    errors = [case.rel_error for case in cases]
+    engine = [abs(case.engine_effective_mass_kg / case.effective_mass_kg - 1.0) for case in cases]
+    restitution = [case.restitution for case in cases]
     return {
         "worst_rel_error": float(max(errors)),
         "mean_rel_error": float(np.mean(errors)),
@@ -558,6 +556,6 @@ def summarise_impulses(
         "restitution_min": float(min(restitution)),
         "restitution_max": float(max(restitution)),
         "engine_vs_core_effective_mass_max_rel_diff": float(max(engine)),
-        "joint_limit_active_cases": int(sum(case["joint_limit_active"] for case in per_case)),
+        "joint_limit_active_cases": int(sum(case.limit_active for case in cases)),
         "per_case": per_case,
     }

@@ -40,7 +40,7 @@ def _heatmap(path: Path, experiment: Experiment, runs: Sequence[GraspRun]) -> Pa
         extent=(times[0], times[-1], 0.5, len(runs) + 0.5),
         interpolation="nearest",
     )
-    contact = np.nanmean([run.collision.contact_time_s for run in runs])
+    contact = float(np.nanmean([run.collision.contact_time_s for run in runs]))
     ax.axvline(contact, color="white", linestyle="--", linewidth=1.0, label="impact")
     ax.set_yticks(np.arange(1, len(runs) + 1))
     ax.set_yticklabels([run.grasp.name for run in runs], fontsize="small")
@@ -59,7 +59,7 @@ def _mass_curves(path: Path, experiment: Experiment, runs: Sequence[GraspRun]) -
     fig, ax = plt.subplots(figsize=(7.0, 4.0))
     for run in runs:
         ax.plot(run.evaluation.times_s, run.evaluation.effective_mass_kg, label=run.grasp.name)
-    contact = np.nanmean([run.collision.contact_time_s for run in runs])
+    contact = float(np.nanmean([run.collision.contact_time_s for run in runs]))
     ax.axvline(contact, color="grey", linestyle="--", linewidth=1.0, label="impact")
     ax.set_xlabel("time [s]")
     ax.set_ylabel("effective mass along the motion [kg]")

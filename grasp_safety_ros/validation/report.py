@@ -161,6 +161,14 @@ def _variant(summary: dict[str, Any], key: str) -> dict[str, Any] | None:
     return summary.get("variants", {}).get(key)
 
 
+def _variant_of_both(
+    tensor: dict[str, Any], book: dict[str, Any], key: str
+) -> tuple[dict[str, Any], dict[str, Any]] | None:
+    """Variant ``key`` of the tensor and the book experiment (both run the same), or None."""
+    ours = _variant(tensor, key)
+    return None if ours is None else (ours, book["variants"][key])
+
+
 def _changes(results: dict[str, Any], key: str, reference: str) -> list[float]:
     """F_key / F_reference - 1 of the peak force, per grasp of both experiments.
 
@@ -251,9 +259,9 @@ def _reading(results: dict[str, Any]) -> str:
             "masses differ by less than that are not resolved, and swaps among them are noise."
         )
     items.append(tensor_sentence)
-    frictionless = _variant(tensor, "frictionless")
-    if frictionless is not None and baseline is not None:
-        book_free = _variant(book, "frictionless")
+    pair = _variant_of_both(tensor, book, "frictionless")
+    if pair is not None and baseline is not None:
+        frictionless, book_free = pair
         exact = frictionless["ordering_holds"] and book_free["ordering_holds"]
         items.append(
             "**Friction.** Without friction (the effective-mass model's assumption) the "
@@ -268,9 +276,9 @@ def _reading(results: dict[str, Any]) -> str:
             "rattles (its normal force drops to zero for some microseconds at a time), the "
             "likely source of the noise above."
         )
-    rigid = _variant(tensor, "rigid_plate")
-    if rigid is not None:
-        book_rigid = _variant(book, "rigid_plate")
+    pair = _variant_of_both(tensor, book, "rigid_plate")
+    if pair is not None:
+        rigid, book_rigid = pair
         items.append(
             "**Rigid plate.** Without the load cell the force is MuJoCo's contact force: "
             f"{rigid['peak_force_min_n']:.0f} to {rigid['peak_force_max_n']:.0f} N for the "
@@ -293,9 +301,9 @@ def _reading(results: dict[str, Any]) -> str:
             else ""
         )
     )
-    control = _variant(tensor, "control_1khz")
-    if control is not None:
-        book_control = _variant(book, "control_1khz")
+    pair = _variant_of_both(tensor, book, "control_1khz")
+    if pair is not None:
+        control, book_control = pair
         shifts = _changes(results, "control_1khz", MAIN_BASELINE)
         items.append(
             "**Controller rate.** With a 1 kHz zero-order hold (as a real controller) the "

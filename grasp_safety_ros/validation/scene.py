@@ -31,8 +31,9 @@ import numpy as np
 import pinocchio as pin
 
 from ..core.exceptions import InvalidInputError, RobotModelError
+from ..core.model.description import resolve_urdf
 from ..core.model.inertia import ObjectInertia
-from ..core.model.robot import RobotModel, resolve_urdf
+from ..core.model.robot import RobotModel
 
 CONTACT_BIT = 2
 """Collision bit shared by the tip sphere (contype) and the obstacle (conaffinity) only."""

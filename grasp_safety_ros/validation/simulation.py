@@ -232,9 +232,9 @@ def simulate_collision(
     setup = setup or CollisionSetup()
     spline = joint_reference(evaluation)
     duration = float(evaluation.times_s[-1])
-    base_to_world = pin.SE3(robot.transform_base_to_world)
-    direction = base_to_world.rotation @ _direction_at(evaluation, setup.impact_time_s)
-    tip_at_impact = base_to_world.act(
+    transform_base_to_world = pin.SE3(robot.transform_base_to_world)
+    direction = transform_base_to_world.rotation @ _direction_at(evaluation, setup.impact_time_s)
+    tip_at_impact = transform_base_to_world.act(
         robot.transform_tip_to_base(spline(setup.impact_time_s))
     ).translation
     face_centre = tip_at_impact + setup.tip_sphere_radius_m * direction
@@ -493,8 +493,10 @@ class ImpulseChecker:
         """One impact at chain positions, along a direction in base axes."""
         scene, setup = self.scene, self.setup
         model, data = scene.model, scene.data
-        base_to_world = pin.SE3(self.robot.transform_base_to_world)
-        unit = base_to_world.rotation @ (direction_in_base / np.linalg.norm(direction_in_base))
+        transform_base_to_world = pin.SE3(self.robot.transform_base_to_world)
+        unit = transform_base_to_world.rotation @ (
+            direction_in_base / np.linalg.norm(direction_in_base)
+        )
         mujoco.mj_resetData(model, data)
         data.qpos[scene.arm_qpos] = positions
         mujoco.mj_forward(model, data)

@@ -146,7 +146,7 @@ def evaluate_effort(
             (shared across analyses).
         terms: The grasp's ``method.terms.SampleTerms`` at these joint positions: then
             the compiled path (``evaluate_efforts``) runs on them; None: Pinocchio per
-            sample (the reference; equal to rounding, test_performance_paths).
+            sample (the reference; equal to rounding, test_terms).
     """
     limits = effort_limits(robot)
     if not evaluation.feasible:
@@ -154,7 +154,7 @@ def evaluate_effort(
     times = np.asarray(evaluation.times_s, dtype=float)
     positions = _checked_positions(robot, evaluation, joint_positions)
     chain = chain_arrays(robot) if terms is not None and compiled_available() else None
-    if chain is not None:
+    if chain is not None and terms is not None:
         batched = SampleTerms(*(array[None] for array in terms))
         return evaluate_efforts(
             robot, [evaluation], object_inertia, [grasp], trajectory, [positions], batched, chain
@@ -181,10 +181,10 @@ def evaluate_effort(
         dq_ds = d2q_ds2 = np.zeros_like(positions)
     velocity_fd = dq_ds * s_rate[:, None]
     acceleration_fd = d2q_ds2 * s_rate[:, None] ** 2 + dq_ds * s_accel[:, None]
-    twist_base, twist_rate_base = tip_twist_and_derivative(
+    twists_tip_in_base, twist_rates_tip_in_base = tip_twist_and_derivative(
         trajectory, grasp.transform_tip_to_object, times
     )
-    rotation = robot.transform_base_to_world.rotation
+    rotation_base_to_world = robot.transform_base_to_world.rotation
     kinematics = kinematic_model.createData()
     if model is None:
         model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
@@ -204,9 +204,17 @@ def evaluate_effort(
         ).reshape(6, kinematic_model.nv)
         pseudo_inverse = np.linalg.pinv(jacobian, rcond=1e-10)
         null = np.eye(kinematic_model.nv) - pseudo_inverse @ jacobian
-        twist = np.concatenate([rotation @ twist_base[i, :3], rotation @ twist_base[i, 3:]])
+        twist = np.concatenate(
+            [
+                rotation_base_to_world @ twists_tip_in_base[i, :3],
+                rotation_base_to_world @ twists_tip_in_base[i, 3:],
+            ]
+        )
         twist_rate = np.concatenate(
-            [rotation @ twist_rate_base[i, :3], rotation @ twist_rate_base[i, 3:]]
+            [
+                rotation_base_to_world @ twist_rates_tip_in_base[i, :3],
+                rotation_base_to_world @ twist_rates_tip_in_base[i, 3:],
+            ]
         )
         v = pseudo_inverse @ twist + null @ velocity_fd[i]
         pin.forwardKinematics(kinematic_model, kinematics, q, v, zero)

@@ -111,20 +111,26 @@ def point_jacobian_in_base(
     or an augmented copy (same kinematics). J_p = J_v − r̂ J_ω with r = tip -> p (world axes).
     """
     pin.computeJointJacobians(model, data, q)
-    rotation_tip = pin.updateFramePlacement(model, data, robot.tip_frame_id).rotation
-    jacobian_world = pin.getFrameJacobian(
+    rotation_tip_to_world = pin.updateFramePlacement(model, data, robot.tip_frame_id).rotation
+    jacobian_tip_in_world = pin.getFrameJacobian(
         model, data, robot.tip_frame_id, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
     ).reshape(6, model.nv)
-    return _point_jacobians(robot, jacobian_world, rotation_tip, np.atleast_2d(point_in_tip_m))
+    return _point_jacobians(
+        robot, jacobian_tip_in_world, rotation_tip_to_world, np.atleast_2d(point_in_tip_m)
+    )
 
 
 def _point_jacobians(
-    robot: RobotModel, jacobian_world: np.ndarray, rotation_tip: np.ndarray, points: np.ndarray
+    robot: RobotModel,
+    jacobian_tip_in_world: np.ndarray,
+    rotation_tip_to_world: np.ndarray,
+    points: np.ndarray,
 ) -> np.ndarray:
     """(..., K, 3, nv) Jacobians of the K tip-fixed ``points`` (tip frame [m]) from tip
     Jacobians (..., 6, nv) and tip rotations (..., 3, 3), world; base axes."""
-    levers = points @ np.swapaxes(rotation_tip, -1, -2)  # (..., K, 3): tip -> point, world
-    linear, angular = jacobian_world[..., :3, :], jacobian_world[..., 3:, :]
+    # (..., K, 3): tip -> point, world axes
+    levers = points @ np.swapaxes(rotation_tip_to_world, -1, -2)
+    linear, angular = jacobian_tip_in_world[..., :3, :], jacobian_tip_in_world[..., 3:, :]
     # J_p = J_v − r̂ J_ω: row a of r̂ J_ω is r_b J_ω,c − r_c J_ω,b ((a, b, c) cyclic)
     r = levers[..., :, :, None]  # (..., K, 3, 1)
     w = angular[..., None, :, :]  # (..., 1, 3, nv)

@@ -306,13 +306,6 @@ class PowerForceLimitAssessment:
         )
 
 
-def assess_region(
-    speed_m_s: np.ndarray, effective_mass_kg: np.ndarray, duration_s: float, region: BodyRegion
-) -> RegionAssessment:
-    """Assess one region for per-sample speeds [m/s] and effective masses [kg] (validated)."""
-    return assess_regions(speed_m_s, effective_mass_kg, duration_s, (region,))[0]
-
-
 @functools.lru_cache(maxsize=64)
 def _region_columns(
     regions: tuple[BodyRegion, ...],

@@ -197,20 +197,20 @@ def effective_mass_for_inertias(
     data = model.createData()
     count, nv = len(evaluation.times_s), model.nv
     mass_matrices = np.empty((count, nv, nv))
-    jacobians_local = np.empty((count, 6, nv))
-    jacobians_base = np.empty((count, 3, nv))
-    rotation_base = robot.transform_base_to_world.rotation
+    jacobians_tip_local = np.empty((count, 6, nv))
+    jacobians_tip_in_base = np.empty((count, 3, nv))
+    rotation_base_to_world = robot.transform_base_to_world.rotation
     for i, positions in enumerate(evaluation.joint_positions):
         q = robot.q_from_positions(positions)
         upper = np.triu(pin.crba(model, data, q))
         mass_matrices[i] = upper + np.triu(upper, 1).T
         pin.computeJointJacobians(model, data, q)
-        rotation_tip = pin.updateFramePlacement(model, data, robot.tip_frame_id).rotation
+        rotation_tip_to_world = pin.updateFramePlacement(model, data, robot.tip_frame_id).rotation
         local = pin.getFrameJacobian(
             model, data, robot.tip_frame_id, pin.ReferenceFrame.LOCAL
         ).reshape(6, nv)
-        jacobians_local[i] = local
-        jacobians_base[i] = rotation_base.T @ rotation_tip @ local[:3]
+        jacobians_tip_local[i] = local
+        jacobians_tip_in_base[i] = rotation_base_to_world.T @ rotation_tip_to_world @ local[:3]
     transform_object_to_tip = pin.SE3(grasp.transform_tip_to_object).inverse()
     spatial = np.array(
         [transform_object_to_tip.act(i.spatial_inertia_in_object()).matrix() for i in inertias]
@@ -221,11 +221,13 @@ def effective_mass_for_inertias(
     for start in range(0, len(inertias), PERTURBATION_CHUNK):
         chunk = spatial[start : start + PERTURBATION_CHUNK]
         augmented = mass_matrices[None] + np.einsum(
-            "nai,pab,nbj->pnij", jacobians_local, chunk, jacobians_local
+            "nai,pab,nbj->pnij", jacobians_tip_local, chunk, jacobians_tip_local
         )
-        rhs = np.broadcast_to(np.swapaxes(jacobians_base, 1, 2), (*augmented.shape[:2], nv, 3))
+        rhs = np.broadcast_to(
+            np.swapaxes(jacobians_tip_in_base, 1, 2), (*augmented.shape[:2], nv, 3)
+        )
         solved = np.linalg.solve(augmented, rhs)
-        mobility = np.einsum("nai,pnib->pnab", jacobians_base, solved)
+        mobility = np.einsum("nai,pnib->pnab", jacobians_tip_in_base, solved)
         masses = 1.0 / np.einsum("na,pnab,nb->pn", directions, mobility, directions)
         if worst.any():
             eigenvalues = np.linalg.eigvalsh(

@@ -155,11 +155,11 @@ def translational_mobilities_in_base(
         pin.computeMinverse(model, data, q)
         minv = np.where(upper, data.Minv, data.Minv.T)  # computeMinverse fills the upper part
         pin.computeJointJacobians(model, data, q)
-        jacobian_world = pin.getFrameJacobian(
+        jacobian_tip_in_world = pin.getFrameJacobian(
             model, data, frame_id, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
         ).reshape(6, model.nv)
-        jacobian_base = rotation_base_to_world.T @ jacobian_world[:3]
-        out[i] = jacobian_base @ minv @ jacobian_base.T
+        jacobian_tip_in_base = rotation_base_to_world.T @ jacobian_tip_in_world[:3]
+        out[i] = jacobian_tip_in_base @ minv @ jacobian_tip_in_base.T
     return out
 
 
@@ -180,11 +180,11 @@ def translational_mobility_in_base(
     minv_upper = np.triu(data.Minv)
     minv = minv_upper + np.triu(minv_upper, 1).T
     pin.computeJointJacobians(model, data, q)
-    jacobian_world = pin.getFrameJacobian(
+    jacobian_tip_in_world = pin.getFrameJacobian(
         model, data, robot.tip_frame_id, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
     ).reshape(6, model.nv)  # eigenpy returns a 6x1 matrix as a vector
-    jacobian_base = robot.transform_base_to_world.rotation.T @ jacobian_world[:3]
-    return jacobian_base @ minv @ jacobian_base.T
+    jacobian_tip_in_base = robot.transform_base_to_world.rotation.T @ jacobian_tip_in_world[:3]
+    return jacobian_tip_in_base @ minv @ jacobian_tip_in_base.T
 
 
 def effective_mass_along(mobility: np.ndarray, direction: np.ndarray) -> float:

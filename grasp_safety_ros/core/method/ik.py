@@ -215,21 +215,21 @@ class IKSolver:
         Returns:
             The configuration, whether it converged to the tolerances, and the iterations.
         """
-        target_in_world = self.robot.transform_base_to_world * transform_tip_to_base
+        transform_target_to_world = self.robot.transform_base_to_world * transform_tip_to_base
         if self.compiled:
             q = np.empty(self.robot.model.nq)
             converged, iterations = call_kernel(
                 _kernels().solve_pose,
                 self.chain,
                 self.settings,
-                plain_array(target_in_world.rotation),
-                plain_array(target_in_world.translation),
+                plain_array(transform_target_to_world.rotation),
+                plain_array(transform_target_to_world.translation),
                 plain_array(q_init),
                 q,
                 _kernels().thread_workspace(self.robot.model.nv),
             )
             return q, bool(converged), int(iterations)
-        return self._solve_python(target_in_world, q_init)
+        return self._solve_python(transform_target_to_world, q_init)
 
     def solve_poses(
         self, transforms_tip_to_base: Sequence[pin.SE3], seeds_q: np.ndarray
@@ -261,7 +261,7 @@ class IKSolver:
 
     def _solve_python(
         self,
-        target_in_world: pin.SE3,
+        transform_target_to_world: pin.SE3,
         q_init: np.ndarray,
         first_residual: np.ndarray | None = None,
     ) -> tuple[np.ndarray, bool, int]:
@@ -277,7 +277,7 @@ class IKSolver:
         for iteration in range(config.max_iterations + 1):
             pin.computeJointJacobians(model, data, q)  # forward kinematics + joint Jacobians
             current = pin.updateFramePlacement(model, data, frame_id)
-            error_transform = current.actInv(target_in_world)
+            error_transform = current.actInv(transform_target_to_world)
             error = pin.log6(error_transform).vector
             translation = error_transform.translation
             if iteration == 0 and first_residual is not None:
@@ -396,11 +396,11 @@ class IKSolver:
     ) -> IKTrajectoryResult:
         """``solve_trajectory`` with the tip poses as (N, 3, 3) rotations and (N, 3) [m]."""
         base = self.robot.transform_base_to_world
-        rotations_world = np.matmul(base.rotation, rotations_tip_to_base)
-        translations_world = (
+        rotations_tip_to_world = np.matmul(base.rotation, rotations_tip_to_base)
+        translations_tip_in_world = (
             np.einsum("ij,nj->ni", base.rotation, translations_tip_in_base) + base.translation
         )
-        count = len(rotations_world)
+        count = len(rotations_tip_to_world)
         if count == 0:
             return IKTrajectoryResult(np.empty((0, self.robot.model.nq)), np.zeros(0, int), "")
         first = pin.SE3(np.array(rotations_tip_to_base[0]), np.array(translations_tip_in_base[0]))
@@ -412,7 +412,7 @@ class IKSolver:
             )
         if self.compiled:
             status, index, joint, value, q_all, iterations, q_fail = self._trajectory_compiled(
-                rotations_world, translations_world, times_s, q0
+                rotations_tip_to_world, translations_tip_in_world, times_s, q0
             )
         else:
             velocity_limits = self.robot.velocity_limits
@@ -422,7 +422,7 @@ class IKSolver:
                 & (velocity_limits > 0)
             )
             status, index, joint, value, q_all, iterations, q_fail = self._trajectory_python(
-                rotations_world, translations_world, times_s, q0, check_velocity
+                rotations_tip_to_world, translations_tip_in_world, times_s, q0, check_velocity
             )
         iterations[0] = iterations0
         if status == _OK:
@@ -485,19 +485,19 @@ class IKSolver:
 
     def _trajectory_compiled(
         self,
-        rotations_world: np.ndarray,
-        translations_world: np.ndarray,
+        rotations_tip_to_world: np.ndarray,
+        translations_tip_in_world: np.ndarray,
         times_s: np.ndarray,
         q0: np.ndarray,
     ) -> tuple[int, int, int, float, np.ndarray, np.ndarray, np.ndarray]:
-        out = grasp_buffers(1, len(rotations_world), self.robot.model.nq)
+        out = grasp_buffers(1, len(rotations_tip_to_world), self.robot.model.nq)
         out.q_all[0, 0] = q0
         status, index, joint, value = call_kernel(
             _kernels().solve_trajectory,
             self.chain,
             self.settings,
-            plain_array(rotations_world),
-            plain_array(translations_world),
+            plain_array(rotations_tip_to_world),
+            plain_array(translations_tip_in_world),
             plain_array(times_s),
             out,
             _kernels().thread_workspace(self.robot.model.nv),
@@ -514,24 +514,24 @@ class IKSolver:
 
     def _trajectory_python(
         self,
-        rotations_world: np.ndarray,
-        translations_world: np.ndarray,
+        rotations_tip_to_world: np.ndarray,
+        translations_tip_in_world: np.ndarray,
         times_s: np.ndarray,
         q0: np.ndarray,
         check_velocity: np.ndarray,
     ) -> tuple[int, int, int, float, np.ndarray, np.ndarray, np.ndarray]:
         model, config = self.robot.model, self.config
-        count = len(rotations_world)
+        count = len(rotations_tip_to_world)
         q_all = np.empty((count, model.nq))
         iterations = np.zeros(count, dtype=np.int64)
         q_all[0] = q0
         velocity_limits = self.robot.velocity_limits
         any_velocity_check = bool(check_velocity.any())
         pin.computeJointJacobians(model, self.data, q0)  # _predict's Jacobian at q_all[0]
-        previous = pin.SE3(rotations_world[0], translations_world[0])
+        previous = pin.SE3(rotations_tip_to_world[0], translations_tip_in_world[0])
         defect, xi2 = np.zeros(6), 0.0
         for i in range(1, count):
-            target = pin.SE3(rotations_world[i], translations_world[i])
+            target = pin.SE3(rotations_tip_to_world[i], translations_tip_in_world[i])
             guess, xi2 = self._predict(q_all[i - 1], previous.actInv(target), defect, xi2)
             previous = target
             q, converged, iterations[i] = self._solve_python(target, guess, defect)

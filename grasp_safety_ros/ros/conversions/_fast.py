@@ -92,7 +92,7 @@ def _template_constructor(template: Any) -> Callable[..., Any]:
     for (slots other than its fields and ``_check_fields``) gets a copy of ``template`` with
     the fields set through its setters.
     """
-    message_type = type(template)
+    message_type: Any = type(template)  # a generated message class (rosidl: untyped)
     fields = message_type.get_fields_and_field_types()
     if not has_slots(message_type, tuple(fields)):
 

@@ -165,6 +165,16 @@ def trajectory_from_multi_dof(
     )
 
 
+def _point_rows(rows: Sequence[Sequence[float]]) -> np.ndarray:
+    """(N,) object array of the points' rows (each a list [rad or m, per second...]): the core
+    checks them row by row, so a point with too few or too many values gets its error naming
+    that point (numpy would refuse the ragged (N, K) array first)."""
+    array = np.empty(len(rows), dtype=object)
+    for k, row in enumerate(rows):
+        array[k] = list(row)
+    return array
+
+
 def planned_from_joint_trajectory(
     trajectory: JointTrajectory, field: str
 ) -> PlannedJointTrajectory | None:
@@ -187,7 +197,7 @@ def planned_from_joint_trajectory(
                 f"must be > points[{k - 1}].time_from_start={times[k - 1]:.9f} s (strictly "
                 f"increasing), got {times[k]:.9f} s",
             )
-    rates = {}
+    rates: dict[str, np.ndarray | None] = {}
     for name in ("velocities", "accelerations"):
         given = [len(getattr(p, name)) > 0 for p in points]
         if any(given) and not all(given):
@@ -195,11 +205,11 @@ def planned_from_joint_trajectory(
             raise InvalidInputError(
                 f"{field}.points[{k}].{name}", f"give {name} for every point or for none"
             )
-        rates[name] = [list(getattr(p, name)) for p in points] if all(given) else None
+        rates[name] = _point_rows([getattr(p, name) for p in points]) if all(given) else None
     return PlannedJointTrajectory(
         tuple(trajectory.joint_names),
         np.array(times),
-        [list(p.positions) for p in points],
+        _point_rows([p.positions for p in points]),
         rates["velocities"],
         field,
         rates["accelerations"],
@@ -323,7 +333,8 @@ def grasps_from_pose_array(
 
     frame_id ``object_frame``: the poses are the tip in the object frame. frame_id
     ``base_frame``: the poses are the tip in the base frame with the object at the start of
-    ``trajectory``; T_object_tip = T_base_object(start)⁻¹ · T_base_tip.
+    ``trajectory``: transform_tip_to_object =
+    transform_object_to_base(start)⁻¹ · transform_tip_to_base.
     """
     poses = check_grasp_array(grasps, object_frame, base_frame, max_grasps, field)
     if grasps.header.frame_id == base_frame:

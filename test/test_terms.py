@@ -1,0 +1,196 @@
+"""The shared per-(grasp, sample) terms (core/method/terms.py) equal Pinocchio, and so do the
+analyses that consume them (exposed points, effort, point Jacobians, whole arm) against their
+Pinocchio reference paths."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from fast_paths import BOX, TERM_ARMS, needs_numba, terms_case
+from tolerances import (
+    assert_close_to_scale,
+    dynamics_tolerance,
+    effort_tolerances,
+    kinematics_tolerance,
+)
+
+from grasp_safety_ros.core import RobotModel
+from grasp_safety_ros.core.method.effective_mass import (
+    augmented_model,
+    translational_mobility_in_base,
+)
+
+
+@needs_numba
+@pytest.mark.parametrize("name", TERM_ARMS)
+def test_shared_terms_equal_pinocchio(name: str, request: pytest.FixtureRequest) -> None:
+    robot: RobotModel = request.getfixturevalue(name)
+    grasp, evaluation, terms, _ = terms_case(robot, 11)
+    model = augmented_model(robot, BOX, grasp.transform_tip_to_object)
+    data = model.createData()
+    kinematic, dynamic = kinematics_tolerance(robot), dynamics_tolerance(robot, terms)
+    for i, positions in enumerate(evaluation.joint_positions):
+        q = robot.q_from_positions(positions)
+        pin.computeMinverse(model, data, q)
+        upper = np.triu(data.Minv)
+        assert_close_to_scale(
+            terms.mass_matrix_inverses[i], upper + np.triu(upper, 1).T, "Minv", dynamic
+        )
+        pin.computeJointJacobians(model, data, q)
+        tip = pin.updateFramePlacement(model, data, robot.tip_frame_id)
+        jacobian = pin.getFrameJacobian(
+            model, data, robot.tip_frame_id, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+        )
+        assert_close_to_scale(terms.tip_jacobians[i], jacobian, "tip Jacobian", kinematic)
+        assert_close_to_scale(terms.tip_rotations[i], tip.rotation, "tip rotation", kinematic)
+        assert_close_to_scale(terms.tip_translations[i], tip.translation, "tip origin", kinematic)
+        for k in range(robot.num_joints):
+            placement = data.oMi[k + 1]
+            assert_close_to_scale(
+                terms.joint_rotations[i, k], placement.rotation, "joint R", kinematic
+            )
+            assert_close_to_scale(
+                terms.joint_origins[i, k], placement.translation, "joint p", kinematic
+            )
+            motion = pin.getJointJacobian(model, data, k + 1, pin.ReferenceFrame.WORLD)[:, k]
+            assert_close_to_scale(terms.joint_motions[i, k], motion, "motion subspace", kinematic)
+        mobility = translational_mobility_in_base(robot, model, data, q)
+        assert_close_to_scale(terms.tip_mobilities[i], mobility, "tip mobility", dynamic)
+
+
+@needs_numba
+@pytest.mark.parametrize("name", TERM_ARMS)
+def test_exposed_points_from_shared_terms_equal_pinocchio(
+    name: str, request: pytest.FixtureRequest
+) -> None:
+    from grasp_safety_ros.core.analyses.exposed_points import (
+        box_corners_in_object,
+        evaluate_exposed_points,
+    )
+
+    robot: RobotModel = request.getfixturevalue(name)
+    grasp, evaluation, terms, motion = terms_case(robot, 12)
+    points = box_corners_in_object([0.08, 0.12, 0.2])
+    reference = evaluate_exposed_points(robot, evaluation, BOX, grasp, motion, points)
+    shared = evaluate_exposed_points(robot, evaluation, BOX, grasp, motion, points, terms=terms)
+    tolerance = dynamics_tolerance(robot, terms)
+    for field in ("effective_mass_kg", "directions_in_base"):
+        assert_close_to_scale(getattr(shared, field), getattr(reference, field), field, tolerance)
+    np.testing.assert_array_equal(shared.leading_point_index, reference.leading_point_index)
+    np.testing.assert_array_equal(shared.worst_point_index, reference.worst_point_index)
+
+
+@needs_numba
+@pytest.mark.parametrize("name", TERM_ARMS)
+def test_effort_from_shared_terms_equals_pinocchio(
+    name: str, request: pytest.FixtureRequest
+) -> None:
+    from grasp_safety_ros.core.analyses.effort import evaluate_effort
+
+    robot: RobotModel = request.getfixturevalue(name)
+    grasp, evaluation, terms, motion = terms_case(robot, 13)
+    reference = evaluate_effort(robot, evaluation, BOX, grasp, motion)
+    shared = evaluate_effort(robot, evaluation, BOX, grasp, motion, terms=terms)
+    tolerances = effort_tolerances(robot, evaluation, BOX, grasp, reference)
+    for field in ("joint_velocities", "joint_accelerations", "joint_torques", "peak_abs_torque"):
+        expected = getattr(reference, field)
+        assert_close_to_scale(getattr(shared, field), expected, field, tolerances[field])
+
+
+@needs_numba
+@pytest.mark.parametrize("name", TERM_ARMS)
+def test_point_jacobians_from_shared_terms_equal_pinocchio(
+    name: str, request: pytest.FixtureRequest
+) -> None:
+    """A point on each link (0.1 m off its joint origin) and the tip: linear Jacobians from the
+    terms equal Pinocchio's frame Jacobians (LOCAL_WORLD_ALIGNED) of frames placed there."""
+    from grasp_safety_ros.core.method.terms import point_jacobians
+
+    robot: RobotModel = request.getfixturevalue(name)
+    _, evaluation, terms, _ = terms_case(robot, 14)
+    model = robot.model.copy()
+    offset = pin.SE3(np.eye(3), np.array([0.03, -0.05, 0.1]))
+    frames = [
+        model.addFrame(pin.Frame(f"site{k}", k + 1, 0, offset, pin.FrameType.OP_FRAME))
+        for k in range(robot.num_joints)
+    ]
+    data = model.createData()
+    tip = point_jacobians(terms, robot.num_joints - 1, terms.tip_translations[:, None])
+    tolerance = kinematics_tolerance(robot)
+    assert_close_to_scale(tip[:, 0], terms.tip_jacobians[:, :3], "tip as a point", tolerance)
+    for i, positions in enumerate(evaluation.joint_positions[::10]):
+        q = robot.q_from_positions(positions)
+        pin.computeJointJacobians(model, data, q)
+        pin.updateFramePlacements(model, data)
+        for k, frame in enumerate(frames):
+            point = data.oMf[frame].translation
+            ours = point_jacobians(terms, k, point[None, None])  # every sample, one point
+            expected = pin.getFrameJacobian(
+                model, data, frame, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+            )[:3]
+            assert_close_to_scale(ours[10 * i, 0], expected, f"site on link {k}", tolerance)
+
+
+@needs_numba
+@pytest.mark.parametrize("name", TERM_ARMS)
+def test_whole_arm_from_shared_terms_equals_pinocchio(
+    name: str, request: pytest.FixtureRequest
+) -> None:
+    """Sites of the whole arm (the defaults and a point on every link) on the compiled path:
+    positions, directions, speeds, masses, energies and the regions' worst cases."""
+    from grasp_safety_ros.core.analyses.whole_arm import evaluate_whole_arm, resolve_arm_sites
+
+    robot: RobotModel = request.getfixturevalue(name)
+    grasp, evaluation, terms, motion = terms_case(robot, 16)
+    links = {
+        frame.name
+        for frame in robot.model.frames
+        if frame.type == pin.FrameType.BODY and frame.parentJoint > 0
+    }
+    sites = resolve_arm_sites(robot, {link: [[0.03, -0.05, 0.1]] for link in sorted(links)})
+    reference = evaluate_whole_arm(robot, evaluation, BOX, grasp, motion, sites)
+    shared = evaluate_whole_arm(robot, evaluation, BOX, grasp, motion, sites, terms=terms)
+    assert reference.stationary.any() and not reference.stationary.all()  # both branches
+    np.testing.assert_array_equal(shared.stationary, reference.stationary)
+    kinematic, dynamic = kinematics_tolerance(robot), dynamics_tolerance(robot, terms)
+    assert_close_to_scale(
+        shared.positions_in_base_m, reference.positions_in_base_m, "positions", kinematic
+    )
+    for field in ("speed_m_s", "energy_j"):  # the joint rates through J⁺; energies through M
+        assert_close_to_scale(getattr(shared, field), getattr(reference, field), field, dynamic)
+    moving = ~reference.stationary
+    masses, expected = shared.effective_mass_kg, reference.effective_mass_kg
+    assert_close_to_scale(masses[moving], expected[moving], "masses", dynamic)
+    # At rest the mass is 1/λ_min of the mobility A, conditioned by λ_max/λ_min (here up to
+    # 1e6): λ_min agrees to rounding of A's scale, so compare 1/M_eff.
+    assert_close_to_scale(
+        1.0 / masses[~moving], 1.0 / expected[~moving], "1/masses at rest", dynamic
+    )
+    assert_close_to_scale(
+        shared.directions_in_base[moving],
+        reference.directions_in_base[moving],
+        "directions",
+        dynamic,
+    )
+    still = reference.stationary  # eigenvectors: up to sign
+    signs = np.sign(
+        np.einsum(
+            "ka,ka->k", shared.directions_in_base[still], reference.directions_in_base[still]
+        )
+    )
+    assert_close_to_scale(
+        shared.directions_in_base[still] * signs[:, None],
+        reference.directions_in_base[still],
+        "directions at rest",
+        dynamic,
+    )
+    for a, b in zip(shared.regions, reference.regions, strict=True):
+        assert (a.region, a.worst_site, a.worst_sample, a.admissible) == (
+            b.region,
+            b.worst_site,
+            b.worst_sample,
+            b.admissible,
+        )
+        assert a.peak_contact_force_n == pytest.approx(b.peak_contact_force_n, rel=dynamic)
+        assert a.worst_force_ratio == pytest.approx(b.worst_force_ratio, rel=dynamic)
