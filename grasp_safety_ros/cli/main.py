@@ -16,7 +16,7 @@ from ..paths import config_file
 
 if TYPE_CHECKING:
     from ..core.analyses.safety_report import SafetyReport
-    from .scenario import Scenario
+    from ..scenario.schema import Scenario
 
 # The commands import the core, the scenario reader and the report writer when they run, so
 # ``grasp-safety --help`` and argument errors stay fast (docs/performance_pipeline.md).
@@ -27,12 +27,15 @@ PROGRESS_MIN_SAMPLES = 2000
 """Show a progress bar (on a terminal) when grasps x samples reaches this."""
 
 
-def _progress_printer(total_samples: int) -> Callable[[int, int], None] | None:
+def _progress_printer(total_samples: int) -> Callable[[str, int, int], None] | None:
+    """A bar of the ranking stage's grasps on a terminal (core.pipeline.Progress)."""
     if total_samples < PROGRESS_MIN_SAMPLES or not sys.stderr.isatty():
         return None
     started = time.perf_counter()
 
-    def show(done: int, total: int) -> None:
+    def show(stage: str, done: int, total: int) -> None:
+        if stage != "rank":
+            return
         width = 30
         filled = int(width * done / total)
         elapsed = time.perf_counter() - started
@@ -49,12 +52,12 @@ def _progress_printer(total_samples: int) -> Callable[[int, int], None] | None:
 def rank_scenario(scenario: Scenario, metric: str | None = None) -> SafetyReport:
     """Load the scenario's robot, rank its grasps and run the analyses the scenario asks for."""
     from ..core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
-    from .scenario import rank_with_evaluator
+    from ..core.pipeline import run_pipeline
 
     robot = scenario.robot.load(scenario.base_dir)
     evaluator = GraspSafetyEvaluator(robot, EvaluationConfig(metric=metric or scenario.metric))
     progress = _progress_printer(len(scenario.grasps) * len(scenario.trajectory.times_s()))
-    return rank_with_evaluator(scenario, evaluator, progress)
+    return run_pipeline(evaluator, scenario.request(robot), progress)
 
 
 def run_header(scenario: Scenario, report: SafetyReport) -> str:
@@ -132,8 +135,8 @@ def _write_outputs(
 
 
 def _command_rank(args: argparse.Namespace) -> int:
+    from ..scenario.schema import load_scenario
     from .report import report_text
-    from .scenario import load_scenario
 
     scenario = load_scenario(args.scenario)
     report = rank_scenario(scenario, args.metric)
@@ -144,8 +147,8 @@ def _command_rank(args: argparse.Namespace) -> int:
 
 
 def _command_demo(args: argparse.Namespace) -> int:
+    from ..scenario.schema import load_scenario
     from .report import report_text
-    from .scenario import load_scenario
 
     path = config_file(DEMO_SCENARIO)
     print(f"demo: the paper's book experiment on Baxter ({path})")

@@ -2,8 +2,10 @@
 
 Combines, on top of GraspSafetyEvaluator.rank: effective mass at exposed object points
 (``metric_point``), ISO/TS 15066 power and force limiting, inertia uncertainty, grasp quality
-(weighted sum + Pareto set), null-space redundancy resolution and joint effort. The CLI and
-the ROS node both serialise a SafetyReport; neither computes anything itself.
+(weighted sum + Pareto set), null-space redundancy resolution, joint effort and the whole
+arm's exposure. ``analyse`` is the analyses stage of ``core.pipeline.run_pipeline`` (after the
+ranking and posture selection), which every adapter calls; the adapters serialise the
+SafetyReport it returns.
 """
 
 from __future__ import annotations
@@ -77,7 +79,8 @@ the whole arm's worst predicted force for ``whole_arm_region``."""
 
 @dataclass(frozen=True)
 class AnalysisOptions:
-    """What to compute beyond the tip effective mass (all off except ISO/TS 15066 by default).
+    """What to compute beyond the tip effective mass (ISO/TS 15066 and effort by default; the
+    defaults are core.options.OPTIONS', checked by test/test_options.py).
 
     Attributes:
         metric_point: ``tip`` (the paper), ``leading_point`` or ``worst_point`` of the object.
@@ -107,7 +110,7 @@ class AnalysisOptions:
     grasp_quality: tuple[float, ...] | None = None
     safety_weight: float = 0.5
     redundancy: bool = False
-    effort: bool = False
+    effort: bool = True
     rank_by: str = "safety"
     effort_criterion: str = "peak_fraction"
     whole_arm: bool = False
