@@ -32,7 +32,7 @@ one feasible timing, so the retimed one is no longer (to the grid: see the tests
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -180,6 +180,12 @@ class RetimedMotion:
         planned_worst_site: Where (``site <name> (<region>)``).
         uniform_min_duration_s: T · planned_worst_ratio [s] (uniform scaling).
         grid_times_s: (N,) the times the grid points are reached [s].
+        planned_times_s: (N,) the grid points: the planned sample times from 0 [s].
+        regions: The regions assessed against (R), for the per-region series.
+        region_speed_m_s: (M, R) per output sample and region, the speed of the site
+            closest to that region's limit [m/s]; region_limit_m_s: (M, R) its f · v_max.
+        planned_region_speed_m_s, planned_region_limit_m_s: (N, R) the same at the
+            planner's timing, at the planned samples (grid points, times from 0).
     """
 
     safe_duration_s: float
@@ -194,6 +200,25 @@ class RetimedMotion:
     planned_worst_site: str
     uniform_min_duration_s: float
     grid_times_s: np.ndarray
+    planned_times_s: np.ndarray
+    regions: tuple[str, ...] = ()
+    region_speed_m_s: np.ndarray = field(default_factory=lambda: np.empty((0, 0)))
+    region_limit_m_s: np.ndarray = field(default_factory=lambda: np.empty((0, 0)))
+    planned_region_speed_m_s: np.ndarray = field(default_factory=lambda: np.empty((0, 0)))
+    planned_region_limit_m_s: np.ndarray = field(default_factory=lambda: np.empty((0, 0)))
+
+
+def region_series(speeds: SiteSpeeds, scale: np.ndarray, factor: float) -> tuple[np.ndarray, ...]:
+    """Per sample and region (N, R): the speed [m/s] (speed per unit × ``scale`` (N,)) of the
+    site closest to the region's limit, and that limit f · v_max [m/s]."""
+    speed = speeds.speed_per_unit * np.asarray(scale)[:, None]  # (N, K)
+    limits = factor * speeds.region_max_speed_m_s  # (N, K, R)
+    if not speed.shape[1]:
+        empty = np.zeros((len(speed), limits.shape[2]))
+        return empty, empty
+    worst = np.argmax(speed[..., None] / limits, axis=1)[:, None]  # (N, 1, R)
+    chosen = np.take_along_axis(np.broadcast_to(speed[..., None], limits.shape), worst, axis=1)
+    return chosen[:, 0], np.take_along_axis(limits, worst, axis=1)[:, 0]
 
 
 def joint_path(times_s: np.ndarray, joint_positions: np.ndarray, robot: RobotModel) -> Any:
@@ -318,10 +343,23 @@ def retime_path(
     samples = _output_samples(
         path, grid, grid_times, rates, np.asarray(path_accelerations), output_dt_s
     )
-    binding, binding_ratio = _binding(robot, speed_model, limits, samples)
+    binding, binding_ratio, output_speeds = _binding(robot, speed_model, limits, samples)
     planned = ratios.max() if ratios.size else 0.0
     worst = _site_label(speed_model, *_worst_site(ratios, speeds)) if speeds is not None else ""
     planned_duration = float(grid[-1])
+    series: dict[str, Any] = {}
+    if speed_model is not None:
+        factor = limits.safety_factor
+        ones = np.ones(len(grid))
+        retimed_series = region_series(output_speeds, np.ones(len(samples[0])), factor)
+        planned_series = region_series(speeds, ones, factor)  # type: ignore[arg-type]
+        series = {
+            "regions": tuple(region.name for region in speed_model.regions),
+            "region_speed_m_s": read_only(retimed_series[0]),
+            "region_limit_m_s": read_only(retimed_series[1]),
+            "planned_region_speed_m_s": read_only(planned_series[0]),
+            "planned_region_limit_m_s": read_only(planned_series[1]),
+        }
     return RetimedMotion(
         safe_duration_s=duration,
         times_s=read_only(samples[0]),
@@ -335,6 +373,8 @@ def retime_path(
         planned_worst_site=worst,
         uniform_min_duration_s=planned_duration * float(planned),
         grid_times_s=read_only(grid_times),
+        planned_times_s=read_only(grid),
+        **series,
     )
 
 
@@ -388,12 +428,14 @@ def _binding(
     speed_model: SiteSpeedModel | None,
     limits: RetimeLimits,
     samples: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
-) -> tuple[tuple[str, ...], np.ndarray]:
+) -> tuple[tuple[str, ...], np.ndarray, SiteSpeeds | None]:
     """Per output sample, the constraint closest to its limit and its ratio (value/limit),
-    re-evaluated from the output q, q̇, q̈ (the sites along their actual velocity)."""
+    re-evaluated from the output q, q̇, q̈ (the sites along their actual velocity), and the
+    sites' SiteSpeeds there (None without sites)."""
     _, positions, velocities, accelerations = samples
     names = [f"joint {n} velocity" for n in robot.joint_names]
     names += [f"joint {n} acceleration" for n in robot.joint_names]
+    speeds = None
     columns = [
         np.abs(velocities) / limits.joint_velocity_limits,
         np.abs(accelerations) / limits.joint_acceleration_limits,
@@ -414,4 +456,4 @@ def _binding(
             site = column - 2 * robot.num_joints
             label = _site_label(speed_model, site, int(speeds.region_index[row, site]))
         labels.append(label if ratio[row] > 0.0 else AT_REST)
-    return tuple(labels), ratio
+    return tuple(labels), ratio, speeds
