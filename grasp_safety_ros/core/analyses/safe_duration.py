@@ -57,6 +57,12 @@ class RetimeOptions:
     output_dt_s: float | None = None
 
     def __post_init__(self) -> None:
+        if self.joint_acceleration_limits is None:
+            raise InvalidInputError(
+                f"{RETIME_FIELD}.joint_acceleration_limits",
+                "is required for a retiming (a list in chain order or {joint: value} "
+                "[rad/s², m/s² prismatic]; the URDF has none)",
+            )
         for name in ("joint_acceleration_limits", "joint_velocity_limits"):
             value = getattr(self, name)
             if isinstance(value, Mapping):
