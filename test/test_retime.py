@@ -223,6 +223,7 @@ def test_retimed_no_slower_than_uniform_scaling_when_that_is_feasible(
     )
     if not (velocity_ok and acceleration_ok):
         return
+    assert retimed.uniform_feasible_duration_s == pytest.approx(t_min, rel=1e-3)  # spline
     step = duration / (samples - 1)
     assert retimed.safe_duration_s <= t_min * (1 + 2 * step / duration) * (1 + 1e-9)
 

@@ -30,6 +30,7 @@ def retimed_to_dict(motion: RetimedMotion | None, per_sample: bool = True) -> di
         "planned_worst_ratio": motion.planned_worst_ratio,
         "planned_worst_site": motion.planned_worst_site,
         "uniform_min_duration_s": motion.uniform_min_duration_s,
+        "uniform_feasible_duration_s": motion.uniform_feasible_duration_s,
     }
     if per_sample:
         result["retimed"] = {
@@ -94,12 +95,13 @@ def retime_lines(report: SafetyReport) -> list[str]:
         if motion is None:
             lines.append(f"  {name}: no safe timing (infeasible or none found)")
             continue
-        saved = 1.0 - motion.safe_duration_s / motion.uniform_min_duration_s
+        uniform = motion.uniform_feasible_duration_s
         lines.append(
             f"  {name}: safe duration {motion.safe_duration_s:.3f} s (planned "
             f"{motion.planned_duration_s:.3f} s at worst ratio {motion.planned_worst_ratio:.2f}"
-            f"; uniform T_min {motion.uniform_min_duration_s:.3f} s, {100 * saved:.0f} % "
-            f"saved); binding most: {_most_binding(motion)}"
+            f"; uniform T_min {motion.uniform_min_duration_s:.3f} s, {uniform:.3f} s with the "
+            f"joint limits, {100 * (1.0 - motion.safe_duration_s / uniform):.0f} % saved); "
+            f"binding most: {_most_binding(motion)}"
         )
     return lines
 

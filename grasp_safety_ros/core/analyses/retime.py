@@ -178,7 +178,10 @@ class RetimedMotion:
         planned_worst_ratio: max over grid points and sites of speed / (f · v_max) at the
             planner's timing (> 1: too fast somewhere).
         planned_worst_site: Where (``site <name> (<region>)``).
-        uniform_min_duration_s: T · planned_worst_ratio [s] (uniform scaling).
+        uniform_min_duration_s: T · planned_worst_ratio [s] (uniform scaling, sites only).
+        uniform_feasible_duration_s: The shortest uniformly scaled duration within every
+            limit, sites and joints: T · max(planned_worst_ratio, max |q'|/v_lim,
+            sqrt(max |q''|/a_lim)) over the grid [s] (what uniform scaling really costs).
         grid_times_s: (N,) the times the grid points are reached [s].
         planned_times_s: (N,) the grid points: the planned sample times from 0 [s].
         regions: The regions assessed against (R), for the per-region series.
@@ -199,6 +202,7 @@ class RetimedMotion:
     planned_worst_ratio: float
     planned_worst_site: str
     uniform_min_duration_s: float
+    uniform_feasible_duration_s: float
     grid_times_s: np.ndarray
     planned_times_s: np.ndarray
     regions: tuple[str, ...] = ()
@@ -347,6 +351,10 @@ def retime_path(
     planned = ratios.max() if ratios.size else 0.0
     worst = _site_label(speed_model, *_worst_site(ratios, speeds)) if speeds is not None else ""
     planned_duration = float(grid[-1])
+    joint_ratio = max(
+        float(np.max(np.abs(tangents) / vlim)),
+        float(np.sqrt(np.max(np.abs(path(grid, 2)) / alim))),
+    )
     series: dict[str, Any] = {}
     if speed_model is not None:
         factor = limits.safety_factor
@@ -372,6 +380,7 @@ def retime_path(
         planned_worst_ratio=float(planned),
         planned_worst_site=worst,
         uniform_min_duration_s=planned_duration * float(planned),
+        uniform_feasible_duration_s=planned_duration * max(float(planned), joint_ratio),
         grid_times_s=read_only(grid_times),
         planned_times_s=read_only(grid),
         **series,
