@@ -6,7 +6,8 @@
    toppra's own joint-limits-only parameterisation of the same path in the same run (what a
    user has today), CPU time of the process, median and max over grasps [ms]. Franka's
    published joint acceleration limits (15, 7.5, 10, 12.5, 15, 20, 20 rad/s²), the URDF's
-   velocity limits, safety factor 1.
+   velocity limits, safety factor 1. Also the largest constraint ratio (value / limit) of the
+   retimed motions re-evaluated every FINE_DT_S, between the grid points.
 2. Cycle time against uniform scaling on the bundled scenarios (config/book_baxter*.yaml, whole
    arm on, every grasp, acceleration limits 4 rad/s² per joint, an assumption: Baxter
    publishes none): per grasp 1 − safe_duration / T_uniform (T_uniform: the whole motion
@@ -41,6 +42,9 @@ PANDA_ACCELERATIONS = [15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0]
 BAXTER_ACCELERATION = 4.0
 """Assumed joint acceleration limit of Baxter [rad/s²] (none published)."""
 
+FINE_DT_S = 0.001
+"""Output step [s] at which the limits are re-evaluated between the grid points."""
+
 SCENARIOS = ("book_baxter.yaml", "book_baxter_extended.yaml", "book_baxter_waypoints.yaml")
 
 
@@ -63,7 +67,7 @@ def bench_cost(grasps: int) -> dict[str, Any]:
     ranking = evaluator.rank(candidates, inertia, trajectory, seed_positions=arm.seed_positions)
     limits = RetimeLimits.from_input(robot, PANDA_ACCELERATIONS)
     sites = resolve_arm_sites(robot)
-    safe_ms, joint_ms, rows = [], [], []
+    safe_ms, joint_ms, rows, between = [], [], [], []
     warm = next(e for e in ranking.evaluations if e.feasible)  # imports toppra once
     retime_path(robot, None, limits, warm.times_s, warm.joint_positions)
     for grasp, evaluation in zip(candidates, ranking.evaluations, strict=True):
@@ -79,6 +83,8 @@ def bench_cost(grasps: int) -> dict[str, Any]:
         safe_ms.append(ms + build_ms)
         joint, ms = _cpu_ms(lambda t=times, p=path: retime_path(robot, None, limits, t, p))
         joint_ms.append(ms)
+        fine = retime_path(robot, model, limits, times, path, output_dt_s=FINE_DT_S)
+        between.append(float(fine.binding_ratio.max()))
         rows.append(
             (safe.safe_duration_s, joint.safe_duration_s, safe.uniform_feasible_duration_s)
         )
@@ -91,6 +97,7 @@ def bench_cost(grasps: int) -> dict[str, Any]:
         "safe_ms_max": max(safe_ms),
         "joint_limits_only_ms_median": statistics.median(joint_ms),
         "joint_limits_only_ms_max": max(joint_ms),
+        "max_ratio_at_fine_dt": max(between),
         "safe_duration_s_median": statistics.median(r[0] for r in rows),
         "joint_limits_only_duration_s_median": statistics.median(r[1] for r in rows),
         "uniform_feasible_duration_s_median": statistics.median(r[2] for r in rows),
