@@ -132,3 +132,24 @@ def test_one_dof_arm_exact_mass_exceeds_the_estimate_far_out() -> None:
     result = compare_with_standard(estimate, (moment / radii**2)[None], np.zeros((1, 2), bool))
     np.testing.assert_array_equal(result.optimistic, moment / radii**2 > 1.5)
     assert result.optimistic.tolist() == [True, False]
+
+
+def test_node_parameters_build_the_retiming() -> None:
+    """The node's retime.* parameters: set limits turn it on; rank_by safe_duration without
+    them is refused naming the parameter; a bad safety factor names its parameter."""
+    from grasp_safety_ros.ros.parameters import check_parameter, settings_from_parameters
+
+    base = {"urdf": "x", "base_frame": "b", "tip_frame": "t"}
+    assert settings_from_parameters(base).analysis.retime is None
+    settings = settings_from_parameters(
+        {**base, "retime.joint_acceleration_limits": ACCELERATIONS, "rank_by": "safe_duration"}
+    )
+    retime = settings.analysis.retime
+    assert retime.joint_acceleration_limits == tuple(ACCELERATIONS)
+    assert retime.joint_velocity_limits is None and retime.safety_factor == 1.0
+    with pytest.raises(InvalidInputError) as error:
+        settings_from_parameters({**base, "rank_by": "safe_duration"})
+    assert error.value.field == "retime.joint_acceleration_limits"
+    for bad in (0.0, 1.5, float("nan")):
+        with pytest.raises(InvalidInputError, match=r"retime\.safety_factor"):
+            check_parameter("retime.safety_factor", bad)
