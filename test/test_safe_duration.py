@@ -153,3 +153,44 @@ def test_node_parameters_build_the_retiming() -> None:
     for bad in (0.0, 1.5, float("nan")):
         with pytest.raises(InvalidInputError, match=r"retime\.safety_factor"):
             check_parameter("retime.safety_factor", bad)
+
+
+def test_the_service_orders_by_safe_duration_as_the_cli_does(
+    tmp_path_factory: pytest.TempPathFactory,
+) -> None:
+    """The node with the retime.* parameters and rank_by safe_duration gives the CLI's order
+    for the same book request (the pipeline is the same; the node's defaults are the table's)."""
+    pytest.importorskip("rclpy")
+    from test_ros_node import BOOK, BOOK_YAML, NodeUnderTest, book_request
+
+    tmp_path = tmp_path_factory.mktemp("service")
+    data = book(
+        retime={"joint_acceleration_limits": ACCELERATIONS, "safety_factor": 0.8},
+        rank_by="safe_duration",
+    )
+    data.pop("effort")
+    report = rank_scenario(parse_scenario(data, tmp_path))
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+        patch.setenv("ROS_LOG_DIR", str(tmp_path / "ros_log"))
+        node = NodeUnderTest(
+            {
+                "urdf": "example-robot-data:baxter",
+                "base_frame": "base",
+                "tip_frame": "right_gripper",
+                "ik_seed": list(BOOK.robot.seed),
+                "object.box_size_m": BOOK_YAML["object"]["box_size_m"],
+                "trajectory.dt_s": data["trajectory"]["dt_s"],
+                "rank_by": "safe_duration",
+                "retime.joint_acceleration_limits": ACCELERATIONS,
+                "retime.safety_factor": 0.8,
+            }
+        )
+        try:
+            response = node.rank(book_request())
+        finally:
+            node.close()
+    assert response.success, response.message
+    assert response.ranking.rank_by == "safe_duration"
+    assert tuple(response.ranking.order) == report.order
+    assert len(report.order) == 3
