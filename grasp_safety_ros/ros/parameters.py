@@ -222,9 +222,7 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
         "the URDF's",
         item_type=float,
     ),
-    "retime.safety_factor": ParameterSpec(
-        1.0, "the retiming keeps every site under this fraction of its v_max, in (0, 1]"
-    ),
+    "retime.safety_factor": _option("retime.safety_factor"),
 }
 """Every parameter of the node, by name."""
 

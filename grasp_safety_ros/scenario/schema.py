@@ -400,7 +400,7 @@ def parse_retime(section: Any, requested: bool = False) -> RetimeOptions | None:
     return RetimeOptions(
         retime.get("joint_acceleration_limits"),
         retime.get("joint_velocity_limits"),
-        retime.get("safety_factor", 1.0),
+        retime.get("safety_factor", default("retime.safety_factor")),
         retime.get("output_dt_s"),
     )
 
