@@ -194,3 +194,38 @@ def test_the_service_orders_by_safe_duration_as_the_cli_does(
     assert response.ranking.rank_by == "safe_duration"
     assert tuple(response.ranking.order) == report.order
     assert len(report.order) == 3
+
+
+def test_cli_retime_flag_writes_the_json_and_a_figure_per_grasp(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from grasp_safety_ros.cli.main import main
+
+    without = tmp_path / "book.yaml"
+    without.write_text(yaml.safe_dump(book()))
+    assert main(["rank", str(without), "--retime"]) == 2
+    assert "retime.joint_acceleration_limits" in capsys.readouterr().err
+    with_limits = tmp_path / "book_retime.yaml"
+    data = book(retime={"joint_acceleration_limits": ACCELERATIONS, "enabled": False})
+    with_limits.write_text(yaml.safe_dump(data))
+    plot, json_path = tmp_path / "out.png", tmp_path / "out.json"
+    assert main(["rank", str(with_limits), "--json", str(json_path), "--plot", str(plot)]) == 0
+    assert not (tmp_path / "out_retime_0.png").exists()  # enabled: false
+    assert main(["rank", str(with_limits), "--retime", "--no-per-sample"]) == 0  # the flag
+    assert "safe retiming" in capsys.readouterr().out
+    data["retime"].pop("enabled")
+    with_limits.write_text(yaml.safe_dump(data))
+    assert main(["rank", str(with_limits), "--json", str(json_path), "--plot", str(plot)]) == 0
+    assert "safe retiming" in capsys.readouterr().out
+    for k in range(3):
+        assert (tmp_path / f"out_retime_{k}.png").stat().st_size > 0
+    assert "safe_duration_s" in yaml.safe_load(json_path.read_text())["grasps"][0]
+
+
+def test_region_series_stay_under_their_limits_on_the_grid(ranked) -> None:
+    """The figure's data: per region, the worst site's speed <= its f · v_max at every
+    retimed sample (grid output), and the planned series' worst ratio is the planner's."""
+    for motion in ranked.retimed:
+        assert np.all(motion.region_speed_m_s <= motion.region_limit_m_s * (1 + 1e-6))
+        planned = motion.planned_region_speed_m_s / motion.planned_region_limit_m_s
+        assert planned.max() == pytest.approx(motion.planned_worst_ratio, rel=1e-12)

@@ -147,9 +147,11 @@ def _command_rank(args: argparse.Namespace) -> int:
     if args.retime and scenario.options.retime is None:  # the limits: refused when missing
         from dataclasses import replace
 
+        from ..scenario.fields import read_yaml_file
         from ..scenario.schema import parse_retime
 
-        retime = parse_retime(None, requested=True)
+        section = read_yaml_file(args.scenario).get("retime")  # its limits, even if disabled
+        retime = parse_retime(section, requested=True)
         scenario = replace(scenario, options=replace(scenario.options, retime=retime))
     report = rank_scenario(scenario, args.metric)
     print(run_header(scenario, report))

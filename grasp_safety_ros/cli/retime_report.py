@@ -122,3 +122,23 @@ def standard_mass_lines(report: SafetyReport) -> list[str]:
             text += f"; estimate optimistic at {', '.join(flagged)}"
         lines.append(text)
     return lines
+
+
+def add_retime_to_grasp(
+    report: SafetyReport, k: int, grasp: dict[str, Any], per_sample: bool = True
+) -> None:
+    """Grasp ``k``'s retiming (when on) and the standard's estimate (with the whole arm or
+    the retiming) into its JSON entry ``grasp``."""
+    if report.retimed:
+        grasp.update(retimed_to_dict(report.retimed[k], per_sample))
+    if report.whole_arm or report.retimed:
+        grasp["standard_mass_estimate"] = standard_mass_to_dict(report, k)
+
+
+def retime_sections(report: SafetyReport) -> list[str]:
+    """The text report's retiming lines (when on) and the standard's estimate (with the
+    whole arm or the retiming)."""
+    lines = retime_lines(report) if report.retimed else []
+    if report.whole_arm or report.retimed:
+        lines += standard_mass_lines(report)
+    return lines
