@@ -194,6 +194,24 @@ def test_the_service_orders_by_safe_duration_as_the_cli_does(
     assert response.ranking.rank_by == "safe_duration"
     assert tuple(response.ranking.order) == report.order
     assert len(report.order) == 3
+    # The node's inputs pass through messages (a few ulps, times the IK's conditioning); the
+    # retiming's LP solution moves with them continuously: equal to 1e-6.
+    for got, motion in zip(response.ranking.evaluations, report.retimed, strict=True):
+        assert got.safe_duration_s == pytest.approx(motion.safe_duration_s, rel=1e-6)
+    first = response.ranking.evaluations[report.order[0]]
+    points = first.retimed_trajectory.points  # response.joint_trajectories 1: the first only
+    motion = report.retimed[report.order[0]]
+    assert len(points) == len(motion.times_s)
+    end = points[-1].time_from_start
+    assert end.sec + 1e-9 * end.nanosec == pytest.approx(motion.safe_duration_s, abs=1e-9)
+    np.testing.assert_allclose(
+        points[len(points) // 2].velocities,
+        motion.velocities[len(points) // 2],
+        rtol=1e-6,
+        atol=1e-9,
+    )
+    others = [e for e in response.ranking.evaluations if e.index != report.order[0]]
+    assert all(not e.retimed_trajectory.points for e in others)
 
 
 def test_cli_retime_flag_writes_the_json_and_a_figure_per_grasp(
