@@ -13,6 +13,10 @@
    publishes none): per grasp 1 − safe_duration / T_uniform (T_uniform: the whole motion
    slowed uniformly until every site and joint is within its limit), median and range.
 
+3. The per-site terms for one configuration (``site_speeds``, N = 1: what the live monitor
+   computes per ``/joint_states`` message), thread CPU time per call, median and 99th
+   percentile.
+
 Run alone: .venv/bin/python bench/retime.py [--grasps 10] [--json out.json]
 """
 
@@ -33,7 +37,7 @@ from grasp_safety_ros.core import EvaluationConfig, GraspSafetyEvaluator
 from grasp_safety_ros.core.analyses.arm_sites import resolve_arm_sites
 from grasp_safety_ros.core.analyses.exposed_points import box_corners_in_object
 from grasp_safety_ros.core.analyses.retime import RetimeLimits, retime_path
-from grasp_safety_ros.core.analyses.site_speeds import SiteSpeedModel
+from grasp_safety_ros.core.analyses.site_speeds import SiteSpeedModel, site_speeds
 from grasp_safety_ros.paths import config_file
 
 PANDA_ACCELERATIONS = [15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0]
@@ -104,6 +108,33 @@ def bench_cost(grasps: int) -> dict[str, Any]:
     }
 
 
+def bench_site_speeds(calls: int = 5000) -> dict[str, Any]:
+    """The per-site terms for one configuration (the live monitor's per-message call): Panda,
+    default sites + the box's 8 corners, thread CPU time per call [µs]."""
+    arm = ARMS["panda"]
+    robot = arm.robot()
+    model = SiteSpeedModel.build(
+        robot,
+        box_object(),
+        grasps_around_box(np.array(arm.approach_from), 1)[0].transform_tip_to_object,
+        resolve_arm_sites(robot),
+        box_corners_in_object(BOX_SIZE_M),
+    )
+    q = np.array([arm.seed_positions])
+    rates = np.full((1, robot.num_joints), 0.5)
+    times = []
+    for _ in range(calls):
+        start = time.thread_time()
+        site_speeds(model, q, rates)
+        times.append(1e6 * (time.thread_time() - start))
+    return {
+        "sites": len(model.sites),
+        "calls": calls,
+        "us_median": float(np.median(times)),
+        "us_p99": float(np.percentile(times, 99)),
+    }
+
+
 def bench_scenarios() -> dict[str, Any]:
     """Cycle time saved against uniform scaling on the bundled scenarios."""
     from grasp_safety_ros.cli.main import rank_scenario
@@ -137,7 +168,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--grasps", type=int, default=10, help="Panda candidates (default 10)")
     parser.add_argument("--json", help="also write the results here")
     args = parser.parse_args(argv)
-    results = {"cost": bench_cost(args.grasps), "scenarios": bench_scenarios()}
+    results = {
+        "cost": bench_cost(args.grasps),
+        "site_speeds_one_configuration": bench_site_speeds(),
+        "scenarios": bench_scenarios(),
+    }
     text = json.dumps(results, indent=2)
     print(text)
     if args.json:
