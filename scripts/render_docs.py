@@ -4,9 +4,9 @@ Two kinds of marked blocks, both rewritten in place:
 
 - ``<!-- generated: NAME -->`` ... ``<!-- end generated -->``: Markdown rendered from the code
   or from committed measurements, by GENERATORS[NAME]: the node's parameter reference (from
-  ``PARAMETERS`` and ``parameter_constraints``) and the benchmark tables (from
-  ``bench/results.json``). Cheap and deterministic: the tests compare every such block with a
-  fresh render (``check``).
+  ``PARAMETERS`` and ``parameter_constraints``), the table of options (``core.options``) and
+  the benchmark tables (from ``bench/results.json``). Cheap and deterministic: the tests
+  compare every such block with a fresh render (``check``).
 - ``<!-- captured -->`` followed by a fenced block whose lines starting with ``$ `` are shell
   commands (run from the repository root with ``.venv/bin`` first on PATH; a command goes on
   over further lines while a quote is open) and whose other lines are their output. With
@@ -127,6 +127,37 @@ def render_parameters() -> str:
             _cell(spec.description),
         ]
         rows.append("| " + " | ".join(cells) + " |")
+    return "\n".join(rows) + "\n"
+
+
+def render_options() -> str:
+    """The one table of options (core.options) as Markdown: the scenario key, the node
+    parameter, type, default (every interface's), bounds, unit, meaning; then the limits."""
+    sys.path.insert(0, str(ROOT))
+    from grasp_safety_ros.core.options import LIMITS, OPTIONS
+
+    rows = [
+        "| Scenario key | Node parameter | Type | Default | Bounds | Unit | Meaning |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for key, option in OPTIONS.items():
+        bounds = option.bounds
+        cells = [
+            f"`{option.scenario_key}`",
+            f"`{key}`",
+            option.type.__name__,
+            f"`{_default(option.default)}`",
+            "" if bounds is None else f"[{_number(bounds[0])}, {_number(bounds[1])}]",
+            option.unit,
+            _cell(option.help),
+        ]
+        rows.append("| " + " | ".join(cells) + " |")
+    rows += ["", "| Limit | Scenario (and top of the node parameter) | Node parameter: default |"]
+    rows.append("|---|---|---|")
+    for limit in LIMITS.values():
+        node = f"`{limit.node}`: {_number(limit.budget)}" if limit.node else ""
+        unit = f" {limit.unit}" if limit.unit else ""
+        rows.append(f"| {limit.name} | {_number(limit.value)}{unit} | {node} |")
     return "\n".join(rows) + "\n"
 
 
@@ -286,6 +317,7 @@ def render_bench_service() -> str:
 
 GENERATORS: dict[str, Callable[[], str]] = {
     "parameters": render_parameters,
+    "options": render_options,
     "bench-arms": render_bench_arms,
     "bench-postures": render_bench_postures,
     "bench-service": render_bench_service,

@@ -339,3 +339,28 @@ def test_a_paused_pooled_ranking_leaves_the_workers_to_others() -> None:
         time.sleep(0.2)  # the caller pauses: the workers idle after the jobs submitted ahead
         assert len(started) <= 1 + 2 * 2, sorted(started)
         assert list(stream) == list(range(1, 100))  # then everything, in order
+
+
+def test_a_nan_effort_score_is_refused_only_when_it_orders() -> None:
+    """Effort is on by default: a grasp of an arm without effort limits has a NaN effort score,
+    an answer (not computable), unless rank_by effort orders by it."""
+    result = ranking([0.2, 0.061, 0.0], [0, 1, 2])
+    result.effort_criterion = "peak_fraction"
+    for evaluation in result.evaluations:
+        evaluation.effort_score = math.nan
+    check_finite_result(result)  # rank_by safety
+    result.rank_by = "effort"
+    with pytest.raises(NonFiniteResultError, match="effort_score = nan"):
+        check_finite_result(result)
+
+
+def test_the_armature_range_orders_are_guarded_too() -> None:
+    result = ranking([0.2, 0.061, 0.0], [0, 1, 2])
+    result.armature_range_message = "ranking stable over the armature ranges: [0, 1, 2]"
+    result.armature_order_lower = [0, 1, 2]
+    for evaluation in result.evaluations:
+        evaluation.score_armature_lower = evaluation.score_armature_upper = 1.0
+    check_finite_result(result)
+    result.evaluations[2].score_armature_upper = math.nan
+    with pytest.raises(NonFiniteResultError, match="score_armature_upper = nan"):
+        check_finite_result(result)

@@ -21,13 +21,8 @@ if TYPE_CHECKING:
     )
     from .method.ik import IKConfig, IKSolver
     from .method.metrics import METRICS
-    from .method.ranking import (
-        EvaluationConfig,
-        Grasp,
-        GraspEvaluation,
-        GraspSafetyEvaluator,
-        Ranking,
-    )
+    from .method.ranking import EvaluationConfig, GraspSafetyEvaluator
+    from .method.results import Grasp, GraspEvaluation, Ranking
     from .model.inertia import ObjectInertia, solid_box, solid_cylinder, solid_sphere
     from .model.robot import RobotModel
     from .model.trajectory import ObjectTrajectory

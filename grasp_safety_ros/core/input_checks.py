@@ -70,7 +70,8 @@ def rotation_from_quat_xyzw(quat_xyzw: Sequence[float] | np.ndarray, field: str)
             f" got norm {norm:.6g}",
         )
     x, y, z, w = quat / norm
-    return pin.Quaternion(w, x, y, z).toRotationMatrix()
+    rotation: np.ndarray = pin.Quaternion(w, x, y, z).toRotationMatrix()
+    return rotation
 
 
 def quat_xyzw_from_rotation(rotation: np.ndarray) -> np.ndarray:

@@ -8,8 +8,9 @@
    ``rank_by: whole_arm`` by the whole arm's criterion);
 3. ``analyses``: every analysis the options enable (``core.analyses.safety_report.analyse``:
    exposed points, ISO/TS 15066, uncertainty, quality, redundancy, effort, whole arm);
-4. ``armature_range``: the effective masses and order at both ends of the armature ranges,
-   when the armature was given as ranges (``analyse_armature_range``).
+4. the report stages (``REPORT_STAGES``, a ``ReportStage`` each), today ``armature_range``:
+   the effective masses and order at both ends of the armature ranges, when the armature
+   was given as ranges (``analyse_armature_range``).
 
 Every adapter calls it: the CLI (``grasp-safety rank``), the ROS node's service and topics,
 the dataset batch, the benchmarks; so does a new capability (safe retiming, a live monitor, a
@@ -18,7 +19,7 @@ MoveIt ``GraspPlanning`` server): build a ``PipelineRequest``, call ``run_pipeli
 
 ``progress(stage, done, total)`` is the hook for progress and cancellation: it is called
 after each unit of work of each stage (one grasp, or one batch of grasps, of rank, postures
-and each analysis) and once before the armature range (``done`` 0, ``total`` 1); it may raise
+and each analysis) and before and after each report stage (``done`` 0 then 1 of 1); it may raise
 any exception to abandon the request, which then propagates unchanged (the node raises when
 its client left, its compute time is spent or it shuts down: ``ros.ranking_job``).
 ``timings``, when given, receives each stage's wall time ``{stage}``, the calling thread's
@@ -38,23 +39,29 @@ import numpy as np
 from .analyses.safety_report import AnalysisOptions, SafetyReport, analyse, posture_criterion
 from .analyses.uncertainty import analyse_armature_range
 from .method.posture import PostureConfig, select_postures
-from .method.ranking import Grasp, GraspSafetyEvaluator
+from .method.ranking import GraspSafetyEvaluator
+from .method.results import Grasp
 from .model.armature import ArmatureRange
 from .model.inertia import ObjectInertia
 from .model.trajectory import ObjectTrajectory
 from .model.waypoint_trajectory import WaypointTrajectory
 
-__all__ = ["STAGES", "PipelineRequest", "Progress", "run_pipeline"]
-
-STAGES = ("rank", "postures", "analyses", "armature_range")
-"""The stages, in the order they run; the first argument of ``Progress``."""
+__all__ = [
+    "REPORT_STAGES",
+    "STAGES",
+    "ArmatureRangeStage",
+    "PipelineRequest",
+    "Progress",
+    "ReportStage",
+    "run_pipeline",
+]
 
 
 class Progress(Protocol):
     """``progress(stage, done, total)``: ``done`` of ``total`` units of ``stage`` (one of
-    STAGES) are done; raise to abandon the request."""
+    STAGES, below) are done; raise to abandon the request."""
 
-    def __call__(self, stage: str, done: int, total: int) -> None: ...
+    def __call__(self, stage: str, done: int, total: int, /) -> None: ...
 
 
 @dataclass(frozen=True)
@@ -136,25 +143,73 @@ def run_pipeline(
         progress=_stage(progress, "analyses"),
     )
     clock.lap("analyses")
-    bounds = request.armature_range
-    if bounds is None or not bounds.is_range:
-        return report
-    if progress is not None:
-        progress("armature_range", 0, 1)
-    spread = analyse_armature_range(
-        evaluator.robot,
-        ranking.evaluations,
-        grasps,
-        inertia,
-        bounds.lower_kgm2,
-        bounds.upper_kgm2,
-        ranking.metric,
-        compiled=evaluator.ik.compiled,
-    )
-    clock.lap("armature_range")
-    if progress is not None:
-        progress("armature_range", 1, 1)
-    return replace(report, armature_range=spread)
+    for stage in REPORT_STAGES:
+        if not stage.wanted(request):
+            continue
+        if progress is not None:
+            progress(stage.name, 0, 1)
+        report = stage.run(evaluator, request, report)
+        clock.lap(stage.name)
+        if progress is not None:
+            progress(stage.name, 1, 1)
+    return report
+
+
+class ReportStage(Protocol):
+    """An analysis run on the report after the others (``REPORT_STAGES``): adding one is its
+    module in core/analyses, a class like ArmatureRangeStage here and its registration
+    (docs/development.md, "Adding an analysis")."""
+
+    @property
+    def name(self) -> str:
+        """Its stage name: ``progress``'s ``stage`` and the ``timings`` key."""
+        ...
+
+    def wanted(self, request: PipelineRequest) -> bool:
+        """Whether ``request`` asks for it."""
+        ...
+
+    def run(
+        self, evaluator: GraspSafetyEvaluator, request: PipelineRequest, report: SafetyReport
+    ) -> SafetyReport:
+        """The report with its result set (``report.ranking``: the kept postures)."""
+        ...
+
+
+@dataclass(frozen=True)
+class ArmatureRangeStage:
+    """Effective masses and order at both ends of the armature ranges
+    (core.analyses.uncertainty.analyse_armature_range) -> ``SafetyReport.armature_range``."""
+
+    name: str = "armature_range"
+
+    def wanted(self, request: PipelineRequest) -> bool:
+        return request.armature_range is not None and request.armature_range.is_range
+
+    def run(
+        self, evaluator: GraspSafetyEvaluator, request: PipelineRequest, report: SafetyReport
+    ) -> SafetyReport:
+        bounds, ranking = request.armature_range, report.ranking
+        if bounds is None:  # not wanted: nothing to add
+            return report
+        spread = analyse_armature_range(
+            evaluator.robot,
+            ranking.evaluations,
+            request.grasps,
+            request.object_inertia,
+            bounds.lower_kgm2,
+            bounds.upper_kgm2,
+            ranking.metric,
+            compiled=evaluator.ik.compiled,
+        )
+        return replace(report, armature_range=spread)
+
+
+REPORT_STAGES: tuple[ReportStage, ...] = (ArmatureRangeStage(),)
+"""The analyses run on the report after ``analyses``, in this order (register new ones here)."""
+
+STAGES = ("rank", "postures", "analyses", *(stage.name for stage in REPORT_STAGES))
+"""The stages, in the order they run; the first argument of ``Progress``."""
 
 
 class _Clock:

@@ -9,7 +9,7 @@ from __future__ import annotations
 import array
 import dataclasses
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -226,24 +226,41 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
 }
 """Every parameter of the node, by name."""
 
-ROBOT_PARAMETERS = ("robot_description", "urdf", "base_frame", "tip_frame")
+ROBOT_PARAMETERS: tuple[str, ...] = ("robot_description", "urdf", "base_frame", "tip_frame")
 ROBOT_PARAMETERS += ("robot.armature_kgm2", "robot.armature_joint_names")
 ROBOT_PARAMETERS += ("robot.armature_published", "robot.armature_lower_kgm2")
 """Parameters whose change rebuilds the robot model."""
 
-_STRINGS = ("robot_description", "urdf", "base_frame", "tip_frame", "object_frame", "metric")
+_STRINGS: tuple[str, ...] = (
+    "robot_description",
+    "urdf",
+    "base_frame",
+    "tip_frame",
+    "object_frame",
+    "metric",
+)
 _STRINGS += ("metric_point", "effort.criterion", "rank_by", "robot.armature_published")
 _STRINGS += ("whole_arm.region",)
-_CHOICES: Mapping[str, Sequence[str]] = {
+_CHOICES: Mapping[str, Collection[str]] = {
     "metric": METRICS,
     "metric_point": METRIC_POINTS,
     "effort.criterion": EFFORT_CRITERIA,
     "rank_by": RANK_BY,
     "whole_arm.region": BODY_REGIONS,
 }
-_FLAGS = ("use_joint_states_seed", "redundancy.enabled", "effort.enabled", "response.per_sample")
+_FLAGS: tuple[str, ...] = (
+    "use_joint_states_seed",
+    "redundancy.enabled",
+    "effort.enabled",
+    "response.per_sample",
+)
 _FLAGS += ("whole_arm.enabled",)
-_POSITIVE = ("trajectory.dt_s", "trajectory.duration_s", "max_mass_kg", "max_compute_time_s")
+_POSITIVE: tuple[str, ...] = (
+    "trajectory.dt_s",
+    "trajectory.duration_s",
+    "max_mass_kg",
+    "max_compute_time_s",
+)
 _POSITIVE += ("service_busy_timeout_s", "diagnostics_period_s")
 _FRACTIONS = ("uncertainty.mass_fraction", "uncertainty.inertia_fraction")
 _RANGES: Mapping[str, tuple[float, float]] = {

@@ -7,6 +7,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 
+import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Inertia, PoseArray
 from nav_msgs.msg import Path
@@ -91,7 +92,7 @@ def ranking_inputs(
     options = analysis_options(
         settings.analysis, len(grasps), quality, metric_point, quality_field
     )
-    seed = bundle.seed
+    seed: tuple[float, ...] | np.ndarray | None = bundle.seed
     if seed is None and settings.use_joint_states_seed and state.joint_state is not None:
         seed = seed_from_joint_state(*state.joint_state, bundle.robot)
     return PipelineRequest(

@@ -186,7 +186,10 @@ def labels_only(ranking: Ranking) -> Ranking:
     return replace(
         ranking,
         postures=(),
-        evaluations=tuple(replace(e, **arrays) for e in ranking.evaluations),
+        evaluations=tuple(
+            replace(e, **arrays)  # type: ignore[arg-type]  # arrays: the per-sample fields
+            for e in ranking.evaluations
+        ),
     )
 
 

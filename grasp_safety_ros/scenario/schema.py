@@ -367,8 +367,8 @@ def parse_joint_trajectory(section: Any, field: str) -> PlannedJointTrajectory:
     return PlannedJointTrajectory(
         tuple(string(n, f"{field}.joint_names") for n in names),
         np.array(times),
-        positions,
-        velocities or None,
+        positions,  # type: ignore[arg-type]  # lists: rows checked, then converted, there
+        velocities or None,  # type: ignore[arg-type]
         field,
     )
 

@@ -35,7 +35,7 @@ import numpy as np
 
 from ..exceptions import GraspSafetyError, InvalidInputError
 from ..input_checks import finite_array, finite_float, read_only
-from ..method.ranking import GraspEvaluation
+from ..method.results import GraspEvaluation
 
 N_PER_MM_IN_N_PER_M = 1000.0
 """1 N/mm = 1000 N/m: the table gives k in N/mm, the core works in N/m."""

@@ -28,7 +28,7 @@ import numpy as np
 
 from ..exceptions import InvalidInputError
 from ..input_checks import finite_array, finite_float, read_only
-from ..method.ranking import GraspEvaluation
+from ..method.results import GraspEvaluation
 
 
 @dataclass(frozen=True)

@@ -3,8 +3,9 @@
 Threads when the compiled kernels are in use (they run without the GIL), else processes; the
 results come back in input order and each grasp is computed by the same code as in the serial
 path, so they equal the serial ones bit for bit. The pool knows the evaluator only by its
-duck type (``config``, ``robot``, ``ik.compiled``; a process worker rebuilds it as
-``type(evaluator)(robot, config)``) and runs the callable it is given on each job.
+type PooledEvaluator (``config``, ``robot``, ``ik.compiled``: what GraspSafetyEvaluator has,
+which imports this module; a process worker rebuilds it as ``type(evaluator)(robot, config)``)
+and runs the callable it is given on each job.
 """
 
 from __future__ import annotations
@@ -20,12 +21,47 @@ from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPool
 from dataclasses import replace
 from functools import partial
 from itertools import islice
-from typing import Any, TypeVar
+from typing import Any, ClassVar, Protocol, TypeVar
+
+from ..model.robot import RobotModel
 
 Job = tuple[Any, ...]
 """Arguments of one call of the ``evaluate`` callable given to ``evaluate_jobs``."""
 
 Result = TypeVar("Result")
+
+
+class PoolConfig(Protocol):
+    """What the pool reads of an evaluator's configuration (a frozen dataclass:
+    ranking.EvaluationConfig)."""
+
+    __dataclass_fields__: ClassVar[dict[str, Any]]
+
+    @property
+    def workers(self) -> int: ...
+
+    @property
+    def parallel_min_samples(self) -> int: ...
+
+
+class CompiledFlag(Protocol):
+    """Whether an evaluator's IK runs the compiled kernels (ik.IKSolver)."""
+
+    @property
+    def compiled(self) -> bool: ...
+
+
+class PooledEvaluator(Protocol):
+    """What the pool needs of an evaluator (ranking.GraspSafetyEvaluator)."""
+
+    @property
+    def config(self) -> PoolConfig: ...
+
+    @property
+    def robot(self) -> RobotModel: ...
+
+    @property
+    def ik(self) -> CompiledFlag: ...
 
 
 def default_workers() -> int:
@@ -36,7 +72,7 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def executor_for(evaluator: Any, total_samples: int) -> Executor | None:
+def executor_for(evaluator: PooledEvaluator, total_samples: int) -> Executor | None:
     """The evaluator's worker pool when a request of ``total_samples`` (grasps x samples) is
     large enough to share out, else None (serial).
 
@@ -64,7 +100,7 @@ def executor_for(evaluator: Any, total_samples: int) -> Executor | None:
                 initializer=_init_worker,
                 initargs=(type(evaluator), evaluator.robot, replace(config, workers=1)),
             )
-        evaluator._grasp_pool = pool
+        setattr(evaluator, "_grasp_pool", pool)  # noqa: B010 - a cache, not of its type
         weakref.finalize(evaluator, pool.shutdown, False)
     return pool
 
@@ -80,7 +116,7 @@ def grasps_per_job(executor: Executor | None, grasps: int, largest: int) -> int:
 
 
 def evaluate_jobs(
-    evaluator: Any,
+    evaluator: PooledEvaluator,
     executor: Executor,
     jobs: Sequence[Job],
     evaluate: Callable[..., Result],
@@ -107,7 +143,7 @@ def evaluate_jobs(
     return _close_early(executor.map(partial(_evaluate_chunk_in_worker, evaluate), chunks))
 
 
-def _evaluate_job(evaluate: Callable[..., Result], evaluator: Any, job: Job) -> Result:
+def _evaluate_job(evaluate: Callable[..., Result], evaluator: PooledEvaluator, job: Job) -> Result:
     return evaluate(evaluator, *job)
 
 
@@ -142,10 +178,14 @@ def _close_early(results: Iterator[list[Result]]) -> Generator[Result, None, Non
             close()
 
 
-_WORKER_EVALUATOR: Any = None
+_WORKER_EVALUATOR: PooledEvaluator | None = None
 
 
-def _init_worker(evaluator_class: Callable[..., Any], robot: Any, config: Any) -> None:
+def _init_worker(
+    evaluator_class: Callable[[RobotModel, PoolConfig], PooledEvaluator],
+    robot: RobotModel,
+    config: PoolConfig,
+) -> None:
     global _WORKER_EVALUATOR
     _WORKER_EVALUATOR = evaluator_class(robot, config)
 

@@ -39,7 +39,7 @@ import functools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import Any, Protocol
+from typing import Protocol
 
 import numpy as np
 import pinocchio as pin
@@ -47,6 +47,7 @@ import pinocchio as pin
 from ..exceptions import InvalidInputError
 from ..model.inertia import ObjectInertia
 from ..model.trajectory import ObjectTrajectory
+from ..model.waypoint_trajectory import WaypointTrajectory
 from .pool import evaluate_jobs, executor_for, grasps_per_job
 from .ranking import (
     BATCH_GRASPS,
@@ -128,10 +129,10 @@ class PostureCriterion(Protocol):
 
     def __call__(
         self,
-        evaluator: Any,
+        evaluator: GraspSafetyEvaluator,
         grasp: Grasp,
         object_inertia: ObjectInertia,
-        trajectory: ObjectTrajectory,
+        trajectory: ObjectTrajectory | WaypointTrajectory,
         evaluations: Sequence[GraspEvaluation],
     ) -> np.ndarray:
         """One finite value per (feasible) evaluation of ``grasp``, in their order."""
@@ -146,7 +147,8 @@ def restart_seeds(evaluator: GraspSafetyEvaluator, config: PostureConfig) -> np.
     lower = np.where(np.isfinite(robot.lower_limits), robot.lower_limits, -np.pi)
     upper = np.where(np.isfinite(robot.upper_limits), robot.upper_limits, np.pi)
     unit = scrambled_halton(robot.num_joints, config.restarts, config.seed)
-    return lower + unit * (upper - lower)
+    seeds: np.ndarray = lower + unit * (upper - lower)
+    return seeds
 
 
 def scrambled_halton(dimensions: int, count: int, seed: int) -> np.ndarray:
@@ -220,7 +222,7 @@ def select_posture(
     evaluator: GraspSafetyEvaluator,
     grasp: Grasp,
     object_inertia: ObjectInertia,
-    trajectory: ObjectTrajectory,
+    trajectory: ObjectTrajectory | WaypointTrajectory,
     single_ik: GraspEvaluation,
     config: PostureConfig,
     metric: str,
@@ -264,7 +266,7 @@ def select_posture_batch(
     evaluator: GraspSafetyEvaluator,
     grasps: Sequence[Grasp],
     object_inertia: ObjectInertia,
-    trajectory: ObjectTrajectory,
+    trajectory: ObjectTrajectory | WaypointTrajectory,
     single_iks: Sequence[GraspEvaluation],
     config: PostureConfig,
     metric: str,
@@ -340,7 +342,7 @@ def select_posture_batch(
 
 def _choose(
     evaluator: GraspSafetyEvaluator,
-    case: tuple[Grasp, ObjectInertia, ObjectTrajectory],
+    case: tuple[Grasp, ObjectInertia, ObjectTrajectory | WaypointTrajectory],
     single_ik: GraspEvaluation,
     followed: list[GraspEvaluation | None],
     config_tried_reached: tuple[PostureConfig, int, bool],
@@ -402,7 +404,7 @@ def select_postures(
     evaluator: GraspSafetyEvaluator,
     grasps: Sequence[Grasp],
     object_inertia: ObjectInertia,
-    trajectory: ObjectTrajectory,
+    trajectory: ObjectTrajectory | WaypointTrajectory,
     ranking: Ranking,
     config: PostureConfig,
     progress: Callable[[int, int], None] | None = None,

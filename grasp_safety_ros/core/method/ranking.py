@@ -20,11 +20,26 @@ from .effective_mass import (
 )
 from .ik import IKConfig, IKSolver, check_backend
 from .joint_trajectory import JointSpaceTrajectory
-from .metrics import METRICS as METRICS  # imported from here by ros.parameters
-from .metrics import aggregate, check_metric, score_bound_weights
+from .metrics import METRICS, aggregate, check_metric, score_bound_weights
 from .packed import CompiledGraspResult
 from .pool import evaluate_jobs, executor_for
 from .results import Grasp, GraspEvaluation, Ranking
+
+__all__ = [  # the public API, re-exported names included (Grasp ... from results, metrics)
+    "BATCH_GRASPS",
+    "METRICS",
+    "EvaluationConfig",
+    "Grasp",
+    "GraspEvaluation",
+    "GraspSafetyEvaluator",
+    "Ranking",
+    "SampledTrajectory",
+    "aggregate",
+    "check_metric",
+    "order_by_score",
+    "positions_along",
+    "sample_trajectory",
+]
 
 BATCH_GRASPS = 16
 """Grasps per call of the fused kernel in ``rank``: one job of the worker pool (its results,

@@ -130,7 +130,8 @@ def armature_range(
         upper = armature_from_input(highs, names, base=base)
     else:
         if isinstance(value, (str, bytes)) or not isinstance(value, (Sequence, np.ndarray)):
-            return ArmatureRange(*(armature_from_input(value, names),) * 2)  # refused there
+            refused = armature_from_input(value, names)  # type: ignore[arg-type]  # raises
+            return ArmatureRange(refused, refused)
         if len(value) != len(names):
             armature_from_input(value, names)  # refused with the count
         pairs_list = [

@@ -77,7 +77,9 @@ def _positive(value: float, name: str) -> float:
 
 
 def solid_box(
-    mass_kg: float, size_m: Sequence[float], com_in_object_m: Sequence[float] = (0, 0, 0)
+    mass_kg: float,
+    size_m: Sequence[float],
+    com_in_object_m: Sequence[float] | np.ndarray = (0, 0, 0),
 ) -> ObjectInertia:
     """Uniform box with edge lengths ``size_m`` = (x, y, z) [m] along the object axes."""
     size = finite_array(size_m, "object.box_size_m", (3,))
@@ -93,7 +95,7 @@ def solid_cylinder(
     mass_kg: float,
     radius_m: float,
     length_m: float,
-    com_in_object_m: Sequence[float] = (0, 0, 0),
+    com_in_object_m: Sequence[float] | np.ndarray = (0, 0, 0),
 ) -> ObjectInertia:
     """Uniform solid cylinder with its axis along the object z axis."""
     mass = _positive(mass_kg, "object.mass_kg")
@@ -105,7 +107,7 @@ def solid_cylinder(
 
 
 def solid_sphere(
-    mass_kg: float, radius_m: float, com_in_object_m: Sequence[float] = (0, 0, 0)
+    mass_kg: float, radius_m: float, com_in_object_m: Sequence[float] | np.ndarray = (0, 0, 0)
 ) -> ObjectInertia:
     """Uniform solid sphere."""
     mass = _positive(mass_kg, "object.mass_kg")
@@ -165,7 +167,9 @@ class TensorObjectGeometry:
 
 def _rotation_z_onto(axis: np.ndarray) -> np.ndarray:
     """A rotation that maps the z axis onto the unit vector ``axis``."""
-    return pin.Quaternion.FromTwoVectors(np.array([0.0, 0.0, 1.0]), axis).toRotationMatrix()
+    z_axis = np.array([0.0, 0.0, 1.0])
+    rotation: np.ndarray = pin.Quaternion.FromTwoVectors(z_axis, axis).toRotationMatrix()
+    return rotation
 
 
 def combine_point_bodies(

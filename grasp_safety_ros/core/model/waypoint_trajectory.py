@@ -59,7 +59,8 @@ def right_jacobian_so3(rotation_vectors: np.ndarray) -> np.ndarray:
     a = np.where(small, 0.5 - theta2 / 24.0, (1.0 - np.cos(safe)) / safe**2)
     b = np.where(small, 1.0 / 6.0 - theta2 / 120.0, (safe - np.sin(safe)) / safe**3)
     hat = _hat(phi)
-    return np.eye(3) - a[:, None, None] * hat + b[:, None, None] * (hat @ hat)
+    jacobians: np.ndarray = np.eye(3) - a[:, None, None] * hat + b[:, None, None] * (hat @ hat)
+    return jacobians
 
 
 def _hat(vectors: np.ndarray) -> np.ndarray:
@@ -295,9 +296,11 @@ class WaypointTrajectory:
         return twist, twist_rate
 
     def _relative(self, times_s: np.ndarray) -> np.ndarray:
-        return np.asarray(times_s, dtype=float) - self.waypoint_times_s[0]
+        relative: np.ndarray = np.asarray(times_s, dtype=float) - self.waypoint_times_s[0]
+        return relative
 
     def _clipped(self, times_s: np.ndarray) -> np.ndarray:
-        return np.clip(
+        clipped: np.ndarray = np.clip(
             np.asarray(times_s, dtype=float), self.waypoint_times_s[0], self.waypoint_times_s[-1]
         )
+        return clipped

@@ -17,8 +17,9 @@ from ...core.analyses.iso15066 import PowerForceLimitAssessment, RegionAssessmen
 from ...core.analyses.safety_report import SafetyReport
 from ...core.analyses.whole_arm import WholeArmEvaluation, whole_arm_score
 from ...core.method.executable import rates_for_execution
-from ...core.method.posture import PostureSelection, single_posture
+from ...core.method.posture import single_posture
 from ...core.method.ranking import GraspEvaluation, Ranking
+from ...core.method.results import PostureSelection
 from ...core.model.armature import armature_ratio
 from ...core.model.robot import NO_ARMATURE_NOTE
 from ..response import ResponseContent
