@@ -212,10 +212,10 @@ class RetimedMotion:
     planned_region_limit_m_s: np.ndarray = field(default_factory=lambda: np.empty((0, 0)))
 
 
-def region_series(speeds: SiteSpeeds, scale: np.ndarray, factor: float) -> tuple[np.ndarray, ...]:
-    """Per sample and region (N, R): the speed [m/s] (speed per unit × ``scale`` (N,)) of the
-    site closest to the region's limit, and that limit f · v_max [m/s]."""
-    speed = speeds.speed_per_unit * np.asarray(scale)[:, None]  # (N, K)
+def region_series(speeds: SiteSpeeds, factor: float) -> tuple[np.ndarray, ...]:
+    """Per sample and region (N, R): the speed [m/s] (``speed_per_unit`` along q̇, or along
+    q' at ṡ = 1) of the site closest to the region's limit, and that limit f · v_max [m/s]."""
+    speed = speeds.speed_per_unit  # (N, K)
     limits = factor * speeds.region_max_speed_m_s  # (N, K, R)
     if not speed.shape[1]:
         empty = np.zeros((len(speed), limits.shape[2]))
@@ -349,25 +349,15 @@ def retime_path(
     )
     binding, binding_ratio, output_speeds = _binding(robot, speed_model, limits, samples)
     planned = ratios.max() if ratios.size else 0.0
-    worst = _site_label(speed_model, *_worst_site(ratios, speeds)) if speeds is not None else ""
     planned_duration = float(grid[-1])
     joint_ratio = max(
         float(np.max(np.abs(tangents) / vlim)),
         float(np.sqrt(np.max(np.abs(path(grid, 2)) / alim))),
     )
-    series: dict[str, Any] = {}
-    if speed_model is not None:
-        factor = limits.safety_factor
-        ones = np.ones(len(grid))
-        retimed_series = region_series(output_speeds, np.ones(len(samples[0])), factor)
-        planned_series = region_series(speeds, ones, factor)  # type: ignore[arg-type]
-        series = {
-            "regions": tuple(region.name for region in speed_model.regions),
-            "region_speed_m_s": read_only(retimed_series[0]),
-            "region_limit_m_s": read_only(retimed_series[1]),
-            "planned_region_speed_m_s": read_only(planned_series[0]),
-            "planned_region_limit_m_s": read_only(planned_series[1]),
-        }
+    worst, series = "", {}
+    if speed_model is not None and speeds is not None and output_speeds is not None:
+        worst = _site_label(speed_model, *_worst_site(ratios, speeds))
+        series = _region_series_fields(speed_model, speeds, output_speeds, limits.safety_factor)
     return RetimedMotion(
         safe_duration_s=duration,
         times_s=read_only(samples[0]),
@@ -385,6 +375,21 @@ def retime_path(
         planned_times_s=read_only(grid),
         **series,
     )
+
+
+def _region_series_fields(
+    speed_model: SiteSpeedModel, planned: SiteSpeeds, retimed: SiteSpeeds, factor: float
+) -> dict[str, Any]:
+    """RetimedMotion's per-region series: the planned timing's (ṡ = 1) and the retimed's."""
+    planned_speed, planned_limit = region_series(planned, factor)
+    speed, limit = region_series(retimed, factor)
+    return {
+        "regions": tuple(region.name for region in speed_model.regions),
+        "region_speed_m_s": read_only(speed),
+        "region_limit_m_s": read_only(limit),
+        "planned_region_speed_m_s": read_only(planned_speed),
+        "planned_region_limit_m_s": read_only(planned_limit),
+    }
 
 
 def _worst_site(ratios: np.ndarray, speeds: SiteSpeeds) -> tuple[int, int]:
@@ -461,7 +466,7 @@ def _binding(
     labels = []
     for row, column in enumerate(where):
         label = names[column]
-        if column >= 2 * robot.num_joints:
+        if speed_model is not None and speeds is not None and column >= 2 * robot.num_joints:
             site = column - 2 * robot.num_joints
             label = _site_label(speed_model, site, int(speeds.region_index[row, site]))
         labels.append(label if ratio[row] > 0.0 else AT_REST)
