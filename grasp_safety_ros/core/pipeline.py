@@ -8,9 +8,10 @@
    ``rank_by: whole_arm`` by the whole arm's criterion);
 3. ``analyses``: every analysis the options enable (``core.analyses.safety_report.analyse``:
    exposed points, ISO/TS 15066, uncertainty, quality, redundancy, effort, whole arm);
-4. the report stages (``REPORT_STAGES``, a ``ReportStage`` each), today ``armature_range``:
-   the effective masses and order at both ends of the armature ranges, when the armature
-   was given as ranges (``analyse_armature_range``).
+4. the report stages (``REPORT_STAGES``, a ``ReportStage`` each): ``armature_range``, the
+   effective masses and order at both ends of the armature ranges, when the armature was
+   given as ranges (``analyse_armature_range``); ``retime``, each grasp's path retimed to the
+   ISO/TS 15066 site speed limits, when ``options.retime`` is set (``retime_report``).
 
 Every adapter calls it: the CLI (``grasp-safety rank``), the ROS node's service and topics,
 the dataset batch, the benchmarks; so does a new capability (safe retiming, a live monitor, a
@@ -36,6 +37,7 @@ from typing import Protocol
 
 import numpy as np
 
+from .analyses.safe_duration import retime_report
 from .analyses.safety_report import AnalysisOptions, SafetyReport, analyse, posture_criterion
 from .analyses.uncertainty import analyse_armature_range
 from .method.posture import PostureConfig, select_postures
@@ -53,6 +55,7 @@ __all__ = [
     "PipelineRequest",
     "Progress",
     "ReportStage",
+    "RetimeStage",
     "run_pipeline",
 ]
 
@@ -205,7 +208,24 @@ class ArmatureRangeStage:
         return replace(report, armature_range=spread)
 
 
-REPORT_STAGES: tuple[ReportStage, ...] = (ArmatureRangeStage(),)
+@dataclass(frozen=True)
+class RetimeStage:
+    """Each feasible grasp's kept path retimed to the ISO/TS 15066 site speed limits and the
+    joint limits (core.analyses.safe_duration.retime_report) -> ``SafetyReport.retimed``, and
+    the order under ``rank_by: safe_duration``."""
+
+    name: str = "retime"
+
+    def wanted(self, request: PipelineRequest) -> bool:
+        return request.options.retime is not None
+
+    def run(
+        self, evaluator: GraspSafetyEvaluator, request: PipelineRequest, report: SafetyReport
+    ) -> SafetyReport:
+        return retime_report(evaluator.robot, request.object_inertia, request.grasps, report)
+
+
+REPORT_STAGES: tuple[ReportStage, ...] = (ArmatureRangeStage(), RetimeStage())
 """The analyses run on the report after ``analyses``, in this order (register new ones here)."""
 
 STAGES = ("rank", "postures", "analyses", *(stage.name for stage in REPORT_STAGES))

@@ -45,13 +45,7 @@ from .iso15066 import (
 from .multi_objective import QualityRanking, rank_with_quality
 from .redundancy import RedundancyConfig, RedundancyResolution, resolve_redundancy
 from .retime import RetimedMotion
-from .safe_duration import (
-    RetimeOptions,
-    SafeDurationPostureCriterion,
-    order_by_safe_duration,
-    retime_grasps,
-    standard_mass_estimate_kg,
-)
+from .safe_duration import RetimeOptions, SafeDurationPostureCriterion, standard_mass_estimate_kg
 from .uncertainty import (
     ArmatureRangeAnalysis,
     InertiaUncertainty,
@@ -230,7 +224,8 @@ class SafetyReport:
         armature_range: Effective masses and ranking at both ends of armature ranges, when
             the armature was given as ranges (uncertainty.analyse_armature_range).
         retimed: Each grasp's motion retimed to the site speed limits (None: infeasible or
-            no timing found), when ``options.retime`` is set.
+            no timing found), when ``options.retime`` is set (core.pipeline's RetimeStage,
+            which also sets ``order`` under ``rank_by: safe_duration``).
         standard_mass_estimate_kg: ISO/TS 15066's m_R = M/2 + m_L [kg] (safe_duration).
     """
 
@@ -285,7 +280,6 @@ def analyse(
         + options.redundancy
         + options.effort
         + options.whole_arm
-        + (options.retime is not None)
     ) * len(grasps) + (options.uncertainty is not None)
     done = 0
 
@@ -435,24 +429,8 @@ def analyse(
             model_of,
             step,
         )
-    retimed: tuple[RetimedMotion | None, ...] = ()
-    if options.retime is not None:
-        retimed = retime_grasps(
-            robot,
-            options.retime,
-            arm_sites or resolve_arm_sites(robot, options.arm_points_m),
-            object_inertia,
-            grasps,
-            evaluations,
-            options.points_in_object_m,
-            options.iso_regions,
-            [r.joint_positions if r.applied else None for r in redundancy] if redundancy else None,
-            step,
-        )
     if options.rank_by == "effort":
         order = order_by_effort(effort, options.effort_criterion)
-    elif options.rank_by == "safe_duration":
-        order = order_by_safe_duration(retimed, scores, [e.index for e in evaluations])
     elif options.rank_by == "whole_arm":
         order = order_by_whole_arm(whole_arm, options.whole_arm_region)
     elif options.grasp_quality is not None:
@@ -473,7 +451,6 @@ def analyse(
         effort=effort,
         whole_arm=whole_arm,
         arm_sites=arm_sites,
-        retimed=retimed,
         standard_mass_estimate_kg=standard_mass_estimate_kg(robot, object_inertia.mass_kg),
     )
 
