@@ -19,8 +19,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -29,12 +29,9 @@ from ..input_checks import finite_float
 from ..method.ranking import Grasp, GraspEvaluation
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
-from .arm_sites import ArmSites, resolve_arm_sites
+from .arm_sites import ArmSites
 from .retime import RETIME_FIELD, RetimedMotion, RetimeLimits, retime_path
 from .site_speeds import SiteSpeedModel
-
-if TYPE_CHECKING:  # safety_report imports this module
-    from .safety_report import SafetyReport
 
 UNRETIMABLE_S = float(np.finfo(float).max)
 """The posture criterion's value for a posture TOPP-RA cannot retime (finite, ranks last)."""
@@ -159,37 +156,6 @@ def order_by_safe_duration(
         if motion is not None
     ]
     return tuple(int(indices[k]) for *_, k in sorted(keyed))
-
-
-def retime_report(
-    robot: RobotModel,
-    object_inertia: ObjectInertia,
-    grasps: Sequence[Grasp],
-    report: SafetyReport,
-) -> SafetyReport:
-    """``report`` with ``retimed`` set (``report.options.retime``; its kept postures, or the
-    null-space resolution's paths where applied; its whole-arm sites) and, under ``rank_by:
-    safe_duration``, its ``order`` by ``order_by_safe_duration``."""
-    options = report.options
-    if options.retime is None:
-        return report
-    redundancy = report.redundancy
-    evaluations = report.ranking.evaluations
-    retimed = retime_grasps(
-        robot,
-        options.retime,
-        report.arm_sites or resolve_arm_sites(robot, options.arm_points_m),
-        object_inertia,
-        grasps,
-        evaluations,
-        options.points_in_object_m,
-        options.iso_regions,
-        [r.joint_positions if r.applied else None for r in redundancy] if redundancy else None,
-    )
-    order = report.order
-    if options.rank_by == "safe_duration":
-        order = order_by_safe_duration(retimed, report.scores, [e.index for e in evaluations])
-    return replace(report, retimed=retimed, order=order)
 
 
 @dataclass(frozen=True)
