@@ -11,6 +11,7 @@ from typing import Any
 import pytest
 import yaml
 
+from grasp_safety_ros.core.analyses.safe_duration import RetimeOptions
 from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions
 from grasp_safety_ros.core.analyses.uncertainty import InertiaUncertainty
 from grasp_safety_ros.core.exceptions import InvalidInputError
@@ -43,6 +44,17 @@ UNCERTAINTY_OF: dict[str, Callable[[Any], Any]] = {
 }
 """Option key -> its value in an InertiaUncertainty."""
 
+RETIME_OF: dict[str, Callable[[Any], Any]] = {
+    "retime.safety_factor": lambda r: r.safety_factor,
+}
+"""Option key -> its value in a RetimeOptions (the retiming is off by default)."""
+
+SECTIONS_OF = {**UNCERTAINTY_OF, **RETIME_OF}
+"""The options of sections that are off by default (checked when the section is given)."""
+
+ACCELERATIONS = [3.0] * 7
+"""Joint acceleration limits that turn the retiming on (Baxter's 7 joints) [rad/s^2]."""
+
 
 def values_of(metric: str, options: AnalysisOptions, posture: PostureConfig) -> dict[str, Any]:
     """Every option's value in what an interface built (uncertainty: see UNCERTAINTY_OF)."""
@@ -51,15 +63,17 @@ def values_of(metric: str, options: AnalysisOptions, posture: PostureConfig) -> 
 
 
 def test_every_option_is_read_by_the_test() -> None:
-    assert set(OPTIONS) == set(OPTIONS_OF) | set(UNCERTAINTY_OF) | {"metric", "posture.restarts"}
+    assert set(OPTIONS) == set(OPTIONS_OF) | set(SECTIONS_OF) | {"metric", "posture.restarts"}
 
 
 def test_the_core_defaults_are_the_tables() -> None:
     assert values_of(default("metric"), AnalysisOptions(), PostureConfig()) == {
-        key: option.default for key, option in OPTIONS.items() if key not in UNCERTAINTY_OF
+        key: option.default for key, option in OPTIONS.items() if key not in SECTIONS_OF
     }
     for key, get in UNCERTAINTY_OF.items():
         assert get(InertiaUncertainty()) == default(key), key
+    for key, get in RETIME_OF.items():
+        assert get(RetimeOptions(ACCELERATIONS)) == default(key), key
 
 
 def test_the_scenario_defaults_are_the_tables(tmp_path: Path) -> None:
@@ -68,10 +82,14 @@ def test_the_scenario_defaults_are_the_tables(tmp_path: Path) -> None:
     data["object"] = {"mass_kg": 0.34, "sphere": {"radius_m": 0.05}}  # no points
     scenario = parse_scenario({**data, "metric": default("metric")}, tmp_path)
     got = values_of(scenario.metric, scenario.options, scenario.posture)
-    assert got == {key: o.default for key, o in OPTIONS.items() if key not in UNCERTAINTY_OF}
+    assert got == {key: o.default for key, o in OPTIONS.items() if key not in SECTIONS_OF}
     with_uncertainty = parse_scenario({**data, "uncertainty": {}}, tmp_path)
     for key, get in UNCERTAINTY_OF.items():
         assert get(with_uncertainty.options.uncertainty) == default(key), key
+    retime = {"joint_acceleration_limits": ACCELERATIONS}
+    with_retime = parse_scenario({**data, "retime": retime}, tmp_path)
+    for key, get in RETIME_OF.items():
+        assert get(with_retime.options.retime) == default(key), key
 
 
 def test_the_node_defaults_and_help_are_the_tables() -> None:
@@ -82,7 +100,13 @@ def test_the_node_defaults_and_help_are_the_tables() -> None:
         assert PARAMETERS[key].description == help_text(key), key
     settings = settings_from_parameters({"urdf": "x", "base_frame": "b", "tip_frame": "t"})
     got = values_of(settings.metric, settings.analysis, settings.posture)
-    assert got == {key: o.default for key, o in OPTIONS.items() if key not in UNCERTAINTY_OF}
+    assert got == {key: o.default for key, o in OPTIONS.items() if key not in SECTIONS_OF}
+    retime = {"retime.joint_acceleration_limits": ACCELERATIONS}
+    with_retime = settings_from_parameters(
+        {"urdf": "x", "base_frame": "b", "tip_frame": "t"} | retime
+    )
+    for key, get in RETIME_OF.items():
+        assert get(with_retime.analysis.retime) == default(key), key
     for limit in LIMITS.values():
         if limit.node:
             assert PARAMETERS[limit.node].default == limit.budget <= limit.value, limit
@@ -93,7 +117,7 @@ def test_the_batch_defaults_are_the_tables(tmp_path: Path) -> None:
 
     spec = parse_spec({"sources": [{"format": "scenarios", "path": "*.yaml"}]}, tmp_path)
     got = values_of(spec.metric, spec.options, spec.posture)
-    assert got == {key: o.default for key, o in OPTIONS.items() if key not in UNCERTAINTY_OF}
+    assert got == {key: o.default for key, o in OPTIONS.items() if key not in SECTIONS_OF}
 
 
 BOUNDED = [key for key, option in OPTIONS.items() if option.bounds is not None]

@@ -812,12 +812,14 @@ def test_evaluation_messages_equal_the_keyword_constructor_and_share_nothing() -
         score_armature_upper=nan,
         armature_min_effective_mass_kg=nan,
         armature_max_effective_mass_kg=nan,
+        safe_duration_s=nan,
     )
     first, second = (conversions.evaluation_msg(evaluation) for _ in range(2))
     assert repr(first) == repr(expected)  # every field; NaN-safe, unlike ==
     first.iso_ts_15066.append(BodyRegionAssessment())
     first.peak_abs_torque.append(1.0)
     first.joint_trajectory.joint_names.append("j")
+    first.retimed_trajectory.joint_names.append("j")
     assert repr(second) == repr(expected)
     empty = conversions.evaluation_msg(evaluation, per_sample=False)
     assert len(empty.time_from_start_s) == len(empty.direction_is_worst_case) == 0

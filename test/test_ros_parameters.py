@@ -189,7 +189,10 @@ BAD: list[tuple[dict[str, Any], str]] = [
     ({"redundancy.enabled": 1}, r"^redundancy\.enabled: must be true or false"),
     ({"effort.enabled": "yes"}, r"^effort\.enabled: must be true or false"),
     ({"effort.criterion": "max"}, r"^effort\.criterion: must be one of peak_fraction, rms_fr"),
-    ({"rank_by": "quality"}, r"^rank_by: must be one of safety, effort, whole_arm, got 'quality'"),
+    (
+        {"rank_by": "quality"},
+        r"^rank_by: must be one of safety, effort, whole_arm, safe_duration, got 'quality'",
+    ),
     # what the result messages carry
     (
         {"response.joint_trajectories": -1},

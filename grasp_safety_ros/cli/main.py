@@ -128,6 +128,11 @@ def _write_outputs(
 
         try:
             plot_report(report, plot_path, title)
+            if report.retimed:
+                from .retime_plot import plot_retimed
+
+                for written in plot_retimed(report, plot_path, title):
+                    print(f"wrote {written}")
         except (OSError, ValueError) as error:  # ValueError: a format matplotlib lacks
             reason = getattr(error, "strerror", None) or " ".join(str(error).split())
             raise InvalidInputError("--plot", f"cannot write '{plot_path}': {reason}") from None
@@ -139,6 +144,15 @@ def _command_rank(args: argparse.Namespace) -> int:
     from .report import report_text
 
     scenario = load_scenario(args.scenario)
+    if args.retime and scenario.options.retime is None:  # the limits: refused when missing
+        from dataclasses import replace
+
+        from ..scenario.fields import read_yaml_file
+        from ..scenario.schema import parse_retime
+
+        section = read_yaml_file(args.scenario).get("retime")  # its limits, even if disabled
+        retime = parse_retime(section, requested=True)
+        scenario = replace(scenario, options=replace(scenario.options, retime=retime))
     report = rank_scenario(scenario, args.metric)
     print(run_header(scenario, report))
     print(report_text(report))
@@ -221,6 +235,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     rank.add_argument("--plot", type=Path, help="write the heatmap and curves as PNG")
     rank.add_argument("--metric", choices=METRICS, help="override the scenario's metric")
+    rank.add_argument(
+        "--retime",
+        action="store_true",
+        help="retime each grasp to the ISO/TS 15066 site speed limits (needs the scenario's "
+        "retime.joint_acceleration_limits; docs/safe_speed.md)",
+    )
     rank.set_defaults(handler=_command_rank)
     demo = commands.add_parser("demo", help="the paper's book experiment on the bundled Baxter")
     demo.add_argument("--out", default="demo_output", help="output folder (default: %(default)s)")

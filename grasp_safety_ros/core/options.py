@@ -122,6 +122,13 @@ OPTIONS: Mapping[str, Option] = MappingProxyType(
                 "orders rank_by whole_arm; must be among iso_ts_15066.regions (when not empty)",
             ),
             Option(
+                "retime.safety_factor",
+                float,
+                1.0,
+                "safe retiming (retime.joint_acceleration_limits set): every site is kept under "
+                "this fraction of its ISO/TS 15066 admissible speed, in (0, 1]",
+            ),
+            Option(
                 "posture.restarts",
                 int,
                 DEFAULT_RESTARTS,

@@ -8,9 +8,10 @@
    ``rank_by: whole_arm`` by the whole arm's criterion);
 3. ``analyses``: every analysis the options enable (``core.analyses.safety_report.analyse``:
    exposed points, ISO/TS 15066, uncertainty, quality, redundancy, effort, whole arm);
-4. the report stages (``REPORT_STAGES``, a ``ReportStage`` each), today ``armature_range``:
-   the effective masses and order at both ends of the armature ranges, when the armature
-   was given as ranges (``analyse_armature_range``).
+4. the report stages (``REPORT_STAGES``, a ``ReportStage`` each): ``armature_range``, the
+   effective masses and order at both ends of the armature ranges, when the armature was
+   given as ranges (``analyse_armature_range``); ``retime``, each grasp's path retimed to the
+   ISO/TS 15066 site speed limits, when ``options.retime`` is set (``retime_grasps``).
 
 Every adapter calls it: the CLI (``grasp-safety rank``), the ROS node's service and topics,
 the dataset batch, the benchmarks; so does a new capability (safe retiming, a live monitor, a
@@ -36,6 +37,8 @@ from typing import Protocol
 
 import numpy as np
 
+from .analyses.arm_sites import resolve_arm_sites
+from .analyses.safe_duration import order_by_safe_duration, retime_grasps
 from .analyses.safety_report import AnalysisOptions, SafetyReport, analyse, posture_criterion
 from .analyses.uncertainty import analyse_armature_range
 from .method.posture import PostureConfig, select_postures
@@ -53,6 +56,7 @@ __all__ = [
     "PipelineRequest",
     "Progress",
     "ReportStage",
+    "RetimeStage",
     "run_pipeline",
 ]
 
@@ -205,7 +209,43 @@ class ArmatureRangeStage:
         return replace(report, armature_range=spread)
 
 
-REPORT_STAGES: tuple[ReportStage, ...] = (ArmatureRangeStage(),)
+@dataclass(frozen=True)
+class RetimeStage:
+    """Each feasible grasp's kept path (the null-space resolution's where applied) retimed to
+    the ISO/TS 15066 site speed limits of its whole-arm sites and object points and to the
+    joint limits (core.analyses.safe_duration.retime_grasps) -> ``SafetyReport.retimed``, and
+    the order under ``rank_by: safe_duration`` (``order_by_safe_duration``)."""
+
+    name: str = "retime"
+
+    def wanted(self, request: PipelineRequest) -> bool:
+        return request.options.retime is not None
+
+    def run(
+        self, evaluator: GraspSafetyEvaluator, request: PipelineRequest, report: SafetyReport
+    ) -> SafetyReport:
+        options, robot = report.options, evaluator.robot
+        if options.retime is None:  # not wanted: nothing to add
+            return report
+        evaluations, redundancy = report.ranking.evaluations, report.redundancy
+        retimed = retime_grasps(
+            robot,
+            options.retime,
+            report.arm_sites or resolve_arm_sites(robot, options.arm_points_m),
+            request.object_inertia,
+            request.grasps,
+            evaluations,
+            options.points_in_object_m,
+            options.iso_regions,
+            [r.joint_positions if r.applied else None for r in redundancy] if redundancy else None,
+        )
+        order = report.order
+        if options.rank_by == "safe_duration":
+            order = order_by_safe_duration(retimed, report.scores, [e.index for e in evaluations])
+        return replace(report, retimed=retimed, order=order)
+
+
+REPORT_STAGES: tuple[ReportStage, ...] = (ArmatureRangeStage(), RetimeStage())
 """The analyses run on the report after ``analyses``, in this order (register new ones here)."""
 
 STAGES = ("rank", "postures", "analyses", *(stage.name for stage in REPORT_STAGES))

@@ -38,7 +38,7 @@ from ..scenario.schema import (
 FORMATS = ("acronym", "graspgen", "scenarios")
 """Source formats: ACRONYM HDF5, GraspGen ``isaac_grasp`` YAML, scenario files."""
 
-PER_GRASP_ANALYSES = frozenset({"metric_point", "iso_ts_15066", "redundancy", "effort"})
+PER_GRASP_ANALYSES = frozenset({"metric_point", "iso_ts_15066", "redundancy", "effort", "retime"})
 """Analysis sections a SPEC may have: each grasp's result depends on that grasp alone."""
 
 SET_ANALYSES = OPTIONAL_SECTIONS - PER_GRASP_ANALYSES - {"posture"}

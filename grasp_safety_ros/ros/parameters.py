@@ -22,6 +22,7 @@ from ..core.analyses.exposed_points import (
     cylinder_rim_points_in_object,
 )
 from ..core.analyses.iso15066 import BODY_REGIONS
+from ..core.analyses.safe_duration import RetimeOptions
 from ..core.analyses.safety_report import RANK_BY, AnalysisOptions
 from ..core.analyses.uncertainty import InertiaUncertainty
 from ..core.analyses.whole_arm import MAX_SITES
@@ -240,6 +241,20 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
         "x y z x y z ... [m]",
         item_type=float,
     ),
+    # --- Safe retiming (core.analyses.retime, docs/safe_speed.md) ---
+    "retime.joint_acceleration_limits": ParameterSpec(
+        [],
+        "joint acceleration limits, chain order [rad/s^2, m/s^2 prismatic]; set: each grasp "
+        "is retimed to the ISO/TS 15066 site speed limits (needed by rank_by safe_duration)",
+        item_type=float,
+    ),
+    "retime.joint_velocity_limits": ParameterSpec(
+        [],
+        "joint velocity limits of the retiming, chain order [rad/s, m/s prismatic]; empty: "
+        "the URDF's",
+        item_type=float,
+    ),
+    "retime.safety_factor": _option("retime.safety_factor"),
 }
 """Every parameter of the node, by name."""
 
@@ -451,6 +466,10 @@ def check_parameter(name: str, value: Any) -> Any:
         points = _points(name, value, MAX_SITES)
         check_within_reach(points, name)
         return points
+    if name in ("retime.joint_acceleration_limits", "retime.joint_velocity_limits"):
+        return _numbers(name, value, None)  # > 0 and one per joint: checked with the robot
+    if name == "retime.safety_factor":
+        return finite_float(value, name, 0.0, 1.0, strict_minimum=True)
     if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
         raise InvalidInputError(name, f"must be a number, got {show(value)}")
     if name in _POSITIVE:
@@ -574,6 +593,10 @@ def parameter_constraints(name: str) -> ParameterConstraints:
             f"x y z (3 finite values, within +/-{MAX_ABS_POSITION_M:g} m) per entry of "
             "whole_arm.point_links"
         )
+    elif name.startswith("retime.joint_"):
+        text = "empty or one value > 0 per chain joint"
+    elif name == "retime.safety_factor":
+        text = "in (0, 1]"
     elif name in PARAMETERS and isinstance(PARAMETERS[name].default, float):
         text = ">= 0"
     return ParameterConstraints(closed, text)
@@ -648,6 +671,13 @@ def analysis_from_parameters(values: Mapping[str, Any]) -> AnalysisOptions:
         whole_arm=values["whole_arm.enabled"],
         arm_points_m=arm_points(values["whole_arm.point_links"], values["whole_arm.points_m"]),
         whole_arm_region=values["whole_arm.region"],
+        retime=RetimeOptions(
+            values["retime.joint_acceleration_limits"],
+            values["retime.joint_velocity_limits"] or None,
+            values["retime.safety_factor"],
+        )
+        if values["retime.joint_acceleration_limits"]
+        else None,
     )
 
 

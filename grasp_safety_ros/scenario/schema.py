@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from ..core.analyses.exposed_points import box_corners_in_object, cylinder_rim_points_in_object
+from ..core.analyses.safe_duration import RetimeOptions
 from ..core.analyses.safety_report import RANK_BY, AnalysisOptions
 from ..core.analyses.uncertainty import InertiaUncertainty
 from ..core.analyses.whole_arm import check_exposed_points_m
@@ -379,7 +380,26 @@ OPTIONAL_SECTIONS = {
     "rank_by",
     "posture",
     "whole_arm",
+    "retime",
 }
+
+
+def parse_retime(section: Any, requested: bool = False) -> RetimeOptions | None:
+    """The ``retime`` section (core.analyses.safe_duration.RetimeOptions): on when given
+    (unless ``enabled: false``) or ``requested`` (``--retime``, ``rank_by: safe_duration``)."""
+    if section is None and not requested:
+        return None
+    retime = mapping({} if section is None else section, "retime")
+    keys = {"joint_acceleration_limits", "joint_velocity_limits", "safety_factor", "output_dt_s"}
+    check_keys(retime, keys | {"enabled"}, "retime")
+    if not (requested or flag(retime.get("enabled", True), "retime.enabled")):
+        return None
+    return RetimeOptions(
+        retime.get("joint_acceleration_limits"),
+        retime.get("joint_velocity_limits"),
+        retime.get("safety_factor", default("retime.safety_factor")),
+        retime.get("output_dt_s"),
+    )
 
 
 def parse_posture(section: Any) -> PostureConfig:
@@ -461,6 +481,7 @@ def parse_options(
             ),
             arm_points_m=arm_points,
             whole_arm_region=whole_arm.get("region", default("whole_arm.region")),
+            retime=parse_retime(root.get("retime"), rank_by == "safe_duration"),
         )
     except InvalidInputError as error:  # the core says iso15066.<field>; the file iso_ts_15066
         if not error.field.startswith("iso15066."):

@@ -44,6 +44,8 @@ from .iso15066 import (
 )
 from .multi_objective import QualityRanking, rank_with_quality
 from .redundancy import RedundancyConfig, RedundancyResolution, resolve_redundancy
+from .retime import RetimedMotion
+from .safe_duration import RetimeOptions, SafeDurationPostureCriterion, standard_mass_estimate_kg
 from .uncertainty import (
     ArmatureRangeAnalysis,
     InertiaUncertainty,
@@ -72,9 +74,9 @@ TERMS_CACHE_SAMPLES = 250_000
 samples (about 500 MB for a 7-joint arm); beyond it the oldest is dropped (then computed
 again if an analysis needs it)."""
 
-RANK_BY = ("safety", "effort", "whole_arm")
-"""What orders the final ranking: the safety score (with quality, when given), the effort, or
-the whole arm's worst predicted force for ``whole_arm_region``."""
+RANK_BY = ("safety", "effort", "whole_arm", "safe_duration")
+"""What orders the final ranking: the safety score (with quality, when given), the effort,
+the whole arm's worst predicted force for ``whole_arm_region``, or the retimed duration."""
 
 
 @dataclass(frozen=True)
@@ -101,6 +103,8 @@ class AnalysisOptions:
         arm_points_m: Extra sites ``{link_name: (P, 3) points [m], link frame}``; giving any
             turns ``whole_arm`` on.
         whole_arm_region: Body region ``rank_by: whole_arm`` uses (DEFAULT_RANK_REGION).
+        retime: Retime each feasible grasp to the site speed limits (core.analyses.
+            safe_duration); required by ``rank_by: safe_duration``.
     """
 
     metric_point: str = "tip"
@@ -116,6 +120,7 @@ class AnalysisOptions:
     whole_arm: bool = False
     arm_points_m: Mapping[str, Any] | None = None
     whole_arm_region: str = DEFAULT_RANK_REGION
+    retime: RetimeOptions | None = None
 
     def __post_init__(self) -> None:
         check_metric_point(self.metric_point)
@@ -165,17 +170,35 @@ class AnalysisOptions:
             )
         if self.rank_by == "whole_arm" or self.arm_points_m:
             object.__setattr__(self, "whole_arm", True)
+        if self.retime is None and self.rank_by == "safe_duration":
+            raise InvalidInputError(
+                "retime.joint_acceleration_limits",
+                "rank_by safe_duration needs a retime section with the joint acceleration limits",
+            )
+        if self.retime is not None and self.iso_regions == ():
+            raise InvalidInputError(
+                "iso_ts_15066.regions", "a retiming needs at least one region (none: all)"
+            )
 
 
 def posture_criterion(
     robot: RobotModel, options: AnalysisOptions
-) -> WholeArmPostureCriterion | None:
+) -> WholeArmPostureCriterion | SafeDurationPostureCriterion | None:
     """What posture selection (core.method.posture) minimises for ``options``: with
     ``rank_by: whole_arm`` the whole arm's worst force for ``whole_arm_region`` over its sites
-    (the defaults and ``arm_points_m``), the criterion that ranks; else None (the tip score)."""
-    if options.rank_by != "whole_arm":
+    (the defaults and ``arm_points_m``), with ``safe_duration`` the retimed duration, the
+    criterion that ranks; else None (the tip score)."""
+    if options.rank_by not in ("whole_arm", "safe_duration"):
         return None
     sites = resolve_arm_sites(robot, options.arm_points_m)
+    if options.rank_by == "safe_duration":
+        regions = None if options.iso_regions is None else tuple(options.iso_regions)
+        return SafeDurationPostureCriterion(
+            options.retime,
+            sites,
+            options.points_in_object_m,
+            regions,  # type: ignore[arg-type]
+        )
     return WholeArmPostureCriterion(sites, options.whole_arm_region)
 
 
@@ -200,6 +223,10 @@ class SafetyReport:
         arm_sites: The sites assessed (resolved once per report), when on.
         armature_range: Effective masses and ranking at both ends of armature ranges, when
             the armature was given as ranges (uncertainty.analyse_armature_range).
+        retimed: Each grasp's motion retimed to the site speed limits (None: infeasible or
+            no timing found), when ``options.retime`` is set (core.pipeline's RetimeStage,
+            which also sets ``order`` under ``rank_by: safe_duration``).
+        standard_mass_estimate_kg: ISO/TS 15066's m_R = M/2 + m_L [kg] (safe_duration).
     """
 
     ranking: Ranking
@@ -216,6 +243,8 @@ class SafetyReport:
     whole_arm: tuple[WholeArmEvaluation, ...] = ()
     arm_sites: ArmSites | None = None
     armature_range: ArmatureRangeAnalysis | None = None
+    retimed: tuple[RetimedMotion | None, ...] = ()
+    standard_mass_estimate_kg: float = float("nan")
 
 
 def analyse(
@@ -422,6 +451,7 @@ def analyse(
         effort=effort,
         whole_arm=whole_arm,
         arm_sites=arm_sites,
+        standard_mass_estimate_kg=standard_mass_estimate_kg(robot, object_inertia.mass_kg),
     )
 
 

@@ -93,6 +93,7 @@ _EVALUATION_TEMPLATE = GraspEvaluationMsg(
     score_armature_upper=NAN,
     armature_min_effective_mass_kg=NAN,
     armature_max_effective_mass_kg=NAN,
+    safe_duration_s=NAN,
 )
 """A GraspEvaluation message whose analysis fields say "not computed" (NaN, empty, false)."""
 _new_evaluation = _template_constructor(_EVALUATION_TEMPLATE)
@@ -520,14 +521,30 @@ def _report_msg(
             if effort.feasible:
                 evaluation.peak_abs_torque = float64_array(effort.peak_abs_torque)
                 evaluation.rms_torque = float64_array(effort.rms_torque)
-    _set_joint_trajectories(
-        message,
-        report.ranking.joint_names,
-        motions,
-        content.with_joint_trajectory(report.order, len(message.evaluations)),
-        base_frame,
-    )
+    carried = content.with_joint_trajectory(report.order, len(message.evaluations))
+    _set_joint_trajectories(message, report.ranking.joint_names, motions, carried, base_frame)
+    _set_retimed(message, report, carried, base_frame)
     return message
+
+
+def _set_retimed(
+    message: GraspRanking, report: SafetyReport, carried: Collection[int], base_frame: str
+) -> None:
+    """``safe_duration_s`` of every retimed grasp and ``retimed_trajectory`` of those among
+    ``carried`` (the grasps that carry their joint trajectory)."""
+    for k, motion in enumerate(report.retimed):
+        if motion is None:
+            continue
+        evaluation = message.evaluations[k]
+        evaluation.safe_duration_s = float(motion.safe_duration_s)
+        if evaluation.index in carried:
+            evaluation.retimed_trajectory = joint_trajectory_msg(
+                report.ranking.joint_names,
+                motion.times_s,
+                motion.positions,
+                Header(frame_id=base_frame),
+                (motion.velocities, motion.accelerations),
+            )
 
 
 def _set_armature_range(message: GraspRanking, report: SafetyReport) -> None:
