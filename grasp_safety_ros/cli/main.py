@@ -23,6 +23,13 @@ if TYPE_CHECKING:
 
 EXIT_BAD_INPUT = 2
 DEMO_SCENARIO = "book_baxter.yaml"
+DEMO_BACKEND = "python"
+"""The demo's three grasps run on the Pinocchio path: under a second, where compiling the
+kernels they would use takes minutes on a new machine (docs/performance_pipeline.md)."""
+DEMO_BACKEND_NOTE = (
+    "(Pinocchio path: nothing to compile; `grasp-safety rank` of the same file runs the "
+    "compiled kernels, the same table)"
+)
 PROGRESS_MIN_SAMPLES = 2000
 """Show a progress bar (on a terminal) when grasps x samples reaches this."""
 
@@ -46,13 +53,20 @@ def _progress_printer(total_samples: int) -> Callable[[int, int], None] | None:
     return show
 
 
-def rank_scenario(scenario: Scenario, metric: str | None = None) -> SafetyReport:
-    """Load the scenario's robot, rank its grasps and run the analyses the scenario asks for."""
+def rank_scenario(
+    scenario: Scenario, metric: str | None = None, backend: str = "auto"
+) -> SafetyReport:
+    """Load the scenario's robot, rank its grasps and run the analyses the scenario asks for
+    (``backend``: EvaluationConfig's); a kernel compiled on the way (first use on a machine)
+    is announced on stderr."""
     from ..core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
+    from ..core.method.warm_up import announce_compiles
     from .scenario import rank_with_evaluator
 
+    announce_compiles(sys.stderr)
     robot = scenario.robot.load(scenario.base_dir)
-    evaluator = GraspSafetyEvaluator(robot, EvaluationConfig(metric=metric or scenario.metric))
+    config = EvaluationConfig(metric=metric or scenario.metric, backend=backend)
+    evaluator = GraspSafetyEvaluator(robot, config)
     progress = _progress_printer(len(scenario.grasps) * len(scenario.trajectory.times_s()))
     return rank_with_evaluator(scenario, evaluator, progress)
 
@@ -149,8 +163,9 @@ def _command_demo(args: argparse.Namespace) -> int:
 
     path = config_file(DEMO_SCENARIO)
     print(f"demo: the paper's book experiment on Baxter ({path})")
+    print(DEMO_BACKEND_NOTE)
     scenario = load_scenario(path)
-    report = rank_scenario(scenario)
+    report = rank_scenario(scenario, backend=DEMO_BACKEND)
     print(run_header(scenario, report))
     print(report_text(report))
     out = Path(args.out)
