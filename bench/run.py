@@ -56,7 +56,7 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np
-from pipeline import bench_pipeline, print_pipeline
+from pipeline import bench_pipeline, issue30_rows, print_issue30, print_pipeline
 from postures import bench_postures, print_postures
 from pykdl_peer import PyKDLPipeline, build_chain, load_pykdl
 from reference import ReferenceIK, reference_effective_masses
@@ -594,6 +594,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             args.json.parent.mkdir(parents=True, exist_ok=True)
             args.json.write_text(json.dumps({"pipeline": pipeline}, indent=2) + "\n")
         print_pipeline(pipeline)
+        print_issue30(issue30_rows(pipeline))
         return 0
     if args.postures_only:
         postures = bench_postures(args.posture_grasps)
@@ -688,6 +689,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "whole_arm": whole_arm,
         "pipeline": pipeline,
         "issue21_targets": issue21_rows(arms, pipeline, service),
+        "issue30_targets": issue30_rows(pipeline, arms, whole_arm, service),
         "pykdl_unavailable_reason": kdl_reason or None,
         "arms": arms,
         "machine": {
@@ -713,6 +715,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     print_whole_arm(whole_arm)
     print_pipeline(pipeline)
     print_issue21(results["issue21_targets"])
+    print_issue30(results["issue30_targets"])
     return 0
 
 
