@@ -25,11 +25,8 @@ EXIT_BAD_INPUT = 2
 DEMO_SCENARIO = "book_baxter.yaml"
 DEMO_BACKEND = "python"
 """The demo's three grasps run on the Pinocchio path: under a second, where compiling the
-kernels they would use takes minutes on a new machine (docs/performance_pipeline.md)."""
-DEMO_BACKEND_NOTE = (
-    "(Pinocchio path: nothing to compile; `grasp-safety rank` of the same file runs the "
-    "compiled kernels, the same table)"
-)
+kernels they would use takes minutes on a new machine; ``grasp-safety rank`` of the same file
+runs the compiled kernels and prints the same table (docs/performance_pipeline.md)."""
 PROGRESS_MIN_SAMPLES = 2000
 """Show a progress bar (on a terminal) when grasps x samples reaches this."""
 
@@ -163,7 +160,6 @@ def _command_demo(args: argparse.Namespace) -> int:
 
     path = config_file(DEMO_SCENARIO)
     print(f"demo: the paper's book experiment on Baxter ({path})")
-    print(DEMO_BACKEND_NOTE)
     scenario = load_scenario(path)
     report = rank_scenario(scenario, backend=DEMO_BACKEND)
     print(run_header(scenario, report))
