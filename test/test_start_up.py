@@ -1,0 +1,66 @@
+"""What a ranking command loads (issue 30: start-up), counted, not timed: with its kernels in
+numba's cache, ``grasp-safety rank`` imports neither scipy.linalg, scipy.interpolate nor
+numba's lowering registries (``numba.np.arraymath`` and the rest of the implementations a
+compilation needs: about a second), and the demo runs on the Pinocchio path."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import yaml
+
+from grasp_safety_ros.core.method.ranking import GraspSafetyEvaluator
+from grasp_safety_ros.paths import config_file
+
+RANK_AND_LIST_MODULES = """
+import json, sys
+from grasp_safety_ros.cli.main import main
+status = main(["rank", sys.argv[1], "--json", sys.argv[2]])
+print(json.dumps({"status": status, "modules": sorted(sys.modules)}))
+"""
+
+
+def rank_in_fresh_process(scenario: Path, out: Path) -> list[str]:
+    done = subprocess.run(
+        [sys.executable, "-c", RANK_AND_LIST_MODULES, str(scenario), str(out)],
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=1800,
+    )
+    result = json.loads(done.stdout.strip().splitlines()[-1])
+    assert result["status"] == 0
+    return result["modules"]
+
+
+def test_rank_with_cached_kernels_imports_no_scipy_and_no_lowering_registries(
+    tmp_path: Path,
+) -> None:
+    data = yaml.safe_load(config_file("book_baxter.yaml").read_text())
+    data["grasps"] = data["grasps"][:1]
+    scenario = tmp_path / "one.yaml"
+    scenario.write_text(yaml.safe_dump(data))
+    rank_in_fresh_process(scenario, tmp_path / "first.json")  # compiles what is not cached
+    modules = rank_in_fresh_process(scenario, tmp_path / "second.json")
+    # numba's own import checks scipy's version (``import scipy``, a few ms): nothing more
+    assert not [m for m in modules if m.startswith(("scipy.linalg", "scipy.interpolate"))]
+    assert "numba.np.arraymath" not in modules
+    assert (tmp_path / "first.json").read_bytes() == (tmp_path / "second.json").read_bytes()
+
+
+def test_demo_ranks_on_the_pinocchio_path(tmp_path: Path, monkeypatch) -> None:
+    from grasp_safety_ros.cli import main as cli
+
+    backends = []
+    real_init = GraspSafetyEvaluator.__init__
+
+    def recording_init(self, robot, config=None) -> None:
+        real_init(self, robot, config)
+        backends.append(self.ik.backend_used)
+
+    monkeypatch.setattr(GraspSafetyEvaluator, "__init__", recording_init)
+    assert cli.main(["demo", "--out", str(tmp_path)]) == 0
+    assert len(backends) == 1 and backends[0].startswith("python")
