@@ -64,3 +64,28 @@ def test_demo_ranks_on_the_pinocchio_path(tmp_path: Path, monkeypatch) -> None:
     monkeypatch.setattr(GraspSafetyEvaluator, "__init__", recording_init)
     assert cli.main(["demo", "--out", str(tmp_path)]) == 0
     assert len(backends) == 1 and backends[0].startswith("python")
+
+
+def test_console_script_exits_with_mains_status_and_complete_outputs(tmp_path: Path) -> None:
+    """``run`` ends rank's process without Python's teardown: the table, the JSON and the exit
+    status are all there; a bad input still exits 2 with its one-line error."""
+    data = yaml.safe_load(config_file("book_baxter.yaml").read_text())
+    data["grasps"] = data["grasps"][:1]
+    data["trajectory"]["dt_s"] = 0.1
+    scenario = tmp_path / "one.yaml"
+    scenario.write_text(yaml.safe_dump(data))
+    out = tmp_path / "out.json"
+    command = [sys.executable, "-m", "grasp_safety_ros.cli", "rank", str(scenario)]
+    done = subprocess.run(
+        [*command, "--json", str(out)], capture_output=True, text=True, timeout=1800
+    )
+    assert done.returncode == 0, done.stderr
+    assert "spine_minus_0.1" in done.stdout and done.stdout.endswith(f"wrote {out}\n")
+    assert json.loads(out.read_text())["ranking"] == [0]
+    bad = subprocess.run(
+        [*command, "--metric", "mean", "--json", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=1800,
+    )
+    assert bad.returncode == 2 and bad.stderr.startswith("grasp-safety: error: --json")
