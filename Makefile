@@ -37,13 +37,13 @@ setup: $(IFACE_STAMP) $(AMENT_STAMP) $(ROS2CLI_STAMP) $(ROS2LAUNCH_STAMP) $(KERN
 
 # The core's and the command line's packages (requirements-core.txt, all `make demo` needs)
 # and the package; then the rest of requirements.txt. pip lists what it downloads and installs.
-# No byte-compiling at install (--no-compile: a third of the install time; Python compiles what
-# it imports, once); the package is built with the venv's setuptools (pinned like the rest).
+# No byte-compiling at install (--no-compile: a third of the install time on this machine;
+# Python compiles what it imports, once).
 $(CORE_STAMP): requirements-core.txt setup.py $(LOCK)
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	@echo "installing the core's packages: pip lists each download, then unpacks them all (1.4 GB, a minute or more)"
 	set -o pipefail; $(PY) -m pip install --no-compile -r requirements-core.txt 2>&1 | $(PIP_QUIET)
-	set -o pipefail; $(PY) -m pip install --no-deps --no-build-isolation -e . 2>&1 | $(PIP_QUIET)
+	set -o pipefail; $(PY) -m pip install --no-deps -e . 2>&1 | $(PIP_QUIET)
 	touch $@
 
 $(STAMP): $(CORE_STAMP) requirements.txt $(LOCK)
