@@ -6,10 +6,12 @@ compilation needs: about a second), and the demo runs on the Pinocchio path."""
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 import yaml
 
 from grasp_safety_ros.core.method.ranking import GraspSafetyEvaluator
@@ -89,3 +91,33 @@ def test_console_script_exits_with_mains_status_and_complete_outputs(tmp_path: P
         timeout=1800,
     )
     assert bad.returncode == 2 and bad.stderr.startswith("grasp-safety: error: --json")
+
+
+ANNOUNCED = """
+import sys
+import numba
+from grasp_safety_ros.core.method.warm_up import announce_compiles
+
+@numba.njit
+def helper(x):
+    return x * 2.0
+
+@numba.njit
+def kernel(x):
+    return helper(x) + 1.0
+
+announce_compiles(sys.stdout)
+print(kernel(1.0), kernel(2.0))
+"""
+
+
+def test_each_kernel_compiled_is_announced_once_without_its_helpers() -> None:
+    pytest.importorskip("numba")
+    done = subprocess.run(
+        [sys.executable, "-c", ANNOUNCED], capture_output=True, text=True, check=True, timeout=600
+    )
+    lines = done.stdout.splitlines()
+    assert len(lines) == 2, done.stdout
+    announced = r"compiling kernel __main__\.kernel \(first use on this machine\) \.\.\. \d+\.\d s"
+    assert re.fullmatch(announced, lines[0])
+    assert lines[1] == "3.0 5.0"
