@@ -19,7 +19,8 @@ checkout of the same sources loads the first one's kernels. The most recently us
 A kernel loaded from the cache skips numba's import of its lowering registries (every numpy
 and Python implementation it knows, with scipy.linalg: about 1 s of start-up; ``KernelCache``):
 only a kernel compiled in this process needs them, and numba's compiler loads them itself.
-``announce_compiles`` prints a line per kernel compiled (first use on a machine).
+``announce_compiles`` prints a line per kernel compiled (first use on a machine). numba is
+imported without its coverage support unless coverage is already running (``_import_numba``).
 """
 
 from __future__ import annotations
@@ -36,12 +37,29 @@ from typing import Any, TextIO
 
 import numpy as np
 
-try:  # optional accelerator
-    import numba
+
+def _import_numba() -> Any:
+    """numba, or None without it. numba imports the coverage package when installed (0.1-0.2 s
+    of every start-up) to report compiled lines to a coverage run; when no coverage run has
+    started in this process (it imports coverage first), numba is imported with coverage
+    hidden, which it reads as not installed."""
+    hide = "coverage" not in sys.modules
+    if hide:
+        sys.modules["coverage"] = None  # type: ignore[assignment]
+    try:
+        import numba
+    except ImportError:  # pragma: no cover - exercised on machines without numba
+        return None
+    finally:
+        if hide and sys.modules.get("coverage", 0) is None:
+            del sys.modules["coverage"]
+    return numba
+
+
+numba = _import_numba()  # optional accelerator
+if numba is not None:
     from numba.core import caching as _numba_caching
     from numba.core import event as _numba_event
-except ImportError:  # pragma: no cover - exercised on machines without numba
-    numba = None
 
 KERNELS_FOLDER = Path(__file__).resolve().parent
 KEPT_CACHES = 6
