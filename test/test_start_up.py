@@ -121,3 +121,27 @@ def test_each_kernel_compiled_is_announced_once_without_its_helpers() -> None:
     announced = r"compiling kernel __main__\.kernel \(first use on this machine\) \.\.\. \d+\.\d s"
     assert re.fullmatch(announced, lines[0])
     assert lines[1] == "3.0 5.0"
+
+
+def test_numba_is_imported_without_coverage_which_stays_importable() -> None:
+    pytest.importorskip("numba")
+    code = (
+        "import sys\n"
+        "import grasp_safety_ros.core.kernels._jit as jit\n"
+        "print(jit.numba is not None, 'coverage' in sys.modules)\n"
+        "import importlib.util\n"
+        "print(importlib.util.find_spec('coverage') is not None)\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=600
+    )
+    loaded, installed = done.stdout.splitlines()
+    assert loaded == "True False"
+    if installed == "True":  # the hidden entry is gone: coverage imports as usual
+        again = subprocess.run(
+            [sys.executable, "-c", code + "import coverage\n"],
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+        assert again.returncode == 0, again.stderr
