@@ -145,3 +145,15 @@ def test_numba_is_imported_without_coverage_which_stays_importable() -> None:
             timeout=600,
         )
         assert again.returncode == 0, again.stderr
+
+
+def test_a_closed_announcement_stream_never_fails_a_compilation() -> None:
+    pytest.importorskip("numba")
+    code = ANNOUNCED.replace(
+        "announce_compiles(sys.stdout)",
+        "import io\nclosed = io.StringIO()\nclosed.close()\nannounce_compiles(closed)",
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=600
+    )
+    assert done.stdout == "3.0 5.0\n"

@@ -61,7 +61,7 @@ def rank_scenario(
     from ..core.method.warm_up import announce_compiles
     from .scenario import rank_with_evaluator
 
-    announce_compiles(sys.stderr)
+    announce_compiles()
     robot = scenario.robot.load(scenario.base_dir)
     config = EvaluationConfig(metric=metric or scenario.metric, backend=backend)
     evaluator = GraspSafetyEvaluator(robot, config)

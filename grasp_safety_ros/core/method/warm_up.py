@@ -4,6 +4,7 @@ imported by ``warm_up`` only: importing this module for ``announce_compiles`` st
 
 from __future__ import annotations
 
+import sys
 import time
 from typing import TYPE_CHECKING, TextIO
 
@@ -117,9 +118,30 @@ def warm_up(evaluator: GraspSafetyEvaluator | None = None) -> float:
 
 
 def announce_compiles(stream: TextIO | None = None) -> None:
-    """From now on, write a line to ``stream`` (default stderr) for each kernel this process
-    compiles (its first use on a machine), with its time; nothing for kernels loaded from
-    numba's cache."""
+    """From now on, write a line to ``stream`` for each kernel this process compiles (its
+    first use on a machine), with its time; nothing for kernels loaded from numba's cache.
+    None: the ``sys.stderr`` of the moment of each line (a test's capture replaced or closed
+    in between is not written to); a stream that cannot be written is skipped."""
     from ..kernels._jit import announce_compiles as announce
 
-    announce(stream)
+    announce(_Announcements(stream))
+
+
+class _Announcements:
+    """The stream of ``announce_compiles``: writes that fail are dropped, so that a closed
+    stream never fails a compilation."""
+
+    def __init__(self, stream: TextIO | None) -> None:
+        self._stream = stream
+
+    def write(self, text: str) -> None:
+        try:
+            (self._stream or sys.stderr).write(text)
+        except (OSError, ValueError):  # closed or broken
+            pass
+
+    def flush(self) -> None:
+        try:
+            (self._stream or sys.stderr).flush()
+        except (OSError, ValueError):
+            pass
