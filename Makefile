@@ -11,6 +11,7 @@ PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+CORE_STAMP := $(VENV)/.core
 LOCK := requirements.lock
 LOCK_VENV := build/lock-venv
 # LOCKED=0 installs what PyPI serves today within requirements*.txt (used by `make lock`)
@@ -28,7 +29,7 @@ ROS2CLI_STAMP := $(if $(ROS2CLI_INSTALL),$(VENV)/.ros2cli)
 ROS2LAUNCH_INSTALL := $(wildcard ../shared/tools/ros2launch/install)
 ROS2LAUNCH_STAMP := $(if $(and $(ROS2CLI_INSTALL),$(ROS2LAUNCH_INSTALL)),$(VENV)/.ros2launch)
 # some machines' pip.conf names local indexes that do not exist: drop pip's warning about them
-PIP_QUIET := sed -e '/is ignored: it is neither a file nor a directory/d'
+PIP_QUIET := sed -u -e '/is ignored: it is neither a file nor a directory/d'
 
 .PHONY: all setup demo test bench lint lock clean
 
@@ -36,17 +37,26 @@ all: setup
 
 setup: $(IFACE_STAMP) $(AMENT_STAMP) $(ROS2CLI_STAMP) $(ROS2LAUNCH_STAMP) $(KERNELS_STAMP)
 
-$(STAMP): requirements.txt setup.py $(LOCK)
+# The core's and the command line's packages (requirements-core.txt, all `make demo` needs)
+# and the package; then the rest of requirements.txt. pip lists what it downloads and installs.
+# No byte-compiling at install (--no-compile: a third of the install time on this machine;
+# Python compiles what it imports, once).
+$(CORE_STAMP): requirements-core.txt setup.py $(LOCK)
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	set -o pipefail; $(PY) -m pip install -q -r requirements.txt 2>&1 | $(PIP_QUIET)
-	set -o pipefail; $(PY) -m pip install -q --no-deps -e . 2>&1 | $(PIP_QUIET)
+	@echo "installing the core's packages: pip lists each download, then unpacks them all (1.4 GB, a minute or more)"
+	set -o pipefail; $(PY) -m pip install --no-compile -r requirements-core.txt 2>&1 | $(PIP_QUIET)
+	set -o pipefail; $(PY) -m pip install --no-deps -e . 2>&1 | $(PIP_QUIET)
+	touch $@
+
+$(STAMP): $(CORE_STAMP) requirements.txt $(LOCK)
+	set -o pipefail; $(PY) -m pip install -r requirements.txt 2>&1 | $(PIP_QUIET)
 	touch $@
 
 # Compile the kernels, or load them from numba's cache of the same sources, shared by the
-# checkouts of this machine (see core/kernels/_jit.py).
+# checkouts of this machine (see core/kernels/_jit.py); a line per kernel compiled.
 $(KERNELS_STAMP): $(STAMP) $(wildcard $(KERNELS)/*.py) \
   $(shell grep -rl --include='*.py' NamedTuple grasp_safety_ros/core)
-	$(PY) -c "from grasp_safety_ros.core.method.warm_up import warm_up; print(f'compiled kernels ready ({warm_up():.1f} s)')"
+	$(PY) -c "from grasp_safety_ros.core.method.warm_up import announce_compiles, warm_up; announce_compiles(); print(f'compiled kernels ready ({warm_up():.1f} s)')"
 	touch $@
 
 $(IFACE_STAMP): $(STAMP) $(IFACE_SRC)
@@ -68,8 +78,9 @@ $(VENV)/.ros2launch: $(VENV)/.ros2cli $(ROS2LAUNCH_INSTALL)
 	set -o pipefail; bash $(ROS2LAUNCH_INSTALL) $(VENV) 2>&1 | $(PIP_QUIET)
 	touch $@
 
-# the demo needs the Python packages and the kernels only: the ROS 2 parts install with `make test`
-demo: $(KERNELS_STAMP)
+# the demo needs the core's packages only (the rest and the ROS 2 parts install with `make test`)
+# and no kernel: its three grasps run on the Pinocchio path (cli/main.py: DEMO_BACKEND)
+demo: $(CORE_STAMP)
 	$(VENV)/bin/grasp-safety demo --out demo_output
 
 # The checks CI runs, cheapest first: lint (ruff), types (mypy, pyproject.toml), then pytest.

@@ -25,7 +25,7 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
-            "grasp-safety = grasp_safety_ros.cli.main:main",
+            "grasp-safety = grasp_safety_ros.cli.main:run",
             "grasp_safety_node = grasp_safety_ros.ros.node:main",
         ],
     },

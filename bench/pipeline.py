@@ -8,6 +8,10 @@ over the spine (y from -0.1 to +0.1 m), dt 0.01 s (201 samples), the scenario's 
 - CLI wall time incl. start-up: ``grasp-safety rank <scenario> --json <file>`` in a fresh
   process, 100 and 1,000 grasps (and 1,000 with ``--no-per-sample``), with the JSON size;
   ``grasp-safety --help``;
+- start-up (issue 30): ``grasp-safety rank`` of 1 grasp, whole process, alternated with
+  ``python -c 'import pinocchio'`` (their ratio, pair by pair), the same command with numba
+  hidden (the Pinocchio path), and what the command imports (``python -X importtime``: the
+  modules, and whether scipy.linalg or .interpolate and numba's lowering registries are in);
 - in one process, one core (workers=1), median over repeats: the paper's ranking (single IK),
   posture selection after it, and every default analysis (``safety_report.analyse``) on the
   shared compiled terms and on the Pinocchio per-sample reference path; as ratios to the
@@ -21,6 +25,7 @@ Run alone: .venv/bin/python bench/run.py --pipeline-only [--json bench/results_p
 from __future__ import annotations
 
 import json
+import os
 import statistics
 import subprocess
 import sys
@@ -100,11 +105,56 @@ def bench_start_up(repeats: int = 3) -> dict[str, float]:
     return result
 
 
+WITHOUT_NUMBA = (
+    "import sys; sys.modules['numba'] = None; from grasp_safety_ros.cli.main import main; "
+    "sys.exit(main(sys.argv[1:]))"
+)
+"""``grasp-safety`` with numba hidden: the evaluator falls back to the Pinocchio path."""
+
+
+def bench_rank_start_up(folder: Path, repeats: int = 5) -> dict[str, Any]:
+    """``grasp-safety rank`` of 1 grasp x 201 samples (``--json``) as a whole process, each run
+    paired with ``python -c 'import pinocchio'`` just before it: medians and [min, max] [s],
+    the ratio of each pair; the same with numba hidden; the command's imports."""
+    scenario = str(book_scenario(1, folder))
+    out = str(folder / "out_start_up.json")
+    rank = [str(CLI), "rank", scenario, "--json", out]
+    _wall(rank)  # kernels into the page cache
+    pairs = [
+        (_wall([sys.executable, "-c", "import pinocchio"]), _wall(rank)) for _ in range(repeats)
+    ]
+    without = [_wall([sys.executable, "-c", WITHOUT_NUMBA, *rank[1:]]) for _ in range(repeats)]
+    imports = subprocess.run(
+        [sys.executable, "-X", "importtime", "-m", "grasp_safety_ros.cli.main", *rank[1:]],
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stderr
+    modules = [line.rsplit("|", 1)[1].strip() for line in imports.splitlines() if "|" in line]
+    modules = modules[1:]  # the header line
+
+    def spread(values: list[float]) -> dict[str, float]:
+        return {"median": statistics.median(values), "min": min(values), "max": max(values)}
+
+    return {
+        "import_pinocchio_s": spread([p for p, _ in pairs]),
+        "rank_1_s": spread([r for _, r in pairs]),
+        "rank_1_vs_import_pinocchio": spread([r / p for p, r in pairs]),
+        "rank_1_without_numba_s": spread(without),
+        "modules_imported": len(modules),
+        "scipy_linalg_or_interpolate_imported": any(
+            m.startswith(("scipy.linalg", "scipy.interpolate")) for m in modules
+        ),
+        "numba_lowering_registries_imported": "numba.np.arraymath" in modules,
+    }
+
+
 def bench_cli(folder: Path, repeats: int = 3) -> dict[str, Any]:
     """Median wall times [s] of the CLI in fresh processes, and the JSON sizes [bytes]."""
     results: dict[str, Any] = {
         "help_s": statistics.median(_wall([str(CLI), "--help"]) for _ in range(repeats)),
         "start_up": bench_start_up(repeats),
+        "rank_start_up": bench_rank_start_up(folder),
     }
     for grasps, flags in ((1, ()), (100, ()), (1000, ()), (1000, ("--no-per-sample",))):
         scenario = book_scenario(grasps, folder)
@@ -213,6 +263,16 @@ def print_pipeline(results: dict[str, Any]) -> None:
     start_up = cli["start_up"]
     spans = ", ".join(f"{key[:-2].replace('_', ' ')} {s:.2f} s" for key, s in start_up.items())
     print(f"  fixed cost of a ranking command, fresh process: {spans}")
+    start = cli["rank_start_up"]
+    print(
+        f"  rank 1 x 201 whole process: {start['rank_1_s']['median']:.2f} s, import pinocchio "
+        f"{start['import_pinocchio_s']['median']:.2f} s (pairwise x"
+        f"{start['rank_1_vs_import_pinocchio']['median']:.2f}); numba hidden (Pinocchio "
+        f"path): {start['rank_1_without_numba_s']['median']:.2f} s; imports "
+        f"{start['modules_imported']} modules, scipy.linalg or .interpolate "
+        f"{start['scipy_linalg_or_interpolate_imported']}, numba's "
+        f"lowering registries {start['numba_lowering_registries_imported']}"
+    )
     for key, label in (
         ("rank_1", "CLI 1 x 201 --json (the floor)"),
         ("rank_100", "CLI 100 x 201 --json"),
@@ -224,3 +284,133 @@ def print_pipeline(results: dict[str, Any]) -> None:
             f"  {label}: {row['wall_s']:.2f} s wall incl. start-up, "
             f"JSON {row['json_bytes'] / 1e6:.1f} MB"
         )
+
+
+NOT_MEASURED = "not measured this run"
+
+
+def bench_batch_per_worker(grasps: int = 960) -> dict[str, Any]:
+    """bench/batch.py's local one-worker throughput alone (its workload, warm process, the
+    fastest of its REPEATS runs) for issue 30's row: (grasp, sample)/s per worker."""
+    from batch import CHUNK, REPEATS, _run, write_dataset
+
+    from grasp_safety_ros.dataset.batch import run_batch
+
+    with tempfile.TemporaryDirectory() as folder:
+        root = Path(folder)
+        spec = write_dataset(root, grasps, CHUNK)
+        run_batch(spec, root / "warm", workers=1)
+        runs = [_run(spec, root / f"local_1_{k}", workers=1) for k in range(REPEATS)]
+    return {
+        "grasps": grasps,
+        "grasp_samples_per_s": max(r["grasp_samples_per_s"] for r in runs),
+        "repeats_per_s": [r["grasp_samples_per_s"] for r in runs],
+    }
+
+
+def issue30_rows(
+    pipeline: dict[str, Any],
+    arms: dict[str, Any] | None = None,
+    whole_arm: dict[str, Any] | None = None,
+    service: dict[str, Any] | None = None,
+    batch: dict[str, Any] | None = None,
+) -> list[dict[str, Any]]:
+    """Issue 30's targets, each beside this run's figure (rows this run did not measure say so):
+    measure, value (text), target (text), met (True, False or None)."""
+    cli = pipeline["cli"]
+    core = pipeline["in_process"]
+    start = cli["rank_start_up"]
+    rows: list[dict[str, Any]] = []
+
+    def row(measure: str, value: str | None, target: str, met: bool | None) -> None:
+        rows.append(
+            {
+                "measure": measure,
+                "value": value or NOT_MEASURED,
+                "target": target,
+                "met": met if value else None,
+            }
+        )
+
+    row(
+        "fresh clone, empty caches: make demo to its table",
+        None,
+        "<= 150 s, visible progress (by hand: docs/performance_pipeline.md)",
+        None,
+    )
+    rank_s, ratio = start["rank_1_s"], start["rank_1_vs_import_pinocchio"]
+    row(
+        "grasp-safety rank 1 x 201, whole process, warm caches",
+        f"{rank_s['median']:.2f} s [{rank_s['min']:.2f}..{rank_s['max']:.2f}], "
+        f"x{ratio['median']:.2f} [{ratio['min']:.2f}..{ratio['max']:.2f}] import pinocchio",
+        "<= 0.5 s and <= x1.5 import pinocchio",
+        rank_s["median"] <= 0.5 and ratio["median"] <= 1.5,
+    )
+    for key, label, target in (
+        ("rank_100", "CLI 100 x 201 --json", 1.0),
+        ("rank_1000", "CLI 1,000 x 201 --json", 3.0),
+    ):
+        wall = cli[key]["wall_s"]
+        row(label, f"{wall:.2f} s", f"<= {target:g} s", wall <= target)
+    if arms and whole_arm and "panda" in arms and "panda" in whole_arm:
+        site_us = whole_arm["panda"]["us_per_sample"]
+        core_us = arms["panda"]["us_per_sample_with_ik"]["median"]
+        row(
+            "whole arm per (grasp, sample), Panda",
+            f"{site_us:.2f} us = x{site_us / core_us:.2f} the core's {core_us:.2f} us",
+            "<= x2 the core's",
+            site_us <= 2 * core_us,
+        )
+    else:
+        row("whole arm per (grasp, sample), Panda", None, "<= x2 the core's", None)
+    row(
+        "posture selection (8 restarts) / single-IK ranking",
+        f"x{core['postures_vs_ranking']:.2f}",
+        "<= x2",
+        core["postures_vs_ranking"] <= 2.0,
+    )
+    row(
+        "default analyses / ranking",
+        f"x{core['analyses_vs_ranking']:.2f}",
+        "<= x1.5",
+        core["analyses_vs_ranking"] <= 1.5,
+    )
+    per_worker = None if batch is None else batch["grasp_samples_per_s"]
+    row(
+        "batch per worker, bench/batch.py (1 local worker, fastest of its repeats)",
+        None if per_worker is None else f"{per_worker:,.0f} /s",
+        ">= 20,000 /s, rows unchanged",
+        None if per_worker is None else per_worker >= 20_000,
+    )
+    targets = {t["row"]: t for t in (service or {}).get("targets") or ()}
+    for key, label, target_ms in (
+        ("10 grasps x 101 samples, median", "service, node defaults, 10 x 101", 15.0),
+        ("100 grasps x 201 samples, one client", "service, node defaults, 100 x 201", 100.0),
+    ):
+        measured = targets.get(key)
+        value = None if measured is None else measured["measured_ms"]
+        row(
+            label,
+            None if value is None else f"{value:.1f} ms",
+            f"<= {target_ms:g} ms",
+            None if value is None else value <= target_ms,
+        )
+    for name, target in (("panda", 1.0), ("baxter", 1.3)):
+        arm = (arms or {}).get(name)
+        value = None if arm is None else arm["us_per_sample_with_ik"]["median"]
+        row(
+            f"core us per (grasp, sample), {name}",
+            None if value is None else f"{value:.2f} us",
+            f"<= {target:g} us",
+            None if value is None else value <= target,
+        )
+    return rows
+
+
+def print_issue30(rows: list[dict[str, Any]]) -> None:
+    """The rows of ``issue30_rows`` as a table, with the load average now."""
+    load = ", ".join(f"{x:.1f}" for x in os.getloadavg())
+    print(f"\nIssue 30's targets, this run (load average {load}):")
+    for r in rows:
+        verdict = {True: "met", False: "NOT met", None: ""}[r["met"]]
+        print(f"  {r['measure']}: {r['value']} (target {r['target']}) {verdict}".rstrip())

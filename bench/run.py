@@ -30,7 +30,10 @@ Measured in one process, interleaved, repeated (median and spread):
   Panda, Baxter and the book; alone: ``bench/run.py --postures-only``;
 - the whole pipeline (bench/pipeline.py): CLI wall time incl. start-up for the book with 100
   and 1,000 grasps x 201 samples (--json), ``--help``, and posture selection and the default
-  analyses as multiples of the ranking's own time; alone: ``bench/run.py --pipeline-only``.
+  analyses as multiples of the ranking's own time, the start-up of a one-grasp ranking against
+  ``import pinocchio``; alone: ``bench/run.py --pipeline-only``;
+- the batch's throughput per worker (bench/batch.py's workload, one local worker);
+- issue 21's and issue 30's target tables from the figures above (rows not measured say so).
 
 Usage: .venv/bin/python bench/run.py --json bench/results.json   (not a test; ~2-4 minutes)
 """
@@ -56,7 +59,13 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np
-from pipeline import bench_pipeline, print_pipeline
+from pipeline import (
+    bench_batch_per_worker,
+    bench_pipeline,
+    issue30_rows,
+    print_issue30,
+    print_pipeline,
+)
 from postures import bench_postures, print_postures
 from pykdl_peer import PyKDLPipeline, build_chain, load_pykdl
 from reference import ReferenceIK, reference_effective_masses
@@ -594,6 +603,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             args.json.parent.mkdir(parents=True, exist_ok=True)
             args.json.write_text(json.dumps({"pipeline": pipeline}, indent=2) + "\n")
         print_pipeline(pipeline)
+        print_issue30(issue30_rows(pipeline))
         return 0
     if args.postures_only:
         postures = bench_postures(args.posture_grasps)
@@ -621,6 +631,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     whole_arm = {name: bench_whole_arm(ARMS[name]) for name in arms}
     print("[pipeline] CLI, posture selection and analyses vs the ranking", file=sys.stderr)
     pipeline = bench_pipeline()
+    print("[batch] grasp-safety batch per worker (bench/batch.py's workload)", file=sys.stderr)
+    batch = bench_batch_per_worker()
     if args.no_service:
         service = {"median_ms": None, "reason": "skipped (--no-service)"}
     else:
@@ -688,6 +700,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         "whole_arm": whole_arm,
         "pipeline": pipeline,
         "issue21_targets": issue21_rows(arms, pipeline, service),
+        "batch_per_worker": batch,
+        "issue30_targets": issue30_rows(pipeline, arms, whole_arm, service, batch),
         "pykdl_unavailable_reason": kdl_reason or None,
         "arms": arms,
         "machine": {
@@ -713,6 +727,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     print_whole_arm(whole_arm)
     print_pipeline(pipeline)
     print_issue21(results["issue21_targets"])
+    print_issue30(results["issue30_targets"])
     return 0
 
 

@@ -19,7 +19,9 @@ def requirement_names(path: Path) -> set[str]:
     names = set()
     for line in path.read_text().splitlines():
         line = line.split("#", 1)[0].strip()
-        if line:
+        if line.startswith("-r "):  # an included file
+            names |= requirement_names(path.parent / line[3:].strip())
+        elif line:
             names.add(canonical(NAME.match(line).group(1)))  # type: ignore[union-attr]
     return names
 

@@ -1,7 +1,5 @@
 """``python -m grasp_safety_ros.cli``: the ``grasp-safety`` command."""
 
-import sys
+from .main import run
 
-from .main import main
-
-sys.exit(main())
+run()

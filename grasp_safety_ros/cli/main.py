@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -23,6 +24,10 @@ if TYPE_CHECKING:
 
 EXIT_BAD_INPUT = 2
 DEMO_SCENARIO = "book_baxter.yaml"
+DEMO_BACKEND = "python"
+"""The demo's three grasps run on the Pinocchio path: under a second, where compiling the
+kernels they would use takes minutes on a new machine; ``grasp-safety rank`` of the same file
+runs the compiled kernels and prints the same table (docs/performance_pipeline.md)."""
 PROGRESS_MIN_SAMPLES = 2000
 """Show a progress bar (on a terminal) when grasps x samples reaches this."""
 
@@ -49,13 +54,20 @@ def _progress_printer(total_samples: int) -> Callable[[str, int, int], None] | N
     return show
 
 
-def rank_scenario(scenario: Scenario, metric: str | None = None) -> SafetyReport:
-    """Load the scenario's robot, rank its grasps and run the analyses the scenario asks for."""
+def rank_scenario(
+    scenario: Scenario, metric: str | None = None, backend: str = "auto"
+) -> SafetyReport:
+    """Load the scenario's robot, rank its grasps and run the analyses the scenario asks for
+    (``backend``: EvaluationConfig's); a kernel compiled on the way (first use on a machine)
+    is announced on stderr."""
     from ..core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
+    from ..core.method.warm_up import announce_compiles
     from ..core.pipeline import run_pipeline
 
+    announce_compiles()
     robot = scenario.robot.load(scenario.base_dir)
-    evaluator = GraspSafetyEvaluator(robot, EvaluationConfig(metric=metric or scenario.metric))
+    config = EvaluationConfig(metric=metric or scenario.metric, backend=backend)
+    evaluator = GraspSafetyEvaluator(robot, config)
     progress = _progress_printer(len(scenario.grasps) * len(scenario.trajectory.times_s()))
     return run_pipeline(evaluator, scenario.request(robot), progress)
 
@@ -167,7 +179,7 @@ def _command_demo(args: argparse.Namespace) -> int:
     path = config_file(DEMO_SCENARIO)
     print(f"demo: the paper's book experiment on Baxter ({path})")
     scenario = load_scenario(path)
-    report = rank_scenario(scenario)
+    report = rank_scenario(scenario, backend=DEMO_BACKEND)
     print(run_header(scenario, report))
     print(report_text(report))
     out = Path(args.out)
@@ -297,5 +309,26 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 0
 
 
-if __name__ == "__main__":
+QUICK_EXIT_COMMANDS = ("rank", "demo")
+"""Commands whose process ends without Python's teardown once its output is flushed: freeing
+the compiled kernels' machine code and numba's and Pinocchio's modules takes 0.3-0.6 s, more
+than a small ranking (docs/performance_pipeline.md); nothing of theirs is left to finish."""
+
+
+def run() -> None:
+    """The ``grasp-safety`` console script: ``main`` on the command line's arguments, then the
+    process's exit (at once after QUICK_EXIT_COMMANDS)."""
+    argv = sys.argv[1:]
+    status = main(argv)
+    if argv and argv[0] in QUICK_EXIT_COMMANDS:
+        try:
+            sys.stdout.flush()
+            sys.stderr.flush()
+        except (BrokenPipeError, ValueError):  # a reader that stopped early; a closed stream
+            pass
+        os._exit(status)
+    sys.exit(status)
+
+
+if __name__ == "__main__":  # (profilers run this: the ordinary exit)
     sys.exit(main())

@@ -11,7 +11,11 @@ import numpy as np
 from ..core.analyses.iso15066 import ADMISSIBLE_RATIO_TOLERANCE, PowerForceLimitAssessment
 from ..core.analyses.safety_report import SafetyReport
 from ..core.analyses.whole_arm import ArmSites, WholeArmEvaluation
-from ..core.method.executable import joint_velocities_accelerations, rates_for_execution
+from ..core.method.executable import (
+    joint_velocities_accelerations,
+    rates_for_execution,
+    rates_for_execution_many,
+)
 from ..core.method.posture import SCORE_CRITERION, PostureSelection
 from ..core.method.ranking import GraspEvaluation, Ranking
 from ..core.model.armature import ArmatureRatio, armature_ratio
@@ -37,9 +41,12 @@ def numbers(values: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(values)
 
 
-def evaluation_to_dict(evaluation: GraspEvaluation, per_sample: bool = True) -> dict[str, Any]:
+def evaluation_to_dict(
+    evaluation: GraspEvaluation, per_sample: bool = True, velocities: np.ndarray | None = None
+) -> dict[str, Any]:
     """One grasp of the paper's ranking; with ``per_sample``, its ``samples``: one array per
-    field, one entry per sample (q and qd rows in joint_names order)."""
+    field, one entry per sample (q and qd rows in joint_names order; ``velocities``: its q̇ if
+    already computed, e.g. by ``rates_for_execution_many`` for a whole ranking)."""
     result: dict[str, Any] = {
         "index": evaluation.index,
         "name": evaluation.name,
@@ -51,9 +58,10 @@ def evaluation_to_dict(evaluation: GraspEvaluation, per_sample: bool = True) -> 
         **_links_only_to_dict(evaluation),
     }
     if per_sample:
-        velocities, _ = rates_for_execution(
-            evaluation.times_s, evaluation.joint_positions, evaluation.planned_joint_rates
-        )
+        if velocities is None:
+            velocities, _ = rates_for_execution(
+                evaluation.times_s, evaluation.joint_positions, evaluation.planned_joint_rates
+            )
         result["samples"] = {
             "t_s": numbers(evaluation.times_s),
             "q": numbers(evaluation.joint_positions),
@@ -90,7 +98,14 @@ def ranking_to_dict(ranking: Ranking, per_sample: bool = True) -> dict[str, Any]
     """The paper's ranking: joint names, metric, ranking (indices), per-grasp results (with
     their per-sample arrays when ``per_sample``) and the backend that ran (``compiled`` or
     ``python``, with the reason of a fallback)."""
-    grasps = [evaluation_to_dict(e, per_sample) for e in ranking.evaluations]
+    evaluations = ranking.evaluations
+    velocities = [None] * len(evaluations)
+    if per_sample:  # the splines of all grasps in one pass
+        trajectories = [(e.times_s, e.joint_positions, e.planned_joint_rates) for e in evaluations]
+        velocities = [v for v, _ in rates_for_execution_many(trajectories)]
+    grasps = [
+        evaluation_to_dict(e, per_sample, v) for e, v in zip(evaluations, velocities, strict=True)
+    ]
     for grasp, posture in zip(grasps, ranking.postures, strict=False):
         grasp["posture"] = posture_to_dict(posture)
     return {

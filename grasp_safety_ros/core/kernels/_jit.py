@@ -16,6 +16,11 @@ writable, the kernels' ``__pycache__``. An edit of any kernel file (or of a core
 the packed NamedTuples they take) selects a new folder (nothing stale can load), and a second
 checkout of the same sources loads the first one's kernels. The most recently used
 ``KEPT_CACHES`` folders, and any used within a day, are kept; older digest folders are deleted.
+A kernel loaded from the cache skips numba's import of its lowering registries (every numpy
+and Python implementation it knows, with scipy.linalg: about 1 s of start-up; ``KernelCache``):
+only a kernel compiled in this process needs them, and numba's compiler loads them itself.
+``announce_compiles`` prints a line per kernel compiled (first use on a machine). numba is
+imported without its coverage support unless coverage is already running (``_import_numba``).
 """
 
 from __future__ import annotations
@@ -24,18 +29,37 @@ import hashlib
 import os
 import re
 import shutil
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 import numpy as np
 
-try:  # optional accelerator
-    import numba
+
+def _import_numba() -> Any:
+    """numba, or None without it. numba imports the coverage package when installed (0.1-0.2 s
+    of every start-up) to report compiled lines to a coverage run; when no coverage run has
+    started in this process (it imports coverage first), numba is imported with coverage
+    hidden, which it reads as not installed."""
+    hide = "coverage" not in sys.modules
+    if hide:
+        sys.modules["coverage"] = None  # type: ignore[assignment]
+    try:
+        import numba
+    except ImportError:  # pragma: no cover - exercised on machines without numba
+        return None
+    finally:
+        if hide and sys.modules.get("coverage", 0) is None:
+            del sys.modules["coverage"]
+    return numba
+
+
+numba = _import_numba()  # optional accelerator
+if numba is not None:
     from numba.core import caching as _numba_caching
-except ImportError:  # pragma: no cover - exercised on machines without numba
-    numba = None
+    from numba.core import event as _numba_event
 
 KERNELS_FOLDER = Path(__file__).resolve().parent
 KEPT_CACHES = 6
@@ -145,6 +169,27 @@ def _share_the_cache() -> bool:
     return True
 
 
+def _kernel_cache_class() -> type | None:
+    """numba's FunctionCache without the registry refresh on load (module docstring); None
+    where numba's caching internals moved (then numba's own class is kept)."""
+    base = getattr(_numba_caching, "FunctionCache", None)
+    if base is None or not all(
+        hasattr(base, name) for name in ("_load_overload", "_guard_against_spurious_io_errors")
+    ):
+        return None
+
+    class KernelCache(base):  # type: ignore[misc, valid-type]
+        """Loads a cached kernel without ``target_context.refresh()``: the object code needs
+        numba's C helpers only, which its target context installs when created; compiling
+        (a cache miss) refreshes the context in numba's compiler as before."""
+
+        def load_overload(self, sig: Any, target_context: Any) -> Any:
+            with self._guard_against_spurious_io_errors():
+                return self._load_overload(sig, target_context)
+
+    return KernelCache
+
+
 _OPTIONS = {
     "cache": numba is not None and _share_the_cache(),
     "nogil": True,
@@ -157,26 +202,66 @@ multiply and an add into one FMA (one rounding instead of two): no reassociation
 infinity keep their meaning."""
 
 
-def _jit(function: Callable[..., Any]) -> Callable[..., Any]:
+_KERNEL_CACHE = _kernel_cache_class() if _OPTIONS["cache"] else None
+
+
+def _njit(function: Callable[..., Any], **options: Any) -> Callable[..., Any]:
     if numba is None:  # pragma: no cover
         return function
-    return numba.njit(**_OPTIONS)(function)
+    dispatcher = numba.njit(**{**_OPTIONS, **options})(function)
+    if _KERNEL_CACHE is not None:
+        dispatcher._cache = _KERNEL_CACHE(function)
+    return dispatcher
+
+
+def _jit(function: Callable[..., Any]) -> Callable[..., Any]:
+    return _njit(function)
 
 
 def _jit_exact(function: Callable[..., Any]) -> Callable[..., Any]:
     """``_jit`` without the fused multiply-adds: for the few sums that must round as numpy's
     do (a difference quotient over samples 1e-6 apart amplifies one rounding 1e6-fold)."""
-    if numba is None:  # pragma: no cover
-        return function
-    return numba.njit(**{**_OPTIONS, "fastmath": False})(function)
+    return _njit(function, fastmath=False)
 
 
 def _jit_inline(function: Callable[..., Any]) -> Callable[..., Any]:
     """``_jit`` for small helpers called per joint: inlined into the caller by numba, so the
     named tuples they take are not passed through a call each time."""
+    return _njit(function, inline="always")
+
+
+_announcing: list[TextIO] = []
+
+
+def announce_compiles(stream: TextIO | None = None) -> None:
+    """From now on, write a line to ``stream`` (default stderr) for each kernel this process
+    compiles, with its time; kernels loaded from the cache and the helpers compiled inside a
+    kernel's compilation are not listed. Calling again changes the stream only."""
+    stream = stream or sys.stderr
+    if _announcing:
+        _announcing[0] = stream
+        return
+    _announcing.append(stream)
     if numba is None:  # pragma: no cover
-        return function
-    return numba.njit(**_OPTIONS, inline="always")(function)
+        return
+    started: list[float] = []
+
+    class Announcer(_numba_event.Listener):
+        def on_start(self, event: Any) -> None:
+            started.append(time.perf_counter())
+            if len(started) == 1:
+                function = event.data["dispatcher"].py_func
+                name = f"{function.__module__.rpartition('.')[2]}.{function.__qualname__}"
+                _announcing[0].write(f"compiling kernel {name} (first use on this machine) ...")
+                _announcing[0].flush()
+
+        def on_end(self, event: Any) -> None:
+            seconds = time.perf_counter() - started.pop()
+            if not started:
+                _announcing[0].write(f" {seconds:.1f} s\n")
+                _announcing[0].flush()
+
+    _numba_event.register("numba:compile", Announcer())
 
 
 _EPS = float(np.finfo(np.float64).eps)

@@ -1,22 +1,15 @@
-"""Compile the kernels (or load them from numba's disk cache) ahead of the first request."""
+"""Compile the kernels (or load them from numba's disk cache) ahead of the first request, and
+say which kernels a process compiles (``announce_compiles``). The modules of every kernel are
+imported by ``warm_up`` only: importing this module for ``announce_compiles`` stays light."""
 
 from __future__ import annotations
 
+import sys
 import time
+from typing import TYPE_CHECKING, TextIO
 
-import numpy as np
-import pinocchio as pin
-
-from ..model.inertia import solid_box
-from ..model.robot import RobotModel
-from ..model.trajectory import ObjectTrajectory
-from .compiled import augmented_bodies
-from .dynamics import joint_dynamics
-from .effective_mass import translational_mobilities_in_base
-from .perturbed import perturbed_effective_masses
-from .points import site_masses, tip_following_rates, tip_point_masses
-from .ranking import Grasp, GraspSafetyEvaluator, sample_trajectory
-from .terms import configurations, grasps_terms
+if TYPE_CHECKING:
+    from .ranking import GraspSafetyEvaluator
 
 _WARM_UP_URDF = """<robot name="warm_up"><link name="base"/>
 <link name="a"><inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01"
@@ -41,6 +34,20 @@ def warm_up(evaluator: GraspSafetyEvaluator | None = None) -> float:
     Returns:
         The time taken [s]; 0 when the compiled backend is not in use.
     """
+    import numpy as np
+    import pinocchio as pin
+
+    from ..model.inertia import solid_box
+    from ..model.robot import RobotModel
+    from ..model.trajectory import ObjectTrajectory
+    from .compiled import augmented_bodies
+    from .dynamics import joint_dynamics
+    from .effective_mass import translational_mobilities_in_base
+    from .perturbed import perturbed_effective_masses
+    from .points import site_masses, tip_following_rates, tip_point_masses
+    from .ranking import Grasp, GraspSafetyEvaluator, sample_trajectory
+    from .terms import configurations, grasps_terms
+
     start = time.perf_counter()
     if evaluator is None:
         evaluator = GraspSafetyEvaluator(RobotModel.from_urdf(_WARM_UP_URDF, "base", "b"))
@@ -108,3 +115,33 @@ def warm_up(evaluator: GraspSafetyEvaluator | None = None) -> float:
             np.zeros(3),
         )
     return time.perf_counter() - start
+
+
+def announce_compiles(stream: TextIO | None = None) -> None:
+    """From now on, write a line to ``stream`` for each kernel this process compiles (its
+    first use on a machine), with its time; nothing for kernels loaded from numba's cache.
+    None: the ``sys.stderr`` of the moment of each line (a test's capture replaced or closed
+    in between is not written to); a stream that cannot be written is skipped."""
+    from ..kernels._jit import announce_compiles as announce
+
+    announce(_Announcements(stream))
+
+
+class _Announcements:
+    """The stream of ``announce_compiles``: writes that fail are dropped, so that a closed
+    stream never fails a compilation."""
+
+    def __init__(self, stream: TextIO | None) -> None:
+        self._stream = stream
+
+    def write(self, text: str) -> None:
+        try:
+            (self._stream or sys.stderr).write(text)
+        except (OSError, ValueError):  # closed or broken
+            pass
+
+    def flush(self) -> None:
+        try:
+            (self._stream or sys.stderr).flush()
+        except (OSError, ValueError):
+            pass
