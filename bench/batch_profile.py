@@ -19,10 +19,10 @@ from pathlib import Path
 
 from batch import CHUNK, write_dataset
 
-from grasp_safety_ros.cli.scenario import read_yaml_file
 from grasp_safety_ros.dataset.batch import SpecPayload, evaluate_chunk, plan_chunks
 from grasp_safety_ros.dataset.sources import discover
 from grasp_safety_ros.dataset.spec import parse_spec
+from grasp_safety_ros.scenario.fields import read_yaml_file
 
 
 def main() -> None:
