@@ -15,6 +15,7 @@ from grasp_safety_ros.core.analyses.arm_sites import resolve_arm_sites
 from grasp_safety_ros.core.analyses.speed_scaling import (
     IncreaseLimiter,
     SpeedScaling,
+    closed_loop_factor,
     payload_speed_model,
 )
 from grasp_safety_ros.core.exceptions import InvalidInputError
@@ -171,3 +172,41 @@ def test_payload_box_corners_about_the_com_in_the_tip_frame() -> None:
     np.testing.assert_allclose(points.max(axis=0) - points.min(axis=0), [0.1, 0.2, 0.3])
     empty = monitor_settings({**BASE, "payload.box_size_m": [0.1, 0.2, 0.3]})
     assert empty.payload.inertia is None and empty.payload.points_in_tip_m is None
+
+
+def run_against_a_scaling_controller(
+    monitor: Governor, q: np.ndarray, nominal: np.ndarray, steps: int
+) -> list[float]:
+    """A controller that moves at the last published factor times the nominal velocity: the
+    factors published for ``steps`` states (0.002 s apart)."""
+    published, factor = [], 0.0
+    for k in range(steps):
+        decision = monitor.on_state(JOINTS, q.tolist(), (factor * nominal).tolist(), 0.002 * k)
+        factor = decision.factor
+        published.append(factor)
+    return published
+
+
+def test_closed_loop_settles_at_the_nominal_motions_factor_open_loop_does_not(
+    scaling: SpeedScaling,
+) -> None:
+    q, nominal = np.full(7, 0.3), np.array([2.0, -1.5, 1.8, 2.2, -2.5, 1.9, 2.4])
+    c = scaling.assess(q, nominal).factor  # the unscaled motion's factor
+    assert 0.0 < c < 0.9
+    closed = governor(scaling)
+    closed.closed_loop = True
+    factors = run_against_a_scaling_controller(closed, q, nominal, 8)
+    # 0 (the rise starts), 1 (at rest: nothing to infer), then c for good
+    assert factors[:2] == [0.0, 1.0]
+    np.testing.assert_allclose(factors[2:], c, rtol=1e-12)
+    at_limit = scaling.assess(q, c * nominal)  # the motion it lets through: at the limit
+    assert at_limit.headroom == pytest.approx(1.0, rel=1e-12)
+    opened = run_against_a_scaling_controller(governor(scaling), q, nominal, 8)
+    np.testing.assert_allclose(opened[2:], [c, 1.0] * 3, rtol=1e-12)  # alternates: unsafe
+
+
+def test_closed_loop_factor_at_rest_and_in_motion() -> None:
+    assert closed_loop_factor(0.0, math.inf) == 1.0  # stopped: rise (rate-limited)
+    assert closed_loop_factor(0.0, 0.5) == 0.0  # still moving after a 0: stay at 0
+    assert closed_loop_factor(0.5, 0.8) == 0.4
+    assert closed_loop_factor(0.5, 3.0) == 1.0

@@ -22,6 +22,7 @@ from grasp_safety_ros.core.analyses.speed_scaling import (
     IncreaseLimiter,
     SpeedScaling,
     check_margin,
+    headroom,
     payload_speed_model,
     region_speeds,
     scaling_factor,
@@ -65,6 +66,8 @@ def test_factor_of_given_speeds_and_limits() -> None:
     assert scaling_factor(np.array([0.1]), np.array([1.0])) == 1.0  # never above 1
     assert scaling_factor(np.zeros(3), np.zeros(3)) == 1.0  # nothing moves
     assert scaling_factor(np.zeros(0), np.zeros(0)) == 1.0
+    assert headroom(speeds, limits, margin=0.5) == 0.25
+    assert headroom(np.zeros(2), np.ones(2)) == math.inf
 
 
 @pytest.mark.parametrize("margin", [0.0, -0.1, 1.5, math.nan])

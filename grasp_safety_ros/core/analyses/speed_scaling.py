@@ -15,6 +15,12 @@ speed of site k over the assessed regions (those where the TS permits transient 
 ``margin`` in (0, 1] the fraction of it aimed at. ``IncreaseLimiter`` bounds how fast the
 published factor may rise (never how fast it falls). Everything here is ROS-free; the node
 ``ros/monitor`` is the adapter.
+
+In closed loop (``closed_loop_factor``) the measured state is the motion a controller has
+already slowed by the published factor f_a: the unscaled motion's sites move 1/f_a times
+faster, so its factor is min(1, f_a · min_k margin · v_max,k / |v_k|). Taking the state's own
+factor instead would alternate between c/f and f (c the unscaled motion's factor) and, at its
+fixed point sqrt(c), let every site run sqrt(1/c) times faster than admitted.
 """
 
 from __future__ import annotations
@@ -43,15 +49,29 @@ def check_margin(margin: float, field_name: str = "speed_scaling.margin") -> flo
     return value
 
 
-def scaling_factor(speed_m_s: np.ndarray, max_speed_m_s: np.ndarray, margin: float = 1.0) -> float:
-    """f = min(1, min over moving sites of margin · v_max / |v|) for (K,) speeds and limits
-    [m/s]; sites with speed 0 do not limit (f = 1 when none moves)."""
+def headroom(speed_m_s: np.ndarray, max_speed_m_s: np.ndarray, margin: float = 1.0) -> float:
+    """min over moving sites of margin · v_max / |v| for (K,) speeds and limits [m/s]: how many
+    times faster the motion could be; inf when no site moves (sites at rest do not limit)."""
     speeds = np.asarray(speed_m_s, dtype=float)
     moving = speeds > 0.0
     if not moving.any():
+        return math.inf
+    return float(np.min(margin * np.asarray(max_speed_m_s, dtype=float)[moving] / speeds[moving]))
+
+
+def scaling_factor(speed_m_s: np.ndarray, max_speed_m_s: np.ndarray, margin: float = 1.0) -> float:
+    """f = min(1, headroom): 1 when no site moves."""
+    return min(1.0, headroom(speed_m_s, max_speed_m_s, margin))
+
+
+def closed_loop_factor(applied: float, state_headroom: float) -> float:
+    """The factor for the unscaled motion when the measured state already moves at
+    ``applied`` times it (a controller applying the published factor): its sites' speeds are
+    those of the state divided by ``applied``, so f = min(1, applied · headroom); 1 when no
+    site moves (the factor cannot be inferred from a motion at rest, and rest is safe)."""
+    if math.isinf(state_headroom):
         return 1.0
-    ratio = float(np.min(margin * np.asarray(max_speed_m_s, dtype=float)[moving] / speeds[moving]))
-    return min(1.0, ratio)
+    return min(1.0, applied * state_headroom)
 
 
 @dataclass(frozen=True)
@@ -114,12 +134,14 @@ class StateScaling:
     """The speed scaling of one joint state.
 
     Attributes:
-        factor: f = min(1, min_k margin · v_max,k / |v_k|) (module docstring).
+        factor: f = min(1, headroom) (module docstring).
+        headroom: min_k margin · v_max,k / |v_k| over the moving sites; inf when none moves.
         limiting_site, limiting_region: The site and region that set f; "" when f is 1.
         regions: One RegionSpeed per assessed region, in the model's region order.
     """
 
     factor: float
+    headroom: float
     limiting_site: str
     limiting_region: str
     regions: tuple[RegionSpeed, ...]
@@ -175,7 +197,8 @@ class SpeedScaling:
         speeds = site_speeds(self.speed_model, robot.q_from_positions(q)[None], qd[None])
         speed, mass = speeds.speed_per_unit[0], speeds.effective_mass_kg[0]
         limit = speeds.max_speed_m_s[0]
-        factor = scaling_factor(speed, limit, self.margin)
+        room = headroom(speed, limit, self.margin)
+        factor = min(1.0, room)
         site = region = ""
         if factor < 1.0:
             moving = speed > 0.0
@@ -185,6 +208,7 @@ class SpeedScaling:
             region = self.speed_model.regions[int(speeds.region_index[0, k])].name
         return StateScaling(
             factor=factor,
+            headroom=room,
             limiting_site=site,
             limiting_region=region,
             regions=region_speeds(

@@ -14,7 +14,12 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from ...core.analyses.speed_scaling import IncreaseLimiter, SpeedScaling, StateScaling
+from ...core.analyses.speed_scaling import (
+    IncreaseLimiter,
+    SpeedScaling,
+    StateScaling,
+    closed_loop_factor,
+)
 from ...core.exceptions import GraspSafetyError
 from .joint_states import JointIndex
 
@@ -55,13 +60,17 @@ class Governor:
 
     Attributes:
         timeout_s: Longest gap between /joint_states messages before the factor drops to 0.
-        limiter: The rate limit on increases (starts at 0).
+        limiter: The rate limit on increases (starts at 0); its factor is the last published.
+        closed_loop: The states move at the last published factor times the unscaled motion
+            (a controller applies it): the target is ``closed_loop_factor``; False: the
+            state's own factor.
         scaling: The analysis of the current robot and payload; None: no robot yet.
         joint_index: The chain's joints in the messages (None: no robot yet).
     """
 
     timeout_s: float
     limiter: IncreaseLimiter
+    closed_loop: bool = False
     scaling: SpeedScaling | None = None
     joint_index: JointIndex | None = None
     last_message_s: float | None = None
@@ -92,18 +101,21 @@ class Governor:
         except GraspSafetyError as error:
             self.counters.refused += 1
             return self.fail(str(error), now_s)
-        if not math.isfinite(assessed.factor):  # a defect, never a speed-up
+        if math.isnan(assessed.headroom):  # a defect, never a speed-up
             self.counters.refused += 1
-            return self.fail(f"analysis gave a factor of {assessed.factor}", now_s)
+            return self.fail(f"analysis gave a headroom of {assessed.headroom}", now_s)
         if self.failed:  # the rise starts now, not at the fail-safe
             self.limiter(0.0, now_s)
             self.failed = False
-        factor = self.limiter(assessed.factor, now_s)
+        target = assessed.factor
+        if self.closed_loop:
+            target = closed_loop_factor(self.limiter.factor, assessed.headroom)
+        factor = self.limiter(target, now_s)
         elapsed = time.perf_counter() - start
         self.counters.states += 1
         self.counters.last_compute_time_s = elapsed
         self.counters.max_compute_time_s = max(self.counters.max_compute_time_s, elapsed)
-        return Decision(factor, assessed.factor, assessed, "", elapsed)
+        return Decision(factor, target, assessed, "", elapsed)
 
     def check_timeout(self, now_s: float) -> Decision | None:
         """The fail-safe decision when no message came for longer than the timeout (once per

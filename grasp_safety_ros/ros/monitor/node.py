@@ -91,6 +91,7 @@ class MonitorNode(Node):
             self._governor = Governor(
                 self._settings.joint_states_timeout_s,
                 IncreaseLimiter(self._settings.max_increase_per_s, 0.0, time.monotonic()),
+                self._settings.closed_loop,
             )
             self._rebuild()
         except GraspSafetyError as error:
@@ -196,6 +197,7 @@ class MonitorNode(Node):
         self._settings = settings
         self._governor.timeout_s = settings.joint_states_timeout_s
         self._governor.limiter.max_increase_per_s = settings.max_increase_per_s
+        self._governor.closed_loop = settings.closed_loop
         if self._governor.scaling is not None:
             self._governor.scaling.margin = settings.margin
         self.destroy_timer(self._watchdog)

@@ -44,6 +44,12 @@ _OWN: dict[str, ParameterSpec] = {
         "fraction of each site's admissible speed v_max the factor aims at, in (0, 1]: every "
         "moving site is kept at or below margin * v_max",
     ),
+    "speed_scaling.closed_loop": ParameterSpec(
+        True,
+        "the /joint_states motion is the one the controller slows by this factor: the factor "
+        "for the unscaled motion is the last published one times the state's margin * v_max / "
+        "speed; false: the state's own factor (a motion this factor does not slow)",
+    ),
     "speed_scaling.max_increase_per_s": ParameterSpec(
         2.0, "largest rise of the published factor per second [1/s], > 0; falls are immediate"
     ),
@@ -77,6 +83,7 @@ MONITOR_PARAMETERS: Mapping[str, ParameterSpec] = MappingProxyType(
 """Every parameter of the monitor, by name."""
 
 RUNTIME = ("joint_states_timeout_s", "speed_scaling.margin", "speed_scaling.max_increase_per_s")
+RUNTIME += ("speed_scaling.closed_loop",)
 """Parameters the monitor takes at run time; the others are read at start-up only."""
 
 _POSITIVE = ("joint_states_timeout_s", "speed_scaling.max_increase_per_s")
@@ -115,6 +122,10 @@ def check_monitor_parameter(name: str, value: Any) -> Any:
                 f"{len(numbers)} numbers",
             )
         return numbers
+    if name == "speed_scaling.closed_loop":
+        if not isinstance(value, bool):
+            raise InvalidInputError(name, f"must be true or false, got {show(value)}")
+        return value
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise InvalidInputError(name, f"must be a number, got {show(value)}")
     if name == "speed_scaling.margin":
@@ -127,6 +138,7 @@ def monitor_constraints(name: str) -> ParameterConstraints:
     texts = {
         "joint_states_timeout_s": "> 0",
         "speed_scaling.margin": "in (0, 1]",
+        "speed_scaling.closed_loop": "",
         "speed_scaling.max_increase_per_s": "> 0",
         "payload.mass_kg": ">= 0, at most max_mass_kg",
         "payload.com_in_tip_m": "3 finite values",
@@ -180,6 +192,7 @@ class MonitorSettings:
     node: NodeSettings
     joint_states_timeout_s: float
     margin: float
+    closed_loop: bool
     max_increase_per_s: float
     payload: Payload
     points_in_tip_m: tuple[float, ...]
@@ -218,6 +231,7 @@ def monitor_settings(values: Mapping[str, Any]) -> MonitorSettings:
         node=node,
         joint_states_timeout_s=v["joint_states_timeout_s"],
         margin=v["speed_scaling.margin"],
+        closed_loop=v["speed_scaling.closed_loop"],
         max_increase_per_s=v["speed_scaling.max_increase_per_s"],
         payload=Payload(inertia, payload_points(inertia, points, box)),
         points_in_tip_m=points,
