@@ -31,6 +31,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import InertiaStamped
 from grasp_safety_msgs.msg import SpeedScalingStatus
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.exceptions import InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -94,7 +95,7 @@ class MonitorNode(Node):
                 self._settings.closed_loop,
             )
             self._rebuild()
-        except GraspSafetyError as error:
+        except (GraspSafetyError, InvalidParameterValueException) as error:
             self.destroy_node()
             raise StartupError(str(error)) from None
         self._last: Decision | None = None
@@ -172,6 +173,11 @@ class MonitorNode(Node):
             self._settings.node.analysis.iso_regions,
         )
         self._governor.set_scaling(SpeedScaling(model, self._settings.margin))
+        self.get_logger().info(
+            f"robot from {self._bundle.origin}: {robot.base_frame} -> {robot.tip_frame}, "
+            f"{robot.num_joints} joints, {len(model.sites)} sites, regions "
+            f"{', '.join(r.name for r in model.regions)}"
+        )
 
     # --- Parameters --------------------------------------------------------------------------
 
