@@ -83,11 +83,12 @@ class ArmTerms(NamedTuple):
 
 
 def pinocchio_kinematic_terms(
-    model: pin.Model, q_all: np.ndarray
+    model: pin.Model, q_all: np.ndarray, data: pin.Data | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Joint placements, world Jacobian columns and M⁻¹ (ArmTerms' first four fields) per
-    configuration of ``q_all`` (N, nq), with Pinocchio on ``model`` (the augmented model)."""
-    data = model.createData()
+    configuration of ``q_all`` (N, nq), with Pinocchio on ``model`` (the augmented model);
+    ``data``: its Pinocchio data to reuse (None: a new one)."""
+    data = model.createData() if data is None else data
     count, n = len(q_all), model.nv
     rotations = np.empty((count, n, 3, 3))
     translations = np.empty((count, n, 3))
@@ -96,12 +97,12 @@ def pinocchio_kinematic_terms(
     upper = np.triu(np.ones((n, n), dtype=bool))
     for i, q in enumerate(q_all):
         pin.computeJointJacobians(model, data, q)
-        jacobians[i] = data.J
+        jacobians[i] = data.J.reshape(6, n)  # a 1-DOF chain: eigenpy gives (6,)
         for j in range(1, model.njoints):
             rotations[i, j - 1] = data.oMi[j].rotation
             translations[i, j - 1] = data.oMi[j].translation
         pin.computeMinverse(model, data, q)
-        minv[i] = np.where(upper, data.Minv, data.Minv.T)
+        minv[i] = np.where(upper, data.Minv, data.Minv.T).reshape(n, n)
     return rotations, translations, jacobians, minv
 
 
