@@ -18,8 +18,10 @@ export PIP_CONSTRAINT := $(if $(filter 0,$(LOCKED)),,$(abspath $(LOCK)))
 IFACE_STAMP := $(VENV)/.interfaces
 KERNELS_STAMP := $(VENV)/.kernels
 KERNELS := grasp_safety_ros/core/kernels
-IFACE_SRC := $(shell find msg_defs -type f 2>/dev/null) scripts/build_interfaces.sh \
-  requirements-interfaces.txt
+# interface packages: msg_defs/ and the used subsets of ../shared/interfaces/ (control_msgs,
+# moveit_msgs; built once per machine and cached, see scripts/build_interfaces.sh)
+IFACE_SRC := $(shell find msg_defs ../shared/interfaces -type f 2>/dev/null) \
+  scripts/build_interfaces.sh scripts/stage_interfaces.py requirements-interfaces.txt
 AMENT_STAMP := $(VENV)/.ament
 ROS2CLI_INSTALL := $(wildcard ../shared/tools/ros2cli/install)
 ROS2CLI_STAMP := $(if $(ROS2CLI_INSTALL),$(VENV)/.ros2cli)

@@ -1,16 +1,25 @@
 #!/usr/bin/env bash
-# Builds the ROS 2 interface package in msg_defs/ (grasp_safety_msgs) against the ROS 2 Jazzy
-# wheels in .venv and installs it into the venv, so that
+# Builds the ROS 2 interface packages against the ROS 2 Jazzy wheels in .venv and installs them
+# into the venv, so that
 #   .venv/bin/python -c 'from grasp_safety_msgs.msg import GraspRanking'
-# works, and rclpy can publish/call it, with no setup file sourced and no variable set.
+# works, and rclpy can publish/call them, with no setup file sourced and no variable set:
+#   - msg_defs/ (grasp_safety_msgs), this project's own, built per checkout in build/interfaces/;
+#   - the subsets of the upstream packages in ../shared/interfaces/ that the project uses
+#     (control_msgs, moveit_msgs and what they include; the list is KEEP in
+#     scripts/stage_interfaces.py), definition files unchanged so the types keep their upstream
+#     type hashes. Their install tree is kept per machine in
+#     ~/.cache/grasp_safety_ros/interfaces/<digest>/ (digest of the staged sources, these
+#     scripts, Python, numpy and the ROS wheels' versions), so a second checkout or venv copies
+#     it in seconds. A package a ROS installation already provides (its ament index, in a prefix
+#     of AMENT_PREFIX_PATH other than the venv) is not built, and a copy of ours is removed.
 #
-# How: colcon + the ament_cmake/rosidl wheels (requirements-interfaces.txt) build the package
-# into build/interfaces/{build,install,log}; the install tree is then copied into the venv
+# How: colcon + the ament_cmake/rosidl wheels (requirements-interfaces.txt) build a package
+# into <out>/{build,install,log}; the install tree is then copied into the venv
 # prefix, laid out like the ros-* wheels lay out their own packages:
-#   .venv/lib/python3.X/site-packages/grasp_safety_msgs/   Python package + C extensions
-#   .venv/lib/libgrasp_safety_msgs__*.so                    typesupport libraries
-#   .venv/share/grasp_safety_msgs/, .venv/include/...       interface files, CMake config, headers
-#   .venv/share/ament_index/resource_index/*/grasp_safety_msgs
+#   .venv/lib/python3.X/site-packages/<pkg>/   Python package + C extensions
+#   .venv/lib/lib<pkg>__*.so                    typesupport libraries
+#   .venv/share/<pkg>/, .venv/include/...       interface files, CMake config, headers
+#   .venv/share/ament_index/resource_index/*/<pkg>
 # .venv/lib is on LD_LIBRARY_PATH in every venv Python process (the ros-wheels-bootstrapper
 # .pth re-executes the interpreter with it), which is how rclpy/rosidl_typesupport_c find
 # the libraries, exactly as for geometry_msgs.
@@ -20,19 +29,19 @@
 # (/opt/python/cp311-cp311/...); they are rewritten to this venv's Python and numpy headers.
 #
 # Idempotent: re-running rebuilds incrementally and replaces the previous copy in the venv
-# (files listed in .venv/.grasp_safety_msgs.files). Usage, from anywhere:
-#   bash scripts/build_interfaces.sh            (the Makefile calls it; VENV=... to override)
+# (files listed in .venv/.<pkg>.files). Usage, from anywhere:
+#   bash scripts/build_interfaces.sh            (the Makefile calls it; VENV=... to override,
+#                                                SHARED_INTERFACES=... for ../shared/interfaces)
 set -euo pipefail
 
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$ROOT"
 VENV=$(cd "${VENV:-.venv}" && pwd)
 PY=$VENV/bin/python
-PKG=grasp_safety_msgs
-SRC_DIR=$ROOT/msg_defs
+SHARED=${SHARED_INTERFACES:-$ROOT/../shared/interfaces}
 OUT=$ROOT/build/interfaces
-MANIFEST=$VENV/.$PKG.files
-LOG=$OUT/colcon_build.log
+CACHE_ROOT=${XDG_CACHE_HOME:-$HOME/.cache}/grasp_safety_ros/interfaces
+OUTSIDE_PREFIXES=${AMENT_PREFIX_PATH:-}  # a sourced ROS installation, read before step 3 resets it
 
 export PATH=$VENV/bin:$PATH  # venv tools (colcon, maybe cmake) and its python first
 
@@ -66,42 +75,123 @@ NPINC=$("$PY" -c 'import numpy; print(numpy.get_include())')
       -e "s#/opt/python/cp3[0-9]+-cp3[0-9]+t?/include/python3\.[0-9]+t?#$PYINC#g"
 
 # 3. Build with colcon, against the venv prefix only (ignore a sourced ROS install).
-# rosidl never deletes what it generated for a removed interface, so any change to msg_defs/
-# or to this script (or a moved checkout or venv) means a clean build; otherwise it takes seconds.
-SRC_HASH=$( { echo "$SRC_DIR $VENV $PYINC $NPINC"; sha256sum "$ROOT/scripts/build_interfaces.sh"
-  cd "$SRC_DIR" && find . -type f | LC_ALL=C sort | xargs -d '\n' sha256sum; } | sha256sum | cut -d' ' -f1)
-if [ "$(cat "$OUT/.src_hash" 2>/dev/null)" != "$SRC_HASH" ]; then
-  rm -rf "${OUT:?}/build" "$OUT/install" "$OUT/.src_hash"
-fi
-mkdir -p "$OUT"
 unset PYTHONPATH COLCON_PREFIX_PATH AMENT_CURRENT_PREFIX
 export AMENT_PREFIX_PATH=$VENV CMAKE_PREFIX_PATH=$VENV
-export COLCON_HOME=$OUT/colcon_home  # no user-level colcon defaults or mixins
-if ! "$VENV/bin/colcon" --log-base "$OUT/log" build \
-      --base-paths "$SRC_DIR" --build-base "$OUT/build" --install-base "$OUT/install" \
-      --cmake-args -DCMAKE_BUILD_TYPE=Release -DBUILD_TESTING=OFF \
-        -DPython3_EXECUTABLE="$PY" -DPython3_FIND_VIRTUALENV=FIRST \
-      >"$LOG" 2>&1; then
-  tail -n 40 "$LOG" >&2
-  die "colcon build failed; full log: $LOG"
-fi
-echo "$SRC_HASH" >"$OUT/.src_hash"
 
-# 4. Replace the previous copy in the venv with the fresh install tree.
-INSTALL=$OUT/install/$PKG
-SITE_REL=$(cd "$INSTALL" && ls -d lib/python3*/site-packages)
-[ "$SITE_REL" = "$("$PY" -c 'import sys; print("lib/python%d.%d/site-packages" % sys.version_info[:2])')" ] \
-  || die "unexpected Python install dir $INSTALL/$SITE_REL"
-if [ -f "$MANIFEST" ]; then
-  (cd "$VENV" && xargs -d '\n' -r rm -f -- <"$MANIFEST")
-fi
-rm -rf "${VENV:?}/$SITE_REL/$PKG" "$VENV/include/$PKG" "$VENV/share/$PKG"
-rm -rf "$VENV/$SITE_REL/$PKG"-*.egg-info
-(cd "$INSTALL" && find . \( -path ./share/colcon-core -o -name __pycache__ \
-    -o -path "./share/$PKG/package.*" ! -name package.xml \) -prune \
-    -o \( -type f -o -type l \) -print | sed 's#^\./##' | sort) >"$MANIFEST.new"
-tar -C "$INSTALL" -cf - -T "$MANIFEST.new" | tar -C "$VENV" -xf -
-mv "$MANIFEST.new" "$MANIFEST"
-"$PY" -m compileall -q "$VENV/$SITE_REL/$PKG" >/dev/null
+CMAKE_ARGS=(-DCMAKE_BUILD_TYPE=Release -DBUILD_TESTING=OFF -DPython3_EXECUTABLE="$PY"
+  -DPython3_FIND_VIRTUALENV=FIRST)
 
+# colcon_build SRC OUT KEY: builds every package under SRC into OUT/{build,install,log}.
+# rosidl never deletes what it generated for a removed interface, so a KEY (digest of the
+# sources) other than the last build's means a clean build; otherwise it takes seconds.
+colcon_build() {
+  local src=$1 out=$2 key=$3 log=$2/colcon_build.log
+  if [ "$(cat "$out/.src_hash" 2>/dev/null)" != "$key" ]; then
+    rm -rf "${out:?}/build" "$out/install" "$out/.src_hash"
+  fi
+  mkdir -p "$out"
+  # COLCON_HOME: no user-level colcon defaults or mixins
+  if ! COLCON_HOME=$out/colcon_home "$VENV/bin/colcon" --log-base "$out/log" build \
+        --base-paths "$src" --build-base "$out/build" --install-base "$out/install" \
+        --cmake-args "${CMAKE_ARGS[@]}" >"$log" 2>&1; then
+    tail -n 40 "$log" >&2
+    die "colcon build failed; full log: $log"
+  fi
+  echo "$key" >"$out/.src_hash"
+}
+
+# tree_digest DIR...: one digest of the files (paths and contents) under each DIR
+tree_digest() {
+  local dir
+  for dir in "$@"; do (cd "$dir" && find . -type f | LC_ALL=C sort | xargs -d '\n' sha256sum); done \
+    | sha256sum | cut -d' ' -f1
+}
+
+SITE_REL=$("$PY" -c 'import sys; print("lib/python%d.%d/site-packages" % sys.version_info[:2])')
+
+# uninstall PKG: removes the copy of PKG a previous run put into the venv
+uninstall() {
+  local pkg=$1 manifest=$VENV/.$1.files
+  if [ -f "$manifest" ]; then
+    (cd "$VENV" && xargs -d '\n' -r rm -f -- <"$manifest")
+    rm -f "$manifest"
+  fi
+  rm -rf "${VENV:?}/$SITE_REL/$pkg" "$VENV/include/$pkg" "$VENV/share/$pkg"
+  rm -rf "$VENV/$SITE_REL/$pkg"-*.egg-info
+}
+
+# install_pkg INSTALL PKG: replaces the previous copy of PKG in the venv with INSTALL/PKG
+install_pkg() {
+  local install=$1/$2 pkg=$2 manifest=$VENV/.$2.files
+  [ -d "$install/$SITE_REL" ] || die "unexpected Python install dir in $install"
+  uninstall "$pkg"
+  (cd "$install" && find . \( -path ./share/colcon-core -o -name __pycache__ \
+      -o -path "./share/$pkg/package.*" ! -name package.xml \) -prune \
+      -o \( -type f -o -type l \) -print | sed 's#^\./##' | sort) >"$manifest.new"
+  tar -C "$install" -cf - -T "$manifest.new" | tar -C "$VENV" -xf -
+  mv "$manifest.new" "$manifest"
+  "$PY" -m compileall -q "$VENV/$SITE_REL/$pkg" >/dev/null
+}
+
+# provided_outside PKG: true when a ROS installation (a prefix of AMENT_PREFIX_PATH other
+# than the venv) has PKG in its ament index
+provided_outside() {
+  local prefix
+  IFS=: read -ra prefixes <<<"$OUTSIDE_PREFIXES"
+  for prefix in "${prefixes[@]}"; do
+    [ -n "$prefix" ] && [ -d "$prefix" ] || continue
+    [ "$(cd "$prefix" && pwd -P)" = "$(cd "$VENV" && pwd -P)" ] && continue
+    [ -e "$prefix/share/ament_index/resource_index/packages/$1" ] && return 0
+  done
+  return 1
+}
+
+# 4. This project's grasp_safety_msgs (msg_defs/), per checkout.
+colcon_build "$ROOT/msg_defs" "$OUT" "$( { echo "$ROOT $VENV $PYINC $NPINC"
+  sha256sum "$ROOT/scripts/build_interfaces.sh"; tree_digest "$ROOT/msg_defs"; } | sha256sum)"
+install_pkg "$OUT/install" grasp_safety_msgs
 echo "grasp_safety_msgs: built in ${OUT#"$ROOT"/}/, installed into $VENV (importable as-is)"
+
+# 5. The upstream subsets, from the per-machine cache or built into it.
+if [ ! -d "$SHARED" ]; then
+  echo "build_interfaces.sh: no $SHARED: control_msgs and moveit_msgs not built" \
+    "(the speed-scaling monitor and the MoveIt services need them)" >&2
+  exit 0
+fi
+UPSTREAM_TOP=(control_msgs moveit_msgs)  # KEEP's packages in scripts/stage_interfaces.py
+SKIP=()
+for pkg in "${UPSTREAM_TOP[@]}"; do
+  if provided_outside "$pkg"; then SKIP+=("$pkg"); fi
+done
+STAGE=$OUT/upstream/src
+STAGED_LIST=$("$PY" "$ROOT/scripts/stage_interfaces.py" "$SHARED" "$STAGE" --skip "${SKIP[@]}")
+mapfile -t STAGED <<<"$STAGED_LIST"
+[ -n "$STAGED_LIST" ] || { echo "upstream interfaces: all provided by ROS (${SKIP[*]})"; exit 0; }
+KEY=$( { echo "$PYINC"; "$PY" -c 'import sys; print(sys.version)'
+  ls "$VENV/$SITE_REL" | grep -E '^(ros_|numpy-).*\.dist-info$'
+  echo "${CMAKE_ARGS[*]##-DPython3_EXECUTABLE=*}"  # not the venv's path: shared by checkouts
+  sha256sum "$ROOT/scripts/stage_interfaces.py" | cut -d' ' -f1
+  tree_digest "$STAGE"; } | sha256sum | cut -c1-16)
+CACHED=$CACHE_ROOT/$KEY
+if [ ! -d "$CACHED" ]; then
+  start=$SECONDS
+  colcon_build "$STAGE" "$OUT/upstream" "$KEY"
+  mkdir -p "$CACHE_ROOT"
+  tmp=$(mktemp -d "$CACHE_ROOT/.tmp.XXXXXX")
+  cp -a "$OUT/upstream/install/." "$tmp/"
+  echo "$VENV" >"$tmp/.venv_path"
+  mv -T "$tmp" "$CACHED" 2>/dev/null || rm -rf "$tmp"  # another checkout cached it meanwhile
+  echo "upstream interfaces: built ${STAGED[*]} in $((SECONDS - start)) s, cached in $CACHED"
+fi
+# the CMake exports and ament index name the venv that built the tree: this one instead
+BUILT_IN=$(cat "$CACHED/.venv_path")
+for pkg in "${STAGED[@]}"; do
+  install_pkg "$CACHED" "$pkg"
+  [ "$BUILT_IN" = "$VENV" ] && continue
+  { grep -rlZ -F "$BUILT_IN" "$VENV/share/$pkg" \
+      "$VENV/share/ament_index/resource_index/parent_prefix_path/$pkg" || true; } \
+    | xargs -0 -r sed -i "s#$BUILT_IN#$VENV#g"
+done
+for pkg in "${SKIP[@]}"; do [ -f "$VENV/.$pkg.files" ] && uninstall "$pkg"; done
+echo "upstream interfaces: ${STAGED[*]} (subsets) installed into $VENV from" \
+  "$CACHED${SKIP[*]:+ (provided by ROS: ${SKIP[*]})}"
