@@ -10,7 +10,8 @@ every region that permits transient contact.
   name, the core's analysis, the rate limit) on the states of a replayed trajectory, in this
   process: median, p99 and max [ms]; and the core's analysis alone. Target: p99 <= 1 ms.
 - end to end: the monitor's console script as a process, a publisher at 500 Hz in this
-  process (its executor spun in a thread) for ``--seconds``; a state's factor is recognised
+  process (its executor spun in a thread) for ``--seconds``, ``speed_scaling.closed_loop``
+  false (no controller slows the replay); a state's factor is recognised
   on arrival by its value (each state of the replay with a factor below 1 has its own,
   computed here with the same core function), and its latency is the arrival time minus that
   state's publish time (one monotonic clock). Also: the states per second the node assessed and
@@ -89,6 +90,8 @@ def states(count: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def percentiles_ms(samples: list[float]) -> dict[str, float]:
+    if not samples:
+        return {"count": 0}
     array = np.array(samples) * 1e3
     return {
         "median_ms": float(np.median(array)),
@@ -137,6 +140,7 @@ def end_to_end(scaling: SpeedScaling, seconds: float) -> dict:
         command = [str(Path(sys.executable).parent / "grasp_safety_monitor"), "--ros-args"]
         command += ["--params-file", str(PARAMS), "-r", f"~/speed_scaling:={TOPIC}"]
         command += ["-p", "speed_scaling.max_increase_per_s:=1000000000.0"]
+        command += ["-p", "speed_scaling.closed_loop:=false"]  # the replay's own factors
         process = subprocess.Popen(command, env=env, stderr=subprocess.DEVNULL)
         context = rclpy.context.Context()
         rclpy.init(context=context, domain_id=claim.domain_id)

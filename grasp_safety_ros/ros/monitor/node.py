@@ -67,6 +67,8 @@ NEWEST_STATE = QoSProfile(
 )
 """Sensor-data QoS keeping one message: a state waiting while the last is computed is
 replaced by a newer one, so the queue never grows and only the newest is assessed."""
+STATUS_DEPTH = 100
+"""~/status keeps the last 100 (0.2 s at 500 Hz) for a reliable subscriber that falls behind."""
 WATCHDOG_CHECKS_PER_TIMEOUT = 5
 """The silence of /joint_states is checked this many times per joint_states_timeout_s."""
 
@@ -101,7 +103,7 @@ class MonitorNode(Node):
         self._last: Decision | None = None
         self._last_refusal = ""
         self._factor_pub = self.create_publisher(SpeedScalingFactor, "~/speed_scaling", LATCHED)
-        self._status_pub = self.create_publisher(SpeedScalingStatus, "~/status", 10)
+        self._status_pub = self.create_publisher(SpeedScalingStatus, "~/status", STATUS_DEPTH)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_subscription(JointState, "/joint_states", self._on_joint_states, NEWEST_STATE)
         self.create_subscription(InertiaStamped, "~/payload", self._guarded(self._on_payload), 10)
