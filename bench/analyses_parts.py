@@ -28,9 +28,9 @@ from pipeline import book_scenario
 
 def bench_parts(grasps: int, repeats: int = 3) -> dict[str, Any]:
     """Median seconds per part and per ranking, and each part's ratio to the ranking."""
-    from grasp_safety_ros.cli.scenario import load_scenario
     from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions, analyse
     from grasp_safety_ros.core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
+    from grasp_safety_ros.scenario.schema import load_scenario
 
     with tempfile.TemporaryDirectory() as folder:
         scenario = load_scenario(book_scenario(grasps, Path(folder)))
@@ -39,9 +39,11 @@ def bench_parts(grasps: int, repeats: int = 3) -> dict[str, Any]:
     args = (scenario.grasps, scenario.object_inertia, scenario.trajectory)
     corners = scenario.options.points_in_object_m
     parts = {
-        "exposed_points": AnalysisOptions(points_in_object_m=corners, iso_regions=()),
-        "iso_15066": AnalysisOptions(),
-        "whole_arm_and_iso": AnalysisOptions(whole_arm=True),
+        "exposed_points": AnalysisOptions(
+            points_in_object_m=corners, iso_regions=(), effort=False
+        ),
+        "iso_15066": AnalysisOptions(effort=False),
+        "whole_arm_and_iso": AnalysisOptions(whole_arm=True, effort=False),
         "effort": AnalysisOptions(effort=True, iso_regions=()),
         "defaults": scenario.options,
         "defaults_without_effort": replace(scenario.options, effort=False),

@@ -121,11 +121,11 @@ def bench_cli(folder: Path, repeats: int = 3) -> dict[str, Any]:
 def bench_in_process(grasps: int, folder: Path, repeats: int = 3) -> dict[str, Any]:
     """Ranking, posture selection and analyses of the book scenario in this process (one
     core), medians [s], and their ratios to the ranking's time."""
-    from grasp_safety_ros.cli.scenario import load_scenario
     from grasp_safety_ros.core.analyses.effort import evaluate_efforts
     from grasp_safety_ros.core.analyses.safety_report import analyse
-    from grasp_safety_ros.core.method.posture import select_postures
     from grasp_safety_ros.core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
+    from grasp_safety_ros.core.pipeline import run_pipeline
+    from grasp_safety_ros.scenario.schema import load_scenario
 
     scenario = load_scenario(book_scenario(grasps, folder))
     robot = scenario.robot.load(scenario.base_dir)
@@ -134,27 +134,19 @@ def bench_in_process(grasps: int, folder: Path, repeats: int = 3) -> dict[str, A
         robot, EvaluationConfig(metric=scenario.metric, workers=1, backend="python")
     )
     args = (scenario.grasps, scenario.object_inertia, scenario.trajectory)
-
-    def rank() -> Any:
-        return evaluator.rank(*args, seed_positions=scenario.robot.seed)
-
-    ranking = rank()  # warm: kernels loaded, restart seeds computed below
-    selected = select_postures(evaluator, *args, ranking, scenario.posture)
+    request = scenario.request(robot)
+    selected = run_pipeline(evaluator, request).ranking  # warm: kernels loaded, restart seeds
     timings: dict[str, list[float]] = {"ranking": [], "postures": [], "analyses": [], "effort": []}
     reference: list[float] = []
     effort_reference: list[float] = []
     grasps_and_motion = (scenario.grasps, scenario.trajectory)
     effort_args = (robot, selected.evaluations, scenario.object_inertia, *grasps_and_motion)
     for repeat in range(repeats):
-        start = time.perf_counter()
-        ranking = rank()
-        timings["ranking"].append(time.perf_counter() - start)
-        start = time.perf_counter()
-        selected = select_postures(evaluator, *args, ranking, scenario.posture)
-        timings["postures"].append(time.perf_counter() - start)
-        start = time.perf_counter()
-        analyse(evaluator, *args, scenario.options, ranking=selected)
-        timings["analyses"].append(time.perf_counter() - start)
+        stages: dict[str, float] = {}
+        selected = run_pipeline(evaluator, request, timings=stages).ranking
+        timings["ranking"].append(stages["rank"])
+        timings["postures"].append(stages["postures"])
+        timings["analyses"].append(stages["analyses"])
         start = time.perf_counter()
         evaluate_efforts(*effort_args, chain=evaluator.ik.chain)
         timings["effort"].append(time.perf_counter() - start)

@@ -4,11 +4,11 @@ For each arm workload (bench/workload.py: Panda and Baxter's right arm, a box, g
 it, 2 s at dt 0.01 s) and for the paper's book on Baxter (config/book_baxter.yaml), the
 ranking is run with ``posture.restarts`` = 0 (the paper's single IK), 2, 4, 8, 16, 32, 64:
 
-- ms per grasp of posture selection (``select_postures`` after ``rank``; the single IK
-  excluded), one core, median over repeats: wall-clock and CPU time of the process (the
-  latter less inflated when other processes share the cores); its CPU time as a multiple of
-  the ranking's (single IK, measured in the same run; issue 21's target: <= 1.5 at 8
-  restarts); at 8 restarts also with ``PostureConfig.early_stop``;
+- ms per grasp of posture selection (the ``postures`` stage of ``core.pipeline``, after
+  ``rank``; the single IK excluded), one core, median over repeats: wall-clock and CPU time
+  of the process (the latter less inflated when other processes share the cores); its CPU
+  time as a multiple of the ranking's (single IK, measured in the same run; issue 21's
+  target: <= 1.5 at 8 restarts); at 8 restarts also with ``PostureConfig.early_stop``;
 - the gain: mean over the grasps feasible with the single IK of 1 - score / score_single_ik
   [%], and grasps feasible with selection but not with the single IK.
 
@@ -18,17 +18,18 @@ Run alone: .venv/bin/python bench/run.py --postures-only [--json bench/results_p
 from __future__ import annotations
 
 import statistics
-import time
 from dataclasses import replace
 from typing import Any
 
 import numpy as np
 from workload import ARMS, box_object, grasps_around_box
 
-from grasp_safety_ros.cli.scenario import load_scenario
 from grasp_safety_ros.core import EvaluationConfig, GraspSafetyEvaluator
-from grasp_safety_ros.core.method.posture import PostureConfig, select_postures
+from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions
+from grasp_safety_ros.core.method.posture import PostureConfig
+from grasp_safety_ros.core.pipeline import PipelineRequest, run_pipeline
 from grasp_safety_ros.paths import config_file
+from grasp_safety_ros.scenario.schema import load_scenario
 
 RESTARTS = (0, 2, 4, 8, 16, 32, 64)
 
@@ -69,29 +70,37 @@ def bench_postures(grasps: int = 20, repeats: int = 3) -> dict[str, Any]:
     """Cost [ms per grasp] and gain [%] of posture selection per restart count and workload."""
     results: dict[str, Any] = {}
     for name, evaluator, candidates, inertia, trajectory, seed in _workloads(grasps):
-        ranking = evaluator.rank(candidates, inertia, trajectory, seed_positions=seed)
-        ranking_cpu = []
-        for _ in range(repeats):
-            cpu_start = time.process_time()
-            evaluator.rank(candidates, inertia, trajectory, seed_positions=seed)
-            ranking_cpu.append(time.process_time() - cpu_start)
+        # no analyses but the quality order
+        request = PipelineRequest(
+            tuple(candidates),
+            inertia,
+            trajectory,
+            options=AnalysisOptions(iso_regions=(), effort=False),
+            seed_positions=seed,
+        )
+
+        def run(config: PostureConfig, evaluator=evaluator, request=request) -> tuple[Any, Any]:
+            """The ranking with ``config`` and the pipeline's stage times."""
+            stages: dict[str, float] = {}
+            report = run_pipeline(evaluator, replace(request, posture=config), timings=stages)
+            return report.ranking, stages
+
+        run(PostureConfig(restarts=0))  # warm
+        ranking_cpu = [
+            run(PostureConfig(restarts=0))[1]["rank_process_cpu"] for _ in range(repeats)
+        ]
         ranking_ms = 1e3 * statistics.median(ranking_cpu) / len(candidates)
         rows = []
         for restarts in RESTARTS:
             config = PostureConfig(restarts=restarts)
             times, cpu_times, early_cpu_times = [], [], []
             for _ in range(repeats):
-                start, cpu_start = time.perf_counter(), time.process_time()
-                selected = select_postures(
-                    evaluator, candidates, inertia, trajectory, ranking, config
-                )
-                times.append(time.perf_counter() - start)
-                cpu_times.append(time.process_time() - cpu_start)
+                selected, stages = run(config)
+                times.append(stages["postures"])
+                cpu_times.append(stages["postures_process_cpu"])
                 if restarts == 8:
                     early = replace(config, early_stop=True)
-                    cpu_start = time.process_time()
-                    select_postures(evaluator, candidates, inertia, trajectory, ranking, early)
-                    early_cpu_times.append(time.process_time() - cpu_start)
+                    early_cpu_times.append(run(early)[1]["postures_process_cpu"])
             gains = [
                 1.0 - p.score / p.score_single_ik
                 for p in selected.postures

@@ -298,8 +298,9 @@ def node_spans(node: Any, request: Any) -> dict[str, float]:
     response.
 
     ``convert`` is the request's checks and conversion (check_no_subnormals, ranking_inputs);
-    ``rank``, ``posture`` and ``analyse`` the three calls of compute_ranking (``rank`` is the
-    core's own ranking: GraspSafetyEvaluator.rank, the single IK); ``response`` report_msg and
+    ``rank``, ``posture`` and ``analyse`` the stages rank, postures and analyses of
+    core.pipeline.run_pipeline (``rank`` is the core's own ranking: GraspSafetyEvaluator.rank,
+    the single IK), timed by its ``timings``; ``response`` report_msg and
     check_finite_result. ``<step>`` is the wall-clock time, ``<step>_cpu`` the CPU time of
     this thread (less affected by other processes; the ranking's pool threads are not counted
     in it). ``markers`` (built only for a subscriber) is timed too but is not a step of the
@@ -308,8 +309,7 @@ def node_spans(node: Any, request: Any) -> dict[str, float]:
     from grasp_safety_msgs.srv import RankGrasps
     from rclpy.serialization import deserialize_message, serialize_message
 
-    from grasp_safety_ros.core.analyses.safety_report import analyse, posture_criterion
-    from grasp_safety_ros.core.method.posture import select_postures
+    from grasp_safety_ros.core.pipeline import run_pipeline
     from grasp_safety_ros.ros import conversions
     from grasp_safety_ros.ros.message_checks import check_finite_result, check_no_subnormals
     from grasp_safety_ros.ros.ranking_inputs import markers_builder, ranking_inputs
@@ -344,27 +344,11 @@ def node_spans(node: Any, request: Any) -> dict[str, float]:
         )
 
     inputs = span("convert", convert)
-    grasps, inertia, trajectory = inputs.grasps, inputs.object_inertia, inputs.trajectory
-    evaluator = bundle.evaluator
-    ranking = span(
-        "rank", lambda: evaluator.rank(grasps, inertia, trajectory, inputs.seed, inputs.metric)
-    )
-    ranking = span(
-        "posture",
-        lambda: select_postures(
-            evaluator,
-            grasps,
-            inertia,
-            trajectory,
-            ranking,
-            settings.posture,
-            criterion=posture_criterion(bundle.robot, inputs.options),
-        ),
-    )
-    report = span(
-        "analyse",
-        lambda: analyse(evaluator, grasps, inertia, trajectory, inputs.options, ranking=ranking),
-    )
+    stages: dict[str, float] = {}
+    report = run_pipeline(bundle.evaluator, inputs, timings=stages)
+    for stage, name in (("rank", "rank"), ("postures", "posture"), ("analyses", "analyse")):
+        spans[name], spans[f"{name}_cpu"] = stages[stage], stages[f"{stage}_cpu"]
+    ranking, grasps, trajectory = report.ranking, inputs.grasps, inputs.trajectory
     stamp = node.get_clock().now().to_msg()
 
     def response() -> Any:

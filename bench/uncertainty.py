@@ -21,13 +21,13 @@ from typing import Any
 
 from pipeline import book_scenario
 
-from grasp_safety_ros.cli.scenario import load_scenario
 from grasp_safety_ros.core.analyses.uncertainty import (
     InertiaUncertainty,
     analyse_inertia_uncertainty,
 )
 from grasp_safety_ros.core.method.pool import default_workers, executor_for
 from grasp_safety_ros.core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
+from grasp_safety_ros.scenario.schema import load_scenario
 
 UNCERTAINTY = InertiaUncertainty(0.2, 0.01, 0.3, num_random_samples=64)
 

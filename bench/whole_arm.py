@@ -16,9 +16,9 @@ process (less inflated than wall-clock time when other processes share the cores
   ``assess_sites``) from precomputed Pinocchio terms;
 - ``ranking_us_per_sample``: the compiled ranking of the same candidates (IK + tip effective
   mass) in the same run, per (grasp, sample) of all candidates, for the ratio;
-- ``posture_ms_per_grasp``: posture selection (``select_postures``, POSTURE_RESTARTS restarts)
-  of the same candidates, ms per grasp, by the tip score and by the whole arm's chest force
-  (``rank_by: whole_arm``'s criterion, ``posture_criterion``).
+- ``posture_ms_per_grasp``: posture selection (the pipeline's ``postures`` stage,
+  POSTURE_RESTARTS restarts) of the same candidates, ms per grasp, by the tip score and by the
+  whole arm's chest force (``rank_by: whole_arm``'s criterion).
 
 Run alone: .venv/bin/python bench/whole_arm.py [--arms panda,baxter] [--grasps 10]
 """
@@ -36,7 +36,7 @@ from workload import ARMS, ArmWorkload, box_object, grasps_around_box
 
 from grasp_safety_ros.core import EvaluationConfig, GraspSafetyEvaluator
 from grasp_safety_ros.core.analyses.iso15066 import select_regions
-from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions, posture_criterion
+from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions
 from grasp_safety_ros.core.analyses.whole_arm import (
     ArmTerms,
     assess_sites,
@@ -50,8 +50,9 @@ from grasp_safety_ros.core.analyses.whole_arm import (
     tip_twists_in_base,
 )
 from grasp_safety_ros.core.method.effective_mass import augmented_model
-from grasp_safety_ros.core.method.posture import PostureConfig, select_postures
+from grasp_safety_ros.core.method.posture import PostureConfig
 from grasp_safety_ros.core.method.terms import grasps_terms
+from grasp_safety_ros.core.pipeline import PipelineRequest, run_pipeline
 
 POSTURE_RESTARTS = 8
 
@@ -115,14 +116,25 @@ def bench_whole_arm(arm: ArmWorkload, grasps: int = 10, repeats: int = 5) -> dic
     def rank() -> None:
         evaluator.rank(candidates, obj, trajectory, seed_positions=arm.seed_positions)
 
-    config = PostureConfig(restarts=POSTURE_RESTARTS)
-    criterion = posture_criterion(robot, AnalysisOptions(rank_by="whole_arm"))
+    def postures(options: AnalysisOptions) -> float:
+        """The process CPU time [s] of the pipeline's posture stage."""
+        request = PipelineRequest(
+            tuple(candidates),
+            obj,
+            trajectory,
+            options=options,
+            posture=PostureConfig(restarts=POSTURE_RESTARTS),
+            seed_positions=arm.seed_positions,
+        )
+        stages: dict[str, float] = {}
+        run_pipeline(evaluator, request, timings=stages)
+        return stages["postures_process_cpu"]
 
-    def postures_by_score() -> None:
-        select_postures(evaluator, candidates, obj, trajectory, ranking, config)
+    def postures_by_score() -> float:
+        return postures(AnalysisOptions(iso_regions=(), effort=False))
 
-    def postures_by_whole_arm() -> None:
-        select_postures(evaluator, candidates, obj, trajectory, ranking, config, None, criterion)
+    def postures_by_whole_arm() -> float:
+        return postures(AnalysisOptions(rank_by="whole_arm", effort=False))
 
     timings: dict[str, list[float]] = {
         "compiled": [],
@@ -143,8 +155,10 @@ def bench_whole_arm(arm: ArmWorkload, grasps: int = 10, repeats: int = 5) -> dic
             ("postures_by_whole_arm", postures_by_whole_arm, per_grasp_ms),
         ):
             start = time.process_time()
-            function()
-            timings[key].append((time.process_time() - start) / max(count, 1) * 1e6)
+            seconds = function()  # the functions of a pipeline stage time it themselves
+            if seconds is None:
+                seconds = time.process_time() - start
+            timings[key].append(seconds / max(count, 1) * 1e6)
     return {
         "robot": f"{arm.urdf} {arm.base_frame} -> {arm.tip_frame}",
         "sites": len(sites),

@@ -10,10 +10,10 @@ import pytest
 import yaml
 
 from grasp_safety_ros.cli.main import main, rank_scenario
-from grasp_safety_ros.cli.scenario import load_scenario, parse_scenario
 from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions
 from grasp_safety_ros.core.exceptions import InvalidInputError
 from grasp_safety_ros.paths import config_file
+from grasp_safety_ros.scenario.schema import load_scenario, parse_scenario
 
 EXTENDED = yaml.safe_load(config_file("book_baxter_extended.yaml").read_text())
 

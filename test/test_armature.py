@@ -247,8 +247,8 @@ def test_bad_scenario_armature_exits_2_naming_the_field(
 
 
 def test_published_fr3_values_go_to_the_panda() -> None:
-    from grasp_safety_ros.cli.scenario import RobotSpec
     from grasp_safety_ros.core.model.armature import published_armatures
+    from grasp_safety_ros.scenario.schema import RobotSpec
 
     entry = published_armatures()["franka_fr3"]
     assert entry.status == "identified" and "panda" in entry.robots

@@ -22,10 +22,10 @@ import yaml
 from conftest import ARM6_AXES, serial_arm_urdf
 
 from grasp_safety_ros.cli.main import main, rank_scenario
-from grasp_safety_ros.cli.scenario import load_scenario
 from grasp_safety_ros.core import RobotModel
 from grasp_safety_ros.core.exceptions import InvalidInputError
 from grasp_safety_ros.core.input_checks import quat_xyzw_from_rotation
+from grasp_safety_ros.scenario.schema import load_scenario
 
 h5py = pytest.importorskip("h5py")
 pa = pytest.importorskip("pyarrow")

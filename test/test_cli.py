@@ -186,7 +186,7 @@ def test_json_writer_round_trips_every_double_and_writes_non_finite_as_null() ->
 
 def test_json_file_holds_the_evaluations_arrays_exactly(tmp_path: Path) -> None:
     from grasp_safety_ros.cli.main import rank_scenario
-    from grasp_safety_ros.cli.scenario import parse_scenario
+    from grasp_safety_ros.scenario.schema import parse_scenario
 
     data = {**GOOD, "trajectory": {**GOOD["trajectory"], "dt_s": 0.1}}
     scenario = tmp_path / "s.yaml"

@@ -23,19 +23,21 @@ from conftest import ARM6_AXES, serial_arm_urdf
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from grasp_safety_ros.cli import scenario as scenario_module
 from grasp_safety_ros.cli.main import main
-from grasp_safety_ros.cli.scenario import (
+from grasp_safety_ros.paths import config_file
+from grasp_safety_ros.scenario import fields as scenario_module
+from grasp_safety_ros.scenario.fields import (
     MAX_EXPANDED_NODES,
+    MAX_NESTING_DEPTH,
+    MAX_SCENARIO_BYTES,
+)
+from grasp_safety_ros.scenario.schema import (
     MAX_GRASP_SAMPLES,
     MAX_GRASPS,
-    MAX_NESTING_DEPTH,
     MAX_POINTS,
-    MAX_SCENARIO_BYTES,
     MAX_UNCERTAINTY_SAMPLES,
     OPTIONAL_SECTIONS,
 )
-from grasp_safety_ros.paths import config_file
 
 BOOK = yaml.safe_load(config_file("book_baxter.yaml").read_text())
 SMALL = {  # the book scenario cut down to 2 grasps x 3 samples, so a valid run is quick

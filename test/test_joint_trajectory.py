@@ -161,19 +161,24 @@ def test_missing_chain_joint_and_limits_are_refused_before_any_work(baxter) -> N
 
 
 def test_posture_selection_keeps_a_planned_motion_as_given(baxter) -> None:
-    from grasp_safety_ros.core.method.posture import PostureConfig, select_postures
+    from grasp_safety_ros.core.method.posture import PostureConfig
+    from grasp_safety_ros.core.pipeline import PipelineRequest, run_pipeline
 
     evaluator, trajectory, evaluation = ik_route(baxter)
     # The IK route given as a planned motion: posture selection must leave it as planned.
     positions = evaluation.joint_positions.copy()
     planned = PlannedJointTrajectory(tuple(baxter.joint_names), evaluation.times_s, positions)
-    grasps = [Grasp(GRASP, joint_trajectory=planned), Grasp(GRASP)]
+    grasps = (Grasp(GRASP, joint_trajectory=planned), Grasp(GRASP))
     ranking = evaluator.rank(grasps, BOOK, trajectory, seed_positions=BAXTER_SEED)
-    selected = select_postures(
-        evaluator, grasps, BOOK, trajectory, ranking, PostureConfig(restarts=4)
+    request = PipelineRequest(
+        grasps, BOOK, trajectory, posture=PostureConfig(restarts=4), seed_positions=BAXTER_SEED
     )
+    selected = run_pipeline(evaluator, request).ranking
     planned_result = selected.evaluations[0]
-    assert planned_result is ranking.evaluations[0]  # never replaced by an IK posture
+    # never replaced by an IK posture: the planned motion's evaluation, as ranked
+    np.testing.assert_array_equal(
+        planned_result.effective_mass_kg, ranking.evaluations[0].effective_mass_kg
+    )
     assert selected.postures[0].postures_tried == 1
     np.testing.assert_array_equal(planned_result.joint_positions, positions)
     assert selected.postures[1].postures_tried >= 1

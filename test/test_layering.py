@@ -1,13 +1,14 @@
 """Imports run one way and in no circle (read from the source with ``ast``).
 
 Layers, lowest first: ``core.exceptions`` and ``core.input_checks`` <- ``core.model`` <-
-``core.method`` <- ``core.analyses`` <- the adapters (``cli``, ``ros``, ``validation``,
-``dataset``, ``paths``). A module may import its own layer or lower ones. ``core.kernels``
-imports only itself and is imported only by ``core.method``; ``core`` never imports rclpy, ROS
-interface packages or an adapter; neither ``core`` nor the ROS node (with all it imports)
-imports the batch's dependencies (BATCH_ONLY). Imports inside functions count. For the
-layers, those under ``if TYPE_CHECKING:`` do not (they never run); for cycles they do, at
-every level (a type-only circle still says a value type lives in the wrong module).
+``core.method`` <- ``core.analyses`` <- ``core.pipeline`` and ``core.options`` <- the adapters
+(``cli``, ``ros``, ``validation``, ``dataset``, ``paths``). A module may import its own layer
+or lower ones. ``core.kernels`` imports only itself and is imported only by ``core.method``;
+``core`` never imports rclpy, ROS interface packages or an adapter; neither ``core`` nor the
+ROS node (with all it imports) imports the batch's dependencies (BATCH_ONLY). Imports inside
+functions count. For the layers, those under ``if TYPE_CHECKING:`` do not (they never run); for
+cycles they do, at every level (a type-only circle still says a value type lives in the wrong
+module).
 """
 
 from __future__ import annotations
@@ -24,9 +25,13 @@ LAYERS = (
     ("core.model",),
     ("core.method",),
     ("core.analyses", "core"),  # core/__init__.py re-exports model and method names
-    ("cli", "ros", "validation", "dataset", "paths"),
+    ("core.pipeline", "core.options"),
+    ("paths", "scenario"),  # where the config files are; the scenario and SPEC schema
+    ("dataset", "ros", "validation"),  # the adapters on the pipeline
+    ("cli",),  # the command line dispatches to batch and reproduce
 )
-"""Module prefixes (below the package) of each layer, lowest first."""
+"""Module prefixes (below the package) of each layer, lowest first. The adapters are layered
+too: one adapter imports another only from a higher layer (a cli <-> dataset circle fails)."""
 
 KERNELS = "core.kernels"
 ROS_ONLY = ("rclpy", "builtin_interfaces", "rcl_interfaces", "ament_index_python")
@@ -205,6 +210,58 @@ def test_ros_node_does_not_import_the_batch_dependencies() -> None:
 def test_package_has_no_import_cycle() -> None:
     cycle = find_cycle(package_imports(type_checking=True))
     assert cycle is None, "import cycle: " + " -> ".join(cycle or [])
+
+
+def room_of(module: str) -> str:
+    """The room (the package's top-level module or subpackage) of a package module."""
+    return _short(module).split(".")[0]
+
+
+def room_graph(graph: Mapping[str, Iterable[str]]) -> dict[str, set[str]]:
+    """Room -> the other rooms its modules import."""
+    rooms: dict[str, set[str]] = {}
+    for module, targets in graph.items():
+        for target in targets:
+            if target.split(".")[0] == PACKAGE and room_of(target) != room_of(module):
+                rooms.setdefault(room_of(module), set()).add(room_of(target))
+    return rooms
+
+
+def test_rooms_import_in_no_circle() -> None:
+    rooms = room_graph(package_imports(type_checking=True))
+    assert "core" in rooms.get("cli", set())  # the walk found the rooms
+    cycle = find_cycle(rooms)
+    assert cycle is None, "rooms import in a circle: " + " -> ".join(cycle or [])
+
+
+def private_imports(source: str) -> list[tuple[str, str]]:
+    """(module, name) of every ``from module import _name`` in ``source`` (relative modules as
+    written, with their dots; dunder names such as ``__version__`` are public)."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.ImportFrom):
+            module = "." * node.level + (node.module or "")
+            found += [
+                (module, a.name)
+                for a in node.names
+                if a.name.startswith("_") and not a.name.startswith("__")
+            ]
+    return found
+
+
+def test_no_private_name_crosses_a_room() -> None:
+    problems = []
+    for path in sorted(ROOT.rglob("*.py")):
+        parts = path.relative_to(ROOT).parts
+        room = parts[0].removesuffix(".py")
+        for module, name in private_imports(path.read_text()):
+            dots = len(module) - len(module.lstrip("."))
+            # a relative import leaves the room when it climbs to the package (depth + 1 dots)
+            leaves = dots and dots >= len(parts) and module.lstrip(".").split(".")[0] != room
+            absolute = not dots and module.startswith(f"{PACKAGE}.")
+            if leaves or (absolute and module.split(".")[1] != room):
+                problems.append(f"{'/'.join(parts)} imports {name} from {module}")
+    assert not problems, "\n".join(problems)
 
 
 def test_checker_sees_lazy_imports_and_skips_type_checking_blocks() -> None:

@@ -99,9 +99,9 @@ def test_a_partial_armature_mapping_keeps_the_mjcf_armature_of_the_other_joints(
 ) -> None:
     """Naming one joint must not zero the others' rotor inertia (that would lower every
     effective mass): in the model, a scenario (value and range) and the node parameters."""
-    from grasp_safety_ros.cli.scenario import parse_robot
     from grasp_safety_ros.ros.parameters import settings_from_parameters
     from grasp_safety_ros.ros.robot_bundle import build_robot
+    from grasp_safety_ros.scenario.schema import parse_robot
 
     kept = [*ARMATURE[:3], 0.1]
     robot = RobotModel.from_urdf(arm_mjcf(), "base_link", "tool")

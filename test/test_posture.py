@@ -311,8 +311,8 @@ def test_scenario_posture_section_and_cli_json() -> None:
 
     from grasp_safety_ros.cli.main import rank_scenario
     from grasp_safety_ros.cli.report import report_to_dict
-    from grasp_safety_ros.cli.scenario import parse_scenario
     from grasp_safety_ros.paths import config_file
+    from grasp_safety_ros.scenario.schema import parse_scenario
 
     path = config_file("book_baxter.yaml")
     data = yaml.safe_load(path.read_text())

@@ -48,9 +48,10 @@ from grasp_safety_ros.core.analyses.exposed_points import box_corners_in_object
 from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions, SafetyReport, analyse
 from grasp_safety_ros.core.analyses.uncertainty import InertiaUncertainty
 from grasp_safety_ros.core.method.executable import joint_velocities_accelerations
-from grasp_safety_ros.core.method.posture import PostureConfig, select_postures
+from grasp_safety_ros.core.method.posture import PostureConfig
 from grasp_safety_ros.core.method.ranking import GraspEvaluation, Ranking
 from grasp_safety_ros.core.model.waypoint_trajectory import WaypointTrajectory
+from grasp_safety_ros.core.pipeline import PipelineRequest, run_pipeline
 from grasp_safety_ros.ros import conversions
 from grasp_safety_ros.ros.conversions import (
     _fast,
@@ -371,10 +372,10 @@ def test_duration_message_rounds_to_the_nanosecond_with_carry() -> None:
 
 
 def test_joint_trajectory_and_posture_fields_round_trip(arm6: RobotModel) -> None:
-    ranking, grasps, trajectory = _ranking(arm6)
-    evaluator = GraspSafetyEvaluator(arm6)
+    _, grasps, trajectory = _ranking(arm6)
     obj = solid_box(0.5, [0.1, 0.1, 0.1])
-    selected = select_postures(evaluator, grasps, obj, trajectory, ranking, PostureConfig(4))
+    request = PipelineRequest(tuple(grasps), obj, trajectory, posture=PostureConfig(4))
+    selected = run_pipeline(GraspSafetyEvaluator(arm6), request).ranking
     request = PoseArray(
         header=Header(frame_id="object"),
         poses=[pose_msg_from_transform(g.transform_tip_to_object) for g in grasps],
@@ -498,9 +499,13 @@ def test_report_message_with_default_options_is_the_ranking_message(arm6: RobotM
         for name in ("index", "feasible", "effective_mass_kg", "time_from_start_s"):
             assert getattr(got, name) == getattr(old, name)
         assert got.score == old.score or (math.isnan(got.score) and math.isnan(old.score))
-        for name in ("grasp_quality", "combined_score", "worst_case_score", "effort_score"):
+        for name in ("grasp_quality", "combined_score", "worst_case_score"):
             assert math.isnan(getattr(got, name)), name
-        assert len(got.leading_point_effective_mass_kg) == len(got.peak_abs_torque) == 0
+        assert len(got.leading_point_effective_mass_kg) == 0
+        # effort is on by default (core.options): the torques, without changing the order
+        effort = report.effort[got.index]
+        assert got.effort_score == effort.score() or math.isnan(effort.score())
+        assert len(got.peak_abs_torque) == (len(message.joint_names) if got.feasible else 0)
         assert not got.redundancy_applied and math.isnan(got.score_without_redundancy)
         if got.feasible:
             assert got.safety_score == got.score
@@ -803,6 +808,10 @@ def test_evaluation_messages_equal_the_keyword_constructor_and_share_nothing() -
         whole_arm_worst_energy_j=nan,
         links_only_effective_mass_kg=[1.0, 1.5],  # no armature: the same masses
         links_only_mean_effective_mass_kg=1.25,
+        score_armature_lower=nan,
+        score_armature_upper=nan,
+        armature_min_effective_mass_kg=nan,
+        armature_max_effective_mass_kg=nan,
     )
     first, second = (conversions.evaluation_msg(evaluation) for _ in range(2))
     assert repr(first) == repr(expected)  # every field; NaN-safe, unlike ==

@@ -37,7 +37,6 @@ from ros_domains import claim_ros_domain
 from std_msgs.msg import Float64MultiArray, Header, String
 from visualization_msgs.msg import Marker, MarkerArray
 
-from grasp_safety_ros.cli.scenario import load_scenario
 from grasp_safety_ros.core import (
     Grasp,
     GraspSafetyEvaluator,
@@ -51,15 +50,16 @@ from grasp_safety_ros.core.analyses.multi_objective import rank_with_quality
 from grasp_safety_ros.core.analyses.safety_report import (
     AnalysisOptions,
     analyse,
-    posture_criterion,
 )
 from grasp_safety_ros.core.analyses.uncertainty import InertiaUncertainty
 from grasp_safety_ros.core.method.executable import joint_velocities_accelerations
-from grasp_safety_ros.core.method.posture import PostureConfig, select_postures
+from grasp_safety_ros.core.method.posture import PostureConfig
+from grasp_safety_ros.core.pipeline import PipelineRequest, run_pipeline
 from grasp_safety_ros.paths import config_file
 from grasp_safety_ros.ros.conversions import inertia_msg_from_object, pose_msg_from_transform
 from grasp_safety_ros.ros.executor import NodeExecutor, join_callbacks
 from grasp_safety_ros.ros.node import EXECUTOR_THREADS, GraspSafetyNode
+from grasp_safety_ros.scenario.schema import load_scenario
 
 BOOK = load_scenario(config_file("book_baxter.yaml"))
 BOOK_GRASPS = [Grasp(g.transform_tip_to_object, f"grasp_{i}") for i, g in enumerate(BOOK.grasps)]
@@ -258,6 +258,21 @@ def core_report(
         AnalysisOptions(points_in_object_m=points, **options),
         ranking=ranking,
     )
+
+
+def core_pipeline(evaluator: GraspSafetyEvaluator, posture: PostureConfig, **options: Any) -> Any:
+    """The core pipeline's SafetyReport of the book scenario with the node's box points."""
+    points = box_corners_in_object(NODE_PARAMETERS["object.box_size_m"])
+    request = PipelineRequest(
+        tuple(BOOK_GRASPS),
+        BOOK.object_inertia,
+        book_trajectory(),
+        "mean",
+        AnalysisOptions(points_in_object_m=points, **options),
+        posture,
+        BOOK.robot.seed,
+    )
+    return run_pipeline(evaluator, request)
 
 
 def assert_matches_core(ranking: GraspRanking, expected: Any) -> None:
@@ -931,8 +946,9 @@ def test_default_analyses_leave_the_paper_fields_and_order(
     for evaluation in ranking.evaluations:
         assert evaluation.safety_score == evaluation.score
         assert math.isnan(evaluation.grasp_quality) and math.isnan(evaluation.combined_score)
-        assert math.isnan(evaluation.worst_case_score) and math.isnan(evaluation.effort_score)
-        assert not evaluation.redundancy_applied and len(evaluation.peak_abs_torque) == 0
+        assert math.isnan(evaluation.worst_case_score) and not evaluation.redundancy_applied
+        # effort is on by default (core.options): its torques, the order unchanged
+        assert len(evaluation.peak_abs_torque) == len(ranking.joint_names)
         # the box gives the exposed points; they do not change the tip score
         count = len(evaluation.effective_mass_kg)
         assert len(evaluation.leading_point_effective_mass_kg) == count
@@ -1235,7 +1251,7 @@ def test_single_ik_posture_fields_and_joint_trajectory(
 
 
 def test_posture_selection_by_parameter_equals_the_core(
-    ros: NodeUnderTest, core_evaluator: GraspSafetyEvaluator, core_ranking: Any
+    ros: NodeUnderTest, core_evaluator: GraspSafetyEvaluator
 ) -> None:
     (result,) = ros.set_parameters(posture__restarts=6)
     assert result.successful, result.reason
@@ -1245,14 +1261,7 @@ def test_posture_selection_by_parameter_equals_the_core(
         (result,) = ros.set_parameters(posture__restarts=0)
         assert result.successful, result.reason
     assert response.success, response.message
-    expected = select_postures(
-        core_evaluator,
-        BOOK_GRASPS,
-        BOOK.object_inertia,
-        book_trajectory(),
-        core_ranking,
-        PostureConfig(restarts=6),
-    )
+    expected = core_pipeline(core_evaluator, PostureConfig(restarts=6), iso_regions=()).ranking
     assert_matches_core(response.ranking, expected)
     for got, want, posture in zip(
         response.ranking.evaluations, expected.evaluations, expected.postures, strict=True
@@ -1557,7 +1566,7 @@ def test_whole_arm_parameters_are_refused_naming_them(ros: NodeUnderTest) -> Non
 
 
 def test_rank_by_whole_arm_selects_postures_by_it(
-    ros: NodeUnderTest, core_evaluator: GraspSafetyEvaluator, core_ranking: Any
+    ros: NodeUnderTest, core_evaluator: GraspSafetyEvaluator
 ) -> None:
     """With rank_by whole_arm and posture.restarts, the node keeps the postures the core's
     whole-arm criterion keeps, and each grasp's ranking force is its kept posture's value."""
@@ -1573,19 +1582,13 @@ def test_rank_by_whole_arm_selects_postures_by_it(
         )
         assert all(r.successful for r in results), results
     assert response.success, response.message
-    options = AnalysisOptions(rank_by="whole_arm", whole_arm_region="upper_arm_elbow")
-    expected = select_postures(
+    want = core_pipeline(
         core_evaluator,
-        BOOK_GRASPS,
-        BOOK.object_inertia,
-        book_trajectory(),
-        core_ranking,
         PostureConfig(restarts=6),
-        criterion=posture_criterion(core_evaluator.robot, options),
+        rank_by="whole_arm",
+        whole_arm_region="upper_arm_elbow",
     )
-    want = core_report(
-        core_evaluator, expected, rank_by="whole_arm", whole_arm_region="upper_arm_elbow"
-    )
+    expected = want.ranking
     ranking = response.ranking
     assert tuple(ranking.order) == want.order
     for got, posture in zip(ranking.evaluations, expected.postures, strict=True):

@@ -255,7 +255,8 @@ def test_default_analyses_are_the_paper() -> None:
     assert analysis.metric_point == "tip" and analysis.points_in_object_m is None
     assert analysis.iso_regions is None  # all regions
     assert analysis.uncertainty is None and analysis.grasp_quality is None
-    assert not analysis.redundancy and not analysis.effort and analysis.rank_by == "safety"
+    assert not analysis.redundancy and analysis.rank_by == "safety"
+    assert analysis.effort  # on everywhere (core.options): adds torques, leaves the order
     assert analysis.safety_weight == 0.5 and analysis.effort_criterion == "peak_fraction"
 
 

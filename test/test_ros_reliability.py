@@ -18,7 +18,6 @@ from nav_msgs.msg import Path
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from grasp_safety_ros.cli import scenario
 from grasp_safety_ros.core.exceptions import InvalidInputError
 from grasp_safety_ros.core.method.ranking import Grasp
 from grasp_safety_ros.ros import parameters
@@ -38,6 +37,7 @@ from grasp_safety_ros.ros.message_checks import (
 from grasp_safety_ros.ros.parameters import check_parameter, parameter_constraints
 from grasp_safety_ros.ros.ranking_job import ClientWatch, FairComputeLock
 from grasp_safety_ros.ros.topic_inputs import MAX_ABS_GRASP_QUALITY, check_quality
+from grasp_safety_ros.scenario import schema as scenario
 
 # --- Count parameters (D) ----------------------------------------------------------------------
 
@@ -45,7 +45,6 @@ from grasp_safety_ros.ros.topic_inputs import MAX_ABS_GRASP_QUALITY, check_quali
 def test_count_parameter_limits_are_the_clis() -> None:
     assert parameters.MAX_GRASPS_LIMIT == scenario.MAX_GRASPS
     assert parameters.MAX_SAMPLES_LIMIT == scenario.MAX_GRASP_SAMPLES
-    assert parameters.MAX_UNCERTAINTY_SAMPLES == scenario.MAX_UNCERTAINTY_SAMPLES
     assert geometry.MAX_OBJECT_SIZE_M == scenario.MAX_OBJECT_SIZE_M
 
 

@@ -22,9 +22,10 @@ from std_msgs.msg import Header
 
 from grasp_safety_ros.core import GraspSafetyEvaluator, ObjectTrajectory, RobotModel, solid_box
 from grasp_safety_ros.core.analyses.exposed_points import box_corners_in_object
-from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions, SafetyReport, analyse
-from grasp_safety_ros.core.method.posture import PostureConfig, select_postures
+from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions, SafetyReport
+from grasp_safety_ros.core.method.posture import PostureConfig
 from grasp_safety_ros.core.method.ranking import Grasp
+from grasp_safety_ros.core.pipeline import PipelineRequest, run_pipeline
 from grasp_safety_ros.ros.conversions import pose_msg_from_transform, report_msg, results
 from grasp_safety_ros.ros.response import ResponseContent
 
@@ -87,10 +88,6 @@ def mixed_report(robot: RobotModel) -> tuple[SafetyReport, PoseArray]:
     grasps.insert(2, Grasp(pin.SE3(np.eye(3), np.array([5.0, 0.0, 0.0])), "unreachable"))
     evaluator = GraspSafetyEvaluator(robot)
     inertia = solid_box(0.5, [0.1, 0.1, 0.1])
-    ranking = evaluator.rank(grasps, inertia, trajectory, seed)
-    ranking = select_postures(
-        evaluator, grasps, inertia, trajectory, ranking, PostureConfig(restarts=2)
-    )
     options = AnalysisOptions(
         metric_point="worst_point",
         points_in_object_m=box_corners_in_object([0.1, 0.1, 0.1]),
@@ -99,7 +96,10 @@ def mixed_report(robot: RobotModel) -> tuple[SafetyReport, PoseArray]:
         grasp_quality=(0.2, 0.9, 0.5, 0.1),
         safety_weight=0.25,
     )
-    report = analyse(evaluator, grasps, inertia, trajectory, options, ranking=ranking)
+    request = PipelineRequest(
+        tuple(grasps), inertia, trajectory, None, options, PostureConfig(restarts=2), seed
+    )
+    report = run_pipeline(evaluator, request)
     request = PoseArray(
         header=Header(frame_id="object", stamp=Time(sec=4)),
         poses=[pose_msg_from_transform(g.transform_tip_to_object) for g in grasps],

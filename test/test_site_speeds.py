@@ -4,8 +4,6 @@ independent re-computation with Pinocchio's frame Jacobians and CRBA on a 6-DOF 
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -118,10 +116,55 @@ def test_no_permitted_region_is_refused() -> None:
         )
 
 
+class IndependentSites:
+    """The oracle: the object as its own body on the tip's joint (appendBodyToJoint), a
+    frame at every site, M from CRBA (armature on its diagonal) inverted by numpy, frame
+    Jacobians (LOCAL_WORLD_ALIGNED); nothing of core.analyses.whole_arm or site_speeds."""
+
+    def __init__(self, robot, sites, inertia, transform_tip_to_object, points) -> None:
+        model = robot.model.copy()
+        tip = model.frames[robot.tip_frame_id]
+        object_in_joint = tip.placement * transform_tip_to_object.inverse()
+        model.appendBodyToJoint(
+            tip.parentJoint, inertia.spatial_inertia_in_object(), object_in_joint
+        )
+        self.frames = [
+            model.addFrame(
+                pin.Frame(f"site{k}", int(j), pin.SE3(np.eye(3), p), pin.FrameType.OP_FRAME)
+            )
+            for k, (j, p) in enumerate(zip(sites.joint_ids, sites.points_in_joint_m, strict=True))
+        ]
+        for k, point in enumerate(np.zeros((0, 3)) if points is None else points):
+            placement = object_in_joint * pin.SE3(np.eye(3), point)
+            self.frames.append(
+                model.addFrame(
+                    pin.Frame(f"obj{k}", tip.parentJoint, placement, pin.FrameType.OP_FRAME)
+                )
+            )
+        self.model, self.data = model, model.createData()
+
+    def mass_matrix(self, q: np.ndarray) -> np.ndarray:
+        upper = pin.crba(self.model, self.data, q)
+        return np.triu(upper) + np.triu(upper, 1).T
+
+    def speeds_and_masses(self, q: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per site |J d| and 1/(uᵀ J M⁻¹ Jᵀ u) (u = J d / |J d|; NaN mass where J d = 0)."""
+        minv = np.linalg.inv(self.mass_matrix(q))
+        pin.computeJointJacobians(self.model, self.data, q)
+        pin.updateFramePlacements(self.model, self.data)
+        speeds, masses = [], []
+        for frame in self.frames:
+            jacobian = pin.getFrameJacobian(self.model, self.data, frame, pin.LOCAL_WORLD_ALIGNED)
+            velocity = jacobian[:3] @ d
+            speed = float(np.linalg.norm(velocity))
+            u = velocity / speed if speed > 0.0 else np.full(3, np.nan)
+            speeds.append(speed)
+            masses.append(1.0 / (u @ jacobian[:3] @ minv @ jacobian[:3].T @ u))
+        return np.array(speeds), np.array(masses)
+
+
 def test_independent_recomputation_on_a_six_dof_arm() -> None:
-    """Frame Jacobians (LOCAL_WORLD_ALIGNED) of frames added at every site, the object added
-    as a separate body (appendBodyToJoint), M from CRBA (armature on its diagonal), inverted
-    by numpy: speed |J d| and 1/(uᵀ J M⁻¹ Jᵀ u) per site, against the module."""
+    """The module's speed, mass and v_max per site against ``IndependentSites``."""
     armature = np.array([0.3, 0.25, 0.2, 0.05, 0.04, 0.02])
     robot = RobotModel.from_urdf(
         serial_arm_urdf(ARM6_AXES), "base_link", "tool", armature_kgm2=armature
@@ -135,50 +178,26 @@ def test_independent_recomputation_on_a_six_dof_arm() -> None:
     speed_model = SiteSpeedModel.build(
         robot, inertia, transform_tip_to_object, sites, points, ["chest", "hand_fingers"]
     )
-    # The independent model: the object as its own body on the tip's joint, frames at sites.
-    model = robot.model.copy()
-    tip = model.frames[robot.tip_frame_id]
-    object_in_joint = tip.placement * transform_tip_to_object.inverse()
-    model.appendBodyToJoint(tip.parentJoint, inertia.spatial_inertia_in_object(), object_in_joint)
-    frames = [
-        model.addFrame(
-            pin.Frame(f"site{k}", int(j), pin.SE3(np.eye(3), p), pin.FrameType.OP_FRAME)
-        )
-        for k, (j, p) in enumerate(zip(sites.joint_ids, sites.points_in_joint_m, strict=True))
-    ]
-    for k, point in enumerate(points):
-        placement = object_in_joint * pin.SE3(np.eye(3), point)
-        frames.append(
-            model.addFrame(
-                pin.Frame(f"obj{k}", tip.parentJoint, placement, pin.FrameType.OP_FRAME)
-            )
-        )
-    data = model.createData()
-    bare = model.copy()
-    bare.armature = np.zeros(model.nv)
+    oracle = IndependentSites(robot, sites, inertia, transform_tip_to_object, points)
+    bare = oracle.model.copy()
+    bare.armature = np.zeros(bare.nv)
     bare_data = bare.createData()
     rng = np.random.default_rng(4)
     q_all = rng.uniform(-2.0, 2.0, (5, 6))
     directions = rng.normal(size=(5, 6))
     result = site_speeds(speed_model, q_all, directions)
     for n, (q, d) in enumerate(zip(q_all, directions, strict=True)):
-        mass_matrix = pin.crba(model, data, q)
-        mass_matrix = np.triu(mass_matrix) + np.triu(mass_matrix, 1).T
         # the armature is on CRBA's diagonal (rounding of O(1) sums)
         without = pin.crba(bare, bare_data, q)
-        np.testing.assert_allclose(np.diag(mass_matrix) - np.diag(without), armature, atol=1e-12)
-        minv = np.linalg.inv(mass_matrix)
-        pin.computeJointJacobians(model, data, q)
-        pin.updateFramePlacements(model, data)
-        for k, frame in enumerate(frames):
-            jacobian = pin.getFrameJacobian(model, data, frame, pin.LOCAL_WORLD_ALIGNED)[:3]
-            velocity = jacobian @ d
-            speed = float(np.linalg.norm(velocity))
-            u = velocity / speed
-            mass = 1.0 / (u @ jacobian @ minv @ jacobian.T @ u)
-            # conditioning of M (armature-dominated, < 1e3) times a few ε
-            assert result.speed_per_unit[n, k] == pytest.approx(speed, rel=1e-10)
-            assert result.effective_mass_kg[n, k] == pytest.approx(mass, rel=1e-9)
-            limits = {r: float(admissible_speed(mass, r)) for r in ("chest", "hand_fingers")}
-            assert result.max_speed_m_s[n, k] == pytest.approx(min(limits.values()), rel=1e-9)
-    assert math.isfinite(result.max_speed_m_s.sum())
+        np.testing.assert_allclose(
+            np.diag(oracle.mass_matrix(q)) - np.diag(without), armature, atol=1e-12
+        )
+        speeds, masses = oracle.speeds_and_masses(q, d)
+        limits = np.minimum(
+            admissible_speed(masses, "chest"), admissible_speed(masses, "hand_fingers")
+        )
+        # conditioning of M (armature-dominated, < 1e3) times a few ε
+        np.testing.assert_allclose(result.speed_per_unit[n], speeds, rtol=1e-10)
+        np.testing.assert_allclose(result.effective_mass_kg[n], masses, rtol=1e-9)
+        np.testing.assert_allclose(result.max_speed_m_s[n], limits, rtol=1e-9)
+    assert len(oracle.frames) == len(speed_model.sites) == len(sites) + len(points)

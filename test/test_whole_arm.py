@@ -416,9 +416,9 @@ def test_whole_arm_follows_the_redundancy_resolved_motion(tmp_path) -> None:
     site then has the optimised tip effective mass wherever the tip moves."""
     import yaml
 
-    from grasp_safety_ros.cli.scenario import parse_scenario
     from grasp_safety_ros.core.analyses.safety_report import analyse
     from grasp_safety_ros.paths import config_file
+    from grasp_safety_ros.scenario.schema import parse_scenario
 
     data = yaml.safe_load(config_file("book_baxter_extended.yaml").read_text())
     data["trajectory"]["dt_s"] = 0.1
@@ -453,9 +453,9 @@ def test_whole_arm_follows_the_redundancy_resolved_motion(tmp_path) -> None:
 def test_tip_twists_from_the_object_motion_equal_the_trajectorys() -> None:
     """The vectorised twists (object motion sampled once) equal each trajectory's tip_twists,
     for the quintic and for a waypoint path."""
-    from grasp_safety_ros.cli.scenario import load_scenario
     from grasp_safety_ros.core.analyses.whole_arm import tip_twists_in_base
     from grasp_safety_ros.paths import config_file
+    from grasp_safety_ros.scenario.schema import load_scenario
 
     grasp = pin.SE3(pin.rpy.rpyToMatrix(0.3, 0.2, -0.1), np.array([0.05, -0.1, 0.02]))
     waypoints = load_scenario(config_file("book_baxter_waypoints.yaml")).trajectory

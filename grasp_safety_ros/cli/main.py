@@ -16,7 +16,7 @@ from ..paths import config_file
 
 if TYPE_CHECKING:
     from ..core.analyses.safety_report import SafetyReport
-    from .scenario import Scenario
+    from ..scenario.schema import Scenario
 
 # The commands import the core, the scenario reader and the report writer when they run, so
 # ``grasp-safety --help`` and argument errors stay fast (docs/performance_pipeline.md).
@@ -27,12 +27,15 @@ PROGRESS_MIN_SAMPLES = 2000
 """Show a progress bar (on a terminal) when grasps x samples reaches this."""
 
 
-def _progress_printer(total_samples: int) -> Callable[[int, int], None] | None:
+def _progress_printer(total_samples: int) -> Callable[[str, int, int], None] | None:
+    """A bar of the ranking stage's grasps on a terminal (core.pipeline.Progress)."""
     if total_samples < PROGRESS_MIN_SAMPLES or not sys.stderr.isatty():
         return None
     started = time.perf_counter()
 
-    def show(done: int, total: int) -> None:
+    def show(stage: str, done: int, total: int) -> None:
+        if stage != "rank":
+            return
         width = 30
         filled = int(width * done / total)
         elapsed = time.perf_counter() - started
@@ -49,12 +52,12 @@ def _progress_printer(total_samples: int) -> Callable[[int, int], None] | None:
 def rank_scenario(scenario: Scenario, metric: str | None = None) -> SafetyReport:
     """Load the scenario's robot, rank its grasps and run the analyses the scenario asks for."""
     from ..core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
-    from .scenario import rank_with_evaluator
+    from ..core.pipeline import run_pipeline
 
     robot = scenario.robot.load(scenario.base_dir)
     evaluator = GraspSafetyEvaluator(robot, EvaluationConfig(metric=metric or scenario.metric))
     progress = _progress_printer(len(scenario.grasps) * len(scenario.trajectory.times_s()))
-    return rank_with_evaluator(scenario, evaluator, progress)
+    return run_pipeline(evaluator, scenario.request(robot), progress)
 
 
 def run_header(scenario: Scenario, report: SafetyReport) -> str:
@@ -125,6 +128,11 @@ def _write_outputs(
 
         try:
             plot_report(report, plot_path, title)
+            if report.retimed:
+                from .retime_plot import plot_retimed
+
+                for written in plot_retimed(report, plot_path, title):
+                    print(f"wrote {written}")
         except (OSError, ValueError) as error:  # ValueError: a format matplotlib lacks
             reason = getattr(error, "strerror", None) or " ".join(str(error).split())
             raise InvalidInputError("--plot", f"cannot write '{plot_path}': {reason}") from None
@@ -132,10 +140,17 @@ def _write_outputs(
 
 
 def _command_rank(args: argparse.Namespace) -> int:
+    from ..scenario.schema import load_scenario
     from .report import report_text
-    from .scenario import load_scenario
 
     scenario = load_scenario(args.scenario)
+    if args.retime and scenario.options.retime is None:  # the limits: refused when missing
+        from dataclasses import replace
+
+        from ..scenario.schema import parse_retime
+
+        retime = parse_retime(None, requested=True)
+        scenario = replace(scenario, options=replace(scenario.options, retime=retime))
     report = rank_scenario(scenario, args.metric)
     print(run_header(scenario, report))
     print(report_text(report))
@@ -144,8 +159,8 @@ def _command_rank(args: argparse.Namespace) -> int:
 
 
 def _command_demo(args: argparse.Namespace) -> int:
+    from ..scenario.schema import load_scenario
     from .report import report_text
-    from .scenario import load_scenario
 
     path = config_file(DEMO_SCENARIO)
     print(f"demo: the paper's book experiment on Baxter ({path})")
@@ -218,6 +233,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     rank.add_argument("--plot", type=Path, help="write the heatmap and curves as PNG")
     rank.add_argument("--metric", choices=METRICS, help="override the scenario's metric")
+    rank.add_argument(
+        "--retime",
+        action="store_true",
+        help="retime each grasp to the ISO/TS 15066 site speed limits (needs the scenario's "
+        "retime.joint_acceleration_limits; docs/safe_speed.md)",
+    )
     rank.set_defaults(handler=_command_rank)
     demo = commands.add_parser("demo", help="the paper's book experiment on the bundled Baxter")
     demo.add_argument("--out", default="demo_output", help="output folder (default: %(default)s)")

@@ -16,6 +16,12 @@ from ..core.method.posture import SCORE_CRITERION, PostureSelection
 from ..core.method.ranking import GraspEvaluation, Ranking
 from ..core.model.armature import ArmatureRatio, armature_ratio
 from ..core.model.robot import NO_ARMATURE_NOTE
+from .retime_report import (
+    retime_lines,
+    retimed_to_dict,
+    standard_mass_lines,
+    standard_mass_to_dict,
+)
 
 SCORE_UNITS = {"mean": "kg", "max": "kg", "integral": "kg*s"}
 
@@ -184,6 +190,10 @@ def _report_tree(report: SafetyReport, per_sample: bool = True) -> dict[str, Any
         _add_per_grasp_series(report, k, grasp)
         if report.whole_arm:
             grasp["whole_arm"] = whole_arm_to_dict(report.whole_arm[k], per_sample)
+        if report.retimed:
+            grasp.update(retimed_to_dict(report.retimed[k], per_sample))
+        if report.whole_arm or report.retimed:
+            grasp["standard_mass_estimate"] = standard_mass_to_dict(report, k)
     if report.arm_sites is not None:
         result["whole_arm"] = whole_arm_sites_to_dict(report.arm_sites, options.whole_arm_region)
     return result
@@ -412,6 +422,10 @@ def report_text(report: SafetyReport) -> str:
         lines += _iso_lines(report)
     if report.whole_arm:
         lines += whole_arm_lines(report)
+    if report.retimed:
+        lines += retime_lines(report)
+    if report.whole_arm or report.retimed:
+        lines += standard_mass_lines(report)
     if report.uncertainty is not None:
         lines += ["", f"inertia uncertainty (tip effective mass): {report.uncertainty.message}"]
         for g in report.uncertainty.grasps:

@@ -1,4 +1,4 @@
-"""The batch: chunks of (source file, grasp range), each ranked by ``rank_with_evaluator`` and
+"""The batch: chunks of (source file, grasp range), each ranked by ``run_pipeline`` and
 written as one Parquet part (atomically), on the package's own pool or a Dask cluster.
 
 Output folder: ``parts/part-00000.parquet`` ... (one per chunk, in plan order, each with its
@@ -31,11 +31,13 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from .. import __version__
-from ..cli.scenario import Scenario, rank_with_evaluator, read_yaml_file
 from ..core.exceptions import GraspSafetyError, InvalidInputError
 from ..core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
 from ..core.method.warm_up import warm_up
 from ..core.model.robot import resolve_urdf
+from ..core.pipeline import run_pipeline
+from ..scenario.fields import read_yaml_file
+from ..scenario.schema import Scenario
 from .rows import block_columns
 from .schema import SCHEMA_VERSION, grasp_schema, table
 from .sources import Failure, GraspBlock, SourceFile, discover, load_block, scenario_of
@@ -222,7 +224,8 @@ def evaluate_chunk(payload: SpecPayload, chunk: Chunk, workers: int) -> ChunkRes
     report, samples = None, 0
     if block.scenario is not None:
         try:
-            report = rank_with_evaluator(block.scenario, _evaluator(block.scenario, workers))
+            evaluator = _evaluator(block.scenario, workers)
+            report = run_pipeline(evaluator, block.scenario.request(evaluator.robot))
             samples = len(block.scenario.grasps) * block.scenario.trajectory.num_samples
         except GraspSafetyError as error:
             block = _unreadable(chunk, error.field, error.reason)

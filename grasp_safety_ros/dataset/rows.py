@@ -49,6 +49,8 @@ def report_columns(report: SafetyReport, per_sample: bool = False) -> dict[str, 
         put("iso_ts_15066_min_duration_s", None if a is None else a.min_duration_s)
         put("iso_ts_15066_limiting_region", (a.limiting_region or None) if a else None)
         put("iso_ts_15066_admissible_where_permitted", a.admissible_where_permitted if a else None)
+        motion = report.retimed[k] if report.retimed else None
+        put("safe_duration_s", None if motion is None else motion.safe_duration_s)
         put("backend", ranking.backend)
         if per_sample:
             for name in ("times_s", "effective_mass_kg", "tip_speed_m_s"):

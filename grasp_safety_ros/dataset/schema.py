@@ -50,6 +50,7 @@ GRASP_SCHEMA = pa.schema(
         pa.field("iso_ts_15066_min_duration_s", pa.float64()),  # T_min
         pa.field("iso_ts_15066_limiting_region", pa.string()),
         pa.field("iso_ts_15066_admissible_where_permitted", pa.bool_()),
+        pa.field("safe_duration_s", pa.float64()),  # retimed to the site limits (retime:)
         pa.field("backend", _TEXT),  # compiled | python (...)
     ]
 )

@@ -18,11 +18,12 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from ..cli.scenario import MAX_OBJECT_MASS_KG, Scenario, _mapping, load_scenario, load_yaml
 from ..core.exceptions import GraspSafetyError, InvalidInputError
 from ..core.input_checks import finite_array, finite_float, pose_from_position_quat
 from ..core.method.ranking import Grasp
 from ..core.model.inertia import ObjectInertia
+from ..scenario.fields import load_yaml, mapping
+from ..scenario.schema import MAX_OBJECT_MASS_KG, Scenario, load_scenario
 from .spec import BatchSpec
 
 MAX_YAML_SOURCE_BYTES = 256_000_000
@@ -283,7 +284,7 @@ def _graspgen_grasps(path: Path, sha256: str) -> tuple[tuple[str, Any], ...]:
         raise InvalidInputError("/", f"not UTF-8 text (byte {error.start})") from None
     except InvalidInputError as error:
         raise InvalidInputError("/", error.reason) from None
-    root = _mapping(data, "/")
+    root = mapping(data, "/")
     if root.get("format") != "isaac_grasp":
         raise InvalidInputError("format", f"must be isaac_grasp, got {root.get('format')!r}")
     grasps = root.get("grasps")
@@ -293,8 +294,8 @@ def _graspgen_grasps(path: Path, sha256: str) -> tuple[tuple[str, Any], ...]:
 
 
 def _graspgen_pose(entry: Any, key: str) -> tuple[pin.SE3, float | None]:
-    grasp = _mapping(entry, key)
-    orientation = _mapping(grasp.get("orientation"), f"{key}.orientation")
+    grasp = mapping(entry, key)
+    orientation = mapping(grasp.get("orientation"), f"{key}.orientation")
     xyz = finite_array(orientation.get("xyz"), f"{key}.orientation.xyz", (3,))
     w = finite_float(orientation.get("w"), f"{key}.orientation.w")
     pose = pose_from_position_quat(grasp.get("position"), [*xyz, w], key)

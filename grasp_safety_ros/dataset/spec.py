@@ -17,20 +17,6 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from ..cli.scenario import (
-    OPTIONAL_SECTIONS,
-    RobotSpec,
-    _check_keys,
-    _mapping,
-    _pose,
-    _required,
-    _string,
-    parse_object,
-    parse_options,
-    parse_posture,
-    parse_robot,
-    read_yaml_file,
-)
 from ..core.analyses.safety_report import AnalysisOptions
 from ..core.exceptions import InvalidInputError
 from ..core.input_checks import finite_float
@@ -38,11 +24,21 @@ from ..core.method.posture import PostureConfig
 from ..core.method.ranking import check_metric
 from ..core.model.inertia import ObjectInertia
 from ..core.model.waypoint_trajectory import WaypointTrajectory
+from ..core.options import default
+from ..scenario.fields import check_keys, mapping, read_pose, read_yaml_file, required, string
+from ..scenario.schema import (
+    OPTIONAL_SECTIONS,
+    RobotSpec,
+    parse_object,
+    parse_options,
+    parse_posture,
+    parse_robot,
+)
 
 FORMATS = ("acronym", "graspgen", "scenarios")
 """Source formats: ACRONYM HDF5, GraspGen ``isaac_grasp`` YAML, scenario files."""
 
-PER_GRASP_ANALYSES = frozenset({"metric_point", "iso_ts_15066", "redundancy", "effort"})
+PER_GRASP_ANALYSES = frozenset({"metric_point", "iso_ts_15066", "redundancy", "effort", "retime"})
 """Analysis sections a SPEC may have: each grasp's result depends on that grasp alone."""
 
 SET_ANALYSES = OPTIONAL_SECTIONS - PER_GRASP_ANALYSES - {"posture"}
@@ -101,9 +97,9 @@ class BatchSpec:
 def parse_motion(section: Any, start: pin.SE3) -> WaypointTrajectory:
     """The ``motion`` section (waypoints in the object's start frame, first the identity at
     0 s, and ``dt_s``) as a trajectory in the base frame: T_base_object_start · M(t_i)."""
-    motion = _mapping(section, "motion")
-    _check_keys(motion, {"waypoints", "dt_s"}, "motion")
-    waypoints = _required(motion, "waypoints", "motion")
+    motion = mapping(section, "motion")
+    check_keys(motion, {"waypoints", "dt_s"}, "motion")
+    waypoints = required(motion, "waypoints", "motion")
     if not isinstance(waypoints, list) or len(waypoints) < 2:
         raise InvalidInputError(
             "motion.waypoints", f"must be a list of at least 2 timed poses, got {waypoints!r}"
@@ -111,8 +107,8 @@ def parse_motion(section: Any, start: pin.SE3) -> WaypointTrajectory:
     times, poses = [], []
     for i, item in enumerate(waypoints):
         field = f"motion.waypoints[{i}]"
-        pose = _pose(item, field, frozenset({"time_s"}))
-        times.append(finite_float(_required(item, "time_s", field), f"{field}.time_s"))
+        pose = read_pose(item, field, frozenset({"time_s"}))
+        times.append(finite_float(required(item, "time_s", field), f"{field}.time_s"))
         poses.append(start * pose)
         if i == 0:
             angle = float(np.linalg.norm(pin.log3(pose.rotation)))
@@ -123,7 +119,7 @@ def parse_motion(section: Any, start: pin.SE3) -> WaypointTrajectory:
                     "must be the identity at time_s 0 (the object's start frame), got time_s "
                     f"{times[0]:g}, offset {offset:g} m, angle {angle:g} rad",
                 )
-    dt_s = finite_float(_required(motion, "dt_s", "motion"), "motion.dt_s")
+    dt_s = finite_float(required(motion, "dt_s", "motion"), "motion.dt_s")
     return WaypointTrajectory(tuple(times), tuple(poses), dt_s)
 
 
@@ -134,14 +130,14 @@ def parse_sources(section: Any) -> tuple[SourceSpec, ...]:
     sources = []
     for i, item in enumerate(section):
         field = f"sources[{i}]"
-        entry = _mapping(item, field)
-        _check_keys(entry, {"format", "path"}, field)
-        fmt = _required(entry, "format", field)
+        entry = mapping(item, field)
+        check_keys(entry, {"format", "path"}, field)
+        fmt = required(entry, "format", field)
         if fmt not in FORMATS:
             raise InvalidInputError(
                 f"{field}.format", f"must be one of {', '.join(FORMATS)}, got {fmt!r}"
             )
-        sources.append(SourceSpec(fmt, _string(_required(entry, "path", field), f"{field}.path")))
+        sources.append(SourceSpec(fmt, string(required(entry, "path", field), f"{field}.path")))
     return tuple(sources)
 
 
@@ -165,29 +161,29 @@ def _content_hash(data: Any, robot: RobotSpec | None, base_dir: Path) -> str:
 
 def parse_spec(data: Any, base_dir: Path) -> BatchSpec:
     """Validate a SPEC mapping (as loaded from YAML)."""
-    root = _mapping(data, "spec")
+    root = mapping(data, "spec")
     dataset_keys = {"robot", "gripper_to_tip", "object_start_in_base", "motion"}
     allowed = dataset_keys | {"object", "metric", "posture", "sources", "chunk_grasps"}
     for name in sorted(SET_ANALYSES & set(root)):
         raise InvalidInputError(
             name, "depends on the whole candidate set; not available in a batch (chunks)"
         )
-    _check_keys(root, allowed | PER_GRASP_ANALYSES, "")
-    sources = parse_sources(_required(root, "sources", ""))
+    check_keys(root, allowed | PER_GRASP_ANALYSES, "")
+    sources = parse_sources(required(root, "sources", ""))
     needs_arm = any(s.format != "scenarios" for s in sources)
     robot = tip_to_gripper = trajectory = None
     if needs_arm or "robot" in root:
-        robot = parse_robot(_required(root, "robot", ""))
+        robot = parse_robot(required(root, "robot", ""))
     if needs_arm:
-        tip_to_gripper = _pose(_required(root, "gripper_to_tip", ""), "gripper_to_tip")
-        start = _pose(_required(root, "object_start_in_base", ""), "object_start_in_base")
-        trajectory = parse_motion(_required(root, "motion", ""), start)
+        tip_to_gripper = read_pose(required(root, "gripper_to_tip", ""), "gripper_to_tip")
+        start = read_pose(required(root, "object_start_in_base", ""), "object_start_in_base")
+        trajectory = parse_motion(required(root, "motion", ""), start)
     defaults, points = (None, None)
     if "object" in root:
         defaults, points = parse_object(root["object"])
     if any(s.format == "graspgen" for s in sources) and defaults is None:
         raise InvalidInputError("object", "is required for graspgen sources (they carry no mass)")
-    metric = root.get("metric", "mean")
+    metric = root.get("metric", default("metric"))
     if not isinstance(metric, str):
         raise InvalidInputError("metric", f"must be a string, got {metric!r}")
     return BatchSpec(

@@ -156,8 +156,9 @@ def check_finite_result(ranking: Any) -> None:
     any evaluation an infinite one: no success answer ranks a grasp by a non-finite number.
 
     Scores of analyses that ran are checked too: ``combined_score`` and ``grasp_quality``
-    when a quality was given (``safety_weight`` finite), ``effort_score`` when effort ran,
-    ``worst_case_score`` and ``percentile_score`` when the uncertainty analysis ran.
+    when a quality was given (``safety_weight`` finite), ``effort_score`` when it orders,
+    ``worst_case_score`` and ``percentile_score`` when the uncertainty analysis ran, the
+    scores at both ends of the armature ranges when those ran (``armature_order_*`` ordered).
 
     Raises:
         NonFiniteResultError: naming the grasp and the score.
@@ -165,15 +166,19 @@ def check_finite_result(ranking: Any) -> None:
     names = list(_SCORES)
     if math.isfinite(ranking.safety_weight):
         names += ["combined_score", "grasp_quality"]
-    if ranking.effort_criterion:
+    if ranking.rank_by == "effort":  # else NaN is an answer: no effort limit known
         names.append("effort_score")
     if math.isfinite(ranking.order_stability):
         names += ["worst_case_score", "percentile_score"]
+    if ranking.armature_range_message:
+        names += ["score_armature_lower", "score_armature_upper"]
     ordered = {
         *ranking.order,
         *ranking.safety_order,
         *ranking.paper_order,
         *ranking.worst_case_order,
+        *ranking.armature_order_lower,
+        *ranking.armature_order_upper,
     }
     evaluations = ranking.evaluations
     for index in sorted(ordered):

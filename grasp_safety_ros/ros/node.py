@@ -1,9 +1,8 @@
 """The ``grasp_safety`` node: ranks candidate grasps with the core, over a service and topics.
 
 A thin adapter: messages are converted in the conversions package, parameters validated in
-parameters.py, requests prepared and computed in ranking_inputs.py: GraspSafetyEvaluator.rank
-followed by core.analyses.safety_report.analyse (metric point, ISO/TS 15066, inertia
-uncertainty, grasp quality, redundancy, effort). See docs/ros/interface.md for the interface.
+parameters.py, requests prepared in ranking_inputs.py and computed by core.pipeline.run_pipeline
+(ranking, postures, every enabled analysis, armature range). See docs/ros/interface.md.
 
 Threads: a NodeExecutor (a MultiThreadedExecutor) with EXECUTOR_THREADS threads. The service
 sits in its own reentrant callback group, the input topics in a mutually exclusive one,
@@ -62,6 +61,7 @@ from visualization_msgs.msg import MarkerArray
 
 from ..core.exceptions import GraspSafetyError, InvalidInputError
 from ..core.model.inertia import ObjectInertia
+from ..core.pipeline import run_pipeline
 from .arm_points import check_arm_point_links
 from .conversions import (
     check_frame_id,
@@ -85,7 +85,7 @@ from .message_checks import check_finite_result, check_no_subnormals
 from .on_demand import OnDemandPublisher
 from .parameters import PARAMETERS, NodeSettings, check_parameter, settings_from_parameters
 from .qos import INPUT, LATCHED, SERVICE
-from .ranking_inputs import compute_ranking, markers_builder, ranking_inputs
+from .ranking_inputs import markers_builder, ranking_inputs
 from .ranking_job import (
     ClientWatch,
     FairComputeLock,
@@ -609,7 +609,7 @@ class GraspSafetyNode(Node):
                 "no robot description yet: set the robot_description or urdf parameter or "
                 "publish the URDF on /robot_description"
             )
-        inputs = ranking_inputs(
+        request = ranking_inputs(
             state,
             bundle,
             grasps_msg,
@@ -622,7 +622,7 @@ class GraspSafetyNode(Node):
             quality_field,
             joint_trajectories,
         )
-        grasps, trajectory = inputs.grasps, inputs.trajectory
+        grasps, trajectory = request.grasps, request.trajectory
 
         if not self._compute_lock.acquire(timeout=settings.service_busy_timeout_s):
             if self._stopping.is_set():
@@ -633,10 +633,8 @@ class GraspSafetyNode(Node):
             )
         try:
             started = time.perf_counter()
-            deadline_check = progress_check(
-                settings, self._stopping, self._compute_lock, client_watch
-            )
-            ranking, report = compute_ranking(bundle, settings, inputs, deadline_check)
+            check = progress_check(settings, self._stopping, self._compute_lock, client_watch)
+            report = run_pipeline(bundle.evaluator, request, check)
             compute_time_s = time.perf_counter() - started
         finally:
             self._compute_lock.release()
@@ -649,8 +647,9 @@ class GraspSafetyNode(Node):
         self._ranking_pub.publish(lambda: result)
         self._ranked_pub.publish(result.ranked_grasps)
         self._markers_pub.publish(
-            markers_builder(ranking, report, grasps, trajectory, settings.base_frame, stamp)
+            markers_builder(report.ranking, report, grasps, trajectory, settings.base_frame, stamp)
         )
+        ranking = report.ranking
         feasible = sum(1 for e in ranking.evaluations if e.feasible)
         with self._state_lock:
             self._status.record_ranking(source, compute_time_s, feasible, len(ranking.evaluations))

@@ -24,13 +24,14 @@ from ..core.analyses.exposed_points import (
 from ..core.analyses.iso15066 import BODY_REGIONS
 from ..core.analyses.safety_report import RANK_BY, AnalysisOptions
 from ..core.analyses.uncertainty import InertiaUncertainty
-from ..core.analyses.whole_arm import DEFAULT_RANK_REGION, MAX_SITES
+from ..core.analyses.whole_arm import MAX_SITES
 from ..core.exceptions import InvalidInputError
 from ..core.input_checks import finite_array, finite_float
-from ..core.method.posture import DEFAULT_RESTARTS, MAX_RESTARTS, PostureConfig
+from ..core.method.posture import PostureConfig
 from ..core.method.ranking import METRICS
 from ..core.model.armature import PUBLISHED
 from ..core.model.inertia import ObjectInertia
+from ..core.options import LIMITS, OPTIONS, bounds, help_text
 from .arm_points import arm_points, check_point_links
 from .conversions.geometry import inertia_tensor_from_components
 from .response import MAX_COUNT, ResponseContent
@@ -52,6 +53,11 @@ class ParameterSpec:
     description: str
     item_type: type | None = None
     read_only: bool = False
+
+
+def _option(key: str) -> ParameterSpec:
+    """The parameter of option ``key`` of the one table (core.options): default and help."""
+    return ParameterSpec(OPTIONS[key].default, help_text(key))
 
 
 PARAMETERS: Mapping[str, ParameterSpec] = {
@@ -77,6 +83,13 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
         "chain joints the values of robot.armature_kgm2 are for (the others keep the "
         "description's own: an MJCF's, else 0); empty: all chain joints in order",
         item_type=str,
+    ),
+    "robot.armature_lower_kgm2": ParameterSpec(
+        [],
+        "lower ends of armature ranges, for the joints of robot.armature_kgm2 (then the upper "
+        "ends, which the chain carries) [kg m^2; kg for prismatic joints], 0 <= lower <= "
+        "upper; the response gives the order at both ends; empty: no ranges",
+        item_type=float,
     ),
     "robot.armature_published": ParameterSpec(
         "",
@@ -116,11 +129,15 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
     "trajectory.duration_s": ParameterSpec(
         2.0, "trajectory duration when the two Path stamps are equal [s]"
     ),
-    "metric": ParameterSpec("mean", f"default score: {' | '.join(METRICS)}"),
-    "max_grasps": ParameterSpec(1000, "most grasps accepted in one request or candidate set"),
-    "max_samples": ParameterSpec(20000, "most samples accepted per trajectory"),
+    "metric": _option("metric"),
+    "max_grasps": ParameterSpec(
+        LIMITS["grasps"].budget, "most grasps accepted in one request or candidate set"
+    ),
+    "max_samples": ParameterSpec(
+        LIMITS["trajectory_samples"].budget, "most samples accepted per trajectory"
+    ),
     "max_total_samples": ParameterSpec(
-        500_000,
+        LIMITS["grasp_samples"].budget,
         "most grasps x samples accepted in one request (bounds time and the result's size)",
     ),
     "max_mass_kg": ParameterSpec(1000.0, "largest object mass accepted [kg]"),
@@ -134,11 +151,7 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
     ),
     "diagnostics_period_s": ParameterSpec(1.0, "period of /diagnostics status messages [s]"),
     # --- Analyses beyond the paper (core.analyses.safety_report.AnalysisOptions) ---
-    "metric_point": ParameterSpec(
-        "tip",
-        f"default point whose effective mass the safety score uses: {' | '.join(METRIC_POINTS)}"
-        " (the last two need object points)",
-    ),
+    "metric_point": _option("metric_point"),
     "object.points_in_object_m": ParameterSpec(
         [],
         "exposed object points, object frame, flat x y z x y z ... [m]; empty: from "
@@ -157,38 +170,18 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
     "iso_ts_15066.regions": ParameterSpec(
         [], "ISO/TS 15066 body regions to assess; empty: all of them", item_type=str
     ),
-    "uncertainty.mass_fraction": ParameterSpec(
-        0.0, "relative object mass error bound, in [0, 1); all three bounds 0: no analysis"
-    ),
-    "uncertainty.com_offset_m": ParameterSpec(0.0, "object CoM error bound per object axis [m]"),
-    "uncertainty.inertia_fraction": ParameterSpec(
-        0.0, "relative error bound of the principal moments of inertia, in [0, 1)"
-    ),
-    "uncertainty.samples": ParameterSpec(
-        64, "random inertias drawn in the error box (besides the nominal one and the corners)"
-    ),
-    "uncertainty.percentile": ParameterSpec(
-        95.0, "percentile of the score reported per grasp, in [0, 100]"
-    ),
-    "uncertainty.seed": ParameterSpec(0, "seed of the random inertias (results are repeatable)"),
-    "safety_weight": ParameterSpec(
-        0.5, "w in [0, 1] of w*safety + (1 - w)*quality when a grasp quality is given"
-    ),
-    "redundancy.enabled": ParameterSpec(
-        False, "lower the tip effective mass in the null space (chains with > 6 joints)"
-    ),
-    "effort.enabled": ParameterSpec(False, "compute joint torques along the trajectory"),
-    "effort.criterion": ParameterSpec(
-        "peak_fraction", f"effort score: {' | '.join(EFFORT_CRITERIA)} of the URDF effort limits"
-    ),
-    "rank_by": ParameterSpec(
-        "safety", f"final order: {' | '.join(RANK_BY)} (effort turns effort.enabled on)"
-    ),
-    "posture.restarts": ParameterSpec(
-        DEFAULT_RESTARTS,
-        "IK restarts at the start pose per grasp besides the seed's; the lowest-score posture "
-        "is kept; 0: the paper's single IK",
-    ),
+    "uncertainty.mass_fraction": _option("uncertainty.mass_fraction"),
+    "uncertainty.com_offset_m": _option("uncertainty.com_offset_m"),
+    "uncertainty.inertia_fraction": _option("uncertainty.inertia_fraction"),
+    "uncertainty.samples": _option("uncertainty.samples"),
+    "uncertainty.percentile": _option("uncertainty.percentile"),
+    "uncertainty.seed": _option("uncertainty.seed"),
+    "safety_weight": _option("safety_weight"),
+    "redundancy.enabled": _option("redundancy.enabled"),
+    "effort.enabled": _option("effort.enabled"),
+    "effort.criterion": _option("effort.criterion"),
+    "rank_by": _option("rank_by"),
+    "posture.restarts": _option("posture.restarts"),
     # --- What the result messages carry (the service's response and ~/ranking) ---
     "response.joint_trajectories": ParameterSpec(
         1,
@@ -201,16 +194,8 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
         "direction_xyz, ...); false: leave them empty (the scores and aggregates stay)",
     ),
     # --- The whole arm's exposure (core.analyses.whole_arm, docs/whole_arm.md) ---
-    "whole_arm.enabled": ParameterSpec(
-        False,
-        "assess points on the arm's links (every chain joint origin from the third on, the "
-        "tip, and whole_arm.points_m); rank_by whole_arm or extra points turn it on",
-    ),
-    "whole_arm.region": ParameterSpec(
-        DEFAULT_RANK_REGION,
-        "body region whose worst predicted transient force over the arm's points orders "
-        "rank_by whole_arm; must be among iso_ts_15066.regions (when not empty)",
-    ),
+    "whole_arm.enabled": _option("whole_arm.enabled"),
+    "whole_arm.region": _option("whole_arm.region"),
     "whole_arm.point_links": ParameterSpec(
         [],
         "link of each extra point on the arm, one per x y z of whole_arm.points_m (a link may "
@@ -228,7 +213,7 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
 
 ROBOT_PARAMETERS = ("robot_description", "urdf", "base_frame", "tip_frame")
 ROBOT_PARAMETERS += ("robot.armature_kgm2", "robot.armature_joint_names")
-ROBOT_PARAMETERS += ("robot.armature_published",)
+ROBOT_PARAMETERS += ("robot.armature_published", "robot.armature_lower_kgm2")
 """Parameters whose change rebuilds the robot model."""
 
 _STRINGS = ("robot_description", "urdf", "base_frame", "tip_frame", "object_frame", "metric")
@@ -247,26 +232,21 @@ _POSITIVE = ("trajectory.dt_s", "trajectory.duration_s", "max_mass_kg", "max_com
 _POSITIVE += ("service_busy_timeout_s", "diagnostics_period_s")
 _FRACTIONS = ("uncertainty.mass_fraction", "uncertainty.inertia_fraction")
 _RANGES: Mapping[str, tuple[float, float]] = {
-    "uncertainty.percentile": (0.0, 100.0),
-    "safety_weight": (0.0, 1.0),
+    key: bounds(key) for key in ("uncertainty.percentile", "safety_weight")
 }
-_MAX_POINTS = 1_000
-MAX_GRASPS_LIMIT = 10_000
-MAX_SAMPLES_LIMIT = 10_000_000
-MAX_UNCERTAINTY_SAMPLES = 10_000
-"""Upper bounds of the node's count parameters and (conversions.geometry.MAX_OBJECT_SIZE_M)
-of an object's size, the CLI's scenario limits (cli/scenario.py: MAX_GRASPS,
-MAX_GRASP_SAMPLES, MAX_UNCERTAINTY_SAMPLES, MAX_POINTS, MAX_OBJECT_SIZE_M; a test keeps them
-equal): beyond them a request cannot finish in useful
-time or memory (``uncertainty.samples`` = 10^9 asked for 52 GiB per request)."""
+_MAX_POINTS = int(LIMITS["points"].value)
+MAX_GRASPS_LIMIT = int(LIMITS["grasps"].value)
+MAX_SAMPLES_LIMIT = int(LIMITS["grasp_samples"].value)
+"""Upper bounds of the node's count parameters, the scenario's limits (core.options.LIMITS):
+beyond them a request cannot finish in useful time or memory."""
 _COUNT_LIMITS: Mapping[str, tuple[int, int]] = {
-    "max_grasps": (1, MAX_GRASPS_LIMIT),
-    "max_samples": (1, MAX_SAMPLES_LIMIT),
-    "max_total_samples": (1, MAX_SAMPLES_LIMIT),
-    "uncertainty.samples": (0, MAX_UNCERTAINTY_SAMPLES),
+    **{limit.node: (1, int(limit.value)) for limit in LIMITS.values() if limit.node},
+    **{
+        key: (int(bounds(key)[0]), int(bounds(key)[1]))
+        for key in ("uncertainty.samples", "posture.restarts")
+    },
     "uncertainty.seed": (0, MAX_COUNT),  # a seed, not a count
     "response.joint_trajectories": (0, MAX_COUNT),  # clipped to the number of grasps
-    "posture.restarts": (0, MAX_RESTARTS),
 }
 
 
@@ -284,8 +264,8 @@ class NodeSettings:
         response: What the result messages carry (``response.*``).
         ik_seed: The seed parameter, or None when empty (length checked against the robot
             in build_robot).
-        armature_kgm2, armature_joint_names, armature_published: The ``robot.armature_*``
-            parameters (checked against the chain in build_robot).
+        armature_kgm2, armature_joint_names, armature_published, armature_lower_kgm2: The
+            ``robot.armature_*`` parameters (checked against the chain in build_robot).
     """
 
     robot_description: str
@@ -315,6 +295,7 @@ class NodeSettings:
     armature_kgm2: tuple[float, ...] = ()
     armature_joint_names: tuple[str, ...] = ()
     armature_published: str = ""
+    armature_lower_kgm2: tuple[float, ...] = ()
 
     @property
     def robot_source(self) -> str:
@@ -382,7 +363,7 @@ def check_parameter(name: str, value: Any) -> Any:
         return _integer(name, value, *_COUNT_LIMITS[name])
     if name == "ik_seed":
         return _numbers(name, value, None)
-    if name == "robot.armature_kgm2":
+    if name in ("robot.armature_kgm2", "robot.armature_lower_kgm2"):
         values = _numbers(name, value, None)
         negative = [k for k, x in enumerate(values) if x < 0.0]
         if negative:
@@ -663,4 +644,5 @@ def settings_from_parameters(values: Mapping[str, Any]) -> NodeSettings:
         armature_kgm2=v["robot.armature_kgm2"],
         armature_joint_names=v["robot.armature_joint_names"],
         armature_published=v["robot.armature_published"],
+        armature_lower_kgm2=v["robot.armature_lower_kgm2"],
     )

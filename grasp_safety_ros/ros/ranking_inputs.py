@@ -1,12 +1,12 @@
-"""A ranking request converted and checked against the node's settings, and its computation:
-GraspSafetyEvaluator.rank, select_postures, then analyse (plain Python, no rclpy)."""
+"""A ranking request's messages converted and checked against the node's settings into the
+core's PipelineRequest (core.pipeline runs it), and the markers of its report (plain Python,
+no rclpy)."""
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
-import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Inertia, PoseArray
 from nav_msgs.msg import Path
@@ -14,13 +14,12 @@ from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from ..core.analyses.exposed_points import check_metric_point
-from ..core.analyses.safety_report import AnalysisOptions, SafetyReport, analyse, posture_criterion
+from ..core.analyses.safety_report import AnalysisOptions, SafetyReport
 from ..core.exceptions import InvalidInputError
-from ..core.method.posture import select_postures
 from ..core.method.ranking import Grasp, Ranking, check_metric
-from ..core.model.inertia import ObjectInertia
 from ..core.model.trajectory import ObjectTrajectory
 from ..core.model.waypoint_trajectory import WaypointTrajectory
+from ..core.pipeline import PipelineRequest
 from .conversions import (
     grasps_from_pose_array,
     grasps_with_joint_trajectories,
@@ -29,21 +28,8 @@ from .conversions import (
     seed_from_joint_state,
     trajectory_from_msg,
 )
-from .parameters import NodeSettings
 from .ranking_job import Snapshot, labels_only
 from .robot_bundle import RobotBundle
-
-
-@dataclass(frozen=True)
-class RankingInputs:
-    """What one ranking computes: the request in core types, checked against the settings."""
-
-    trajectory: ObjectTrajectory | WaypointTrajectory
-    grasps: list[Grasp]
-    object_inertia: ObjectInertia
-    metric: str
-    options: AnalysisOptions
-    seed: np.ndarray | None
 
 
 def ranking_inputs(
@@ -58,9 +44,10 @@ def ranking_inputs(
     metric_point: str,
     quality_field: str,
     joint_trajectories: Sequence[JointTrajectory],
-) -> RankingInputs:
-    """The request's messages converted and checked (GraspSafetyNode._rank's arguments).
-    Raises GraspSafetyError naming the field."""
+) -> PipelineRequest:
+    """The request's messages converted and checked (GraspSafetyNode._rank's arguments), with
+    the node's posture settings and the robot's armature range. Raises GraspSafetyError
+    naming the field."""
     settings = state.settings
     trajectory = trajectory_from_msg(
         trajectory_msg,
@@ -107,46 +94,16 @@ def ranking_inputs(
     seed = bundle.seed
     if seed is None and settings.use_joint_states_seed and state.joint_state is not None:
         seed = seed_from_joint_state(*state.joint_state, bundle.robot)
-    return RankingInputs(trajectory, grasps, object_inertia, metric, options, seed)
-
-
-def compute_ranking(
-    bundle: RobotBundle,
-    settings: NodeSettings,
-    inputs: RankingInputs,
-    deadline_check: Callable[[int, int], None],
-) -> tuple[Ranking, SafetyReport]:
-    """Rank, select postures, analyse; ``deadline_check`` is the progress callback."""
-    grasps, object_inertia, trajectory = inputs.grasps, inputs.object_inertia, inputs.trajectory
-    metric, options, seed = inputs.metric, inputs.options, inputs.seed
-    ranking = bundle.evaluator.rank(
-        grasps,
-        object_inertia,
-        trajectory,
-        seed_positions=seed,
+    return PipelineRequest(
+        grasps=tuple(grasps),
+        object_inertia=object_inertia,
+        trajectory=trajectory,
         metric=metric,
-        progress=deadline_check,
+        options=options,
+        posture=settings.posture,
+        seed_positions=seed,
+        armature_range=bundle.armature_range,
     )
-    ranking = select_postures(
-        bundle.evaluator,
-        grasps,
-        object_inertia,
-        trajectory,
-        ranking,
-        settings.posture,
-        progress=deadline_check,
-        criterion=posture_criterion(bundle.robot, options),
-    )
-    report = analyse(
-        bundle.evaluator,
-        grasps,
-        object_inertia,
-        trajectory,
-        options,
-        ranking=ranking,
-        progress=deadline_check,
-    )
-    return ranking, report
 
 
 def analysis_options(

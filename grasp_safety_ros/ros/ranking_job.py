@@ -22,6 +22,7 @@ import numpy as np
 
 from ..core.method.ranking import Ranking
 from ..core.model.inertia import ObjectInertia
+from ..core.pipeline import Progress
 from .errors import (
     ClientGoneError,
     ComputeTimeExceededError,
@@ -194,14 +195,14 @@ def progress_check(
     stopping: threading.Event,
     lock: FairComputeLock,
     client_watch: ClientWatch | None,
-) -> Callable[[int, int], None]:
-    """A progress callback for rank() and analyse(): abandons the work when the node shuts
+) -> Progress:
+    """The pipeline's progress hook (core.pipeline.Progress): abandons the work when the node shuts
     down, after max_compute_time_s of computing (time queued behind other rankings not
     counted), or when the request's clients are gone; between steps it shares the compute
     lock with waiting requests (FairComputeLock.share)."""
     deadline = time.perf_counter() + settings.max_compute_time_s
 
-    def check(done: int, total: int) -> None:
+    def check(_stage: str, done: int, total: int) -> None:
         nonlocal deadline
         if done >= total:
             return

@@ -4,11 +4,17 @@ armature parameters applied, its evaluator (kernels warmed up) and its validated
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 from ..core.exceptions import FrameNotFoundError, GraspSafetyError, InvalidInputError
 from ..core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
 from ..core.method.warm_up import warm_up
-from ..core.model.armature import published_for, published_values
+from ..core.model.armature import (
+    ArmatureRange,
+    armature_range,
+    published_for,
+    published_values,
+)
 from ..core.model.robot import RobotModel
 from .arm_points import check_arm_point_links
 from .parameters import NodeSettings
@@ -20,12 +26,15 @@ class RobotBundle:
 
     Attributes:
         origin: Where the description came from: a parameter name or the topic.
+        armature_range: The armature bounds when some joint has a range (the chain carries
+            the upper ends); None otherwise.
     """
 
     robot: RobotModel
     evaluator: GraspSafetyEvaluator
     seed: tuple[float, ...] | None
     origin: str
+    armature_range: ArmatureRange | None = None
 
 
 _CORE_FIELDS = {
@@ -50,23 +59,47 @@ def _renamed(error: GraspSafetyError, origin: str) -> GraspSafetyError:
 
 def _with_armature_parameters(
     robot: RobotModel, settings: NodeSettings, source: str
-) -> RobotModel:
-    """The chain with the armature of the ``robot.armature_*`` parameters (if any)."""
+) -> tuple[RobotModel, ArmatureRange | None]:
+    """The chain with the armature of the ``robot.armature_*`` parameters (if any), and the
+    armature range when ``robot.armature_lower_kgm2`` gives lower ends (the chain carries the
+    upper ends, ``robot.armature_kgm2``)."""
+    lower = settings.armature_lower_kgm2
     if settings.armature_published:
+        if lower:
+            raise InvalidInputError(
+                "robot.armature_lower_kgm2",
+                "must be empty with robot.armature_published (a published entry has values, "
+                "not ranges)",
+            )
         entry = published_for(settings.armature_published, source, robot.joint_names)
-        return robot.with_armature(published_values(entry, robot.joint_names))
+        return robot.with_armature(published_values(entry, robot.joint_names)), None
     values = settings.armature_kgm2
     names = settings.armature_joint_names
-    if not values and not names:
-        return robot
-    if names:
-        if len(names) != len(values):
+    if not values and not names and not lower:
+        return robot, None
+    if names and len(names) != len(values):
+        raise InvalidInputError(
+            "robot.armature_joint_names",
+            f"has {len(names)} names for {len(values)} values of robot.armature_kgm2",
+        )
+    if not lower:
+        given: Any = dict(zip(names, values, strict=True)) if names else values
+        return robot.with_armature(given), None
+    if len(lower) != len(values):
+        raise InvalidInputError(
+            "robot.armature_lower_kgm2",
+            f"has {len(lower)} values for the {len(values)} of robot.armature_kgm2",
+        )
+    for k, (lo, hi) in enumerate(zip(lower, values, strict=True)):
+        if lo > hi:
             raise InvalidInputError(
-                "robot.armature_joint_names",
-                f"has {len(names)} names for {len(values)} values of robot.armature_kgm2",
+                f"robot.armature_lower_kgm2[{k}]",
+                f"must be at most robot.armature_kgm2[{k}] = {hi:g}, got {lo:g}",
             )
-        return robot.with_armature(dict(zip(names, values, strict=True)))
-    return robot.with_armature(values)
+    pairs = [[lo, hi] for lo, hi in zip(lower, values, strict=True)]
+    given = dict(zip(names, pairs, strict=True)) if names else pairs
+    bounds = armature_range(given, robot.joint_names, robot.armature_kgm2)
+    return robot.with_armature(bounds.upper_kgm2), bounds if bounds.is_range else None
 
 
 def build_robot(settings: NodeSettings, topic_description: str | None) -> RobotBundle | None:
@@ -89,7 +122,7 @@ def build_robot(settings: NodeSettings, topic_description: str | None) -> RobotB
         return None
     try:
         robot = RobotModel.from_urdf(source, settings.base_frame, settings.tip_frame)
-        robot = _with_armature_parameters(robot, settings, source)
+        robot, armature_bounds = _with_armature_parameters(robot, settings, source)
         check_arm_point_links(settings.analysis.arm_points_m, robot)
         seed = None
         if settings.ik_seed is not None:
@@ -98,4 +131,4 @@ def build_robot(settings: NodeSettings, topic_description: str | None) -> RobotB
         raise _renamed(error, origin) from None
     evaluator = GraspSafetyEvaluator(robot, EvaluationConfig(metric=settings.metric))
     warm_up(evaluator)  # compile or load the kernels now, not on the first request
-    return RobotBundle(robot=robot, evaluator=evaluator, seed=seed, origin=origin)
+    return RobotBundle(robot, evaluator, seed, origin, armature_bounds)

@@ -2,8 +2,10 @@
 
 Combines, on top of GraspSafetyEvaluator.rank: effective mass at exposed object points
 (``metric_point``), ISO/TS 15066 power and force limiting, inertia uncertainty, grasp quality
-(weighted sum + Pareto set), null-space redundancy resolution and joint effort. The CLI and
-the ROS node both serialise a SafetyReport; neither computes anything itself.
+(weighted sum + Pareto set), null-space redundancy resolution, joint effort and the whole
+arm's exposure. ``analyse`` is the analyses stage of ``core.pipeline.run_pipeline`` (after the
+ranking and posture selection), which every adapter calls; the adapters serialise the
+SafetyReport it returns.
 """
 
 from __future__ import annotations
@@ -42,6 +44,14 @@ from .iso15066 import (
 )
 from .multi_objective import QualityRanking, rank_with_quality
 from .redundancy import RedundancyConfig, RedundancyResolution, resolve_redundancy
+from .retime import RetimedMotion
+from .safe_duration import (
+    RetimeOptions,
+    SafeDurationPostureCriterion,
+    order_by_safe_duration,
+    retime_grasps,
+    standard_mass_estimate_kg,
+)
 from .uncertainty import (
     ArmatureRangeAnalysis,
     InertiaUncertainty,
@@ -70,14 +80,15 @@ TERMS_CACHE_SAMPLES = 250_000
 samples (about 500 MB for a 7-joint arm); beyond it the oldest is dropped (then computed
 again if an analysis needs it)."""
 
-RANK_BY = ("safety", "effort", "whole_arm")
-"""What orders the final ranking: the safety score (with quality, when given), the effort, or
-the whole arm's worst predicted force for ``whole_arm_region``."""
+RANK_BY = ("safety", "effort", "whole_arm", "safe_duration")
+"""What orders the final ranking: the safety score (with quality, when given), the effort,
+the whole arm's worst predicted force for ``whole_arm_region``, or the retimed duration."""
 
 
 @dataclass(frozen=True)
 class AnalysisOptions:
-    """What to compute beyond the tip effective mass (all off except ISO/TS 15066 by default).
+    """What to compute beyond the tip effective mass (ISO/TS 15066 and effort by default; the
+    defaults are core.options.OPTIONS', checked by test/test_options.py).
 
     Attributes:
         metric_point: ``tip`` (the paper), ``leading_point`` or ``worst_point`` of the object.
@@ -98,6 +109,8 @@ class AnalysisOptions:
         arm_points_m: Extra sites ``{link_name: (P, 3) points [m], link frame}``; giving any
             turns ``whole_arm`` on.
         whole_arm_region: Body region ``rank_by: whole_arm`` uses (DEFAULT_RANK_REGION).
+        retime: Retime each feasible grasp to the site speed limits (core.analyses.
+            safe_duration); required by ``rank_by: safe_duration``.
     """
 
     metric_point: str = "tip"
@@ -107,12 +120,13 @@ class AnalysisOptions:
     grasp_quality: tuple[float, ...] | None = None
     safety_weight: float = 0.5
     redundancy: bool = False
-    effort: bool = False
+    effort: bool = True
     rank_by: str = "safety"
     effort_criterion: str = "peak_fraction"
     whole_arm: bool = False
     arm_points_m: Mapping[str, Any] | None = None
     whole_arm_region: str = DEFAULT_RANK_REGION
+    retime: RetimeOptions | None = None
 
     def __post_init__(self) -> None:
         check_metric_point(self.metric_point)
@@ -162,17 +176,35 @@ class AnalysisOptions:
             )
         if self.rank_by == "whole_arm" or self.arm_points_m:
             object.__setattr__(self, "whole_arm", True)
+        if self.retime is None and self.rank_by == "safe_duration":
+            raise InvalidInputError(
+                "retime.joint_acceleration_limits",
+                "rank_by safe_duration needs a retime section with the joint acceleration limits",
+            )
+        if self.retime is not None and self.iso_regions == ():
+            raise InvalidInputError(
+                "iso_ts_15066.regions", "a retiming needs at least one region (none: all)"
+            )
 
 
 def posture_criterion(
     robot: RobotModel, options: AnalysisOptions
-) -> WholeArmPostureCriterion | None:
+) -> WholeArmPostureCriterion | SafeDurationPostureCriterion | None:
     """What posture selection (core.method.posture) minimises for ``options``: with
     ``rank_by: whole_arm`` the whole arm's worst force for ``whole_arm_region`` over its sites
-    (the defaults and ``arm_points_m``), the criterion that ranks; else None (the tip score)."""
-    if options.rank_by != "whole_arm":
+    (the defaults and ``arm_points_m``), with ``safe_duration`` the retimed duration, the
+    criterion that ranks; else None (the tip score)."""
+    if options.rank_by not in ("whole_arm", "safe_duration"):
         return None
     sites = resolve_arm_sites(robot, options.arm_points_m)
+    if options.rank_by == "safe_duration":
+        regions = None if options.iso_regions is None else tuple(options.iso_regions)
+        return SafeDurationPostureCriterion(
+            options.retime,
+            sites,
+            options.points_in_object_m,
+            regions,  # type: ignore[arg-type]
+        )
     return WholeArmPostureCriterion(sites, options.whole_arm_region)
 
 
@@ -197,6 +229,9 @@ class SafetyReport:
         arm_sites: The sites assessed (resolved once per report), when on.
         armature_range: Effective masses and ranking at both ends of armature ranges, when
             the armature was given as ranges (uncertainty.analyse_armature_range).
+        retimed: Each grasp's motion retimed to the site speed limits (None: infeasible or
+            no timing found), when ``options.retime`` is set.
+        standard_mass_estimate_kg: ISO/TS 15066's m_R = M/2 + m_L [kg] (safe_duration).
     """
 
     ranking: Ranking
@@ -213,6 +248,8 @@ class SafetyReport:
     whole_arm: tuple[WholeArmEvaluation, ...] = ()
     arm_sites: ArmSites | None = None
     armature_range: ArmatureRangeAnalysis | None = None
+    retimed: tuple[RetimedMotion | None, ...] = ()
+    standard_mass_estimate_kg: float = float("nan")
 
 
 def analyse(
@@ -248,6 +285,7 @@ def analyse(
         + options.redundancy
         + options.effort
         + options.whole_arm
+        + (options.retime is not None)
     ) * len(grasps) + (options.uncertainty is not None)
     done = 0
 
@@ -397,8 +435,24 @@ def analyse(
             model_of,
             step,
         )
+    retimed: tuple[RetimedMotion | None, ...] = ()
+    if options.retime is not None:
+        retimed = retime_grasps(
+            robot,
+            options.retime,
+            arm_sites or resolve_arm_sites(robot, options.arm_points_m),
+            object_inertia,
+            grasps,
+            evaluations,
+            options.points_in_object_m,
+            options.iso_regions,
+            [r.joint_positions if r.applied else None for r in redundancy] if redundancy else None,
+            step,
+        )
     if options.rank_by == "effort":
         order = order_by_effort(effort, options.effort_criterion)
+    elif options.rank_by == "safe_duration":
+        order = order_by_safe_duration(retimed, scores, [e.index for e in evaluations])
     elif options.rank_by == "whole_arm":
         order = order_by_whole_arm(whole_arm, options.whole_arm_region)
     elif options.grasp_quality is not None:
@@ -419,6 +473,8 @@ def analyse(
         effort=effort,
         whole_arm=whole_arm,
         arm_sites=arm_sites,
+        retimed=retimed,
+        standard_mass_estimate_kg=standard_mass_estimate_kg(robot, object_inertia.mass_kg),
     )
 
 

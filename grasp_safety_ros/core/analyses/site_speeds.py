@@ -84,6 +84,7 @@ class SiteSpeeds:
         stationary: True where the site does not move along d (mass: its largest).
         region_index: Index into ``SiteSpeedModel.regions`` of the region assessed against.
         max_speed_m_s: That region's admissible transient-contact speed v_max [m/s].
+        region_max_speed_m_s: (N, K, R) v_max of every region of ``SiteSpeedModel.regions``.
     """
 
     speed_per_unit: np.ndarray
@@ -91,6 +92,7 @@ class SiteSpeeds:
     stationary: np.ndarray
     region_index: np.ndarray
     max_speed_m_s: np.ndarray
+    region_max_speed_m_s: np.ndarray
 
 
 def permitted_regions(regions: Sequence[str | BodyRegion] | None) -> tuple[BodyRegion, ...]:
@@ -175,4 +177,5 @@ def site_speeds(
         stationary=exposure.stationary,
         region_index=index,
         max_speed_m_s=np.take_along_axis(limits, index[..., None], axis=-1)[..., 0],
+        region_max_speed_m_s=limits,
     )

@@ -61,7 +61,7 @@ MAX_RESTARTS = 1000
 """Largest number of posture restarts accepted per grasp."""
 
 DEFAULT_RESTARTS = 8
-"""Default restarts of the CLI and the node (docs/analyses.md, "Posture selection")."""
+"""Default restarts everywhere (core.options; docs/analyses.md, "Posture selection")."""
 
 FOLLOW_ROWS = 64
 """Start postures per kernel call in ``select_posture_batch`` (bounds its buffers: ~45 floats
@@ -74,7 +74,8 @@ class PostureConfig:
 
     Attributes:
         restarts: Start postures tried besides the single IK's, in [0, MAX_RESTARTS];
-            0: the paper's single IK only (the ranking is returned unchanged).
+            0: the paper's single IK only (the ranking is returned unchanged); default
+            DEFAULT_RESTARTS.
         seed: Seed of the scrambled Halton sequence of the IK seeds (repeatable results).
         duplicate_tolerance_rad: Start postures closer than this (largest joint difference)
             [rad or m] to one already found are not followed again.
@@ -85,7 +86,7 @@ class PostureConfig:
             lower bound of a worse one exceeds the best only near the end.
     """
 
-    restarts: int = 0
+    restarts: int = DEFAULT_RESTARTS
     seed: int = 0
     duplicate_tolerance_rad: float = 1e-3
     early_stop: bool = False

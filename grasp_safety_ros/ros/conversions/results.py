@@ -88,6 +88,10 @@ _EVALUATION_TEMPLATE = GraspEvaluationMsg(
     whole_arm_worst_force_ratio=NAN,
     whole_arm_min_duration_s=NAN,
     whole_arm_worst_energy_j=NAN,
+    score_armature_lower=NAN,
+    score_armature_upper=NAN,
+    armature_min_effective_mass_kg=NAN,
+    armature_max_effective_mass_kg=NAN,
 )
 """A GraspEvaluation message whose analysis fields say "not computed" (NaN, empty, false)."""
 _new_evaluation = _template_constructor(_EVALUATION_TEMPLATE)
@@ -470,6 +474,7 @@ def _report_msg(
         message.order_stability = float(report.uncertainty.order_stability)
         message.worst_case_order = [int(i) for i in report.uncertainty.worst_case_order]
         message.uncertainty_message = report.uncertainty.message
+    _set_armature_range(message, report)
     if report.arm_sites is not None:
         message.whole_arm_region = options.whole_arm_region
         message.whole_arm_sites = list(report.arm_sites.names)
@@ -522,3 +527,22 @@ def _report_msg(
         base_frame,
     )
     return message
+
+
+def _set_armature_range(message: GraspRanking, report: SafetyReport) -> None:
+    """The armature-range fields (GraspRanking and each GraspEvaluation), when ranges ran."""
+    spread = report.armature_range
+    if spread is None:
+        return
+    message.armature_lower_kgm2 = float64_array(spread.lower_kgm2)
+    message.armature_upper_kgm2 = float64_array(spread.upper_kgm2)
+    message.armature_order_lower = [int(i) for i in spread.order_lower]
+    message.armature_order_upper = [int(i) for i in spread.order_upper]
+    message.armature_ranking_flips = bool(spread.ranking_flips)
+    message.armature_range_message = spread.message
+    for k, evaluation in enumerate(message.evaluations):
+        evaluation.score_armature_lower = float(spread.scores_lower[k])
+        evaluation.score_armature_upper = float(spread.scores_upper[k])
+        low, high = spread.effective_mass_range_kg[k]
+        evaluation.armature_min_effective_mass_kg = float(low)
+        evaluation.armature_max_effective_mass_kg = float(high)

@@ -1,31 +1,24 @@
-"""Scenario files (YAML): robot, object, trajectory, grasps, metric; validated per field."""
+"""Scenario files (YAML): robot, object, trajectory, grasps, metric, the options; validated
+per field (readers: scenario.fields), read by the CLI and the batch."""
 
 from __future__ import annotations
 
-import json
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, replace
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from ..core.analyses.exposed_points import box_corners_in_object, cylinder_rim_points_in_object
-from ..core.analyses.safety_report import (
-    RANK_BY,
-    AnalysisOptions,
-    SafetyReport,
-    analyse,
-    posture_criterion,
-)
-from ..core.analyses.uncertainty import InertiaUncertainty, analyse_armature_range
-from ..core.analyses.whole_arm import DEFAULT_RANK_REGION
+from ..core.analyses.safe_duration import RetimeOptions
+from ..core.analyses.safety_report import RANK_BY, AnalysisOptions
+from ..core.analyses.uncertainty import InertiaUncertainty
 from ..core.exceptions import InvalidInputError
-from ..core.input_checks import finite_array, finite_float, pose_from_position_quat
+from ..core.input_checks import finite_array, finite_float
 from ..core.method.joint_trajectory import PlannedJointTrajectory
-from ..core.method.posture import DEFAULT_RESTARTS, PostureConfig, select_postures
-from ..core.method.ranking import METRICS, Grasp, GraspSafetyEvaluator, check_metric
+from ..core.method.posture import PostureConfig
+from ..core.method.ranking import METRICS, Grasp, check_metric
 from ..core.model.armature import (
     PUBLISHED,
     ArmatureRange,
@@ -38,96 +31,36 @@ from ..core.model.inertia import ObjectInertia, solid_box, solid_cylinder, solid
 from ..core.model.robot import RobotModel
 from ..core.model.trajectory import ObjectTrajectory
 from ..core.model.waypoint_trajectory import WaypointTrajectory
+from ..core.options import LIMITS, bounds, default
+from ..core.pipeline import PipelineRequest
+from .fields import (
+    check_keys,
+    flag,
+    mapping,
+    read_pose,
+    read_yaml_file,
+    required,
+    string,
+)
 
-MAX_SCENARIO_BYTES = 4_000_000
-"""Largest scenario file read [bytes]."""
+MAX_GRASPS = int(LIMITS["grasps"].value)
+"""Most grasps in a scenario (core.options.LIMITS, as every limit here but the file's)."""
 
-MAX_NESTING_DEPTH = 64
-"""Deepest nesting of lists and mappings in a scenario file."""
-
-MAX_EXPANDED_NODES = 1_000_000
-"""Most YAML nodes a scenario may expand to, aliases (``*name``) counted at full size."""
-
-MAX_GRASPS = 10_000
-"""Most grasps in a scenario."""
-
-MAX_GRASP_SAMPLES = 10_000_000
+MAX_GRASP_SAMPLES = int(LIMITS["grasp_samples"].value)
 """Most grasps x trajectory samples (IK solves) in a scenario."""
 
-MAX_POINTS = 1_000
+MAX_POINTS = int(LIMITS["points"].value)
 """Most exposed points (``object.points_m``)."""
 
-MAX_UNCERTAINTY_SAMPLES = 10_000
+MAX_UNCERTAINTY_SAMPLES = int(LIMITS["uncertainty_samples"].value)
 """Most random inertia samples (``uncertainty.samples``)."""
 
 MAX_OBJECT_MASS_KG = 10_000.0
 """Heaviest object [kg]."""
 
-MAX_OBJECT_SIZE_M = 100.0
+MAX_OBJECT_SIZE_M = LIMITS["object_size_m"].value
 """Largest object dimension, CoM offset and radius of gyration [m] (far beyond any gripper;
 much larger objects make the augmented mass matrix numerically singular)."""
-
-
-_SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml when available
-_PARSER_DEPTH_LIMIT = "exceeded maximum nesting depth"
-"""What libyaml's scanner says when its own nesting limit (1000 flow levels) trips."""
-
-
-def _check_yaml_structure(text: str) -> None:
-    """Refuse YAML nested deeper than MAX_NESTING_DEPTH or expanding to more than
-    MAX_EXPANDED_NODES nodes (aliases ``*name`` counted at the full size of their anchor, so a
-    "billion laughs" file is refused however short); one pass over the parser's events."""
-    child_sizes: list[int] = [0]
-    anchor_stack: list[str | None] = []
-    anchor_sizes: dict[str, int] = {}
-    for event in yaml.parse(text, Loader=_SAFE_LOADER):
-        if isinstance(event, yaml.CollectionStartEvent):
-            if len(anchor_stack) >= MAX_NESTING_DEPTH:
-                raise InvalidInputError(
-                    "scenario",
-                    f"nesting deeper than {MAX_NESTING_DEPTH} levels at line "
-                    f"{event.start_mark.line + 1}",
-                )
-            anchor_stack.append(event.anchor)
-            child_sizes.append(0)
-            continue
-        if isinstance(event, yaml.CollectionEndEvent):
-            size, anchor = 1 + child_sizes.pop(), anchor_stack.pop()
-        elif isinstance(event, yaml.AliasEvent):
-            size, anchor = anchor_sizes.get(event.anchor, 1), None
-        elif isinstance(event, yaml.ScalarEvent):
-            size, anchor = 1, event.anchor
-        else:  # stream and document start and end
-            continue
-        if anchor is not None:
-            anchor_sizes[anchor] = size
-        child_sizes[-1] += size
-        if child_sizes[-1] > MAX_EXPANDED_NODES:
-            raise InvalidInputError(
-                "scenario",
-                f"expands to more than {MAX_EXPANDED_NODES} YAML nodes (aliases counted at "
-                f"full size), near line {event.start_mark.line + 1}",
-            )
-
-
-def load_yaml(text: str, where: str) -> Any:
-    """Parse YAML text, bounded by _check_yaml_structure; errors as one-line
-    InvalidInputError('scenario')."""
-    try:
-        _check_yaml_structure(text)
-        return yaml.load(text, Loader=_SAFE_LOADER)  # a safe loader
-    except (yaml.YAMLError, ValueError, OverflowError) as error:
-        if isinstance(error, InvalidInputError):
-            raise
-        if isinstance(error, yaml.MarkedYAMLError) and _PARSER_DEPTH_LIMIT in str(error.problem):
-            # libyaml (PyYAML >= 6.0.4) has a nesting limit of its own, which its scanner can
-            # reach before our event loop sees MAX_NESTING_DEPTH levels: one message for both.
-            line = error.problem_mark.line + 1 if error.problem_mark else 1
-            raise InvalidInputError(
-                "scenario", f"nesting deeper than {MAX_NESTING_DEPTH} levels at line {line}"
-            ) from None
-        reason = " ".join(str(error).split())
-        raise InvalidInputError("scenario", f"{where} is not valid YAML: {reason}") from None
 
 
 @dataclass(frozen=True)
@@ -185,7 +118,7 @@ class Scenario:
     Attributes:
         options: The analyses beyond the paper (metric point, ISO/TS 15066, uncertainty,
             grasp quality, redundancy, effort), from the optional sections of the file.
-        posture: Posture selection (section ``posture``; default DEFAULT_RESTARTS restarts).
+        posture: Posture selection (section ``posture``; defaults: core.options).
     """
 
     robot: RobotSpec
@@ -195,40 +128,27 @@ class Scenario:
     metric: str
     base_dir: Path
     options: AnalysisOptions = field(default_factory=AnalysisOptions)
-    posture: PostureConfig = field(default_factory=lambda: PostureConfig(DEFAULT_RESTARTS))
+    posture: PostureConfig = field(default_factory=PostureConfig)
 
-
-def _mapping(value: Any, field: str) -> Mapping[str, Any]:
-    if not isinstance(value, Mapping):
-        raise InvalidInputError(field, f"must be a mapping, got {type(value).__name__}")
-    return value
-
-
-def _required(section: Mapping[str, Any], key: str, prefix: str) -> Any:
-    if key not in section:
-        raise InvalidInputError(f"{prefix}.{key}" if prefix else key, "is required")
-    return section[key]
-
-
-def _string(value: Any, field: str) -> str:
-    if not isinstance(value, str) or not value:
-        raise InvalidInputError(field, f"must be a non-empty string, got {value!r}")
-    return value
-
-
-def _check_keys(section: Mapping[str, Any], allowed: set[str], prefix: str) -> None:
-    unknown = sorted(
-        k if isinstance(k, str) else json.dumps(k, default=str) for k in set(section) - allowed
-    )
-    if unknown:
-        where = f"{prefix}.{unknown[0]}" if prefix else unknown[0]
-        raise InvalidInputError(where, f"unknown field; allowed: {', '.join(sorted(allowed))}")
+    def request(self, robot: RobotModel) -> PipelineRequest:
+        """The pipeline's request (core.pipeline) for ``robot``, the chain ``self.robot``
+        loaded (its armature range, if any, from ``robot.armature_kgm2``); the metric is the
+        evaluator's."""
+        return PipelineRequest(
+            grasps=self.grasps,
+            object_inertia=self.object_inertia,
+            trajectory=self.trajectory,
+            options=self.options,
+            posture=self.posture,
+            seed_positions=self.robot.seed,
+            armature_range=self.robot.armature_range(robot),
+        )
 
 
 def parse_robot(section: Any) -> RobotSpec:
     """Parse the ``robot`` section."""
-    robot = _mapping(section, "robot")
-    _check_keys(
+    robot = mapping(section, "robot")
+    check_keys(
         robot,
         {"urdf", "base_frame", "tip_frame", "seed", "locked_joints", "armature_kgm2"}
         | {"exposed_points_m"},  # exposed_points_m: an analysis option
@@ -245,8 +165,8 @@ def parse_robot(section: Any) -> RobotSpec:
     locked = robot.get("locked_joints")
     if locked is not None:
         locked = {
-            _string(k, "robot.locked_joints"): finite_float(v, f"robot.locked_joints.{k}")
-            for k, v in _mapping(locked, "robot.locked_joints").items()
+            string(k, "robot.locked_joints"): finite_float(v, f"robot.locked_joints.{k}")
+            for k, v in mapping(locked, "robot.locked_joints").items()
         }
     if seed is not None:
         array = finite_array(seed, "robot.seed")
@@ -254,9 +174,9 @@ def parse_robot(section: Any) -> RobotSpec:
             raise InvalidInputError("robot.seed", "must be a list of joint positions")
         seed = tuple(float(x) for x in array)
     return RobotSpec(
-        urdf=_string(_required(robot, "urdf", "robot"), "robot.urdf"),
-        base_frame=_string(_required(robot, "base_frame", "robot"), "robot.base_frame"),
-        tip_frame=_string(_required(robot, "tip_frame", "robot"), "robot.tip_frame"),
+        urdf=string(required(robot, "urdf", "robot"), "robot.urdf"),
+        base_frame=string(required(robot, "base_frame", "robot"), "robot.base_frame"),
+        tip_frame=string(required(robot, "tip_frame", "robot"), "robot.tip_frame"),
         seed=seed,
         locked_joints=locked,
         armature_kgm2=armature,
@@ -270,7 +190,7 @@ def parse_object(section: Any) -> tuple[ObjectInertia, np.ndarray | None]:
         The inertia, and the exposed points [m] (object frame): ``points_m`` when given, else
         the corners of a box or the rims of a cylinder, else None.
     """
-    obj = _mapping(section, "object")
+    obj = mapping(section, "object")
     inertia = _parse_inertia(obj)
     if "points_m" in obj:
         if isinstance(obj["points_m"], list) and len(obj["points_m"]) > MAX_POINTS:
@@ -297,9 +217,9 @@ def parse_object(section: Any) -> tuple[ObjectInertia, np.ndarray | None]:
 
 def _parse_inertia(obj: Mapping[str, Any]) -> ObjectInertia:
     shapes = {"inertia_about_com_kgm2", "box_size_m", "cylinder", "sphere"}
-    _check_keys(obj, {"mass_kg", "com_in_object_m", "points_m"} | shapes, "object")
+    check_keys(obj, {"mass_kg", "com_in_object_m", "points_m"} | shapes, "object")
     mass = finite_float(
-        _required(obj, "mass_kg", "object"),
+        required(obj, "mass_kg", "object"),
         "object.mass_kg",
         minimum=0.0,
         maximum=MAX_OBJECT_MASS_KG,
@@ -333,16 +253,16 @@ def _parse_inertia(obj: Mapping[str, Any]) -> ObjectInertia:
         _check_size(obj["box_size_m"], "object.box_size_m")
         return solid_box(mass, obj["box_size_m"], com)
     if "cylinder" in obj:
-        cylinder = _mapping(obj["cylinder"], "object.cylinder")
-        _check_keys(cylinder, {"radius_m", "length_m"}, "object.cylinder")
-        radius = _required(cylinder, "radius_m", "object.cylinder")
-        length = _required(cylinder, "length_m", "object.cylinder")
+        cylinder = mapping(obj["cylinder"], "object.cylinder")
+        check_keys(cylinder, {"radius_m", "length_m"}, "object.cylinder")
+        radius = required(cylinder, "radius_m", "object.cylinder")
+        length = required(cylinder, "length_m", "object.cylinder")
         _check_size(radius, "object.cylinder.radius_m")
         _check_size(length, "object.cylinder.length_m")
         return solid_cylinder(mass, radius, length, com)
-    sphere = _mapping(obj["sphere"], "object.sphere")
-    _check_keys(sphere, {"radius_m"}, "object.sphere")
-    radius = _required(sphere, "radius_m", "object.sphere")
+    sphere = mapping(obj["sphere"], "object.sphere")
+    check_keys(sphere, {"radius_m"}, "object.sphere")
+    radius = required(sphere, "radius_m", "object.sphere")
     _check_size(radius, "object.sphere.radius_m")
     return solid_sphere(mass, radius, com)
 
@@ -360,20 +280,12 @@ _LEGACY = frozenset({"name", "quality"})
 """Keys start and goal have always tolerated (ignored)."""
 
 
-def _pose(section: Any, field: str, allowed: frozenset[str] = frozenset()):
-    pose = _mapping(section, field)
-    _check_keys(pose, {"position_m", "quat_xyzw"} | allowed, field)
-    return pose_from_position_quat(
-        _required(pose, "position_m", field), _required(pose, "quat_xyzw", field), field
-    )
-
-
 def parse_trajectory(section: Any) -> ObjectTrajectory | WaypointTrajectory:
     """Parse the ``trajectory`` section (object-frame poses in the base frame): ``start``,
     ``goal``, ``duration_s``, ``dt_s``, or timed ``waypoints`` and ``dt_s``."""
-    trajectory = _mapping(section, "trajectory")
+    trajectory = mapping(section, "trajectory")
     if "waypoints" in trajectory:
-        _check_keys(trajectory, {"waypoints", "dt_s"}, "trajectory")
+        check_keys(trajectory, {"waypoints", "dt_s"}, "trajectory")
         waypoints = trajectory["waypoints"]
         if not isinstance(waypoints, list):
             raise InvalidInputError(
@@ -382,19 +294,19 @@ def parse_trajectory(section: Any) -> ObjectTrajectory | WaypointTrajectory:
         times, poses = [], []
         for i, item in enumerate(waypoints):
             field = f"trajectory.waypoints[{i}]"
-            poses.append(_pose(item, field, frozenset({"time_s"})))
-            times.append(finite_float(_required(item, "time_s", field), f"{field}.time_s"))
+            poses.append(read_pose(item, field, frozenset({"time_s"})))
+            times.append(finite_float(required(item, "time_s", field), f"{field}.time_s"))
         return WaypointTrajectory(
             tuple(times),
             tuple(poses),
-            finite_float(_required(trajectory, "dt_s", "trajectory"), "trajectory.dt_s"),
+            finite_float(required(trajectory, "dt_s", "trajectory"), "trajectory.dt_s"),
         )
-    _check_keys(trajectory, {"start", "goal", "duration_s", "dt_s"}, "trajectory")
+    check_keys(trajectory, {"start", "goal", "duration_s", "dt_s"}, "trajectory")
     return ObjectTrajectory(
-        _pose(_required(trajectory, "start", "trajectory"), "trajectory.start", _LEGACY),
-        _pose(_required(trajectory, "goal", "trajectory"), "trajectory.goal", _LEGACY),
-        finite_float(_required(trajectory, "duration_s", "trajectory"), "trajectory.duration_s"),
-        finite_float(_required(trajectory, "dt_s", "trajectory"), "trajectory.dt_s"),
+        read_pose(required(trajectory, "start", "trajectory"), "trajectory.start", _LEGACY),
+        read_pose(required(trajectory, "goal", "trajectory"), "trajectory.goal", _LEGACY),
+        finite_float(required(trajectory, "duration_s", "trajectory"), "trajectory.duration_s"),
+        finite_float(required(trajectory, "dt_s", "trajectory"), "trajectory.dt_s"),
     )
 
 
@@ -415,14 +327,14 @@ def parse_grasps(section: Any) -> tuple[tuple[Grasp, ...], tuple[float, ...] | N
     qualities = []
     for i, item in enumerate(section):
         field = f"grasps[{i}]"
-        pose = _pose(item, field, frozenset({"name", "quality", "joint_trajectory"}))
-        entry = _mapping(item, field)
+        tip_pose = read_pose(item, field, frozenset({"name", "quality", "joint_trajectory"}))
+        entry = mapping(item, field)
         planned = None
         if "joint_trajectory" in entry:
             planned = parse_joint_trajectory(
                 entry["joint_trajectory"], f"{field}.joint_trajectory"
             )
-        grasps.append(Grasp(pose, str(entry.get("name", f"grasp_{i}")), planned))
+        grasps.append(Grasp(tip_pose, str(entry.get("name", f"grasp_{i}")), planned))
         if "quality" in entry:
             qualities.append(finite_float(entry["quality"], f"{field}.quality"))
     if qualities and len(qualities) != len(grasps):
@@ -433,27 +345,27 @@ def parse_grasps(section: Any) -> tuple[tuple[Grasp, ...], tuple[float, ...] | N
 def parse_joint_trajectory(section: Any, field: str) -> PlannedJointTrajectory:
     """Parse ``grasps[i].joint_trajectory``: ``joint_names`` and ``points`` with ``time_s``,
     ``positions`` and optionally ``velocities`` (every point or none)."""
-    trajectory = _mapping(section, field)
-    _check_keys(trajectory, {"joint_names", "points"}, field)
-    names = _required(trajectory, "joint_names", field)
+    trajectory = mapping(section, field)
+    check_keys(trajectory, {"joint_names", "points"}, field)
+    names = required(trajectory, "joint_names", field)
     if not isinstance(names, list):
         raise InvalidInputError(f"{field}.joint_names", f"must be a list of names, got {names!r}")
-    points = _required(trajectory, "points", field)
+    points = required(trajectory, "points", field)
     if not isinstance(points, list):
         raise InvalidInputError(f"{field}.points", f"must be a list of points, got {points!r}")
     times, positions, velocities = [], [], []
     for k, item in enumerate(points):
         where = f"{field}.points[{k}]"
-        point = _mapping(item, where)
-        _check_keys(point, {"time_s", "positions", "velocities"}, where)
-        times.append(finite_float(_required(point, "time_s", where), f"{where}.time_s"))
-        positions.append(_required(point, "positions", where))
+        point = mapping(item, where)
+        check_keys(point, {"time_s", "positions", "velocities"}, where)
+        times.append(finite_float(required(point, "time_s", where), f"{where}.time_s"))
+        positions.append(required(point, "positions", where))
         if "velocities" in point:
             velocities.append(point["velocities"])
     if velocities and len(velocities) != len(points):
         raise InvalidInputError(f"{field}.points", "give velocities for every point or for none")
     return PlannedJointTrajectory(
-        tuple(_string(n, f"{field}.joint_names") for n in names),
+        tuple(string(n, f"{field}.joint_names") for n in names),
         np.array(times),
         positions,
         velocities or None,
@@ -471,30 +383,43 @@ OPTIONAL_SECTIONS = {
     "rank_by",
     "posture",
     "whole_arm",
+    "retime",
 }
+
+
+def parse_retime(section: Any, requested: bool = False) -> RetimeOptions | None:
+    """The ``retime`` section (core.analyses.safe_duration.RetimeOptions): on when given
+    (unless ``enabled: false``) or ``requested`` (``--retime``, ``rank_by: safe_duration``)."""
+    if section is None and not requested:
+        return None
+    retime = mapping({} if section is None else section, "retime")
+    keys = {"joint_acceleration_limits", "joint_velocity_limits", "safety_factor", "output_dt_s"}
+    check_keys(retime, keys | {"enabled"}, "retime")
+    if not (requested or flag(retime.get("enabled", True), "retime.enabled")):
+        return None
+    return RetimeOptions(
+        retime.get("joint_acceleration_limits"),
+        retime.get("joint_velocity_limits"),
+        retime.get("safety_factor", 1.0),
+        retime.get("output_dt_s"),
+    )
 
 
 def parse_posture(section: Any) -> PostureConfig:
     """Parse the ``posture`` section: ``{restarts: N, seed: S}``."""
-    posture = _mapping(section, "posture")
-    _check_keys(posture, {"restarts", "seed"}, "posture")
+    posture = mapping(section, "posture")
+    check_keys(posture, {"restarts", "seed"}, "posture")
     return PostureConfig(
-        restarts=posture.get("restarts", DEFAULT_RESTARTS), seed=posture.get("seed", 0)
+        restarts=posture.get("restarts", default("posture.restarts")), seed=posture.get("seed", 0)
     )
-
-
-def _flag(value: Any, field: str) -> bool:
-    if not isinstance(value, bool):
-        raise InvalidInputError(field, f"must be true or false, got {value!r}")
-    return value
 
 
 def parse_options(
     root: Mapping[str, Any], points: np.ndarray | None, quality: tuple[float, ...] | None
 ) -> AnalysisOptions:
     """Parse the optional sections beyond the paper into AnalysisOptions."""
-    iso = _mapping(root.get("iso_ts_15066", {}), "iso_ts_15066")
-    _check_keys(iso, {"regions"}, "iso_ts_15066")
+    iso = mapping(root.get("iso_ts_15066", {}), "iso_ts_15066")
+    check_keys(iso, {"regions"}, "iso_ts_15066")
     regions = iso.get("regions")
     if regions is not None and not (
         isinstance(regions, list) and all(isinstance(r, str) for r in regions)
@@ -504,7 +429,7 @@ def parse_options(
         )
     uncertainty = None
     if "uncertainty" in root:
-        section = _mapping(root["uncertainty"], "uncertainty")
+        section = mapping(root["uncertainty"], "uncertainty")
         allowed = {
             "mass_fraction",
             "com_offset_m",
@@ -513,7 +438,7 @@ def parse_options(
             "percentile",
             "seed",
         }
-        _check_keys(section, allowed, "uncertainty")
+        check_keys(section, allowed, "uncertainty")
         samples = section.get("samples")
         if isinstance(samples, int) and samples > MAX_UNCERTAINTY_SAMPLES:
             raise InvalidInputError(
@@ -522,15 +447,15 @@ def parse_options(
             )
         renamed = {("num_random_samples" if k == "samples" else k): v for k, v in section.items()}
         uncertainty = InertiaUncertainty(**renamed)
-    effort = _mapping(root.get("effort", {}), "effort")
-    _check_keys(effort, {"enabled", "criterion"}, "effort")
-    whole_arm = _mapping(root.get("whole_arm", {}), "whole_arm")
-    _check_keys(whole_arm, {"enabled", "region"}, "whole_arm")
-    arm_points = _mapping(root.get("robot", {}), "robot").get("exposed_points_m")
-    rank_by = root.get("rank_by", "safety")
+    effort = mapping(root.get("effort", {}), "effort")
+    check_keys(effort, {"enabled", "criterion"}, "effort")
+    whole_arm = mapping(root.get("whole_arm", {}), "whole_arm")
+    check_keys(whole_arm, {"enabled", "region"}, "whole_arm")
+    arm_points = mapping(root.get("robot", {}), "robot").get("exposed_points_m")
+    rank_by = root.get("rank_by", default("rank_by"))
     if rank_by not in RANK_BY:
         raise InvalidInputError("rank_by", f"must be one of {', '.join(RANK_BY)}, got {rank_by!r}")
-    metric_point = root.get("metric_point", "tip")
+    metric_point = root.get("metric_point", default("metric_point"))
     if metric_point != "tip" and points is None:
         raise InvalidInputError(
             "metric_point",
@@ -543,14 +468,21 @@ def parse_options(
             iso_regions=None if regions is None else tuple(regions),
             uncertainty=uncertainty,
             grasp_quality=quality,
-            safety_weight=finite_float(root.get("safety_weight", 0.5), "safety_weight", 0.0, 1.0),
-            redundancy=_flag(root.get("redundancy", False), "redundancy"),
-            effort=_flag(effort.get("enabled", True), "effort.enabled"),
+            safety_weight=finite_float(
+                root.get("safety_weight", default("safety_weight")),
+                "safety_weight",
+                *bounds("safety_weight"),
+            ),
+            redundancy=flag(root.get("redundancy", default("redundancy.enabled")), "redundancy"),
+            effort=flag(effort.get("enabled", default("effort.enabled")), "effort.enabled"),
             rank_by=rank_by,
-            effort_criterion=effort.get("criterion", "peak_fraction"),
-            whole_arm=_flag(whole_arm.get("enabled", False), "whole_arm.enabled"),
+            effort_criterion=effort.get("criterion", default("effort.criterion")),
+            whole_arm=flag(
+                whole_arm.get("enabled", default("whole_arm.enabled")), "whole_arm.enabled"
+            ),
             arm_points_m=arm_points,
-            whole_arm_region=whole_arm.get("region", DEFAULT_RANK_REGION),
+            whole_arm_region=whole_arm.get("region", default("whole_arm.region")),
+            retime=parse_retime(root.get("retime"), rank_by == "safe_duration"),
         )
     except InvalidInputError as error:  # the core says iso15066.<field>; the file iso_ts_15066
         if not error.field.startswith("iso15066."):
@@ -561,15 +493,15 @@ def parse_options(
 
 def parse_scenario(data: Any, base_dir: Path) -> Scenario:
     """Validate a scenario mapping (as loaded from YAML)."""
-    root = _mapping(data, "scenario")
-    required = {"robot", "object", "trajectory", "grasps", "metric"}
-    _check_keys(root, required | OPTIONAL_SECTIONS, "")
-    metric = root.get("metric", "mean")
+    root = mapping(data, "scenario")
+    sections = {"robot", "object", "trajectory", "grasps", "metric"}
+    check_keys(root, sections | OPTIONAL_SECTIONS, "")
+    metric = root.get("metric", default("metric"))
     if not isinstance(metric, str):
         raise InvalidInputError("metric", f"must be one of {', '.join(METRICS)}, got {metric!r}")
-    object_inertia, points = parse_object(_required(root, "object", ""))
-    grasps, quality = parse_grasps(_required(root, "grasps", ""))
-    trajectory = parse_trajectory(_required(root, "trajectory", ""))
+    object_inertia, points = parse_object(required(root, "object", ""))
+    grasps, quality = parse_grasps(required(root, "grasps", ""))
+    trajectory = parse_trajectory(required(root, "trajectory", ""))
     samples = trajectory.num_samples
     if len(grasps) * samples > MAX_GRASP_SAMPLES:
         raise InvalidInputError(
@@ -579,7 +511,7 @@ def parse_scenario(data: Any, base_dir: Path) -> Scenario:
             "(fewer grasps or a larger trajectory.dt_s)",
         )
     return Scenario(
-        robot=parse_robot(_required(root, "robot", "")),
+        robot=parse_robot(required(root, "robot", "")),
         object_inertia=object_inertia,
         trajectory=trajectory,
         grasps=grasps,
@@ -590,76 +522,6 @@ def parse_scenario(data: Any, base_dir: Path) -> Scenario:
     )
 
 
-def read_yaml_file(path: str | Path, field: str = "scenario") -> Any:
-    """Read and parse a YAML file of at most MAX_SCENARIO_BYTES (UTF-8, bounded structure);
-    errors as one-line InvalidInputError(``field``)."""
-    path = Path(path)
-    try:
-        with path.open("rb") as stream:
-            raw = stream.read(MAX_SCENARIO_BYTES + 1)
-    except OSError as error:
-        reason = error.strerror or str(error)
-        raise InvalidInputError(field, f"cannot read '{path}': {reason}") from None
-    if len(raw) > MAX_SCENARIO_BYTES:
-        raise InvalidInputError(
-            field, f"'{path}' is larger than {MAX_SCENARIO_BYTES} bytes, the limit"
-        )
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError as error:
-        raise InvalidInputError(
-            field, f"'{path}' is not UTF-8 text (byte {error.start}: {error.reason})"
-        ) from None
-    return load_yaml(text, f"'{path}'")
-
-
 def load_scenario(path: str | Path) -> Scenario:
     """Read and validate a scenario YAML file (at most MAX_SCENARIO_BYTES, UTF-8)."""
     return parse_scenario(read_yaml_file(path), Path(path).resolve().parent)
-
-
-def rank_with_evaluator(
-    scenario: Scenario,
-    evaluator: GraspSafetyEvaluator,
-    progress: Callable[[int, int], None] | None = None,
-) -> SafetyReport:
-    """Rank the scenario's grasps with ``evaluator`` (built for its robot; its metric is the
-    one used), select their postures and run the analyses the scenario asks for."""
-    ranking = evaluator.rank(
-        scenario.grasps,
-        scenario.object_inertia,
-        scenario.trajectory,
-        seed_positions=scenario.robot.seed,
-        progress=progress,
-    )
-    ranking = select_postures(
-        evaluator,
-        scenario.grasps,
-        scenario.object_inertia,
-        scenario.trajectory,
-        ranking,
-        scenario.posture,
-        criterion=posture_criterion(evaluator.robot, scenario.options),
-    )
-    report = analyse(
-        evaluator,
-        scenario.grasps,
-        scenario.object_inertia,
-        scenario.trajectory,
-        scenario.options,
-        ranking=ranking,
-    )
-    bounds = scenario.robot.armature_range(evaluator.robot)
-    if bounds is None or not bounds.is_range:
-        return report
-    spread = analyse_armature_range(
-        evaluator.robot,
-        ranking.evaluations,
-        scenario.grasps,
-        scenario.object_inertia,
-        bounds.lower_kgm2,
-        bounds.upper_kgm2,
-        ranking.metric,
-        compiled=evaluator.ik.compiled,
-    )
-    return replace(report, armature_range=spread)

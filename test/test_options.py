@@ -1,0 +1,137 @@
+"""The one table of options (core.options): every interface's defaults and bounds derive from
+it, and the core's dataclasses agree with it. A mismatch anywhere fails here, naming the
+option and the interface."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+
+from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions
+from grasp_safety_ros.core.analyses.uncertainty import InertiaUncertainty
+from grasp_safety_ros.core.exceptions import InvalidInputError
+from grasp_safety_ros.core.method.posture import PostureConfig
+from grasp_safety_ros.core.options import LIMITS, OPTIONS, default, help_text
+from grasp_safety_ros.paths import config_file
+from grasp_safety_ros.scenario.schema import parse_scenario
+
+BOOK = yaml.safe_load(config_file("book_baxter.yaml").read_text())
+
+OPTIONS_OF: dict[str, Callable[[Any], Any]] = {
+    "metric_point": lambda o: o.metric_point,
+    "safety_weight": lambda o: o.safety_weight,
+    "redundancy.enabled": lambda o: o.redundancy,
+    "effort.enabled": lambda o: o.effort,
+    "effort.criterion": lambda o: o.effort_criterion,
+    "rank_by": lambda o: o.rank_by,
+    "whole_arm.enabled": lambda o: o.whole_arm,
+    "whole_arm.region": lambda o: o.whole_arm_region,
+}
+"""Option key -> its value in an AnalysisOptions."""
+
+UNCERTAINTY_OF: dict[str, Callable[[Any], Any]] = {
+    "uncertainty.mass_fraction": lambda u: u.mass_fraction,
+    "uncertainty.com_offset_m": lambda u: u.com_offset_m,
+    "uncertainty.inertia_fraction": lambda u: u.inertia_fraction,
+    "uncertainty.samples": lambda u: u.num_random_samples,
+    "uncertainty.percentile": lambda u: u.percentile,
+    "uncertainty.seed": lambda u: u.seed,
+}
+"""Option key -> its value in an InertiaUncertainty."""
+
+
+def values_of(metric: str, options: AnalysisOptions, posture: PostureConfig) -> dict[str, Any]:
+    """Every option's value in what an interface built (uncertainty: see UNCERTAINTY_OF)."""
+    values = {key: get(options) for key, get in OPTIONS_OF.items()}
+    return {**values, "metric": metric, "posture.restarts": posture.restarts}
+
+
+def test_every_option_is_read_by_the_test() -> None:
+    assert set(OPTIONS) == set(OPTIONS_OF) | set(UNCERTAINTY_OF) | {"metric", "posture.restarts"}
+
+
+def test_the_core_defaults_are_the_tables() -> None:
+    assert values_of(default("metric"), AnalysisOptions(), PostureConfig()) == {
+        key: option.default for key, option in OPTIONS.items() if key not in UNCERTAINTY_OF
+    }
+    for key, get in UNCERTAINTY_OF.items():
+        assert get(InertiaUncertainty()) == default(key), key
+
+
+def test_the_scenario_defaults_are_the_tables(tmp_path: Path) -> None:
+    data = {key: BOOK[key] for key in ("robot", "object", "trajectory", "grasps", "metric")}
+    del data["metric"]  # optional: the table's
+    data["object"] = {"mass_kg": 0.34, "sphere": {"radius_m": 0.05}}  # no points
+    scenario = parse_scenario({**data, "metric": default("metric")}, tmp_path)
+    got = values_of(scenario.metric, scenario.options, scenario.posture)
+    assert got == {key: o.default for key, o in OPTIONS.items() if key not in UNCERTAINTY_OF}
+    with_uncertainty = parse_scenario({**data, "uncertainty": {}}, tmp_path)
+    for key, get in UNCERTAINTY_OF.items():
+        assert get(with_uncertainty.options.uncertainty) == default(key), key
+
+
+def test_the_node_defaults_and_help_are_the_tables() -> None:
+    from grasp_safety_ros.ros.parameters import PARAMETERS, settings_from_parameters
+
+    for key in OPTIONS:
+        assert PARAMETERS[key].default == default(key), key
+        assert PARAMETERS[key].description == help_text(key), key
+    settings = settings_from_parameters({"urdf": "x", "base_frame": "b", "tip_frame": "t"})
+    got = values_of(settings.metric, settings.analysis, settings.posture)
+    assert got == {key: o.default for key, o in OPTIONS.items() if key not in UNCERTAINTY_OF}
+    for limit in LIMITS.values():
+        if limit.node:
+            assert PARAMETERS[limit.node].default == limit.budget <= limit.value, limit
+
+
+def test_the_batch_defaults_are_the_tables(tmp_path: Path) -> None:
+    from grasp_safety_ros.dataset.spec import parse_spec
+
+    spec = parse_spec({"sources": [{"format": "scenarios", "path": "*.yaml"}]}, tmp_path)
+    got = values_of(spec.metric, spec.options, spec.posture)
+    assert got == {key: o.default for key, o in OPTIONS.items() if key not in UNCERTAINTY_OF}
+
+
+BOUNDED = [key for key, option in OPTIONS.items() if option.bounds is not None]
+
+
+@pytest.mark.parametrize("key", BOUNDED)
+def test_the_node_bounds_are_the_tables(key: str) -> None:
+    from grasp_safety_ros.ros.parameters import check_parameter, parameter_constraints
+
+    low, high = OPTIONS[key].bounds  # type: ignore[misc]
+    assert parameter_constraints(key).value_range == (low, high)  # the declared ROS range
+    kind = OPTIONS[key].type
+    step = 1 if kind is int else 1e-9 * max(1.0, abs(high))
+    assert check_parameter(key, kind(high)) == high
+    with pytest.raises(InvalidInputError, match=key):
+        check_parameter(key, kind(high + step))
+    with pytest.raises(InvalidInputError, match=key):
+        check_parameter(key, kind(low - step))
+
+
+SCENARIO_VALUES: dict[str, Callable[[Any], dict[str, Any]]] = {
+    "safety_weight": lambda v: {"safety_weight": v},
+    "posture.restarts": lambda v: {"posture": {"restarts": v}},
+    "uncertainty.samples": lambda v: {"uncertainty": {"mass_fraction": 0.1, "samples": v}},
+    "uncertainty.percentile": lambda v: {"uncertainty": {"mass_fraction": 0.1, "percentile": v}},
+}
+"""A bounded option's value as scenario sections."""
+
+
+@pytest.mark.parametrize("key", BOUNDED)
+def test_the_scenario_bounds_are_the_tables(key: str, tmp_path: Path) -> None:
+    low, high = OPTIONS[key].bounds  # type: ignore[misc]
+    kind = OPTIONS[key].type
+    step = 1 if kind is int else 1e-9 * max(1.0, abs(high))
+    data = {k: BOOK[k] for k in ("robot", "object", "trajectory", "grasps", "metric")}
+    data["grasps"] = data["grasps"][:1]
+    parse_scenario({**data, **SCENARIO_VALUES[key](kind(high))}, tmp_path)
+    for value in (high + step, low - step):
+        with pytest.raises(InvalidInputError) as error:
+            parse_scenario({**data, **SCENARIO_VALUES[key](kind(value))}, tmp_path)
+        assert error.value.field.endswith(key.rpartition(".")[2]), (key, error.value)
