@@ -1,7 +1,8 @@
 """The ``grasp_safety_monitor`` node as a process (``ros2 run`` when the ``ros2`` command is in
 the venv, else the console script), with the bundled params file: a joint trajectory replayed
 as JointState at 500 Hz gives, state by state, the factor of the core's analysis of the same
-state (to 1e-9); a slow one gives 1; silence gives 0 with the reason; bad states and payloads
+state (to 1e-9); a slow one gives 1, and so does (to 0.001) the fast one's safe retiming
+(core.analyses.retime); silence gives 0 with the reason; bad states and payloads
 give 0 or a one-line refusal, and the node keeps serving; a control_msgs subscriber and
 ``ros2 topic echo`` receive the factor on the remapped controller topic.
 
@@ -37,6 +38,7 @@ from sensor_msgs.msg import JointState
 from test_ros2_cli import BIN, ROS2, ros2, ros_env, stop
 
 from grasp_safety_ros.core.analyses.arm_sites import resolve_arm_sites
+from grasp_safety_ros.core.analyses.retime import RetimeLimits, retime_path
 from grasp_safety_ros.core.analyses.speed_scaling import (
     SpeedScaling,
     closed_loop_factor,
@@ -395,10 +397,10 @@ def test_closed_loop_factor_is_the_last_one_times_the_state_headroom(
         rows = slice(200, 260)
         client.publish_states(JOINTS, q[rows], qd[rows], first=7000)
         client.spin_until(lambda: len(assessed(client, 7000, 60)) >= 54, 5.0)
-        statuses = [s for s in client.statuses if 7000 <= s.header.stamp.sec < 7060]
+        statuses = client.statuses[client.replay_start :]  # fail-safes of the watchdog too
         checked = 0
         for before, status in itertools.pairwise(statuses):
-            if status.fail_safe or before.fail_safe:
+            if status.fail_safe or before.fail_safe or status.header.stamp.sec < 7000:
                 continue
             row = 200 + status.header.stamp.sec - 7000
             core = offline["payload"].assess(q[row], qd[row])
@@ -409,3 +411,25 @@ def test_closed_loop_factor_is_the_last_one_times_the_state_headroom(
         assert checked >= 20, f"only {checked} consecutive states assessed"
     finally:
         ros2(env, "param", "set", node, name, "false")
+
+
+def test_replay_of_the_safe_retiming_needs_no_scaling(
+    monitor: tuple[Client, Path, dict], offline: dict[str, SpeedScaling]
+) -> None:
+    """The fast replay's path retimed by core.analyses.retime under the monitor's own sites
+    and payload (planned samples every 2 ms: the grid; between grid points a site exceeds its
+    limit by what the path changes over one interval), replayed at the output's 500 Hz: every
+    assessed state's factor is >= 0.999 (the speed limits hold within 0.1 %)."""
+    analysis = offline["payload"]
+    robot = analysis.speed_model.robot
+    q, _ = panda_trajectory(duration_s=1.0, stroke_rad=0.8)
+    limits = RetimeLimits.from_input(robot, [15.0] * robot.num_joints)
+    times = np.arange(len(q)) / RATE_HZ
+    motion = retime_path(robot, analysis.speed_model, limits, times, q, 1.0 / RATE_HZ)
+    assert motion.planned_worst_ratio > 1.2  # the planned timing is too fast somewhere
+    client, _, _ = monitor
+    count = len(motion.times_s)
+    client.publish_states(JOINTS, motion.positions, motion.velocities, first=30000)
+    factors = check_replay(client, analysis, motion.positions, motion.velocities, first=30000)
+    assert min(factors) >= 0.999, min(factors)
+    assert len(factors) >= count // 10
