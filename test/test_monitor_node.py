@@ -35,7 +35,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from ros_domains import claim_ros_domain
 from sensor_msgs.msg import JointState
-from test_ros2_cli import BIN, ROS2, ros2, ros_env, stop
+from test_ros2_cli import BIN, PREFIX, ROS2, ros2, ros_env, stop
 
 from grasp_safety_ros.core.analyses.arm_sites import resolve_arm_sites
 from grasp_safety_ros.core.analyses.retime import RetimeLimits, retime_path
@@ -49,6 +49,9 @@ from grasp_safety_ros.ros.monitor.parameters import MonitorSettings, monitor_set
 from grasp_safety_ros.ros.robot_bundle import build_robot
 
 PARAMS = config_file("grasp_safety_monitor.yaml")
+HAS_LAUNCH = ROS2.exists() and any(
+    (path / "ros2launch").is_dir() for path in (PREFIX / "lib").glob("python3*/site-packages")
+)
 CONTROLLER_TOPIC = "/arm_controller/speed_scaling_input"
 STATUS_TOPIC = "/grasp_safety_monitor/status"
 RATE_HZ = 500.0
@@ -433,3 +436,38 @@ def test_replay_of_the_safe_retiming_needs_no_scaling(
     factors = check_replay(client, analysis, motion.positions, motion.velocities, first=30000)
     assert min(factors) >= 0.999, min(factors)
     assert len(factors) >= count // 10
+
+
+@pytest.mark.skipif(not HAS_LAUNCH, reason=f"no ros2 launch in {BIN}")
+def test_launch_file_remaps_the_factor_to_the_controller(tmp_path: Path) -> None:
+    """``ros2 launch grasp_safety_ros grasp_safety_monitor.launch.py controller:=arm_ctrl``:
+    the factor (0: no state yet) on /arm_ctrl/speed_scaling_input; Ctrl-C stops it cleanly."""
+    with claim_ros_domain() as claim:
+        env = ros_env(tmp_path, claim.domain_id)
+        launch = subprocess.Popen(
+            [
+                str(ROS2),
+                "launch",
+                "grasp_safety_ros",
+                "grasp_safety_monitor.launch.py",
+                "controller:=arm_ctrl",
+            ],
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            start_new_session=True,
+        )
+        try:
+            echoed = ros2(
+                env,
+                *("topic", "echo", "--once", "--no-daemon", "/arm_ctrl/speed_scaling_input"),
+                *("control_msgs/msg/SpeedScalingFactor", "--qos-durability", "transient_local"),
+                *("--qos-reliability", "reliable"),
+                timeout_s=90.0,
+            )
+        finally:
+            stop(launch)
+        output = launch.communicate()[0]
+    assert "factor: 0.0" in echoed.stdout, echoed.stdout + echoed.stderr + output
+    assert "process has finished cleanly" in output and "Traceback" not in output, output

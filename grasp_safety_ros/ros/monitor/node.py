@@ -18,6 +18,7 @@ callback, so the analysis (which reuses its Pinocchio data) needs no lock.
 from __future__ import annotations
 
 import os
+import signal
 import sys
 import time
 import traceback
@@ -299,6 +300,8 @@ def run(args: list[str] | None = None) -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        for number in (signal.SIGINT, signal.SIGTERM):  # a second signal (ros2 launch sends
+            signal.signal(number, signal.SIG_IGN)  # one more) no longer interrupts teardown
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
