@@ -35,7 +35,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from ros_domains import claim_ros_domain
 from sensor_msgs.msg import JointState
-from test_ros2_cli import BIN, PREFIX, ROS2, ros2, ros_env, stop
+from test_ros2_cli import BIN, PREFIX, ROS2, ros2, ros2_all, ros_env, stop
 
 from grasp_safety_ros.core.analyses.arm_sites import resolve_arm_sites
 from grasp_safety_ros.core.analyses.retime import RetimeLimits, retime_path
@@ -471,3 +471,19 @@ def test_launch_file_remaps_the_factor_to_the_controller(tmp_path: Path) -> None
         output = launch.communicate()[0]
     assert "factor: 0.0" in echoed.stdout, echoed.stdout + echoed.stderr + output
     assert "process has finished cleanly" in output and "Traceback" not in output, output
+
+
+@pytest.mark.skipif(not ROS2.exists(), reason=f"no ros2 command line in {BIN}")
+def test_parameter_changes_refused_with_the_reason(monitor: tuple[Client, Path, dict]) -> None:
+    _, _, env = monitor
+    node = "/grasp_safety_monitor"
+    margin, urdf, described = ros2_all(
+        env,
+        ("param", "set", node, "speed_scaling.margin", "1.5"),
+        ("param", "set", node, "urdf", "example-robot-data:ur5"),
+        ("param", "describe", node, "joint_states_timeout_s"),
+    )
+    refused = "Setting parameter failed: speed_scaling.margin: must be in (0, 1], got 1.5"
+    assert refused in margin.stdout + margin.stderr, margin
+    assert "urdf: read at start-up only" in urdf.stdout + urdf.stderr, urdf
+    assert "no valid /joint_states" in described.stdout, described
