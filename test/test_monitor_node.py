@@ -303,7 +303,7 @@ def test_slow_replay_gives_1_and_silence_gives_0_with_the_reason(
     k = next(k for k in range(len(client.statuses) - 1, -1, -1) if client.statuses[k].fail_safe)
     status, delay_s = client.statuses[k], client.status_arrivals[k] - stopped
     silence_s = float(re.search(r"for ([0-9.]+) s", status.fail_safe).group(1))
-    assert status.factor == 0.0 and silence_s > 0.1  # never before the timeout
+    assert status.factor == 0.0 and silence_s >= 0.1  # never before the timeout (3 decimals)
     assert delay_s < 2.0  # timeout 0.1 s, checked every 0.02 s (bench/monitor.py measures it)
     assert client.factors[-1] == 0.0
     one_line = "fail-safe (factor 0): no /joint_states for"
