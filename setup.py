@@ -27,6 +27,7 @@ setup(
         "console_scripts": [
             "grasp-safety = grasp_safety_ros.cli.main:run",
             "grasp_safety_node = grasp_safety_ros.ros.node:main",
+            "grasp_safety_monitor = grasp_safety_ros.ros.monitor.node:main",
         ],
     },
 )

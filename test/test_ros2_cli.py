@@ -266,7 +266,10 @@ def test_ros2_run_finds_the_package(node: RunningNode) -> None:
     assert installed.read_text() == Path(PARAMS).read_text()
     assert (Path(share) / "launch" / "grasp_safety.launch.py").is_file()
     executables = ros2_ok(node.env, "pkg", "executables", "grasp_safety_ros")
-    assert executables.split() == ["grasp_safety_ros", "grasp_safety_node"]
+    assert sorted(executables.splitlines()) == [
+        "grasp_safety_ros grasp_safety_monitor",
+        "grasp_safety_ros grasp_safety_node",
+    ]
     assert node.process.poll() is None, node.output()  # started by ros2 run, serving
     assert "robot from urdf: base -> right_gripper, 7 joints" in node.output()
 

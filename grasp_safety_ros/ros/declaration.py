@@ -11,12 +11,33 @@ file as "not set", become the declared type.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
+from typing import Any, NamedTuple
+
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from ..core.exceptions import InvalidInputError
-from .parameters import PARAMETERS, check_parameter, parameter_constraints
+from .parameters import (
+    PARAMETERS,
+    ParameterConstraints,
+    ParameterSpec,
+    check_parameter,
+    parameter_constraints,
+)
+
+
+class ParameterTable(NamedTuple):
+    """A node's parameters: their specs, the check of one value and its constraints."""
+
+    specs: Mapping[str, ParameterSpec]
+    check: Callable[[str, Any], Any]
+    constraints: Callable[[str], ParameterConstraints]
+
+
+RANKING_NODE = ParameterTable(PARAMETERS, check_parameter, parameter_constraints)
+"""The ranking node's parameters (the default of every function here)."""
 
 _SCALAR_TYPES = {
     bool: Parameter.Type.BOOL,
@@ -35,13 +56,13 @@ _TYPE_WORDS = {
 }
 
 
-def declared_type(name: str) -> Parameter.Type:
+def declared_type(name: str, table: ParameterTable = RANKING_NODE) -> Parameter.Type:
     """The static type of node parameter ``name`` (from its default and item_type).
 
     Raises:
         TypeError: the spec gives no type (a list default without item_type).
     """
-    spec = PARAMETERS[name]
+    spec = table.specs[name]
     if isinstance(spec.default, (list, tuple)):
         item = spec.item_type or (type(spec.default[0]) if spec.default else None)
         if item not in _ARRAY_TYPES:
@@ -50,11 +71,11 @@ def declared_type(name: str) -> Parameter.Type:
     return _SCALAR_TYPES[type(spec.default)]
 
 
-def descriptor(name: str) -> ParameterDescriptor:
+def descriptor(name: str, table: ParameterTable = RANKING_NODE) -> ParameterDescriptor:
     """The ParameterDescriptor of node parameter ``name``: type, description, constraints."""
-    spec = PARAMETERS[name]
-    kind = declared_type(name)
-    constraints = parameter_constraints(name)
+    spec = table.specs[name]
+    kind = declared_type(name, table)
+    constraints = table.constraints(name)
     result = ParameterDescriptor(
         name=name,
         type=kind.value,
@@ -73,16 +94,16 @@ def descriptor(name: str) -> ParameterDescriptor:
     return result
 
 
-def typed(parameter: Parameter) -> Parameter:
+def typed(parameter: Parameter, table: ParameterTable = RANKING_NODE) -> Parameter:
     """``parameter`` in its declared type where nothing is lost, else unchanged.
 
     An integer becomes a double, a list of integers a list of doubles, and an empty list of
     any type the declared empty list. Names not in PARAMETERS and values that cannot be
     converted are returned as they are (the type check then refuses them).
     """
-    if parameter.name not in PARAMETERS:
+    if parameter.name not in table.specs:
         return parameter
-    kind, given, value = declared_type(parameter.name), parameter.type_, parameter.value
+    kind, given, value = declared_type(parameter.name, table), parameter.type_, parameter.value
     if given is kind or given is Parameter.Type.NOT_SET:
         return parameter
     if kind is Parameter.Type.DOUBLE and given is Parameter.Type.INTEGER:
@@ -94,16 +115,18 @@ def typed(parameter: Parameter) -> Parameter:
     return parameter
 
 
-def typed_parameters(parameters: list[Parameter]) -> list[Parameter]:
+def typed_parameters(
+    parameters: list[Parameter], table: ParameterTable = RANKING_NODE
+) -> list[Parameter]:
     """Pre-set callback: every parameter of a set request converted by typed()."""
-    return [typed(parameter) for parameter in parameters]
+    return [typed(parameter, table) for parameter in parameters]
 
 
-def declare_node_parameters(node: Node) -> None:
-    """Declare every node parameter on ``node``, statically typed, with its descriptor.
+def declare_node_parameters(node: Node, table: ParameterTable = RANKING_NODE) -> None:
+    """Declare every parameter of ``table`` on ``node``, statically typed, with its descriptor.
 
     Overrides (params file, ``-p``, ``parameter_overrides``) are converted by typed() and
-    checked one by one with check_parameter first, in PARAMETERS order, so a bad one is
+    checked one by one with the table's check first, in its order, so a bad one is
     reported by name with the reason. rclpy infers the type of a declared value again and
     takes ``[]`` for a byte array, so a list parameter that is to be empty is declared without
     that value and then set to the typed empty list.
@@ -114,14 +137,14 @@ def declare_node_parameters(node: Node) -> None:
     overrides = node._parameter_overrides  # rclpy keeps them here; there is no public setter
     declarations: list[tuple[str, object, ParameterDescriptor]] = []
     empty: list[Parameter] = []
-    for name, spec in PARAMETERS.items():
-        kind = declared_type(name)
+    for name, spec in table.specs.items():
+        kind = declared_type(name, table)
         value = spec.default
         if name in overrides:
-            override = typed(overrides[name])
+            override = typed(overrides[name], table)
             if override.type_ is Parameter.Type.NOT_SET and kind in _ARRAY_TYPES.values():
                 override = Parameter(name, kind, [])  # how rcl reads [] from a params file
-            check_parameter(name, override.value)  # the reason, when it has one
+            table.check(name, override.value)  # the reason, when it has one
             if override.type_ is not kind:
                 raise InvalidInputError(
                     name, f"must be {_TYPE_WORDS[kind]}, got {override.value!r:.80}"
@@ -133,7 +156,9 @@ def declare_node_parameters(node: Node) -> None:
             empty.append(Parameter(name, kind, []))
         # an empty default is declared by type alone (an override, if any, gives the value)
         empty_default = isinstance(spec.default, (list, tuple)) and not spec.default
-        declarations.append((name, kind if empty_default else spec.default, descriptor(name)))
+        declarations.append(
+            (name, kind if empty_default else spec.default, descriptor(name, table))
+        )
     node.declare_parameters("", declarations)
     for parameter, result in zip(empty, node.set_parameters(empty), strict=True):
         if not result.successful:
