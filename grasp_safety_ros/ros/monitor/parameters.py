@@ -28,7 +28,13 @@ from ..parameters import (
 )
 from ..values import show
 
-SHARED = ("robot_description", "urdf", "base_frame", "tip_frame", "robot.armature_kgm2")
+SHARED: tuple[str, ...] = (
+    "robot_description",
+    "urdf",
+    "base_frame",
+    "tip_frame",
+    "robot.armature_kgm2",
+)
 SHARED += ("robot.armature_joint_names", "robot.armature_published", "iso_ts_15066.regions")
 SHARED += ("whole_arm.point_links", "whole_arm.points_m", "max_mass_kg", "diagnostics_period_s")
 """Parameters of the ranking node the monitor has too (same spec and check)."""
@@ -82,7 +88,11 @@ MONITOR_PARAMETERS: Mapping[str, ParameterSpec] = MappingProxyType(
 )
 """Every parameter of the monitor, by name."""
 
-RUNTIME = ("joint_states_timeout_s", "speed_scaling.margin", "speed_scaling.max_increase_per_s")
+RUNTIME: tuple[str, ...] = (
+    "joint_states_timeout_s",
+    "speed_scaling.margin",
+    "speed_scaling.max_increase_per_s",
+)
 RUNTIME += ("speed_scaling.closed_loop",)
 """Parameters the monitor takes at run time; the others are read at start-up only."""
 
@@ -129,7 +139,7 @@ def check_monitor_parameter(name: str, value: Any) -> Any:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise InvalidInputError(name, f"must be a number, got {show(value)}")
     if name == "speed_scaling.margin":
-        return check_margin(value, name)
+        return check_margin(float(value), name)
     return finite_float(value, name, minimum=0.0, strict_minimum=name in _POSITIVE)
 
 
