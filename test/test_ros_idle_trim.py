@@ -51,6 +51,24 @@ def test_the_heap_is_trimmed_once_idle_and_only_with_enough_free() -> None:
     assert not lock.locked()
 
 
+def test_no_trim_while_a_ranking_publishes_after_releasing_the_lock() -> None:
+    """The node lets the compute lock go before it publishes the response; a diagnostics
+    tick then (with an earlier ranking's heap pending and long idle) must not trim."""
+    clock, trimmed = Clock(), []
+    trim = IdleTrim(clock, lambda: TRIM_MIN_FREE_KIB, lambda: trimmed.append(1) or True)
+    lock = FairComputeLock()
+    trim.ranking_done()  # an earlier ranking freed heap ...
+    clock.now_s += 2 * IDLE_BEFORE_TRIM_S  # ... and the node has been idle since
+    assert lock.acquire(timeout=0.0)  # a request: the node's _rank
+    trim.ranking_started()
+    lock.release()  # computed; its response is being published
+    assert not trim.run(lock) and trimmed == []
+    trim.ranking_done()
+    assert not trim.run(lock)  # just ended: not idle
+    clock.now_s += IDLE_BEFORE_TRIM_S
+    assert trim.run(lock) and trimmed == [1]
+
+
 @pytest.fixture()
 def trims(monkeypatch: pytest.MonkeyPatch) -> Iterator[list[str]]:
     """Every heap trim the node makes (the glibc call replaced by a recorder), by thread."""
