@@ -224,21 +224,21 @@ class GraspSafetyNode(Node):
         timed = source in _TIMED_SOURCES
 
         def guarded(msg: Any, info: dict[str, Any]) -> None:
-            if sequences is not None and (
-                n := sequences.skipped(
-                    info["publication_sequence_number"],
-                    self._input_subscriptions[source].get_publisher_count(),
-                )
-            ):
-                with self._state_lock:
-                    skipped = self._status.skipped_by_source
-                    skipped[source] = skipped.get(source, 0) + n
             try:
-                check_no_subnormals(msg, source)
-            except GraspSafetyError as error:
-                self._report_error(source, error)
-                return
-            try:
+                if sequences is not None and (
+                    n := sequences.skipped(
+                        info["publication_sequence_number"],
+                        self._input_subscriptions[source].get_publisher_count(),
+                    )
+                ):
+                    with self._state_lock:
+                        skipped = self._status.skipped_by_source
+                        skipped[source] = skipped.get(source, 0) + n
+                try:
+                    check_no_subnormals(msg, source)
+                except GraspSafetyError as error:
+                    self._report_error(source, error)
+                    return
                 callback(msg, info["received_timestamp"]) if timed else callback(msg)
             except Exception as error:  # last resort: keep serving
                 self.get_logger().error(f"{source}: internal error:\n{traceback.format_exc()}")
