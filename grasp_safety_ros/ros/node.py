@@ -589,7 +589,7 @@ class GraspSafetyNode(Node):
                 quality_field="candidate_grasp_quality",
             )
         except NotReadyError as error:
-            self._topic_inputs.retry()  # with the next trajectory
+            self._topic_inputs.retry()  # at the next input, with the trajectory before it
             self._report_error("topics", error)
         except ShuttingDownError:
             pass  # the node is going: nothing to report
