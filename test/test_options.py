@@ -77,10 +77,9 @@ def test_the_core_defaults_are_the_tables() -> None:
 
 
 def test_the_scenario_defaults_are_the_tables(tmp_path: Path) -> None:
-    data = {key: BOOK[key] for key in ("robot", "object", "trajectory", "grasps", "metric")}
-    del data["metric"]  # optional: the table's
+    data = {key: BOOK[key] for key in ("robot", "object", "trajectory", "grasps")}  # no metric
     data["object"] = {"mass_kg": 0.34, "sphere": {"radius_m": 0.05}}  # no points
-    scenario = parse_scenario({**data, "metric": default("metric")}, tmp_path)
+    scenario = parse_scenario(data, tmp_path)
     got = values_of(scenario.metric, scenario.options, scenario.posture)
     assert got == {key: o.default for key, o in OPTIONS.items() if key not in SECTIONS_OF}
     with_uncertainty = parse_scenario({**data, "uncertainty": {}}, tmp_path)
