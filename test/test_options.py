@@ -77,10 +77,9 @@ def test_the_core_defaults_are_the_tables() -> None:
 
 
 def test_the_scenario_defaults_are_the_tables(tmp_path: Path) -> None:
-    data = {key: BOOK[key] for key in ("robot", "object", "trajectory", "grasps", "metric")}
-    del data["metric"]  # optional: the table's
+    data = {key: BOOK[key] for key in ("robot", "object", "trajectory", "grasps")}  # no metric
     data["object"] = {"mass_kg": 0.34, "sphere": {"radius_m": 0.05}}  # no points
-    scenario = parse_scenario({**data, "metric": default("metric")}, tmp_path)
+    scenario = parse_scenario(data, tmp_path)
     got = values_of(scenario.metric, scenario.options, scenario.posture)
     assert got == {key: o.default for key, o in OPTIONS.items() if key not in SECTIONS_OF}
     with_uncertainty = parse_scenario({**data, "uncertainty": {}}, tmp_path)
@@ -110,6 +109,33 @@ def test_the_node_defaults_and_help_are_the_tables() -> None:
     for limit in LIMITS.values():
         if limit.node:
             assert PARAMETERS[limit.node].default == limit.budget <= limit.value, limit
+
+
+def flat(section: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """A parameter YAML's nested sections as dotted keys (rclpy's parameter names)."""
+    result: dict[str, Any] = {}
+    for key, value in section.items():
+        if isinstance(value, dict):
+            result.update(flat(value, f"{prefix}{key}."))
+        else:
+            result[f"{prefix}{key}"] = value
+    return result
+
+
+def test_the_node_config_file_sets_the_tables_defaults() -> None:
+    """config/grasp_safety_node.yaml (the file users start from) sets every option it names
+    to the table's default, and every node budget to LIMITS' (it once turned effort off)."""
+    document = yaml.safe_load(config_file("grasp_safety_node.yaml").read_text())
+    parameters = flat(document["grasp_safety"]["ros__parameters"])
+    expected = {key: option.default for key, option in OPTIONS.items()}
+    expected |= {limit.node: limit.budget for limit in LIMITS.values() if limit.node}
+    checked = sorted(set(parameters) & set(expected))
+    assert checked, "no option of the table in the node's config file"
+    for key in checked:
+        assert parameters[key] == expected[key], (
+            f"{key}: config/grasp_safety_node.yaml sets {parameters[key]!r}, "
+            f"the table's default is {expected[key]!r}"
+        )
 
 
 def test_the_batch_defaults_are_the_tables(tmp_path: Path) -> None:

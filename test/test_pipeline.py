@@ -18,6 +18,7 @@ import yaml
 pytest.importorskip("rclpy")
 
 from test_ros_node import BOOK, BOOK_YAML, NodeUnderTest, book_request
+from tolerances import effort_tolerances, path_tolerance
 
 from grasp_safety_ros.cli.main import rank_scenario
 from grasp_safety_ros.core.method.ranking import GraspSafetyEvaluator
@@ -28,10 +29,6 @@ DT_S = 0.1
 LOWER_KGM2 = [0.0, 0.05, 0.0, 0.05, 0.0, 0.02, 0.0]
 UPPER_KGM2 = [0.1, 0.25, 0.1, 0.25, 0.05, 0.05, 0.05]
 """Armature ranges of Baxter's right arm [kg m^2], chain order (made up: any 0 <= lo <= hi)."""
-
-REL = 1e-9
-"""The node's grasps and trajectory pass through messages (quaternions normalised again, times
-in sec + nanosec): its numbers equal the CLI's to a few ulps times the IK's conditioning."""
 
 
 @pytest.fixture(scope="module")
@@ -52,6 +49,43 @@ def scenario_path(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="module")
 def cli_report(scenario_path: Path) -> Any:
     return rank_scenario(load_scenario(scenario_path))
+
+
+@pytest.fixture(scope="module")
+def tolerances(scenario_path: Path, cli_report: Any) -> dict[int, dict[str, float]]:
+    """Relative tolerances of the node's numbers against the CLI's, per feasible grasp.
+
+    The node's grasps and trajectory pass through messages (quaternions normalised again,
+    times in sec + nanosec): its inputs differ from the CLI's by a few roundings, which the
+    IK and the dynamics amplify by the path's conditioning. So: ``path`` = path_tolerance
+    (k · cond · eps, cond the worse of M's and the tip Jacobian's along the grasp's path,
+    k = ROUNDINGS_PER_JOINT per joint, which also covers the inputs' few roundings) for the
+    scores, effective masses, the ISO/TS 15066 durations (from the effective mass) and the
+    start posture (relative to its largest joint value, at least 1 rad); ``lower`` the same
+    with the armature's lower ends (their M); ``effort`` =
+    effort_tolerances' of the ranked criterion (the torques' finite differences included)."""
+    scenario = load_scenario(scenario_path)
+    robot = scenario.robot.load(scenario.base_dir)
+    criterion = f"{cli_report.options.effort_criterion}_of_limit"
+    result = {}
+    for k, evaluation in enumerate(cli_report.ranking.evaluations):
+        if not evaluation.feasible:
+            continue
+        grasp = scenario.grasps[k]
+        path = path_tolerance(robot, scenario.object_inertia, grasp, evaluation.joint_positions)
+        lower = path_tolerance(
+            robot.with_armature(LOWER_KGM2),
+            scenario.object_inertia,
+            grasp,
+            evaluation.joint_positions,
+        )
+        result[k] = {"path": path, "lower": lower}
+        if cli_report.effort:
+            effort = effort_tolerances(
+                robot, evaluation, scenario.object_inertia, grasp, cli_report.effort[k]
+            )
+            result[k]["effort"] = effort[criterion]
+    return result
 
 
 @pytest.fixture(scope="module")
@@ -81,7 +115,9 @@ def node_response(tmp_path_factory: pytest.TempPathFactory) -> Any:
     return response.ranking
 
 
-def test_node_equals_the_cli_with_the_defaults(cli_report: Any, node_response: Any) -> None:
+def test_node_equals_the_cli_with_the_defaults(
+    cli_report: Any, node_response: Any, tolerances: dict[int, dict[str, float]]
+) -> None:
     report, ranking = cli_report, node_response
     assert tuple(ranking.order) == report.order
     assert tuple(ranking.safety_order) == report.safety_order
@@ -96,16 +132,22 @@ def test_node_equals_the_cli_with_the_defaults(cli_report: Any, node_response: A
         assert got.postures_tried == posture.postures_tried
         if not e.feasible:
             continue
-        assert got.score == pytest.approx(e.score, rel=REL)
-        assert got.safety_score == pytest.approx(report.scores[k], rel=REL)
-        assert got.iso_min_duration_s == pytest.approx(iso[k].min_duration_s, rel=REL)
-        np.testing.assert_allclose(got.start_positions, posture.start_positions, atol=1e-9)
+        rel = tolerances[k]["path"]
+        assert got.score == pytest.approx(e.score, rel=rel)
+        assert got.safety_score == pytest.approx(report.scores[k], rel=rel)
+        assert got.iso_min_duration_s == pytest.approx(iso[k].min_duration_s, rel=rel)
+        scale_rad = max(float(np.abs(posture.start_positions).max()), 1.0)
+        np.testing.assert_allclose(
+            got.start_positions, posture.start_positions, rtol=0.0, atol=rel * scale_rad
+        )
         if report.effort:
             effort = report.effort[k].score(report.options.effort_criterion)
-            assert got.effort_score == pytest.approx(effort, rel=REL)
+            assert got.effort_score == pytest.approx(effort, rel=tolerances[k]["effort"])
 
 
-def test_the_service_returns_the_armature_range(cli_report: Any, node_response: Any) -> None:
+def test_the_service_returns_the_armature_range(
+    cli_report: Any, node_response: Any, tolerances: dict[int, dict[str, float]]
+) -> None:
     spread, ranking = cli_report.armature_range, node_response
     assert spread is not None  # the scenario's ranges ran in the CLI
     np.testing.assert_array_equal(ranking.armature_lower_kgm2, LOWER_KGM2)
@@ -117,13 +159,14 @@ def test_the_service_returns_the_armature_range(cli_report: Any, node_response: 
     for k, got in enumerate(ranking.evaluations):
         if not got.feasible:
             continue
-        assert got.score_armature_lower == pytest.approx(spread.scores_lower[k], rel=REL)
-        assert got.score_armature_upper == pytest.approx(spread.scores_upper[k], rel=REL)
+        rel, lower = tolerances[k]["path"], tolerances[k]["lower"]
+        assert got.score_armature_lower == pytest.approx(spread.scores_lower[k], rel=lower)
+        assert got.score_armature_upper == pytest.approx(spread.scores_upper[k], rel=rel)
         low, high = spread.effective_mass_range_kg[k]
-        assert got.armature_min_effective_mass_kg == pytest.approx(low, rel=REL)
-        assert got.armature_max_effective_mass_kg == pytest.approx(high, rel=REL)
+        assert got.armature_min_effective_mass_kg == pytest.approx(low, rel=lower)
+        assert got.armature_max_effective_mass_kg == pytest.approx(high, rel=rel)
         # the ends bound the effective mass (M + diag(a) grows with a), the upper is ranked
-        assert got.score_armature_lower <= got.score <= got.score_armature_upper * (1 + REL)
+        assert got.score_armature_lower <= got.score <= got.score_armature_upper * (1 + rel)
 
 
 def test_batch_equals_the_cli(scenario_path: Path, cli_report: Any, tmp_path: Path) -> None:

@@ -16,7 +16,6 @@ from test_ros_node import (  # noqa: F401  (_localhost_only: autouse fixture)
 )
 
 from grasp_safety_ros.ros import memory
-from grasp_safety_ros.ros import node as node_module
 from grasp_safety_ros.ros.memory import IDLE_BEFORE_TRIM_S, TRIM_MIN_FREE_KIB, IdleTrim
 from grasp_safety_ros.ros.ranking_job import FairComputeLock
 
@@ -51,6 +50,24 @@ def test_the_heap_is_trimmed_once_idle_and_only_with_enough_free() -> None:
     assert not lock.locked()
 
 
+def test_no_trim_while_a_ranking_publishes_after_releasing_the_lock() -> None:
+    """The node lets the compute lock go before it publishes the response; a diagnostics
+    tick then (with an earlier ranking's heap pending and long idle) must not trim."""
+    clock, trimmed = Clock(), []
+    trim = IdleTrim(clock, lambda: TRIM_MIN_FREE_KIB, lambda: trimmed.append(1) or True)
+    lock = FairComputeLock()
+    trim.ranking_done()  # an earlier ranking freed heap ...
+    clock.now_s += 2 * IDLE_BEFORE_TRIM_S  # ... and the node has been idle since
+    assert lock.acquire(timeout=0.0)  # a request: the node's _rank
+    trim.ranking_started()
+    lock.release()  # computed; its response is being published
+    assert not trim.run(lock) and trimmed == []
+    trim.ranking_done()
+    assert not trim.run(lock)  # just ended: not idle
+    clock.now_s += IDLE_BEFORE_TRIM_S
+    assert trim.run(lock) and trimmed == [1]
+
+
 @pytest.fixture()
 def trims(monkeypatch: pytest.MonkeyPatch) -> Iterator[list[str]]:
     """Every heap trim the node makes (the glibc call replaced by a recorder), by thread."""
@@ -61,8 +78,10 @@ def trims(monkeypatch: pytest.MonkeyPatch) -> Iterator[list[str]]:
         return True
 
     monkeypatch.setattr(memory, "release_free_heap", record)
-    if hasattr(node_module, "release_free_heap"):  # the node before IdleTrim called it itself
-        monkeypatch.setattr(node_module, "release_free_heap", record)
+    # A fresh node has about 1.5 MB of free heap, under TRIM_MIN_FREE_KIB: without this no
+    # trim could ever run and the test below could not fail; now only the idle rule holds
+    # trims back.
+    monkeypatch.setattr(memory, "TRIM_MIN_FREE_KIB", 0)
     yield calls
 
 

@@ -62,12 +62,6 @@ from grasp_safety_ros.scenario import schema as scenario
 # --- Count parameters (D) ----------------------------------------------------------------------
 
 
-def test_count_parameter_limits_are_the_clis() -> None:
-    assert parameters.MAX_GRASPS_LIMIT == scenario.MAX_GRASPS
-    assert parameters.MAX_SAMPLES_LIMIT == scenario.MAX_GRASP_SAMPLES
-    assert geometry.MAX_OBJECT_SIZE_M == scenario.MAX_OBJECT_SIZE_M
-
-
 @pytest.mark.parametrize(
     ("name", "limit"),
     [

@@ -138,8 +138,7 @@ def test_a_flood_of_large_messages_queues_at_most_the_depth(ros: NodeUnderTest) 
             )
 
         assert ros.spin_until(lambda: taken() >= 301, 180.0), diagnostics(ros)
-        assert taken() == 301
-        assert count(ros, "skipped.object_trajectory") > 0  # the flood outran the node
+        assert taken() == 301  # refused or skipped (how many of each: the machine's speed)
         grown_mb = (memory_kib()["rss_kib"] - rss_before_kib) / 1024
         bound_mb = INPUT_DEPTHS["object_trajectory"] * 1 + 10 * 1 + 4 * 5 + 150
         assert grown_mb < bound_mb, (grown_mb, bound_mb)

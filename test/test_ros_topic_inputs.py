@@ -93,6 +93,18 @@ def test_a_set_before_any_trajectory_takes_the_first_then_one_received_before_it
     assert taken is not None and taken[1] is before
 
 
+def test_a_reception_time_of_zero_is_none() -> None:
+    """An rmw that does not fill received_timestamp gives 0: the time of the call then, not
+    the epoch (which put the later trajectory before every other)."""
+    inputs, first, second = TopicInputs(), Path(), Path()
+    inputs.set_trajectory(first)  # the time of the call
+    inputs.set_trajectory(second, received_ns=0)  # no reception time
+    assert inputs.latest_trajectory() is second
+    inputs.set_candidates(candidates(2), received_ns=0)
+    taken = inputs.take()
+    assert taken is not None and taken[1] is second  # the one received last before the set
+
+
 def test_the_latest_trajectory_is_the_one_received_last() -> None:
     """What ~/plan_grasps ranks along: None before any, then the latest by reception time (a
     message received earlier but handed over later does not replace it)."""

@@ -79,9 +79,10 @@ class PipelineRequest:
         trajectory: The object's motion after the grasp (poses of the object frame in the
             base frame).
         metric: ``mean``, ``max`` or ``integral``; None: the evaluator's configured metric.
-        options: The analyses beyond the paper (AnalysisOptions; all off except ISO/TS 15066
-            by default).
-        posture: Posture selection (PostureConfig; ``restarts`` 0: the paper's single IK).
+        options: The analyses beyond the paper (AnalysisOptions; ISO/TS 15066 and effort by
+            default, the others off: core.options).
+        posture: Posture selection (PostureConfig; 8 restarts by default, core.options;
+            ``restarts`` 0: the paper's single IK).
         seed_positions: IK seed of the first sample [rad or m], chain joint order; None: the
             evaluator's (mid-range).
         armature_range: Armature bounds per chain joint; the analysis runs when some joint

@@ -87,7 +87,8 @@ class _Lock(Protocol):
 
 
 class IdleTrim:
-    """When the node gives freed heap back (release_free_heap): once no ranking has ended for
+    """When the node gives freed heap back (release_free_heap): once no ranking runs (from
+    ranking_started to ranking_done, publication included), none has ended for
     IDLE_BEFORE_TRIM_S and at least TRIM_MIN_FREE_KIB are free, holding the compute lock.
 
     malloc_trim walks the whole heap and madvises every free page, holding each arena's lock:
@@ -109,24 +110,38 @@ class IdleTrim:
         self._clock, self._free_kib, self._trim = clock, free_kib, trim
         self._lock = threading.Lock()
         self._pending = False
+        self._running = 0
         self._last_ranking = clock()
         self.trims = 0
 
-    def ranking_done(self) -> None:
-        """A ranking ended (it freed heap; the node is not idle)."""
+    def ranking_started(self) -> None:
+        """A ranking started: no trim until it is done (ranking_done), also after it let the
+        compute lock go while its response is published."""
         with self._lock:
+            self._running += 1
+
+    def ranking_done(self) -> None:
+        """A ranking (started by ranking_started) ended: it freed heap; the node is not idle."""
+        with self._lock:
+            self._running = max(self._running - 1, 0)
             self._pending, self._last_ranking = True, self._clock()
+
+    def _due(self) -> bool:
+        """A ranking freed heap, none runs, and the last ended IDLE_BEFORE_TRIM_S ago (call
+        holding self._lock)."""
+        idle_s = self._clock() - self._last_ranking
+        return self._pending and self._running == 0 and idle_s >= IDLE_BEFORE_TRIM_S
 
     def run(self, compute_lock: _Lock) -> bool:
         """Trim if due and no ranking computes (the lock is free now); True if it trimmed."""
         with self._lock:
-            due = self._pending and self._clock() - self._last_ranking >= IDLE_BEFORE_TRIM_S
+            due = self._due()
         if not due or not compute_lock.acquire(timeout=0.0):
             return False
         try:
             with self._lock:
-                if self._clock() - self._last_ranking < IDLE_BEFORE_TRIM_S:
-                    return False  # one ended meanwhile
+                if not self._due():
+                    return False  # one started or ended meanwhile
                 self._pending = False
             if self._free_kib() < TRIM_MIN_FREE_KIB:
                 return False

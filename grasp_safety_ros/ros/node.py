@@ -53,9 +53,10 @@ from std_msgs.msg import Float64MultiArray, Header, String
 from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 from visualization_msgs.msg import MarkerArray
 
+from ..core.analyses.safety_report import SafetyReport
 from ..core.exceptions import GraspSafetyError, InvalidInputError
 from ..core.model.inertia import ObjectInertia
-from ..core.pipeline import run_pipeline
+from ..core.pipeline import PipelineRequest, run_pipeline
 from .arm_points import check_arm_point_links
 from .conversions import (
     check_frame_id,
@@ -223,21 +224,21 @@ class GraspSafetyNode(Node):
         timed = source in _TIMED_SOURCES
 
         def guarded(msg: Any, info: dict[str, Any]) -> None:
-            if sequences is not None and (
-                n := sequences.skipped(
-                    info["publication_sequence_number"],
-                    self._input_subscriptions[source].get_publisher_count(),
-                )
-            ):
-                with self._state_lock:
-                    skipped = self._status.skipped_by_source
-                    skipped[source] = skipped.get(source, 0) + n
             try:
-                check_no_subnormals(msg, source)
-            except GraspSafetyError as error:
-                self._report_error(source, error)
-                return
-            try:
+                if sequences is not None and (
+                    n := sequences.skipped(
+                        info["publication_sequence_number"],
+                        self._input_subscriptions[source].get_publisher_count(),
+                    )
+                ):
+                    with self._state_lock:
+                        skipped = self._status.skipped_by_source
+                        skipped[source] = skipped.get(source, 0) + n
+                try:
+                    check_no_subnormals(msg, source)
+                except GraspSafetyError as error:
+                    self._report_error(source, error)
+                    return
                 callback(msg, info["received_timestamp"]) if timed else callback(msg)
             except Exception as error:  # last resort: keep serving
                 self.get_logger().error(f"{source}: internal error:\n{traceback.format_exc()}")
@@ -588,7 +589,7 @@ class GraspSafetyNode(Node):
                 quality_field="candidate_grasp_quality",
             )
         except NotReadyError as error:
-            self._topic_inputs.retry()  # with the next trajectory
+            self._topic_inputs.retry()  # at the next input, with the trajectory before it
             self._report_error("topics", error)
         except ShuttingDownError:
             pass  # the node is going: nothing to report
@@ -644,8 +645,6 @@ class GraspSafetyNode(Node):
             quality_field,
             joint_trajectories,
         )
-        grasps, trajectory = request.grasps, request.trajectory
-
         if not self._compute_lock.acquire(timeout=settings.service_busy_timeout_s):
             if self._stopping.is_set():
                 raise ShuttingDownError("ranking not started: the node is shutting down")
@@ -653,13 +652,35 @@ class GraspSafetyNode(Node):
                 f"busy: another ranking has been running for more than "
                 f"service_busy_timeout_s={settings.service_busy_timeout_s:g} s; try again"
             )
+        self._idle_trim.ranking_started()  # no heap trim until the response is published
         try:
-            started = time.perf_counter()
-            check = progress_check(settings, self._stopping, self._compute_lock, client_watch)
-            report = run_pipeline(bundle.evaluator, request, check)
-            compute_time_s = time.perf_counter() - started
+            try:
+                started = time.perf_counter()
+                check = progress_check(settings, self._stopping, self._compute_lock, client_watch)
+                report = run_pipeline(bundle.evaluator, request, check)
+                compute_time_s = time.perf_counter() - started
+            finally:
+                self._compute_lock.release()
+            result = self._publish_ranking(
+                settings, report, request, grasps_msg, compute_time_s, source
+            )
         finally:
-            self._compute_lock.release()
+            self._idle_trim.ranking_done()
+        self._publish_diagnostics()
+        return result
+
+    def _publish_ranking(
+        self,
+        settings: NodeSettings,
+        report: SafetyReport,
+        request: PipelineRequest,
+        grasps_msg: PoseArray,
+        compute_time_s: float,
+        source: str,
+    ) -> GraspRanking:
+        """Publish a ranking's result on ~/ranking, ~/ranked_grasps and the markers, and count
+        it in the status; the result (the service's response)."""
+        grasps, trajectory = request.grasps, request.trajectory
 
         stamp = self.get_clock().now().to_msg()
         result = report_msg(
@@ -681,8 +702,6 @@ class GraspSafetyNode(Node):
             f"{source}: ranked {len(grasps)} grasps ({feasible} feasible) in "
             f"{compute_time_s:.3f} s; order {list(report.order)}"
         )
-        self._idle_trim.ranking_done()
-        self._publish_diagnostics()
         return result
 
     # --- Diagnostics -------------------------------------------------------------------------

@@ -302,10 +302,6 @@ _RANGES: Mapping[str, tuple[float, float]] = {
     key: bounds(key) for key in ("uncertainty.percentile", "safety_weight")
 }
 _MAX_POINTS = int(LIMITS["points"].value)
-MAX_GRASPS_LIMIT = int(LIMITS["grasps"].value)
-MAX_SAMPLES_LIMIT = int(LIMITS["grasp_samples"].value)
-"""Upper bounds of the node's count parameters, the scenario's limits (core.options.LIMITS):
-beyond them a request cannot finish in useful time or memory."""
 _COUNT_LIMITS: Mapping[str, tuple[int, int]] = {
     **{limit.node: (1, int(limit.value)) for limit in LIMITS.values() if limit.node},
     **{
@@ -315,6 +311,8 @@ _COUNT_LIMITS: Mapping[str, tuple[int, int]] = {
     "uncertainty.seed": (0, MAX_COUNT),  # a seed, not a count
     "response.joint_trajectories": (0, MAX_COUNT),  # clipped to the number of grasps
 }
+"""Bounds of the node's count parameters; the request budgets' tops are the scenario's limits
+(core.options.LIMITS): beyond them a request cannot finish in useful time or memory."""
 
 
 @dataclass(frozen=True)

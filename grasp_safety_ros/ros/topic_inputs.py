@@ -89,7 +89,8 @@ class TopicInputs:
     length and no quality yet (the set is then ranked again, with the quality); otherwise it
     waits for the next candidate set. An empty vector (None) clears a waiting one.
 
-    Reception times are the middleware's [ns]; without one, the time of the call.
+    Reception times are the middleware's [ns]; without one (None, or 0: an rmw that does not
+    fill it), the time of the call.
     """
 
     def __init__(self) -> None:
@@ -176,4 +177,6 @@ class TopicInputs:
 
 
 def _received(received_ns: int | None) -> int:
-    return time.time_ns() if received_ns is None else int(received_ns)
+    """The reception time [ns]: the middleware's, or the time of the call when it gave none
+    (None, or 0 from an rmw that does not fill it)."""
+    return int(received_ns) if received_ns else time.time_ns()

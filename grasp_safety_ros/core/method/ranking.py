@@ -401,8 +401,8 @@ class GraspSafetyEvaluator:
             for i in np.flatnonzero(worst):
                 directions[i], masses[i] = worst_direction(mobilities[i])
         object_inertia, start = inertia_seed
-        links_only = masses
-        if self.robot.armature_given:
+        links_only = masses  # no armature, or explicit zeros: these are the links' own
+        if np.any(self.robot.armature_kgm2 > 0):
             links_only = self._links_only_masses(grasp, object_inertia, q_all, directions, worst)
         if planned is not None:
             positions = np.array(planned.joint_positions)

@@ -24,10 +24,10 @@ from ...core.input_checks import (
     quat_xyzw_from_rotation,
     rotation_from_quat_xyzw,
 )
+from ...core.options import LIMITS
 
-MAX_OBJECT_SIZE_M = 100.0
-"""Largest radius of gyration of an object [m] (the CLI's scenario limit; a test keeps them
-equal)."""
+MAX_OBJECT_SIZE_M = LIMITS["object_size_m"].value
+"""Largest radius of gyration of an object [m] (the scenario's limit: core.options.LIMITS)."""
 
 
 # --- Poses -----------------------------------------------------------------------------------
