@@ -90,12 +90,11 @@ test: setup lint
 bench: setup
 	$(PY) bench/run.py --json bench/results.json
 
-# ruff check, then mypy (its configuration: pyproject.toml). To add once the tree has been
-# formatted (one `ruff format` over it at the end of a round), after ruff check:
-#	$(VENV)/bin/ruff format --check $(LINTED)
-LINTED := grasp_safety_ros test bench examples launch
+# ruff check, ruff format --check, then mypy (its configuration: pyproject.toml)
+LINTED := grasp_safety_ros test bench examples launch scripts
 lint: $(STAMP)
 	$(VENV)/bin/ruff check $(LINTED)
+	$(VENV)/bin/ruff format --check $(LINTED)
 	$(VENV)/bin/mypy
 
 # Re-resolve requirements*.txt (and the PyPI packages of ../shared/tools' installers) in a
