@@ -19,6 +19,7 @@ from ..core.analyses.effort import EFFORT_CRITERIA
 from ..core.analyses.exposed_points import (
     METRIC_POINTS,
     box_corners_in_object,
+    check_metric_point_has_points,
     cylinder_rim_points_in_object,
 )
 from ..core.analyses.iso15066 import BODY_REGIONS
@@ -637,12 +638,12 @@ def analysis_from_parameters(values: Mapping[str, Any]) -> AnalysisOptions:
     """
     points = points_from_parameters(values)
     metric_point = values["metric_point"]
-    if metric_point != "tip" and points is None:
-        raise InvalidInputError(
-            "metric_point",
-            f"{metric_point!r} needs the object's points: set object.points_in_object_m, "
-            "object.box_size_m or object.cylinder_radius_m and object.cylinder_length_m",
-        )
+    check_metric_point_has_points(
+        metric_point,
+        points,
+        "set object.points_in_object_m, object.box_size_m or object.cylinder_radius_m and "
+        "object.cylinder_length_m",
+    )
     bounds = [values[f"uncertainty.{n}"] for n in ("mass_fraction", "com_offset_m")]
     bounds.append(values["uncertainty.inertia_fraction"])
     uncertainty = None

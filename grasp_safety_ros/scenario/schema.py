@@ -10,7 +10,11 @@ from typing import Any
 
 import numpy as np
 
-from ..core.analyses.exposed_points import box_corners_in_object, cylinder_rim_points_in_object
+from ..core.analyses.exposed_points import (
+    box_corners_in_object,
+    check_metric_point_has_points,
+    cylinder_rim_points_in_object,
+)
 from ..core.analyses.safe_duration import RetimeOptions
 from ..core.analyses.safety_report import RANK_BY, AnalysisOptions
 from ..core.analyses.uncertainty import InertiaUncertainty
@@ -455,11 +459,7 @@ def parse_options(
     if rank_by not in RANK_BY:
         raise InvalidInputError("rank_by", f"must be one of {', '.join(RANK_BY)}, got {rank_by!r}")
     metric_point = root.get("metric_point", default("metric_point"))
-    if metric_point != "tip" and points is None:
-        raise InvalidInputError(
-            "metric_point",
-            f"{metric_point!r} needs object.points_m or a box or cylinder object",
-        )
+    check_metric_point_has_points(metric_point, points, "object.points_m or a box or cylinder")
     try:
         return AnalysisOptions(
             metric_point=metric_point,

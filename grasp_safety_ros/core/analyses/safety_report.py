@@ -30,6 +30,7 @@ from .effort import EffortEvaluation, check_effort_criterion, evaluate_efforts, 
 from .exposed_points import (
     ExposedPointsEvaluation,
     check_metric_point,
+    check_metric_point_has_points,
     check_points_in_object,
     evaluate_exposed_points,
     evaluate_exposed_points_on_terms,
@@ -130,12 +131,11 @@ class AnalysisOptions:
                 "points_in_object_m",
                 check_points_in_object(self.points_in_object_m, "object.points_m"),
             )
-        elif self.metric_point != "tip":
-            raise InvalidInputError(
-                "metric_point",
-                f"{self.metric_point!r} needs the object's points (a box or cylinder shape, "
-                "or object.points_m)",
-            )
+        check_metric_point_has_points(
+            self.metric_point,
+            self.points_in_object_m,
+            "a box or cylinder shape, or object.points_m",
+        )
         if self.iso_regions:
             select_regions(list(self.iso_regions))  # raises on unknown names
         if self.rank_by not in RANK_BY:
