@@ -25,7 +25,7 @@ from ..core.method.ranking import check_metric
 from ..core.model.inertia import ObjectInertia
 from ..core.model.waypoint_trajectory import WaypointTrajectory
 from ..core.options import default
-from ..scenario.fields import check_keys, mapping, read_pose, read_yaml_file, required, string
+from ..scenario.fields import check_keys, mapping, read_pose, required, string
 from ..scenario.schema import (
     OPTIONAL_SECTIONS,
     RobotSpec,
@@ -201,8 +201,3 @@ def parse_spec(data: Any, base_dir: Path) -> BatchSpec:
             {k: v for k, v in root.items() if k != "sources"}, robot, base_dir
         ),
     )
-
-
-def load_spec(path: str | Path) -> BatchSpec:
-    """Read and validate a SPEC YAML file."""
-    return parse_spec(read_yaml_file(path, "spec"), Path(path).resolve().parent)
