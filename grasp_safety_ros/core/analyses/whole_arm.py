@@ -187,7 +187,9 @@ def tip_twists_in_base(
     return np.concatenate([tip.tangents * rate, motion.angular_tangents * rate], axis=1)
 
 
-def tip_jacobians_world(robot: RobotModel, terms_kinematics: tuple[np.ndarray, ...]) -> np.ndarray:
+def jacobians_tip_in_world(
+    robot: RobotModel, terms_kinematics: tuple[np.ndarray, ...]
+) -> np.ndarray:
     """(N, 6, n) Jacobians of the tip frame, world axes at the tip origin (LOCAL_WORLD_ALIGNED),
     from ``pinocchio_kinematic_terms``' placements and world columns."""
     rotations, translations, jacobians = terms_kinematics[:3]
@@ -214,7 +216,7 @@ def tip_following_joint_velocities(
     """q̇ (N, n) = J⁺ξ + (I − J⁺J) q̇_s (module docstring) [rad/s or m/s].
 
     Args:
-        tip_jacobians: (N, 6, n) from ``tip_jacobians_world``.
+        tip_jacobians: (N, 6, n) from ``jacobians_tip_in_world``.
         tip_twists_in_world: (N, 6) tip twists (linear [m/s], angular [rad/s]), world axes.
         times_s, joint_positions: The samples (N,), (N, n); continuous joints are unwrapped.
     """
@@ -386,7 +388,7 @@ def evaluate_whole_arm(
     kinematics = pinocchio_kinematic_terms(model, q_all)
     velocities = tip_following_joint_velocities(
         robot,
-        tip_jacobians_world(robot, kinematics),
+        jacobians_tip_in_world(robot, kinematics),
         _tip_twists_in_world(robot, trajectory, grasp, times),
         times,
         positions,
