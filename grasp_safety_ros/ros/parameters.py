@@ -19,6 +19,7 @@ from ..core.analyses.effort import EFFORT_CRITERIA
 from ..core.analyses.exposed_points import (
     METRIC_POINTS,
     box_corners_in_object,
+    check_metric_point_has_points,
     cylinder_rim_points_in_object,
 )
 from ..core.analyses.iso15066 import BODY_REGIONS
@@ -33,11 +34,21 @@ from ..core.input_checks import (
     finite_array,
     finite_float,
 )
+from ..core.method.ik import IKConfig
 from ..core.method.posture import PostureConfig
 from ..core.method.ranking import METRICS
 from ..core.model.armature import PUBLISHED, published_armatures
 from ..core.model.inertia import ObjectInertia
-from ..core.options import LIMITS, OPTIONS, bounds, help_text
+from ..core.options import (
+    IK_OPTIONS,
+    LIMITS,
+    OPTIONS,
+    REDUNDANCY_OPTIONS,
+    bounds,
+    help_text,
+    ik_config,
+    redundancy_config,
+)
 from .arm_points import arm_points, check_point_links
 from .conversions.geometry import inertia_tensor_from_components
 from .response import MAX_COUNT, ResponseContent
@@ -192,6 +203,9 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
     "effort.criterion": _option("effort.criterion"),
     "rank_by": _option("rank_by"),
     "posture.restarts": _option("posture.restarts"),
+    **{key: _option(key) for key in REDUNDANCY_OPTIONS},
+    # the evaluator's, built with the robot: read at start-up
+    **{key: dataclasses.replace(_option(key), read_only=True) for key in IK_OPTIONS},
     # --- What the result messages carry (the service's response and ~/ranking) ---
     "response.joint_trajectories": ParameterSpec(
         1,
@@ -298,15 +312,17 @@ _POSITIVE: tuple[str, ...] = (
 )
 _POSITIVE += ("service_busy_timeout_s", "diagnostics_period_s", "moveit.planner_timeout_s")
 _FRACTIONS = ("uncertainty.mass_fraction", "uncertainty.inertia_fraction")
+_POSITIVE += tuple(k for k in IK_OPTIONS + REDUNDANCY_OPTIONS if OPTIONS[k].type is float)
 _RANGES: Mapping[str, tuple[float, float]] = {
     key: bounds(key) for key in ("uncertainty.percentile", "safety_weight")
 }
 _MAX_POINTS = int(LIMITS["points"].value)
 _COUNT_LIMITS: Mapping[str, tuple[int, int]] = {
     **{limit.node: (1, int(limit.value)) for limit in LIMITS.values() if limit.node},
+    **{k: (0, MAX_COUNT) for k in IK_OPTIONS + REDUNDANCY_OPTIONS if OPTIONS[k].type is int},
     **{
         key: (int(bounds(key)[0]), int(bounds(key)[1]))
-        for key in ("uncertainty.samples", "posture.restarts")
+        for key in ("uncertainty.samples", "posture.restarts", "redundancy.profile_degree")
     },
     "uncertainty.seed": (0, MAX_COUNT),  # a seed, not a count
     "response.joint_trajectories": (0, MAX_COUNT),  # clipped to the number of grasps
@@ -354,6 +370,7 @@ class NodeSettings:
     diagnostics_period_s: float
     analysis: AnalysisOptions = dataclasses.field(default_factory=AnalysisOptions)
     posture: PostureConfig = dataclasses.field(default_factory=PostureConfig)
+    ik: IKConfig = dataclasses.field(default_factory=IKConfig)
     response: ResponseContent = dataclasses.field(
         default_factory=lambda: ResponseContent(joint_trajectories=1)
     )
@@ -637,12 +654,12 @@ def analysis_from_parameters(values: Mapping[str, Any]) -> AnalysisOptions:
     """
     points = points_from_parameters(values)
     metric_point = values["metric_point"]
-    if metric_point != "tip" and points is None:
-        raise InvalidInputError(
-            "metric_point",
-            f"{metric_point!r} needs the object's points: set object.points_in_object_m, "
-            "object.box_size_m or object.cylinder_radius_m and object.cylinder_length_m",
-        )
+    check_metric_point_has_points(
+        metric_point,
+        points,
+        "set object.points_in_object_m, object.box_size_m or object.cylinder_radius_m and "
+        "object.cylinder_length_m",
+    )
     bounds = [values[f"uncertainty.{n}"] for n in ("mass_fraction", "com_offset_m")]
     bounds.append(values["uncertainty.inertia_fraction"])
     uncertainty = None
@@ -676,6 +693,7 @@ def analysis_from_parameters(values: Mapping[str, Any]) -> AnalysisOptions:
         )
         if values["retime.joint_acceleration_limits"]
         else None,
+        redundancy_settings=redundancy_config(values),
     )
 
 
@@ -742,6 +760,7 @@ def settings_from_parameters(values: Mapping[str, Any]) -> NodeSettings:
         diagnostics_period_s=v["diagnostics_period_s"],
         analysis=analysis_from_parameters(v),
         posture=PostureConfig(restarts=v["posture.restarts"]),
+        ik=ik_config(v),
         response=ResponseContent(
             joint_trajectories=v["response.joint_trajectories"],
             per_sample=v["response.per_sample"],
