@@ -178,6 +178,10 @@ class NodeSession:
                 self.close()
                 raise RuntimeError(f"the node did not start:\n{self.log.read_text()}")
             time.sleep(0.2)
+        # A daemon of this session's own, running before the first look at the graph: with
+        # none, a ros2 verb starts one and answers from a discovery of its own, so the node
+        # could be listed once and then be "not found" by the newborn daemon.
+        self.run("ros2 daemon stop; ros2 daemon start")
 
     def wait_for_node(self) -> None:
         """Until the ``ros2`` daemon lists the node (at most NODE_WAIT_S).
