@@ -72,3 +72,15 @@ def test_the_set_parameters_callback_rclpy_offers_is_wrapped(context: Context) -
         assert node.get_parameter("fixed").value == 1.0
     finally:
         node.destroy_node()
+
+
+def test_a_dumped_double_read_back_as_text_is_the_same_value() -> None:
+    """``ros2 param dump`` writes 1e-06, which ``ros2 param load`` reads as the string
+    '1e-06': a read-only parameter at that value is unchanged, another value is refused."""
+    from grasp_safety_ros.ros.read_only import UNCHANGED, read_only_result
+
+    assert read_only_result("ik.position_tolerance_m", "1e-06", 1e-6).reason == UNCHANGED
+    assert read_only_result("ik.position_tolerance_m", 1e-6, 1e-6).successful
+    for other in ("2e-06", "not a number", 2e-6):
+        result = read_only_result("ik.position_tolerance_m", other, 1e-6)
+        assert not result.successful and "read at start-up" in result.reason

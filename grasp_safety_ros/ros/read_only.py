@@ -22,9 +22,20 @@ from rclpy.parameter import Parameter
 UNCHANGED = "unchanged: read-only, and already this value (read at start-up)"
 
 
+def _same_number(value: Any, current: Any) -> bool:
+    """``ros2 param dump`` writes a double such as 1e-06 without a decimal point, which
+    ``ros2 param load`` (YAML 1.1) reads back as the string '1e-06': the same number."""
+    if not isinstance(value, str) or not isinstance(current, float):
+        return False
+    try:
+        return float(value) == current
+    except ValueError:
+        return False
+
+
 def read_only_result(name: str, value: Any, current: Any) -> SetParametersResult:
     """The answer to setting read-only parameter ``name`` to ``value`` (now ``current``)."""
-    if value == current:
+    if value == current or _same_number(value, current):
         return SetParametersResult(successful=True, reason=UNCHANGED)
     return SetParametersResult(
         successful=False,
