@@ -145,8 +145,9 @@ def running_node(
     from rclpy.context import Context
     from rclpy.parameter import Parameter
 
-    from grasp_safety_ros.ros.executor import NodeExecutor, join_callbacks, spin_until
     from grasp_safety_ros.ros.node import EXECUTOR_THREADS, GraspSafetyNode
+    from grasp_safety_ros.ros.runtime.process import spin_until
+    from grasp_safety_ros.ros.runtime.rclpy_private import NodeExecutor, join_callbacks
 
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     domain_id = random.SystemRandom().randint(0, 101)
@@ -323,8 +324,11 @@ def node_spans(node: Any, request: Any) -> dict[str, float]:
 
     from grasp_safety_ros.core.pipeline import run_pipeline
     from grasp_safety_ros.ros import conversions
-    from grasp_safety_ros.ros.message_checks import check_finite_result, check_no_subnormals
-    from grasp_safety_ros.ros.ranking_inputs import markers_builder, ranking_inputs
+    from grasp_safety_ros.ros.service.message_checks import (
+        check_finite_result,
+        check_no_subnormals,
+    )
+    from grasp_safety_ros.ros.service.ranking_inputs import markers_builder, ranking_inputs
 
     spans: dict[str, float] = {}
     snapshot = node._snapshot()

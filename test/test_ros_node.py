@@ -57,8 +57,8 @@ from grasp_safety_ros.core.method.posture import PostureConfig
 from grasp_safety_ros.core.pipeline import PipelineRequest, run_pipeline
 from grasp_safety_ros.paths import config_file
 from grasp_safety_ros.ros.conversions import inertia_msg_from_object, pose_msg_from_transform
-from grasp_safety_ros.ros.executor import NodeExecutor, join_callbacks
 from grasp_safety_ros.ros.node import EXECUTOR_THREADS, GraspSafetyNode
+from grasp_safety_ros.ros.runtime.rclpy_private import NodeExecutor, join_callbacks
 from grasp_safety_ros.scenario.schema import load_scenario
 
 BOOK = load_scenario(config_file("book_baxter.yaml"))
@@ -562,7 +562,7 @@ def test_result_topics_are_built_for_subscribers_only(
     both). A transient-local subscriber alone, or left alone, gets the last ones."""
     from rclpy.publisher import Publisher
 
-    import grasp_safety_ros.ros.ranking_inputs as node_module  # builds the markers
+    import grasp_safety_ros.ros.service.ranking_inputs as node_module  # builds the markers
 
     ros = own_ros
     built: list[int] = []

@@ -24,7 +24,7 @@ from grasp_safety_ros.ros.parameters import (
     check_parameter,
     settings_from_parameters,
 )
-from grasp_safety_ros.ros.robot_bundle import build_robot
+from grasp_safety_ros.ros.robot.bundle import build_robot
 
 MINIMAL = {"base_frame": "base_link", "tip_frame": "tool"}
 

@@ -23,8 +23,8 @@ from test_ros_node import (  # noqa: F401  (_localhost_only: autouse fixture)
     book_request,
 )
 
-from grasp_safety_ros.ros.memory import memory_kib
-from grasp_safety_ros.ros.qos import INPUT_DEPTHS
+from grasp_safety_ros.ros.runtime.memory import memory_kib
+from grasp_safety_ros.ros.topics.qos import INPUT_DEPTHS
 
 KEEP_ALL = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
 

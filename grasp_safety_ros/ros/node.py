@@ -57,7 +57,6 @@ from ..core.analyses.safety_report import SafetyReport
 from ..core.exceptions import GraspSafetyError, InvalidInputError
 from ..core.model.inertia import ObjectInertia
 from ..core.pipeline import PipelineRequest, run_pipeline
-from .arm_points import check_arm_point_links
 from .conversions import (
     check_frame_id,
     check_grasp_array,
@@ -66,34 +65,35 @@ from .conversions import (
     report_msg,
     trajectory_from_msg,
 )
-from .declaration import declare_node_parameters, typed_parameters
-from .diagnostics import NodeStatus, status_msg
-from .errors import (
+from .moveit import offer_plan_grasps
+from .parameters import PARAMETERS, NodeSettings, check_parameter, settings_from_parameters
+from .parameters.arm_points import check_arm_point_links
+from .parameters.declaration import declare_node_parameters, typed_parameters
+from .robot.bundle import RobotBundle, build_robot
+from .robot.group import PENDING_FIELDS, ROBOT_GROUP, group_complete, pending_reason
+from .runtime.memory import IdleTrim
+from .runtime.process import run_node
+from .runtime.rclpy_private import request_header
+from .runtime.read_only import answer_read_only_parameters
+from .service.clients import ServiceClients
+from .service.errors import (
     BusyError,
     NotReadyError,
     ShuttingDownError,
     StartupError,
 )
-from .executor import request_header
-from .memory import IdleTrim
-from .message_checks import check_finite_result, check_no_subnormals
-from .moveit import offer_plan_grasps
-from .on_demand import OnDemandPublisher
-from .parameters import PARAMETERS, NodeSettings, check_parameter, settings_from_parameters
-from .process import run_node
-from .qos import INPUT_DEPTHS, LATCHED, SERVICE, subscription_qos
-from .ranking_inputs import markers_builder, ranking_inputs
-from .ranking_job import (
+from .service.message_checks import check_finite_result, check_no_subnormals
+from .service.ranking_inputs import markers_builder, ranking_inputs
+from .service.ranking_job import (
     ClientWatch,
     FairComputeLock,
     Snapshot,
     progress_check,
 )
-from .read_only import answer_read_only_parameters
-from .robot_bundle import RobotBundle, build_robot
-from .robot_group import PENDING_FIELDS, ROBOT_GROUP, group_complete, pending_reason
-from .service_clients import ServiceClients
-from .topic_inputs import PublisherSequences, TopicInputs, check_quality
+from .topics.diagnostics import NodeStatus, status_msg
+from .topics.inputs import PublisherSequences, TopicInputs, check_quality
+from .topics.on_demand import OnDemandPublisher
+from .topics.qos import INPUT_DEPTHS, LATCHED, SERVICE, subscription_qos
 
 NODE_NAME = "grasp_safety"
 EXECUTOR_THREADS = 4

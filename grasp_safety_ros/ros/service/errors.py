@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from ..core.exceptions import GraspSafetyError
+from ...core.exceptions import GraspSafetyError
 
 
 class StartupError(GraspSafetyError):

@@ -6,10 +6,10 @@ from dataclasses import dataclass, field
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
-from ..core.model.robot import NO_ARMATURE_NOTE, RobotModel
-from .memory import memory_kib
-from .parameters import NodeSettings
-from .robot_bundle import RobotBundle
+from ...core.model.robot import NO_ARMATURE_NOTE, RobotModel
+from ..parameters import NodeSettings
+from ..robot.bundle import RobotBundle
+from ..runtime.memory import memory_kib
 
 _INT32_LIMIT = 2**31
 """DDS counts messages in signed 32-bit integers: a count at or beyond is not one."""
