@@ -73,7 +73,7 @@ from grasp_safety_ros.ros.conversions import (
     transform_from_pose_msg,
     transforms_from_pose_msgs,
 )
-from grasp_safety_ros.ros.parameters import ResponseContent
+from grasp_safety_ros.ros.service.response import ResponseContent
 
 
 def pose(xyz: tuple[float, float, float], xyzw: tuple[float, float, float, float]) -> Pose:
