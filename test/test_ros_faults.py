@@ -23,7 +23,7 @@ from nav_msgs.msg import Path as PathMsg
 from rcl_interfaces.srv import SetParameters
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
-from test_ros_node import (  # noqa: F401  (_localhost_only: autouse fixture)
+from ros_node_harness import (  # noqa: F401  (_localhost_only: autouse fixture)
     NODE_PARAMETERS,
     NodeUnderTest,
     _localhost_only,
@@ -443,7 +443,7 @@ import sys
 sys.path.insert(0, sys.argv[1])
 import rclpy
 from grasp_safety_msgs.srv import RankGrasps
-from test_ros_node import book_request
+from ros_node_harness import book_request
 request = book_request()
 try:
     request.grasps.poses[1].position.x = 1  # an int in a float64 field

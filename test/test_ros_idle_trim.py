@@ -8,7 +8,7 @@ import threading
 from collections.abc import Iterator
 
 import pytest
-from test_ros_node import (  # noqa: F401  (_localhost_only: autouse fixture)
+from ros_node_harness import (  # noqa: F401  (_localhost_only: autouse fixture)
     NODE_PARAMETERS,
     NodeUnderTest,
     _localhost_only,
