@@ -12,8 +12,8 @@ rclpy changes under it.
   Public replacement: an ``Executor.shutdown`` that waits. Checked by test_ros_rclpy_private.py.
 - replace_service_callback swaps the callback of one of the node's own services
   (``Node.services``, ``Service.callback``), used by read_only.py on ``set_parameters``.
-  Public replacement: a hook on the parameter services that can answer a request (
-  ``add_pre_set_parameters_callback`` cannot: rclpy refuses the list it empties). Checked by
+  Public replacement: a hook on the parameter services that can answer a request
+  (``add_pre_set_parameters_callback`` cannot: rclpy refuses the list it empties). Checked by
   test_ros_read_only.py.
 """
 
