@@ -40,6 +40,7 @@ from test_ros_node_process import (  # noqa: F401  (ros_env: fixture)
 
 from grasp_safety_ros.ros import node as node_module
 from grasp_safety_ros.ros.node import EXECUTOR_THREADS
+from grasp_safety_ros.ros.robot import source as robot_source
 
 TEST_DIR = Path(__file__).resolve().parent
 
@@ -236,7 +237,7 @@ def test_bug_in_a_parameter_change_is_refused_not_fatal(
     def broken(*args: Any, **kwargs: Any) -> None:
         raise ValueError("Several frames match the filter - please specify the FrameType")
 
-    monkeypatch.setattr(node_module, "build_robot", broken)
+    monkeypatch.setattr(robot_source, "build_robot", broken)  # the robot group's rebuild
     (result,) = ros.set_parameters(tip_frame="right_wrist")
     monkeypatch.undo()
     assert not result.successful
