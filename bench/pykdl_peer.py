@@ -416,8 +416,10 @@ class PyKDLPipeline:
                 return q, True, iteration
             if iteration == config.max_iterations:
                 break
-            jacobian_base = self.jacobian(q)
-            local = np.vstack([rotation.T @ jacobian_base[:3], rotation.T @ jacobian_base[3:]])
+            jacobian_tip_in_base = self.jacobian(q)
+            local = np.vstack(
+                [rotation.T @ jacobian_tip_in_base[:3], rotation.T @ jacobian_tip_in_base[3:]]
+            )
             jacobian = jlog6(error_r.T, -error_r.T @ error_p) @ local
             q = np.clip(q + self._damped_step(jacobian, error), self.chain.lower, self.chain.upper)
         return q, False, config.max_iterations
@@ -452,8 +454,10 @@ class PyKDLPipeline:
         core, this reuses the solve's last forward kinematics); c = r D, D in ``defect``
         (overwritten with c), r = min(|xi|^2 / previous_xi2, PREDICTOR_MAX_RATIO). Returns the
         guess and |xi|^2."""
-        jacobian_base = self.jacobian(q_previous)
-        local = np.vstack([tip_rotation.T @ jacobian_base[:3], tip_rotation.T @ jacobian_base[3:]])
+        jacobian_tip_in_base = self.jacobian(q_previous)
+        local = np.vstack(
+            [tip_rotation.T @ jacobian_tip_in_base[:3], tip_rotation.T @ jacobian_tip_in_base[3:]]
+        )
         twist = log6(
             rotation_previous.T @ rotation, rotation_previous.T @ (position - position_previous)
         )

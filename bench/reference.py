@@ -56,13 +56,13 @@ class ReferenceIK:
         """
         model, data, config = self.robot.model, self.data, self.config
         frame_id = self.robot.tip_frame_id
-        target_in_world = self.robot.transform_base_to_world * transform_tip_to_base
+        transform_target_to_world = self.robot.transform_base_to_world * transform_tip_to_base
         q = np.clip(np.array(q_init, dtype=float), self._lower_q, self._upper_q)
         n = model.nv
         for iteration in range(config.max_iterations + 1):
             pin.forwardKinematics(model, data, q)
             current = pin.updateFramePlacement(model, data, frame_id)
-            error_transform = current.actInv(target_in_world)
+            error_transform = current.actInv(transform_target_to_world)
             error = pin.log6(error_transform).vector
             if (
                 np.linalg.norm(error_transform.translation) <= config.position_tolerance_m

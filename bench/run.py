@@ -42,14 +42,10 @@ from __future__ import annotations
 
 import argparse
 import cProfile
-import io
 import itertools
 import json
-import math
 import os
 import platform
-import pstats
-import statistics
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -59,6 +55,8 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np
+from _common import rel_diff, summary, timed, top_functions
+from continuous import bench_continuous
 from pipeline import (
     bench_batch_per_worker,
     bench_pipeline,
@@ -69,6 +67,7 @@ from pipeline import (
 from postures import bench_postures, print_postures
 from pykdl_peer import PyKDLPipeline, build_chain, load_pykdl
 from reference import ReferenceIK, reference_effective_masses
+from run_report import issue21_rows, print_issue21, print_table
 from whole_arm import bench_whole_arm, print_whole_arm
 from workload import ARMS, ArmWorkload, box_object, grasps_around_box
 
@@ -86,38 +85,6 @@ FLOPS_PER_EVALUATION = 4000.0
 FLOPS_PER_IK_ITERATION = 2000.0
 FLOPS_PER_US = 6000.0
 """Assumed sustained scalar double rate of one core: 6 GFLOP/s (one FMA per cycle, 3 GHz)."""
-
-
-def summary(values: Sequence[float]) -> dict[str, float]:
-    """Median, min, max and relative spread ((max - min) / median) of repeated timings."""
-    median = statistics.median(values)
-    return {
-        "median": median,
-        "min": min(values),
-        "max": max(values),
-        "spread_rel": (max(values) - min(values)) / median if median else 0.0,
-        "repeats": len(values),
-    }
-
-
-def timed(function: Callable[[], Any]) -> tuple[float, Any]:
-    start = time.perf_counter()
-    result = function()
-    return time.perf_counter() - start, result
-
-
-def top_functions(profile: cProfile.Profile, total_s: float, count: int = 8) -> list[dict]:
-    stats = pstats.Stats(profile, stream=io.StringIO())
-    rows = []
-    for (filename, line, name), (_, calls, tottime, _, _) in stats.stats.items():  # type: ignore[attr-defined]
-        where = f"{Path(filename).name}:{line}({name})" if line else name
-        rows.append({"function": where, "calls": calls, "share": tottime / total_s})
-    rows.sort(key=lambda row: -row["share"])
-    return rows[:count]
-
-
-def rel_diff(a: np.ndarray, b: np.ndarray) -> float:
-    return float(np.max(np.abs(a / b - 1.0))) if len(a) else 0.0
 
 
 def self_motion_fractions(robot: Any, q_path: np.ndarray) -> np.ndarray:
@@ -416,61 +383,6 @@ def bench_arm(arm: ArmWorkload, args: argparse.Namespace, kdl: Any) -> dict[str,
 
 
 # ----------------------------------------------------------------------------- continuous joints
-def bench_continuous(arm: ArmWorkload, repeats: int) -> dict[str, Any]:
-    """The compiled path on a chain with continuous joints ((cos, sin) in q): µs per (grasp,
-    sample) with IK, serial, as for the revolute arms; compiled vs Python identity."""
-    robot = arm.robot()
-    trajectory = arm.trajectory(2.0, 0.01)
-    obj = box_object()
-    grasps = grasps_around_box(np.array(arm.approach_from), 100)
-    seed = np.array(arm.seed_positions)
-    serial = GraspSafetyEvaluator(robot, EvaluationConfig(workers=1))
-    fallback = GraspSafetyEvaluator(robot, EvaluationConfig(backend="python", workers=1))
-
-    def rank(evaluator: GraspSafetyEvaluator) -> Ranking:
-        return evaluator.rank(grasps, obj, trajectory, seed_positions=seed)
-
-    print(f"[{arm.name}] continuous joints: warm-up, then {repeats} repeats", file=sys.stderr)
-    ranking = rank(serial)
-    total = len(grasps) * trajectory.num_samples
-    wall, cpu = [], []
-    for _ in range(repeats):
-        cpu_start = time.process_time()
-        wall.append(timed(lambda: rank(serial))[0])
-        cpu.append(time.process_time() - cpu_start)
-    python_s, python = timed(lambda: rank(fallback))
-    pairs = list(zip(python.evaluations, ranking.evaluations, strict=True))
-    model = robot.model
-    return {
-        "robot": f"{arm.urdf} {arm.base_frame} -> {arm.tip_frame}",
-        "continuous_joints": [
-            name
-            for name, joint in zip(robot.joint_names, list(model.joints)[1:], strict=True)
-            if joint.nq == 2
-        ],
-        "nq_nv": [model.nq, model.nv],
-        "backend": "compiled" if serial.ik.compiled else "python",
-        "grasps": len(grasps),
-        "samples_per_grasp": trajectory.num_samples,
-        "feasible_grasps": sum(e.feasible for e in ranking.evaluations),
-        "us_per_sample_with_ik": summary([t / total * 1e6 for t in wall]),
-        "cpu_us_per_sample_with_ik": summary([t / total * 1e6 for t in cpu]),
-        "python_backend_us_per_sample_with_ik": python_s / total * 1e6,
-        "python_backend_max_rel_diff": max(
-            (
-                rel_diff(a.effective_mass_kg, b.effective_mass_kg)
-                for a, b in pairs
-                if a.feasible and b.feasible
-            ),
-            default=0.0,
-        ),
-        "python_backend_same_feasibility": all(a.feasible == b.feasible for a, b in pairs),
-        "python_backend_same_ik_iterations": all(
-            np.array_equal(a.ik_iterations, b.ik_iterations) for a, b in pairs
-        ),
-    }
-
-
 # ----------------------------------------------------------------------------- service
 def service_latency(arm: ArmWorkload, repeats: int) -> dict[str, Any]:
     """The node's service cost (bench/service.py), Baxter: 10 grasps x 101 samples (latency,
@@ -505,72 +417,6 @@ def service_latency(arm: ArmWorkload, repeats: int) -> dict[str, Any]:
 
 
 # ----------------------------------------------------------------------------- main
-def issue21_rows(
-    arms: dict[str, Any], pipeline: dict[str, Any], service: dict[str, Any]
-) -> list[dict[str, Any]]:
-    """Issue 21's target table, measured in this run: (measure, value, unit, target, met)."""
-    core = pipeline["in_process"]
-    cli = pipeline["cli"]
-
-    def row(measure: str, value: float | None, unit: str, target: float) -> dict[str, Any]:
-        met = None if value is None else value <= target
-        return {"measure": measure, "value": value, "unit": unit, "target": target, "met": met}
-
-    rows = [
-        row(
-            "CLI, 100 x 201, defaults, --json, wall incl. start-up",
-            cli["rank_100"]["wall_s"],
-            "s",
-            1.5,
-        ),
-        row("CLI, 1,000 x 201, defaults, --json", cli["rank_1000"]["wall_s"], "s", 6.0),
-        row("default analyses vs the ranking's own time", core["analyses_vs_ranking"], "x", 1.0),
-        row(
-            "posture selection (8 restarts) vs single-IK ranking",
-            core["postures_vs_ranking"],
-            "x",
-            1.5,
-        ),
-    ]
-    targets = {t["row"]: t for t in service.get("targets") or ()}
-    for label, key, target_ms in (
-        ("service, node defaults, 10 x 101, median", "10 grasps x 101 samples, median", 20.0),
-        (
-            "service, node defaults, 100 x 201, one client",
-            "100 grasps x 201 samples, one client",
-            200.0,
-        ),
-        (
-            "service, node defaults, 1,000 x 201, end to end",
-            "1,000 grasps x 201 samples, end to end",
-            3000.0,
-        ),
-    ):
-        measured = targets.get(key)
-        rows.append(
-            row(label, None if measured is None else measured["measured_ms"], "ms", target_ms)
-        )
-    for name, arm in arms.items():
-        rows.append(
-            row(
-                f"core us per (grasp, sample), {name} (no regression: <= 2.2)",
-                arm["us_per_sample_with_ik"]["median"],
-                "us",
-                2.2,
-            )
-        )
-    return rows
-
-
-def print_issue21(rows: list[dict[str, Any]]) -> None:
-    """The rows of ``issue21_rows`` as a table."""
-    print("\nIssue 21's targets, this run (one machine, same minutes):")
-    for r in rows:
-        value = "n/a" if r["value"] is None else f"{r['value']:.3g} {r['unit']}"
-        verdict = {True: "met", False: "NOT met", None: "not measured"}[r["met"]]
-        print(f"  {r['measure']}: {value} (target <= {r['target']:g} {r['unit']}): {verdict}")
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", type=Path, help="write the results as JSON here")
@@ -729,125 +575,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     print_issue21(results["issue21_targets"])
     print_issue30(results["issue30_targets"])
     return 0
-
-
-def print_table(results: dict[str, Any]) -> None:
-    def fmt(value: Any, spec: str = ".2f") -> str:
-        return (
-            "n/a"
-            if value is None or (isinstance(value, float) and math.isnan(value))
-            else (format(value, spec))
-        )
-
-    for name, arm in results["arms"].items():
-        w, wo = arm["us_per_sample_with_ik"], arm["us_per_sample_without_ik"]
-        print(
-            f"{name}: {arm['grasps']} grasps x {arm['samples_per_grasp']} samples, "
-            f"{arm['feasible_grasps']} feasible, backend {arm['backend']}"
-        )
-        print(
-            f"  ours, 1 core : {fmt(w['median'])} us/sample with IK "
-            f"[{fmt(w['min'])}..{fmt(w['max'])}], {fmt(wo['median'])} without IK "
-            f"[{fmt(wo['min'])}..{fmt(wo['max'])}], "
-            f"wall {fmt(arm['wall_s_serial']['median'], '.3f')} s, "
-            f"{fmt(arm['ik_iterations_per_sample'])} IK iterations/sample; CPU time "
-            f"{fmt(arm['cpu_us_per_sample_with_ik']['median'])} us/sample"
-        )
-        print(
-            f"  ours, {arm['workers']} cores: "
-            f"{fmt(arm['us_per_sample_with_ik_parallel']['median'])} "
-            f"us/sample, wall {fmt(arm['wall_s_parallel']['median'], '.3f')} s "
-            f"(x{fmt(arm['parallel_speedup'])})"
-        )
-        same = arm["python_backend_same_feasibility"] and arm["python_backend_same_ik_iterations"]
-        print(
-            f"  python backend: {fmt(arm['python_backend_us_per_sample_with_ik'])} us/sample, "
-            f"max rel diff {fmt(arm['python_backend_max_rel_diff'], '.1e')}, "
-            f"{'same' if same else 'DIFFERENT'} feasibility and IK iterations"
-        )
-        ref, motion = arm["reference"], arm["self_motion_fraction"]
-        print(
-            f"  pre-issue code (secant warm start): {fmt(ref['us_per_sample_with_ik'])} "
-            f"us/sample, {ref['feasible_grasps']} feasible; its effective masses on our paths: "
-            f"max rel diff {fmt(ref['effective_mass_max_rel_diff_on_our_paths'], '.1e')}; "
-            f"self-motion share of joint steps: ours max {fmt(motion['ours_max'], '.1e')}, "
-            f"secant max {fmt(motion['reference_max'], '.2f')} "
-            f"(median {fmt(motion['reference_median_of_grasp_max'], '.2f')})"
-        )
-        if "pykdl" in arm:
-            p = arm["pykdl"]
-            print(
-                f"  PyKDL: {fmt(p['us_per_sample_with_ik']['median'])} us/sample with IK, "
-                f"{fmt(p['us_per_sample_without_ik']['median'])} without; ours is "
-                f"x{fmt(arm['speedup_vs_pykdl'], '.0f')} faster; max rel diff "
-                f"{fmt(p['max_rel_diff'], '.1e')}; the KDL calls alone (FK + J + M) "
-                f"{fmt(p['kdl_calls_us_per_sample'])} us/sample"
-            )
-        print(
-            f"  floor ~{fmt(arm['floor_us_per_sample'])} us/sample; ours is "
-            f"x{fmt(arm['distance_to_floor'], '.1f')} from it"
-        )
-    continuous = results["continuous_arm"]
-    if continuous is not None:
-        w = continuous["us_per_sample_with_ik"]
-        same = (
-            continuous["python_backend_same_feasibility"]
-            and continuous["python_backend_same_ik_iterations"]
-        )
-        joints = ", ".join(continuous["continuous_joints"])
-        print(
-            f"continuous joints ({continuous['robot']}; {joints}"
-            f"; nq, nv = {continuous['nq_nv']}): {continuous['feasible_grasps']} feasible, "
-            f"backend {continuous['backend']}"
-        )
-        print(
-            f"  ours, 1 core : {fmt(w['median'])} us/sample with IK [{fmt(w['min'])}.."
-            f"{fmt(w['max'])}]; CPU time {fmt(continuous['cpu_us_per_sample_with_ik']['median'])}"
-            f" us/sample = x{fmt(results['continuous_vs_revolute_cpu'])} the slowest revolute "
-            f"arm's; python backend {fmt(continuous['python_backend_us_per_sample_with_ik'])} "
-            f"us/sample, max rel diff {fmt(continuous['python_backend_max_rel_diff'], '.1e')}, "
-            f"{'same' if same else 'DIFFERENT'} feasibility and IK iterations"
-        )
-    service = results["service"]
-    if service.get("median_ms") is None:
-        print(f"service latency: n/a ({service.get('reason')})")
-        return
-    for label, measured in (
-        ("posture.restarts 0", service),
-        ("posture.restarts 0, response.per_sample false", service["per_sample_off"]),
-        ("node defaults", service["node_defaults"]),
-        ("the least the node returns", service["least_response"]),
-    ):
-        print(
-            f"service latency (10 x 101, Baxter, {label}): median {fmt(measured['median_ms'])} "
-            f"ms, p90 {fmt(measured['latency_ms']['p90'])} ms "
-            f"[{fmt(measured['latency_ms']['min'])}..{fmt(measured['latency_ms']['max'])}], "
-            f"ranking alone {fmt(measured['ranking_ms']['median'])} ms "
-            f"(x{fmt(measured['latency_over_ranking'])}; client: {measured.get('client')})"
-        )
-        if "latency_spin_until_ms" in measured:
-            print(
-                f"  client waiting with spin_until_future_complete: median "
-                f"{fmt(measured['latency_spin_until_ms']['median'])} ms; empty request "
-                f"{fmt(measured['empty_request_ms']['median'])} ms (fast client), "
-                f"{fmt(measured['empty_request_spin_until_ms']['median'])} ms "
-                "(spin_until_future_complete)"
-            )
-        for key in ("end_to_end_100x201", "end_to_end_1000x201"):
-            large = measured.get(key)
-            if large:
-                print(
-                    f"service end to end ({large['grasps']} x {large['samples_per_grasp']}, "
-                    f"Baxter, {label}): {fmt(large['wall_s'], '.3f')} s, response "
-                    f"{large['response_bytes']} bytes"
-                )
-    for row in service.get("targets") or ():
-        print(
-            f"service target, node defaults, {row['row']}: {fmt(row['measured_ms'])} ms "
-            f"(target {fmt(row['target_ms'])} ms), core ranking {fmt(row['core_ranking_ms'])} "
-            f"ms (x{fmt(row['over_core_ranking'])}), the node's own work "
-            f"{fmt(row['node_share_ms'])} ms"
-        )
 
 
 if __name__ == "__main__":

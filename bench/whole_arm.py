@@ -42,11 +42,11 @@ from grasp_safety_ros.core.analyses.whole_arm import (
     assess_sites,
     evaluate_whole_arm,
     evaluate_whole_arm_on_terms,
+    jacobians_tip_in_world,
     pinocchio_kinematic_terms,
     resolve_arm_sites,
     site_exposure,
     tip_following_joint_velocities,
-    tip_jacobians_world,
     tip_twists_in_base,
 )
 from grasp_safety_ros.core.method.effective_mass import augmented_model
@@ -79,7 +79,7 @@ def bench_whole_arm(arm: ArmWorkload, grasps: int = 10, repeats: int = 5) -> dic
         twists = np.concatenate([twists[:, :3] @ rotation.T, twists[:, 3:] @ rotation.T], 1)
         rates = tip_following_joint_velocities(
             robot,
-            tip_jacobians_world(robot, kinematics),
+            jacobians_tip_in_world(robot, kinematics),
             twists,
             evaluation.times_s,
             evaluation.joint_positions,

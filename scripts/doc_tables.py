@@ -16,6 +16,7 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 BENCH = ROOT / "bench" / "results.json"
 BENCH_BATCH = ROOT / "bench" / "results_batch.json"
+BENCH_MONITOR = ROOT / "bench" / "results_monitor.json"
 VALIDATION = ROOT / "docs" / "validation" / "results.json"
 """The committed full run of ``grasp-safety reproduce --out docs/validation``."""
 
@@ -398,6 +399,50 @@ def render_bench_start_up() -> str:
     return f"Start-up of a ranking command (fresh process, medians): {text}.\n"
 
 
+def render_bench_monitor() -> str:
+    """The speed-scaling monitor's cost per joint state and its end-to-end latency, from
+    bench/results_monitor.json (``bench/monitor.py``)."""
+    monitor = json.loads(BENCH_MONITOR.read_text())
+    compute, end_to_end = monitor["compute"], monitor["end_to_end"]
+    load = " / ".join(f"{value:.1f}" for value in monitor["load_average"])
+    rate_hz = end_to_end["publish_rate_hz"]
+    rows = (
+        (
+            compute["on_state"],
+            "per state, `Governor.on_state` (names matched, the core's "
+            "analysis, rate limit), wall",
+        ),
+        (compute["on_state_cpu"], "the same, this thread's CPU time"),
+        (compute["core"], "the core's analysis alone (`SpeedScaling.assess`), wall"),
+        (
+            end_to_end["latency"],
+            f"`/joint_states` publish to the factor's arrival (end to end, "
+            f"{rate_hz:.0f} Hz for {end_to_end['published_states'] / rate_hz:.0f} s)",
+        ),
+    )
+    lines = [
+        f"Load average {load} at the start; {monitor['sites']} sites, {monitor['regions']} "
+        "regions.",
+        "",
+        "| | median | p99 | max |",
+        "|---|---|---|---|",
+        *(
+            f"| {label} | {f['median_ms']:.2f} ms | {f['p99_ms']:.2f} ms | {f['max_ms']:.2g} ms |"
+            for f, label in rows
+        ),
+    ]
+    wall, cpu = compute["on_state"]["p99_ms"], compute["on_state_cpu"]["p99_ms"]
+    below, answered = end_to_end["states_below_1"], end_to_end["states_below_1_with_a_factor"]
+    lines += [
+        "",
+        f"The target, p99 compute <= 1 ms, is {'met' if max(wall, cpu) <= 1.0 else 'not met'} "
+        f"({wall:.2f} ms wall, {cpu:.2f} ms CPU). Of the {below} published states with a factor "
+        f"below 1 (each recognisable by its value), {answered} ({100 * answered / below:.0f} %) "
+        f"got their own factor back at {rate_hz:.0f} Hz.",
+    ]
+    return "\n".join(lines) + "\n"
+
+
 # --- limits of the command line's input -------------------------------------------------------
 
 
@@ -511,6 +556,7 @@ GENERATORS: dict[str, Callable[[], str]] = {
     "bench-whole-arm": render_bench_whole_arm,
     "bench-targets": render_bench_targets,
     "bench-start-up": render_bench_start_up,
+    "bench-monitor": render_bench_monitor,
     "validation-results": render_validation_results,
     "validation-armature": render_validation_armature,
     "validation-elbow": render_validation_elbow,

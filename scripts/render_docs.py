@@ -13,9 +13,11 @@ Two kinds of marked blocks, both rewritten in place:
   commands (run from the repository root with ``.venv/bin`` first on PATH; a command goes on
   over further lines while a quote is open) and whose other lines are their output. With
   ``--capture`` each command is run again and the block rewritten with its current output
-  (the checkout's path shown as ``<checkout>``, times and rates as ``…``: TIMINGS). The tests
-  run every plain captured command again and compare the whole output with the one shown:
-  text exactly, every number to one unit of its last shown digit.
+  (the checkout's path shown as ``<checkout>``, times, stamps and rates as ``…``: TIMINGS).
+  ``<!-- captured: node -->`` blocks run against the node as the docs start it (NodeSession,
+  one per page, in a ROS domain of its own), in the page's order. The tests run every captured
+  command again and compare the whole output with the one shown: text exactly, every number
+  to one unit of its last shown digit.
 
 Usage (from the repository root; ``make docs`` runs both)::
 
@@ -54,12 +56,25 @@ NODE_COMMAND = (
 """How the docs start the node; the ``node`` blocks run against it."""
 ABBREVIATED = (re.compile(r"poses=\[.*\]\)$", re.M), "poses=[...])")
 """Echoes shortened in the docs (the publishers' echo of a whole message)."""
+WAITING = re.compile(r"^Waiting for at least \d+ matching subscription\(s\)\.\.\.\n", re.M)
+"""``ros2 topic pub``'s progress line, printed once a second until discovery has matched its
+publisher (none to several times): left out of the outputs shown."""
 TIMINGS = (
     (re.compile(r"^(batch: \d+/\d+ chunks, )\d+(?:\.\d+)? s$", re.M), r"\1… s"),
     (re.compile(r", \d+ \(grasp, sample\)/s"), ", … (grasp, sample)/s"),
+    (re.compile(r"^(\[[A-Z]+\] )\[\d+\.\d+\]", re.M), r"\1[…]"),  # a ROS log line's stamp
+    (  # examples/echo_ranking.py: the ranking's stamp and compute time
+        re.compile(
+            r"^(ranking at )\d+\.\d+( \(\w+\), metric \w+, \d+ candidates, )\d+\.\d+ s$", re.M
+        ),
+        r"\1…\2… s",
+    ),
 )
-"""Times and rates in outputs, shown as ``…``: they differ from run to run, so no test can
-hold them (measured speeds are in the generated bench blocks)."""
+"""Times, stamps and rates in outputs, shown as ``…``: they differ from run to run, so no test
+can hold them (measured speeds are in the generated bench blocks)."""
+NODE_WAIT_S = 120.0
+"""How long the node may take to start, and the ``ros2`` daemon to find it before each block
+(discovery on a loaded machine takes seconds)."""
 
 
 def doc_files(root: Path = ROOT) -> list[Path]:
@@ -121,8 +136,10 @@ def run_shown(command: str, root: Path = ROOT, cwd: Path | None = None) -> str:
 
 def as_shown(output: str, root: Path = ROOT) -> str:
     """An output as the docs show it: the checkout's path as ``<checkout>``, whole messages
-    abbreviated, times and rates as ``…``."""
-    output = ABBREVIATED[0].sub(ABBREVIATED[1], output.replace(str(root), "<checkout>"))
+    abbreviated, progress lines left out, times, stamps and rates as ``…``."""
+    venv = root / ".venv"  # a venv linked into the checkout is shown as the checkout's
+    output = output.replace(str(venv.resolve()), str(venv)).replace(str(root), "<checkout>")
+    output = ABBREVIATED[0].sub(ABBREVIATED[1], WAITING.sub("", output))
     for pattern, replacement in TIMINGS:
         output = pattern.sub(replacement, output)
     return output
@@ -155,17 +172,38 @@ class NodeSession:
                 start_new_session=True,
                 env=dict(os.environ, RCUTILS_COLORIZED_OUTPUT="0"),
             )
-        deadline = time.monotonic() + 120.0
+        deadline = time.monotonic() + NODE_WAIT_S
         while "robot from urdf" not in self.log.read_text():
             if self.process.poll() is not None or time.monotonic() > deadline:
                 self.close()
                 raise RuntimeError(f"the node did not start:\n{self.log.read_text()}")
             time.sleep(0.2)
-        while "/grasp_safety" not in self.run("ros2 node list"):  # the daemon has found it
+        # A daemon of this session's own, running before the first look at the graph: with
+        # none, a ros2 verb starts one and answers from a discovery of its own, so the node
+        # could be listed once and then be "not found" by the newborn daemon.
+        self.run("ros2 daemon stop; ros2 daemon start")
+
+    def wait_for_node(self) -> None:
+        """Until the ``ros2`` daemon lists the node (at most NODE_WAIT_S).
+
+        Raises:
+            RuntimeError: it does not within NODE_WAIT_S, or the node has exited.
+        """
+        deadline = time.monotonic() + NODE_WAIT_S
+        while "/grasp_safety" not in self.run("ros2 node list").split():
+            if self.process.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError(f"ros2 node list: no /grasp_safety\n{self.log.read_text()}")
             time.sleep(0.5)
 
-    def first_log_line(self) -> str:
-        return self.log.read_text().splitlines()[0]
+    def outputs(self, mode: str, shown: list[str]) -> list[str]:
+        """The outputs of one block's commands, as the docs show them: a ``node`` block's run
+        once the daemon lists the node, a ``node-start`` block's the node's first log line
+        after its last command (the ones before it set up the shell)."""
+        if mode == "node-start":
+            first_log_line = as_shown(self.log.read_text().splitlines()[0], self.root)
+            return [""] * (len(shown) - 1) + [first_log_line]
+        self.wait_for_node()
+        return [self.run(command) for command in shown]
 
     def run(self, command: str) -> str:
         return run_shown(f"{self.prefix} && {command}", self.root, cwd=self.scratch)
@@ -196,14 +234,12 @@ def capture(text: str, root: Path = ROOT) -> str:
         if mode and session is None:
             session = NodeSession(root)
         parts = []
-        shown = commands(match.group("body"))
-        for k, (command, _) in enumerate(shown):
-            if mode == "node-start":
-                output = session.first_log_line() if k == len(shown) - 1 else ""
-            elif mode == "node":
-                output = session.run(command)
-            else:
-                output = run_shown(command, root)
+        shown = [command for command, _ in commands(match.group("body"))]
+        if mode:
+            outputs = session.outputs(mode, shown)
+        else:
+            outputs = [run_shown(command, root) for command in shown]
+        for command, output in zip(shown, outputs, strict=True):
             lines = command.splitlines()
             output = output.rstrip("\n")
             parts.append("\n".join(["$ " + lines[0], *lines[1:]] + ([output] if output else [])))

@@ -12,7 +12,7 @@ import pytest
 import yaml
 
 from grasp_safety_ros.cli.main import main
-from grasp_safety_ros.cli.report import _ratio
+from grasp_safety_ros.cli.report_values import force_ratio_text
 from grasp_safety_ros.core.analyses.iso15066 import ADMISSIBLE_RATIO_TOLERANCE
 from grasp_safety_ros.core.model.robot import RobotModel
 from grasp_safety_ros.paths import config_file
@@ -69,7 +69,7 @@ def test_long_names_are_printed_whole_in_every_section(
     ],
 )
 def test_ratio_is_printed_on_the_side_of_one_of_its_verdict(value: float, shown: str) -> None:
-    assert _ratio(value) == shown
+    assert force_ratio_text(value) == shown
 
 
 def test_iso_ratio_near_one_agrees_with_the_verdict(

@@ -2,7 +2,8 @@
 
 Hermetic: the link and render checks read files only; the captured ``grasp-safety`` commands
 run in-process on the bundled scenarios and examples (a few seconds), the other captured
-commands as shown; what they print is compared with what the pages show, every number to its
+commands as shown, the ``node`` blocks against a node started per page in a ROS domain of this
+process's own; what they print is compared with what the pages show, every number to its
 last digit (``make docs`` re-captures them).
 """
 
@@ -264,6 +265,39 @@ def test_shown_shell_outputs_are_current(path: Path, command: str, shown: list[s
     assert differences(shown, output.rstrip("\n").splitlines()) == [], f"{path}: run make docs"
 
 
+NODE_PAGES = [
+    path
+    for path in DOCS
+    if any(match.group("mode") for match in render_docs.CAPTURED.finditer(path.read_text()))
+]
+
+
+@pytest.mark.skipif(
+    not (ROOT / ".venv" / "bin" / "ros2").exists(),
+    reason="no ros2 command line in .venv/bin (make setup installs it when "
+    "../shared/tools/ros2cli/install exists beside the checkout)",
+)
+@pytest.mark.parametrize("path", NODE_PAGES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_shown_node_outputs_are_current(path: Path) -> None:
+    """A page's ``node`` blocks, run in order against the node started as the page starts it
+    (in a ROS domain of this process's own), print what they show, numbers to their last
+    digit; stamps and times are shown as ``…``."""
+    stale = []
+    session = render_docs.NodeSession(ROOT)
+    try:
+        for match in render_docs.CAPTURED.finditer(path.read_text()):
+            if not match.group("mode"):
+                continue
+            shown = render_docs.commands(match.group("body"))
+            outputs = session.outputs(match.group("mode"), [command for command, _ in shown])
+            for (command, lines), output in zip(shown, outputs, strict=True):
+                found = differences(lines, output.rstrip("\n").splitlines())
+                stale += [f"$ {command.splitlines()[0][:60]}: {line}" for line in found]
+    finally:
+        session.close()
+    assert not stale, "\n".join([f"{path.relative_to(ROOT)}: run make docs", *stale])
+
+
 def test_capture_rewrites_outputs(tmp_path: Path) -> None:
     page = "x\n<!-- captured -->\n```text\n$ echo 'a\nb'\nold\n$ printf c\n```\ny\n"
     assert render_docs.capture(page, tmp_path) == (
@@ -271,8 +305,18 @@ def test_capture_rewrites_outputs(tmp_path: Path) -> None:
     )
 
 
-def test_times_are_shown_as_ellipses() -> None:
-    output = "batch: 3/3 chunks, 1.4 s\nwrote out: 10 grasps, 3 of 3 chunks, 80 (grasp, sample)/s"
+def test_times_are_shown_as_ellipses_and_progress_lines_left_out() -> None:
+    waiting = "Waiting for at least 1 matching subscription(s)...\n"  # a progress line
+    output = (
+        "batch: 3/3 chunks, 1.4 s\nwrote out: 10 grasps, 3 of 3 chunks, 80 (grasp, sample)/s\n"
+        + waiting * 2
+        + "[INFO] [1795615960.317059770] [grasp_safety]: robot from urdf: 7 joints\n"
+        "ranking at 1795615980.729 (base), metric mean, 2 candidates, 0.091 s\n"
+        "  #1 candidate 1: score 1.0189, peak 1.0823 kg over 101 samples"
+    )
     assert render_docs.as_shown(output) == (
-        "batch: 3/3 chunks, … s\nwrote out: 10 grasps, 3 of 3 chunks, … (grasp, sample)/s"
+        "batch: 3/3 chunks, … s\nwrote out: 10 grasps, 3 of 3 chunks, … (grasp, sample)/s\n"
+        "[INFO] […] [grasp_safety]: robot from urdf: 7 joints\n"
+        "ranking at … (base), metric mean, 2 candidates, … s\n"
+        "  #1 candidate 1: score 1.0189, peak 1.0823 kg over 101 samples"
     )

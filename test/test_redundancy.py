@@ -26,6 +26,7 @@ from grasp_safety_ros.core.analyses.redundancy import (
     RedundancyResolution,
     resolve_redundancy,
 )
+from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions, analyse
 from grasp_safety_ros.core.input_checks import pose_from_position_quat
 from grasp_safety_ros.core.method.effective_mass import (
     augmented_model,
@@ -326,3 +327,18 @@ def test_compiled_trial_masses_equal_pinocchio(
     assert error <= 1e-12, f"relative error {error:.2e}"
     assert compiled.score == pytest.approx(reference.score, rel=1e-12)
     assert compiled.samples_improved == reference.samples_improved
+
+
+def test_analyse_runs_with_the_options_redundancy_settings(arm7: RobotModel) -> None:
+    """AnalysisOptions.redundancy_settings reach the optimisation: no descent step allowed
+    (iterations 0) leaves the score the IK's; the default settings lower it."""
+    positions = np.array([0.3, 0.6, -0.4, -1.1, 0.5, 0.8, -0.2])
+    grasp = Grasp(pin.SE3(pin.exp3(np.array([0.3, 0.1, -0.2])), np.array([0.0, 0.05, -0.12])))
+    trajectory = trajectory_from_configuration(arm7, positions, grasp)
+    evaluator = GraspSafetyEvaluator(arm7)
+    options = AnalysisOptions(redundancy=True, effort=False, iso_regions=())
+    kept = replace(options, redundancy_settings=RedundancyConfig(iterations=0))
+    (still,) = analyse(evaluator, [grasp], BOX, trajectory, kept, positions).redundancy
+    (lowered,) = analyse(evaluator, [grasp], BOX, trajectory, options, positions).redundancy
+    assert still.score == still.original_score
+    assert lowered.score < lowered.original_score

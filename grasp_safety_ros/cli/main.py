@@ -66,7 +66,7 @@ def rank_scenario(
 
     announce_compiles()
     robot = scenario.robot.load(scenario.base_dir)
-    config = EvaluationConfig(metric=metric or scenario.metric, backend=backend)
+    config = EvaluationConfig(metric=metric or scenario.metric, ik=scenario.ik, backend=backend)
     evaluator = GraspSafetyEvaluator(robot, config)
     progress = _progress_printer(len(scenario.grasps) * len(scenario.trajectory.times_s()))
     return run_pipeline(evaluator, scenario.request(robot), progress)

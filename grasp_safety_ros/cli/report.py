@@ -2,15 +2,13 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
-from ..core.analyses.iso15066 import ADMISSIBLE_RATIO_TOLERANCE, PowerForceLimitAssessment
+from ..core.analyses.iso15066 import PowerForceLimitAssessment
 from ..core.analyses.safety_report import SafetyReport
-from ..core.analyses.whole_arm import ArmSites, WholeArmEvaluation
 from ..core.method.executable import (
     joint_velocities_accelerations,
     rates_for_execution,
@@ -20,25 +18,15 @@ from ..core.method.posture import SCORE_CRITERION, PostureSelection
 from ..core.method.ranking import GraspEvaluation, Ranking
 from ..core.model.armature import ArmatureRatio, armature_ratio
 from ..core.model.robot import NO_ARMATURE_NOTE
+from .report_values import force_ratio_text, name_width, number, numbers
 from .retime_report import add_retime_to_grasp, retime_sections
+from .whole_arm_report import whole_arm_lines, whole_arm_sites_to_dict, whole_arm_to_dict
 
 SCORE_UNITS = {"mean": "kg", "max": "kg", "integral": "kg*s"}
 
 SCHEMA_VERSION = 2
 """Version of the JSON layout: 2 holds each grasp's ``samples`` as one array per field
 (columnar; 1, before it, held one object per sample)."""
-
-
-def number(value: float) -> float | None:
-    """A finite float, or None (JSON null) for NaN and inf."""
-    value = float(value)
-    return value if math.isfinite(value) else None
-
-
-def numbers(values: np.ndarray) -> np.ndarray:
-    """An array as the JSON writer takes it (C-contiguous; ``report_json`` writes NaN and inf
-    as null)."""
-    return np.ascontiguousarray(values)
 
 
 def evaluation_to_dict(
@@ -285,15 +273,6 @@ def _add_per_grasp_series(report: SafetyReport, k: int, grasp: dict[str, Any]) -
                 samples["joint_torques"] = numbers(effort.joint_torques)
 
 
-NAME_WIDTH = 16
-"""Least width of the name columns of the tables; longer names widen them (never cut)."""
-
-
-def name_width(names: Sequence[str]) -> int:
-    """Width of a name column holding ``names`` whole: the longest, at least NAME_WIDTH."""
-    return max([NAME_WIDTH, *(len(name) for name in names)])
-
-
 def ranking_table(ranking: Ranking) -> str:
     """Plain-text table: rank, index, name, score, mean and peak effective mass, or the reason."""
     unit = SCORE_UNITS[ranking.metric]
@@ -324,19 +303,6 @@ def ranking_table(ranking: Ranking) -> str:
     return "\n".join(lines)
 
 
-def _ratio(value: float) -> str:
-    """F/F_max with two decimals, or as many more as it takes (up to 9) for the printed number
-    to lie on the same side of 1 as the admissibility verdict (1.0029 is "1.003", not "1.00")."""
-    if math.isinf(value):
-        return "n/p"
-    admissible = value <= 1.0 + ADMISSIBLE_RATIO_TOLERANCE
-    for digits in range(2, 10):
-        text = f"{value:.{digits}f}"
-        if (float(text) <= 1.0) == admissible:
-            return text
-    return text
-
-
 ISO_COLUMNS = 8
 """Grasps shown in the ISO/TS 15066 table (the first ones of the final ranking)."""
 
@@ -363,7 +329,10 @@ def _iso_lines(report: SafetyReport) -> list[str]:
     ]
     for j, region in enumerate(shown[0].regions):
         lines.append(
-            row(region.region.name, [_ratio(a.regions[j].worst_force_ratio) for a in shown])
+            row(
+                region.region.name,
+                [force_ratio_text(a.regions[j].worst_force_ratio) for a in shown],
+            )
         )
     lines.append(
         row("ok where allowed", ["yes" if a.admissible_where_permitted else "no" for a in shown])
@@ -457,97 +426,6 @@ def report_text(report: SafetyReport) -> str:
                     f"{options.effort_criterion} {e.score(options.effort_criterion):.3f}"
                 )
     return "\n".join(lines)
-
-
-def whole_arm_sites_to_dict(sites: ArmSites, rank_region: str) -> dict[str, Any]:
-    """The whole-arm sites (the column order of every grasp's ``whole_arm`` arrays)."""
-    return {
-        "sites": list(sites.names),
-        "links": list(sites.links),
-        "points_in_joint_m": sites.points_in_joint_m.tolist(),
-        "dropped_welded_to_base": list(sites.dropped),
-        "rank_region": rank_region,
-    }
-
-
-def whole_arm_to_dict(whole: WholeArmEvaluation, per_sample: bool = True) -> dict[str, Any]:
-    """One grasp's whole-arm exposure: worst site per body region and by energy, the
-    admissibility over the arm, T_min, and (with ``per_sample``) the (N, K) per-sample arrays
-    (sites as columns)."""
-    if not whole.feasible:
-        return {"feasible": False}
-    times = whole.times_s
-
-    def where(site: int, sample: int) -> dict[str, Any]:
-        return {
-            "site": whole.site_names[site],
-            "link": whole.site_links[site],
-            "time_s": float(times[sample]),
-            "effective_mass_kg": number(whole.effective_mass_kg[sample, site]),
-            "speed_m_s": float(whole.speed_m_s[sample, site]),
-        }
-
-    energy, site, sample = whole.worst_energy
-    result = {
-        "feasible": True,
-        "regions": {
-            r.region: {
-                "worst_force_ratio": number(r.worst_force_ratio),
-                "peak_contact_force_n": r.peak_contact_force_n,
-                "admissible": r.admissible,
-                "min_duration_s": number(r.min_duration_s),
-                **where(r.worst_site, r.worst_sample),
-            }
-            for r in whole.regions
-        },
-        "worst_energy": {"energy_j": energy, **where(site, sample)},
-        "admissible": whole.admissible,
-        "admissible_where_permitted": whole.admissible_where_permitted,
-        "min_duration_s": number(whole.min_duration_s),
-        "limiting_region": whole.limiting_region,
-    }
-    if per_sample:
-        result["effective_mass_kg"] = numbers(whole.effective_mass_kg)
-        result["speed_m_s"] = numbers(whole.speed_m_s)
-        result["stationary"] = numbers(whole.stationary)
-    return result
-
-
-def whole_arm_lines(report: SafetyReport) -> list[str]:
-    """One line per feasible grasp (final order): the worst site of the limiting region, of the
-    ranking region, and by energy, with their links, and T_min over the whole arm."""
-    sites = report.arm_sites
-    region = report.options.whole_arm_region
-    names = ", ".join(sites.names) if sites is not None else ""
-    lines = [
-        "",
-        f"whole arm (sites: {names}; worst over sites and samples; grasps in the final order, "
-        f"rank_by={report.options.rank_by}):",
-    ]
-    by_index = {w.index: w for w in report.whole_arm if w.feasible}
-    width = name_width([w.name for w in report.whole_arm])
-    for k in report.order:
-        w = by_index.get(k)
-        if w is None:
-            continue
-        energy, e_site, _ = w.worst_energy
-        ranked = w.region(region) if any(r.region == region for r in w.regions) else None
-        text = f"  {w.name:<{width}}"
-        if w.limiting_region:
-            limiting = w.region(w.limiting_region)
-            text += (
-                f" {w.limiting_region} F/F_max {_ratio(limiting.worst_force_ratio)} at "
-                f"{w.site_names[limiting.worst_site]} ({w.site_links[limiting.worst_site]}),"
-            )
-        if ranked is not None:
-            text += f" {region} peak {ranked.peak_contact_force_n:.1f} N,"
-        text += (
-            f" energy {energy:.3f} J at {w.site_names[e_site]} ({w.site_links[e_site]}),"
-            f" T_min {w.min_duration_s:.3f} s,"
-            f" ok where allowed {'yes' if w.admissible_where_permitted else 'no'}"
-        )
-        lines.append(text)
-    return lines
 
 
 # --- Armature (reflected rotor inertia): links-only masses and their ratio -------------------

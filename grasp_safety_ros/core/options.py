@@ -16,15 +16,30 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
+from typing import Any
 
 from .analyses.effort import EFFORT_CRITERIA
 from .analyses.exposed_points import METRIC_POINTS
+from .analyses.redundancy import MAX_PROFILE_DEGREE, RedundancyConfig
 from .analyses.safety_report import RANK_BY
 from .analyses.whole_arm import DEFAULT_RANK_REGION
+from .method.ik import IKConfig
 from .method.metrics import METRICS
 from .method.posture import DEFAULT_RESTARTS, MAX_RESTARTS
 
-__all__ = ["LIMITS", "OPTIONS", "Limit", "Option", "bounds", "default", "help_text"]
+__all__ = [
+    "IK_OPTIONS",
+    "LIMITS",
+    "OPTIONS",
+    "REDUNDANCY_OPTIONS",
+    "Limit",
+    "Option",
+    "bounds",
+    "default",
+    "help_text",
+    "ik_config",
+    "redundancy_config",
+]
 
 MAX_UNCERTAINTY_SAMPLES = 10_000
 """Most random inertias per request (``uncertainty.samples`` = 10^9 asked for 52 GiB)."""
@@ -91,6 +106,60 @@ OPTIONS: Mapping[str, Option] = MappingProxyType(
                 False,
                 "lower the tip effective mass in the null space (chains with > 6 joints)",
                 scenario="redundancy",
+            ),
+            Option(
+                "redundancy.iterations",
+                int,
+                60,
+                "largest number of descent steps of the null-space optimisation",
+            ),
+            Option(
+                "redundancy.profile_degree",
+                int,
+                5,
+                "degree of the joint offset profile's Bernstein polynomial in time (0: one "
+                "constant offset, a new start posture only)",
+                bounds=(0, MAX_PROFILE_DEGREE),
+            ),
+            Option(
+                "redundancy.max_rate_ratio",
+                float,
+                1.5,
+                "largest ratio of the optimised to the original trajectory's peak joint speed "
+                "and acceleration, >= 1",
+            ),
+            Option(
+                "redundancy.max_effort_fraction",
+                float,
+                1.0,
+                "largest peak joint torque of the optimised trajectory as a fraction of the "
+                "URDF effort limit, > 0",
+            ),
+            Option(
+                "ik.max_iterations",
+                int,
+                100,
+                "Gauss-Newton iterations of the IK per trajectory sample",
+            ),
+            Option(
+                "ik.position_tolerance_m",
+                float,
+                1e-6,
+                "the IK converges when the tip position error is at most this, > 0",
+                unit="m",
+            ),
+            Option(
+                "ik.orientation_tolerance_rad",
+                float,
+                1e-6,
+                "... and the tip orientation error at most this, > 0",
+                unit="rad",
+            ),
+            Option(
+                "ik.random_restarts",
+                int,
+                30,
+                "random IK seeds tried for the first sample when the given seed fails",
             ),
             Option("effort.enabled", bool, True, "compute joint torques along the trajectory"),
             Option(
@@ -179,6 +248,32 @@ OPTIONS: Mapping[str, Option] = MappingProxyType(
     }
 )
 """Every option, by node parameter name."""
+
+IK_OPTIONS = tuple(key for key in OPTIONS if key.startswith("ik."))
+"""The IK solver's options (core.method.ik.IKConfig fields, ``ik.`` prefixed)."""
+
+REDUNDANCY_OPTIONS = tuple(
+    key for key in OPTIONS if key.startswith("redundancy.") and key != "redundancy.enabled"
+)
+"""The null-space optimisation's settings (core.analyses.redundancy.RedundancyConfig fields,
+``redundancy.`` prefixed); ``redundancy.enabled`` is AnalysisOptions.redundancy."""
+
+
+def _fields(keys: tuple[str, ...], values: Mapping[str, Any]) -> dict[str, Any]:
+    """``keys``' values (their defaults where absent) as fields: the section prefix dropped."""
+    return {key.split(".", 1)[1]: values.get(key, default(key)) for key in keys}
+
+
+def ik_config(values: Mapping[str, Any]) -> IKConfig:
+    """The IKConfig of IK_OPTIONS' values by dotted key (absent: the table's default); the
+    config checks them (InvalidInputError naming ``ik.<field>``)."""
+    return IKConfig(**_fields(IK_OPTIONS, values))
+
+
+def redundancy_config(values: Mapping[str, Any]) -> RedundancyConfig:
+    """The RedundancyConfig of REDUNDANCY_OPTIONS' values by dotted key (absent: the table's
+    default); the config checks them (InvalidInputError naming ``redundancy.<field>``)."""
+    return RedundancyConfig(**_fields(REDUNDANCY_OPTIONS, values))
 
 
 @dataclass(frozen=True)

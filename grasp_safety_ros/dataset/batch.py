@@ -178,20 +178,21 @@ def _spec(payload: SpecPayload) -> BatchSpec:
 
 
 def _evaluator(scenario: Scenario, workers: int) -> GraspSafetyEvaluator:
-    """The process's evaluator for the scenario's robot and metric (URDF parsed once)."""
+    """The process's evaluator for the scenario's robot, metric and IK (URDF parsed once)."""
     robot = scenario.robot
     key = (
         json.dumps(dataclasses.asdict(robot), sort_keys=True, default=str),
         description_sha256(robot.urdf, scenario.base_dir),
         str(scenario.base_dir),
         scenario.metric,
+        repr(scenario.ik),
         str(workers),
     )
     with _LOCK:
         if key not in _EVALUATORS:
             # a chunk is already a coarse unit: share out whatever its size
             config = EvaluationConfig(
-                metric=scenario.metric, workers=workers, parallel_min_samples=1
+                metric=scenario.metric, ik=scenario.ik, workers=workers, parallel_min_samples=1
             )
             _EVALUATORS[key] = GraspSafetyEvaluator(robot.load(scenario.base_dir), config)
         return _EVALUATORS[key]

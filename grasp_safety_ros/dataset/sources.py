@@ -150,6 +150,7 @@ def _dataset_scenario(spec: BatchSpec, inertia: ObjectInertia, grasps: list[Gras
         base_dir=spec.base_dir,
         options=spec.options,
         posture=spec.posture,
+        ik=spec.ik,
     )
 
 

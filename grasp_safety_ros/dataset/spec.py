@@ -20,15 +20,17 @@ import pinocchio as pin
 from ..core.analyses.safety_report import AnalysisOptions
 from ..core.exceptions import InvalidInputError
 from ..core.input_checks import finite_float
+from ..core.method.ik import IKConfig
 from ..core.method.posture import PostureConfig
 from ..core.method.ranking import check_metric
 from ..core.model.inertia import ObjectInertia
 from ..core.model.waypoint_trajectory import WaypointTrajectory
 from ..core.options import default
-from ..scenario.fields import check_keys, mapping, read_pose, read_yaml_file, required, string
+from ..scenario.fields import check_keys, mapping, read_pose, required, string
 from ..scenario.schema import (
     OPTIONAL_SECTIONS,
     RobotSpec,
+    parse_ik,
     parse_object,
     parse_options,
     parse_posture,
@@ -41,7 +43,7 @@ FORMATS = ("acronym", "graspgen", "scenarios")
 PER_GRASP_ANALYSES = frozenset({"metric_point", "iso_ts_15066", "redundancy", "effort", "retime"})
 """Analysis sections a SPEC may have: each grasp's result depends on that grasp alone."""
 
-SET_ANALYSES = OPTIONAL_SECTIONS - PER_GRASP_ANALYSES - {"posture"}
+SET_ANALYSES = OPTIONAL_SECTIONS - PER_GRASP_ANALYSES - {"posture", "ik"}
 """Analyses over the whole candidate set (uncertainty, quality weighting, rank_by): refused,
 a chunk is not the candidate set."""
 
@@ -73,7 +75,7 @@ class BatchSpec:
             dataset's gripper frame.
         trajectory: The object's motion in the base frame, T_base_object_start · M(t).
         object_defaults: Inertia used where a source has none; None: not given.
-        metric, posture, options: As in a scenario (options: the per-grasp analyses).
+        metric, posture, ik, options: As in a scenario (options: the per-grasp analyses).
         sources: Where the grasps come from.
         chunk_grasps: Grasps per chunk.
         base_dir: Folder of the SPEC file (globs and relative URDF paths start there).
@@ -87,6 +89,7 @@ class BatchSpec:
     object_defaults: ObjectInertia | None
     metric: str
     posture: PostureConfig
+    ik: IKConfig
     options: AnalysisOptions
     sources: tuple[SourceSpec, ...]
     chunk_grasps: int
@@ -163,7 +166,7 @@ def parse_spec(data: Any, base_dir: Path) -> BatchSpec:
     """Validate a SPEC mapping (as loaded from YAML)."""
     root = mapping(data, "spec")
     dataset_keys = {"robot", "gripper_to_tip", "object_start_in_base", "motion"}
-    allowed = dataset_keys | {"object", "metric", "posture", "sources", "chunk_grasps"}
+    allowed = dataset_keys | {"object", "metric", "posture", "ik", "sources", "chunk_grasps"}
     for name in sorted(SET_ANALYSES & set(root)):
         raise InvalidInputError(
             name, "depends on the whole candidate set; not available in a batch (chunks)"
@@ -193,6 +196,7 @@ def parse_spec(data: Any, base_dir: Path) -> BatchSpec:
         object_defaults=defaults,
         metric=check_metric(metric),
         posture=parse_posture(root.get("posture", {})),
+        ik=parse_ik(root.get("ik", {})),
         options=parse_options(root, points, None),
         sources=sources,
         chunk_grasps=_chunk_grasps(root.get("chunk_grasps", DEFAULT_CHUNK_GRASPS)),
@@ -201,8 +205,3 @@ def parse_spec(data: Any, base_dir: Path) -> BatchSpec:
             {k: v for k, v in root.items() if k != "sources"}, robot, base_dir
         ),
     )
-
-
-def load_spec(path: str | Path) -> BatchSpec:
-    """Read and validate a SPEC YAML file."""
-    return parse_spec(read_yaml_file(path, "spec"), Path(path).resolve().parent)

@@ -10,13 +10,19 @@ from typing import Any
 
 import numpy as np
 
-from ..core.analyses.exposed_points import box_corners_in_object, cylinder_rim_points_in_object
+from ..core.analyses.exposed_points import (
+    box_corners_in_object,
+    check_metric_point_has_points,
+    cylinder_rim_points_in_object,
+)
+from ..core.analyses.redundancy import RedundancyConfig
 from ..core.analyses.safe_duration import RetimeOptions
 from ..core.analyses.safety_report import RANK_BY, AnalysisOptions
 from ..core.analyses.uncertainty import InertiaUncertainty
 from ..core.analyses.whole_arm import check_exposed_points_m
 from ..core.exceptions import InvalidInputError
 from ..core.input_checks import check_within_reach, finite_array, finite_float
+from ..core.method.ik import IKConfig
 from ..core.method.joint_trajectory import PlannedJointTrajectory
 from ..core.method.posture import PostureConfig
 from ..core.method.ranking import METRICS, Grasp, check_metric
@@ -32,7 +38,15 @@ from ..core.model.inertia import ObjectInertia, solid_box, solid_cylinder, solid
 from ..core.model.robot import RobotModel
 from ..core.model.trajectory import ObjectTrajectory
 from ..core.model.waypoint_trajectory import WaypointTrajectory
-from ..core.options import LIMITS, bounds, default
+from ..core.options import (
+    IK_OPTIONS,
+    LIMITS,
+    REDUNDANCY_OPTIONS,
+    bounds,
+    default,
+    ik_config,
+    redundancy_config,
+)
 from ..core.pipeline import PipelineRequest
 from .fields import (
     check_keys,
@@ -120,6 +134,7 @@ class Scenario:
         options: The analyses beyond the paper (metric point, ISO/TS 15066, uncertainty,
             grasp quality, redundancy, effort), from the optional sections of the file.
         posture: Posture selection (section ``posture``; defaults: core.options).
+        ik: The IK solver's settings (section ``ik``; defaults: core.options).
     """
 
     robot: RobotSpec
@@ -130,6 +145,7 @@ class Scenario:
     base_dir: Path
     options: AnalysisOptions = field(default_factory=AnalysisOptions)
     posture: PostureConfig = field(default_factory=PostureConfig)
+    ik: IKConfig = field(default_factory=IKConfig)
 
     def request(self, robot: RobotModel) -> PipelineRequest:
         """The pipeline's request (core.pipeline) for ``robot``, the chain ``self.robot``
@@ -379,6 +395,7 @@ OPTIONAL_SECTIONS = {
     "effort",
     "rank_by",
     "posture",
+    "ik",
     "whole_arm",
     "retime",
 }
@@ -409,6 +426,31 @@ def parse_posture(section: Any) -> PostureConfig:
     return PostureConfig(
         restarts=posture.get("restarts", default("posture.restarts")), seed=posture.get("seed", 0)
     )
+
+
+def _dotted(
+    section: Any, name: str, keys: tuple[str, ...], extra: frozenset[str]
+) -> dict[str, Any]:
+    """Section ``name``'s entries but ``extra`` as the table's dotted keys (core.options),
+    refusing any but ``keys`` and ``extra``."""
+    entries = mapping(section, name)
+    check_keys(entries, {key.split(".", 1)[1] for key in keys} | extra, name)
+    return {f"{name}.{key}": value for key, value in entries.items() if key not in extra}
+
+
+def parse_ik(section: Any) -> IKConfig:
+    """Parse the ``ik`` section: ``{max_iterations: N, position_tolerance_m: x, ...}``."""
+    return ik_config(_dotted(section, "ik", IK_OPTIONS, frozenset()))
+
+
+def parse_redundancy(section: Any) -> tuple[bool, RedundancyConfig]:
+    """The ``redundancy`` entry: true or false, or a section ``{enabled: ..., iterations: ...,
+    ...}`` (its settings: core.options.REDUNDANCY_OPTIONS); (on, RedundancyConfig)."""
+    if not isinstance(section, Mapping):
+        return flag(section, "redundancy"), redundancy_config({})
+    values = _dotted(section, "redundancy", REDUNDANCY_OPTIONS, frozenset({"enabled"}))
+    enabled = flag(section.get("enabled", default("redundancy.enabled")), "redundancy.enabled")
+    return enabled, redundancy_config(values)
 
 
 def parse_options(
@@ -455,11 +497,10 @@ def parse_options(
     if rank_by not in RANK_BY:
         raise InvalidInputError("rank_by", f"must be one of {', '.join(RANK_BY)}, got {rank_by!r}")
     metric_point = root.get("metric_point", default("metric_point"))
-    if metric_point != "tip" and points is None:
-        raise InvalidInputError(
-            "metric_point",
-            f"{metric_point!r} needs object.points_m or a box or cylinder object",
-        )
+    check_metric_point_has_points(metric_point, points, "object.points_m or a box or cylinder")
+    redundancy, redundancy_settings = parse_redundancy(
+        root.get("redundancy", default("redundancy.enabled"))
+    )
     try:
         return AnalysisOptions(
             metric_point=metric_point,
@@ -472,7 +513,7 @@ def parse_options(
                 "safety_weight",
                 *bounds("safety_weight"),
             ),
-            redundancy=flag(root.get("redundancy", default("redundancy.enabled")), "redundancy"),
+            redundancy=redundancy,
             effort=flag(effort.get("enabled", default("effort.enabled")), "effort.enabled"),
             rank_by=rank_by,
             effort_criterion=effort.get("criterion", default("effort.criterion")),
@@ -482,6 +523,7 @@ def parse_options(
             arm_points_m=arm_points,
             whole_arm_region=whole_arm.get("region", default("whole_arm.region")),
             retime=parse_retime(root.get("retime"), rank_by == "safe_duration"),
+            redundancy_settings=redundancy_settings,
         )
     except InvalidInputError as error:  # the core says iso15066.<field>; the file iso_ts_15066
         if not error.field.startswith("iso15066."):
@@ -518,6 +560,7 @@ def parse_scenario(data: Any, base_dir: Path) -> Scenario:
         base_dir=base_dir,
         options=parse_options(root, points, quality),
         posture=parse_posture(root.get("posture", {})),
+        ik=parse_ik(root.get("ik", {})),
     )
 
 

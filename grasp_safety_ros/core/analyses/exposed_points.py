@@ -47,6 +47,16 @@ def check_metric_point(metric_point: str, field: str = "metric_point") -> str:
     return metric_point
 
 
+def check_metric_point_has_points(metric_point: str, points: object | None, how: str) -> None:
+    """Raise InvalidInputError on ``metric_point`` when a point other than the tip is asked
+    for with no object points (``points`` None); ``how``: how the caller's interface sets
+    them (its own field names), the end of the message."""
+    if metric_point != "tip" and points is None:
+        raise InvalidInputError(
+            "metric_point", f"{metric_point!r} needs the object's points: {how}"
+        )
+
+
 def box_corners_in_object(
     size_m: Sequence[float] | np.ndarray,
     center_in_object_m: Sequence[float] | np.ndarray = (0.0, 0.0, 0.0),

@@ -11,7 +11,7 @@ SafetyReport it returns.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import Any
 
@@ -30,6 +30,7 @@ from .effort import EffortEvaluation, check_effort_criterion, evaluate_efforts, 
 from .exposed_points import (
     ExposedPointsEvaluation,
     check_metric_point,
+    check_metric_point_has_points,
     check_points_in_object,
     evaluate_exposed_points,
     evaluate_exposed_points_on_terms,
@@ -105,6 +106,8 @@ class AnalysisOptions:
         whole_arm_region: Body region ``rank_by: whole_arm`` uses (DEFAULT_RANK_REGION).
         retime: Retime each feasible grasp to the site speed limits (core.analyses.
             safe_duration); required by ``rank_by: safe_duration``.
+        redundancy_settings: The null-space optimisation's settings when ``redundancy`` is on
+            (its ``metric`` and ``max_joint_step`` are the evaluator's).
     """
 
     metric_point: str = "tip"
@@ -121,6 +124,7 @@ class AnalysisOptions:
     arm_points_m: Mapping[str, Any] | None = None
     whole_arm_region: str = DEFAULT_RANK_REGION
     retime: RetimeOptions | None = None
+    redundancy_settings: RedundancyConfig = field(default_factory=RedundancyConfig)
 
     def __post_init__(self) -> None:
         check_metric_point(self.metric_point)
@@ -130,12 +134,11 @@ class AnalysisOptions:
                 "points_in_object_m",
                 check_points_in_object(self.points_in_object_m, "object.points_m"),
             )
-        elif self.metric_point != "tip":
-            raise InvalidInputError(
-                "metric_point",
-                f"{self.metric_point!r} needs the object's points (a box or cylinder shape, "
-                "or object.points_m)",
-            )
+        check_metric_point_has_points(
+            self.metric_point,
+            self.points_in_object_m,
+            "a box or cylinder shape, or object.points_m",
+        )
         if self.iso_regions:
             select_regions(list(self.iso_regions))  # raises on unknown names
         if self.rank_by not in RANK_BY:
@@ -355,7 +358,11 @@ def analyse(
         exposed = tuple(exposed_list)  # type: ignore[arg-type]
     redundancy: tuple[RedundancyResolution, ...] = ()
     if options.redundancy:
-        config = RedundancyConfig(metric=metric, max_joint_step=evaluator.config.ik.max_joint_step)
+        config = replace(
+            options.redundancy_settings,
+            metric=metric,
+            max_joint_step=evaluator.config.ik.max_joint_step,
+        )
         resolutions = []
         for k, (e, g) in enumerate(zip(evaluations, grasps, strict=True)):
             resolutions.append(

@@ -24,7 +24,7 @@ ISO/TS 15066 (core.analyses.iso15066, Annex A): for each body region, the force 
 F/F_tr = v·sqrt(μ k)/F_tr at every (sample, site); the worst over both, the worst site and
 its link, admissibility over the whole arm, and T_min = T · max ratio over the permitted
 regions (a uniform re-timing scales every site speed alike). Energy: ½ M_eff v² [J].
-The sites themselves are resolved in ``arm_sites``.
+The sites themselves are resolved in ``arm_sites``, the regions assessed in ``arm_regions``.
 """
 
 from __future__ import annotations
@@ -47,16 +47,14 @@ from ..method.terms import SampleTerms, grasps_terms
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
 from ..model.trajectory import ObjectMotion, ObjectPath, Trajectory
+from .arm_regions import WholeArmRegion as WholeArmRegion
+from .arm_regions import assess_sites as assess_sites
+from .arm_regions import assess_sites_batch
 from .arm_sites import MAX_SITES as MAX_SITES
 from .arm_sites import ArmSites as ArmSites
 from .arm_sites import check_exposed_points_m as check_exposed_points_m
 from .arm_sites import resolve_arm_sites as resolve_arm_sites
-from .iso15066 import (
-    ADMISSIBLE_RATIO_TOLERANCE,
-    BodyRegion,
-    select_regions,
-    transient_contact_force_n,
-)
+from .iso15066 import BodyRegion, select_regions
 
 STATIONARY_SPEED_M_S = 1e-9
 """Below this speed [m/s] a site does not move: flagged, no direction of its own."""
@@ -189,7 +187,9 @@ def tip_twists_in_base(
     return np.concatenate([tip.tangents * rate, motion.angular_tangents * rate], axis=1)
 
 
-def tip_jacobians_world(robot: RobotModel, terms_kinematics: tuple[np.ndarray, ...]) -> np.ndarray:
+def jacobians_tip_in_world(
+    robot: RobotModel, terms_kinematics: tuple[np.ndarray, ...]
+) -> np.ndarray:
     """(N, 6, n) Jacobians of the tip frame, world axes at the tip origin (LOCAL_WORLD_ALIGNED),
     from ``pinocchio_kinematic_terms``' placements and world columns."""
     rotations, translations, jacobians = terms_kinematics[:3]
@@ -216,7 +216,7 @@ def tip_following_joint_velocities(
     """q̇ (N, n) = J⁺ξ + (I − J⁺J) q̇_s (module docstring) [rad/s or m/s].
 
     Args:
-        tip_jacobians: (N, 6, n) from ``tip_jacobians_world``.
+        tip_jacobians: (N, 6, n) from ``jacobians_tip_in_world``.
         tip_twists_in_world: (N, 6) tip twists (linear [m/s], angular [rad/s]), world axes.
         times_s, joint_positions: The samples (N,), (N, n); continuous joints are unwrapped.
     """
@@ -224,94 +224,6 @@ def tip_following_joint_velocities(
     pseudo_inverse = np.linalg.pinv(tip_jacobians, rcond=PSEUDO_INVERSE_RCOND)  # (N, n, 6)
     residual = tip_twists_in_world - (tip_jacobians @ spline_rates[..., None])[..., 0]
     return spline_rates + (pseudo_inverse @ residual[..., None])[..., 0]
-
-
-@dataclass(frozen=True)
-class WholeArmRegion:
-    """ISO/TS 15066 transient contact of one body region with any site of the arm.
-
-    Attributes:
-        region: Region name.
-        transient_contact_permitted: False where the TS permits none (ratio inf when moving).
-        worst_force_ratio: max over samples and sites of F/F_tr (0 when nothing moves).
-        worst_site, worst_sample: Where the peak force occurs (first on ties, sample-major):
-            its site's speed and mass there give peak_contact_force_n.
-        peak_contact_force_n: max over samples and sites of F = v·sqrt(μ k) [N].
-        admissible: worst_force_ratio <= 1 (+ ADMISSIBLE_RATIO_TOLERANCE).
-        min_duration_s: T · worst_force_ratio [s] (0 when nothing moves).
-    """
-
-    region: str
-    transient_contact_permitted: bool
-    worst_force_ratio: float
-    worst_site: int
-    worst_sample: int
-    peak_contact_force_n: float
-    admissible: bool
-    min_duration_s: float
-
-
-def assess_sites(
-    speed_m_s: np.ndarray,
-    effective_mass_kg: np.ndarray,
-    duration_s: float,
-    regions: Sequence[BodyRegion],
-) -> tuple[WholeArmRegion, ...]:
-    """Each region's worst case over (N, K) site speeds [m/s] and effective masses [kg]."""
-    speeds = np.asarray(speed_m_s, dtype=float)
-    masses = np.asarray(effective_mass_kg, dtype=float)
-    return _assess_sites_batch(speeds[None], masses[None], [duration_s], regions)[0]
-
-
-def _assess_sites_batch(
-    speed_m_s: np.ndarray,
-    effective_mass_kg: np.ndarray,
-    durations_s: Sequence[float],
-    regions: Sequence[BodyRegion],
-) -> list[tuple[WholeArmRegion, ...]]:
-    """``assess_sites`` of G motions at once: (G, N, K) speeds [m/s] and masses [kg] (rows a
-    motion does not have: speed 0), (G,) durations [s]; the same numbers, one array pass per
-    region over every motion."""
-    grasps, _, count_sites = speed_m_s.shape
-    speeds = speed_m_s.reshape(grasps, -1)
-    masses = effective_mass_kg.reshape(grasps, -1)
-    moving = speeds > 0.0
-    columns = []
-    for region in regions:
-        with np.errstate(divide="ignore", invalid="ignore"):  # m_h = m_r = inf: μ = inf
-            force = transient_contact_force_n(speeds, masses, region)
-        force = np.where(moving, force, 0.0)  # a site at rest: no force (not 0·inf)
-        if region.max_transient_force_n is None:
-            ratio = np.where(moving, np.inf, 0.0)
-        else:
-            ratio = force / region.max_transient_force_n
-        if ratio.shape[1]:  # at the peak force: F/F_tr's maximum, or inf wherever moving
-            where = np.argmax(force, axis=1)
-            rows = np.arange(grasps)
-            worst, peak = ratio[rows, where], force[rows, where]
-        else:
-            where, worst, peak = np.zeros(grasps, dtype=int), np.zeros(grasps), np.zeros(grasps)
-        columns.append((where.tolist(), worst.tolist(), peak.tolist()))
-    results = []
-    for g in range(grasps):
-        assessed = []
-        for region, (where, worst_list, peak_list) in zip(regions, columns, strict=True):
-            sample, site = divmod(where[g], count_sites) if count_sites else (0, 0)
-            worst = worst_list[g]
-            assessed.append(
-                WholeArmRegion(
-                    region=region.name,
-                    transient_contact_permitted=region.transient_contact_permitted,
-                    worst_force_ratio=worst,
-                    worst_site=int(site),
-                    worst_sample=int(sample),
-                    peak_contact_force_n=peak_list[g],
-                    admissible=worst <= 1.0 + ADMISSIBLE_RATIO_TOLERANCE,
-                    min_duration_s=durations_s[g] * worst if worst > 0.0 else 0.0,
-                )
-            )
-        results.append(tuple(assessed))
-    return results
 
 
 @dataclass(frozen=True)
@@ -476,7 +388,7 @@ def evaluate_whole_arm(
     kinematics = pinocchio_kinematic_terms(model, q_all)
     velocities = tip_following_joint_velocities(
         robot,
-        tip_jacobians_world(robot, kinematics),
+        jacobians_tip_in_world(robot, kinematics),
         _tip_twists_in_world(robot, trajectory, grasp, times),
         times,
         positions,
@@ -572,7 +484,7 @@ def evaluate_whole_arm_on_terms(
     speeds[stationary] = 0.0
     masses[~valid] = 1.0
     durations = [float(t.duration_s) for t in trajectories]
-    assessed = _assess_sites_batch(speeds, masses, durations, regions)
+    assessed = assess_sites_batch(speeds, masses, durations, regions)
     base = robot.transform_base_to_world
     results = []
     for g, evaluation in enumerate(evaluations):

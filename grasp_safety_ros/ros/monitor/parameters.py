@@ -1,5 +1,5 @@
 """The monitor's parameters: those it shares with the ranking node (same names, specs and
-checks: ros/parameters.py) and its own, validated as pure functions (no rclpy)."""
+checks: ros/parameters/) and its own, validated as pure functions (no rclpy)."""
 
 from __future__ import annotations
 

@@ -28,7 +28,7 @@ from ...core.input_checks import (
 )
 from ...core.method.ranking import METRICS
 from ...core.model.armature import PUBLISHED, published_armatures
-from ...core.options import LIMITS, bounds
+from ...core.options import IK_OPTIONS, LIMITS, OPTIONS, REDUNDANCY_OPTIONS, bounds
 from ..service.response import MAX_COUNT
 from .arm_points import check_point_links
 from .table import INFEASIBLE_CHOICES, PARAMETERS, PUBLISHED_PARAMETER
@@ -67,15 +67,17 @@ _POSITIVE: tuple[str, ...] = (
 )
 _POSITIVE += ("service_busy_timeout_s", "diagnostics_period_s", "moveit.planner_timeout_s")
 _FRACTIONS = ("uncertainty.mass_fraction", "uncertainty.inertia_fraction")
+_POSITIVE += tuple(k for k in IK_OPTIONS + REDUNDANCY_OPTIONS if OPTIONS[k].type is float)
 _RANGES: Mapping[str, tuple[float, float]] = {
     key: bounds(key) for key in ("uncertainty.percentile", "safety_weight")
 }
 _MAX_POINTS = int(LIMITS["points"].value)
 _COUNT_LIMITS: Mapping[str, tuple[int, int]] = {
     **{limit.node: (1, int(limit.value)) for limit in LIMITS.values() if limit.node},
+    **{k: (0, MAX_COUNT) for k in IK_OPTIONS + REDUNDANCY_OPTIONS if OPTIONS[k].type is int},
     **{
         key: (int(bounds(key)[0]), int(bounds(key)[1]))
-        for key in ("uncertainty.samples", "posture.restarts")
+        for key in ("uncertainty.samples", "posture.restarts", "redundancy.profile_degree")
     },
     "uncertainty.seed": (0, MAX_COUNT),  # a seed, not a count
     "response.joint_trajectories": (0, MAX_COUNT),  # clipped to the number of grasps

@@ -13,14 +13,17 @@ import numpy as np
 
 from ...core.analyses.exposed_points import (
     box_corners_in_object,
+    check_metric_point_has_points,
     cylinder_rim_points_in_object,
 )
 from ...core.analyses.safe_duration import RetimeOptions
 from ...core.analyses.safety_report import AnalysisOptions
 from ...core.analyses.uncertainty import InertiaUncertainty
 from ...core.exceptions import InvalidInputError
+from ...core.method.ik import IKConfig
 from ...core.method.posture import PostureConfig
 from ...core.model.inertia import ObjectInertia
+from ...core.options import ik_config, redundancy_config
 from ..conversions.geometry import inertia_tensor_from_components
 from ..service.response import ResponseContent
 from .arm_points import arm_points
@@ -67,6 +70,7 @@ class NodeSettings:
     diagnostics_period_s: float
     analysis: AnalysisOptions = dataclasses.field(default_factory=AnalysisOptions)
     posture: PostureConfig = dataclasses.field(default_factory=PostureConfig)
+    ik: IKConfig = dataclasses.field(default_factory=IKConfig)
     response: ResponseContent = dataclasses.field(
         default_factory=lambda: ResponseContent(joint_trajectories=1)
     )
@@ -118,12 +122,12 @@ def analysis_from_parameters(values: Mapping[str, Any]) -> AnalysisOptions:
     """
     points = points_from_parameters(values)
     metric_point = values["metric_point"]
-    if metric_point != "tip" and points is None:
-        raise InvalidInputError(
-            "metric_point",
-            f"{metric_point!r} needs the object's points: set object.points_in_object_m, "
-            "object.box_size_m or object.cylinder_radius_m and object.cylinder_length_m",
-        )
+    check_metric_point_has_points(
+        metric_point,
+        points,
+        "set object.points_in_object_m, object.box_size_m or object.cylinder_radius_m and "
+        "object.cylinder_length_m",
+    )
     bounds = [values[f"uncertainty.{n}"] for n in ("mass_fraction", "com_offset_m")]
     bounds.append(values["uncertainty.inertia_fraction"])
     uncertainty = None
@@ -157,6 +161,7 @@ def analysis_from_parameters(values: Mapping[str, Any]) -> AnalysisOptions:
         )
         if values["retime.joint_acceleration_limits"]
         else None,
+        redundancy_settings=redundancy_config(values),
     )
 
 
@@ -223,6 +228,7 @@ def settings_from_parameters(values: Mapping[str, Any]) -> NodeSettings:
         diagnostics_period_s=v["diagnostics_period_s"],
         analysis=analysis_from_parameters(v),
         posture=PostureConfig(restarts=v["posture.restarts"]),
+        ik=ik_config(v),
         response=ResponseContent(
             joint_trajectories=v["response.joint_trajectories"],
             per_sample=v["response.per_sample"],

@@ -6,11 +6,12 @@ into its settings (settings.py).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from ...core.options import LIMITS, OPTIONS, help_text
+from ...core.options import IK_OPTIONS, LIMITS, OPTIONS, REDUNDANCY_OPTIONS, help_text
 
 INFEASIBLE_CHOICES = ("append", "drop")
 """What ``~/plan_grasps`` does with grasps outside the node's order (``moveit.infeasible``):
@@ -161,6 +162,9 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
     "effort.criterion": _option("effort.criterion"),
     "rank_by": _option("rank_by"),
     "posture.restarts": _option("posture.restarts"),
+    **{key: _option(key) for key in REDUNDANCY_OPTIONS},
+    # the evaluator's, built with the robot: read at start-up
+    **{key: dataclasses.replace(_option(key), read_only=True) for key in IK_OPTIONS},
     # --- What the result messages carry (the service's response and ~/ranking) ---
     "response.joint_trajectories": ParameterSpec(
         1,

@@ -133,6 +133,8 @@ def build_robot(settings: NodeSettings, topic_description: str | None) -> RobotB
             seed = tuple(float(x) for x in robot.check_positions(settings.ik_seed, "robot.seed"))
     except GraspSafetyError as error:
         raise _renamed(error, origin) from None
-    evaluator = GraspSafetyEvaluator(robot, EvaluationConfig(metric=settings.metric))
+    evaluator = GraspSafetyEvaluator(
+        robot, EvaluationConfig(metric=settings.metric, ik=settings.ik)
+    )
     warm_up(evaluator)  # compile or load the kernels now, not on the first request
     return RobotBundle(robot, evaluator, seed, origin, armature_bounds)

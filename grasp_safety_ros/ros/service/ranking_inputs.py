@@ -14,7 +14,7 @@ from nav_msgs.msg import Path
 from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 from visualization_msgs.msg import MarkerArray
 
-from ...core.analyses.exposed_points import check_metric_point
+from ...core.analyses.exposed_points import check_metric_point, check_metric_point_has_points
 from ...core.analyses.safety_report import AnalysisOptions, SafetyReport
 from ...core.exceptions import InvalidInputError
 from ...core.method.ranking import Grasp, Ranking, check_metric
@@ -120,12 +120,11 @@ def analysis_options(
             quality_field, f"must have one value per grasp ({num_grasps}), got {len(quality)}"
         )
     metric_point = check_metric_point(metric_point or defaults.metric_point, "metric_point")
-    if metric_point != "tip" and defaults.points_in_object_m is None:
-        raise InvalidInputError(
-            "metric_point",
-            f"{metric_point!r} needs the object's points: set the node parameter "
-            "object.points_in_object_m, object.box_size_m or object.cylinder_*",
-        )
+    check_metric_point_has_points(
+        metric_point,
+        defaults.points_in_object_m,
+        "set the node parameter object.points_in_object_m, object.box_size_m or object.cylinder_*",
+    )
     return replace(defaults, metric_point=metric_point, grasp_quality=quality)
 
 
