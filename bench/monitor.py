@@ -50,7 +50,7 @@ from grasp_safety_ros.core.analyses.speed_scaling import (  # noqa: E402
 from grasp_safety_ros.paths import config_file  # noqa: E402
 from grasp_safety_ros.ros.monitor.governor import Governor  # noqa: E402
 from grasp_safety_ros.ros.monitor.parameters import monitor_settings  # noqa: E402
-from grasp_safety_ros.ros.robot_bundle import build_robot  # noqa: E402
+from grasp_safety_ros.ros.robot.bundle import build_robot  # noqa: E402
 
 PARAMS = config_file("grasp_safety_monitor.yaml")
 RATE_HZ = 500.0

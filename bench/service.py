@@ -193,8 +193,11 @@ def node_spans(node: Any, request: Any) -> dict[str, float]:
 
     from grasp_safety_ros.core.pipeline import run_pipeline
     from grasp_safety_ros.ros import conversions
-    from grasp_safety_ros.ros.message_checks import check_finite_result, check_no_subnormals
-    from grasp_safety_ros.ros.ranking_inputs import markers_builder, ranking_inputs
+    from grasp_safety_ros.ros.service.message_checks import (
+        check_finite_result,
+        check_no_subnormals,
+    )
+    from grasp_safety_ros.ros.service.ranking_inputs import markers_builder, ranking_inputs
 
     spans: dict[str, float] = {}
     snapshot = node._snapshot()

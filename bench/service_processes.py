@@ -32,8 +32,9 @@ def running_node(
     from rclpy.context import Context
     from rclpy.parameter import Parameter
 
-    from grasp_safety_ros.ros.executor import NodeExecutor, join_callbacks, spin_until
     from grasp_safety_ros.ros.node import EXECUTOR_THREADS, GraspSafetyNode
+    from grasp_safety_ros.ros.runtime.process import spin_until
+    from grasp_safety_ros.ros.runtime.rclpy_private import NodeExecutor, join_callbacks
 
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     domain_id = random.SystemRandom().randint(0, 101)

@@ -37,10 +37,10 @@ sys.path.insert(0, str(ROOT / "test"))
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-from test_ros_node import NODE_PARAMETERS, NodeUnderTest, book_path, book_request  # noqa: E402
+from ros_node_harness import NODE_PARAMETERS, NodeUnderTest, book_path, book_request  # noqa: E402
 
 from grasp_safety_ros.ros import node as node_module  # noqa: E402
-from grasp_safety_ros.ros.memory import release_free_heap  # noqa: E402
+from grasp_safety_ros.ros.runtime.memory import release_free_heap  # noqa: E402
 
 
 def large_request(grasps: int) -> Any:

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -154,3 +155,47 @@ def random_rotation(rng: np.random.Generator) -> np.ndarray:
     quat = rng.normal(size=4)
     quat /= np.linalg.norm(quat)
     return pin.Quaternion(*quat).toRotationMatrix()
+
+
+# --- The grasp_safety node over real rclpy (ros_node_harness.py, imported lazily: rclpy) -------
+# A test module using them imports ros_node_harness._localhost_only (autouse) first.
+
+
+@pytest.fixture(scope="module")
+def ros() -> Iterator[Any]:
+    """The node with ros_node_harness.NODE_PARAMETERS, shared by a test module."""
+    from ros_node_harness import NODE_PARAMETERS, NodeUnderTest
+
+    harness = NodeUnderTest(NODE_PARAMETERS)
+    yield harness
+    harness.close()
+
+
+@pytest.fixture()
+def own_ros() -> Iterator[Any]:
+    """A node of its own (own ROS domain): no candidate set, trajectory or quality left by
+    earlier tests, which the topic-pairing rules would otherwise act on."""
+    from ros_node_harness import NODE_PARAMETERS, NodeUnderTest
+
+    harness = NodeUnderTest(NODE_PARAMETERS)
+    yield harness
+    harness.close()
+
+
+@pytest.fixture(scope="module")
+def core_evaluator() -> Any:
+    """The core's evaluator of the node's robot (Baxter's right arm)."""
+    from grasp_safety_ros.core import GraspSafetyEvaluator
+
+    robot = RobotModel.from_urdf("example-robot-data:baxter", "base", "right_gripper")
+    return GraspSafetyEvaluator(robot)
+
+
+@pytest.fixture(scope="module")
+def core_ranking(core_evaluator: Any) -> Any:
+    """The core's ranking of the book scenario, as the node's service must answer it."""
+    from ros_node_harness import BOOK, BOOK_GRASPS, book_trajectory
+
+    return core_evaluator.rank(
+        BOOK_GRASPS, BOOK.object_inertia, book_trajectory(), BOOK.robot.seed, "mean"
+    )

@@ -323,7 +323,7 @@ def node_settings(**values: object):
 
 
 def test_node_armature_parameters_build_the_chain_with_it() -> None:
-    from grasp_safety_ros.ros.robot_bundle import build_robot
+    from grasp_safety_ros.ros.robot.bundle import build_robot
 
     fr3 = [0.195] * 4 + [0.074] * 3
     for values in (
@@ -360,7 +360,7 @@ def test_node_armature_parameters_build_the_chain_with_it() -> None:
     ],
 )
 def test_bad_node_armature_parameters_are_refused_by_name(values: dict, message: str) -> None:
-    from grasp_safety_ros.ros.robot_bundle import build_robot
+    from grasp_safety_ros.ros.robot.bundle import build_robot
 
     with pytest.raises(InvalidInputError, match=message):
         build_robot(node_settings(**values), None)

@@ -120,7 +120,7 @@ def test_a_seed_a_turn_away_starts_the_output_there(tmp_path: Path, kinova: Robo
 
 def kinova_node(**parameters: object):
     """A node on the Kinova chain (no joint-state seed, a small object, no restarts)."""
-    from test_ros_node import NodeUnderTest
+    from ros_node_harness import NodeUnderTest
 
     return NodeUnderTest(
         {
@@ -140,9 +140,9 @@ def test_node_joint_trajectory_keeps_continuous_joints_unwrapped(kinova: RobotMo
     from builtin_interfaces.msg import Duration
     from geometry_msgs.msg import Pose, PoseArray
     from grasp_safety_msgs.srv import RankGrasps
+    from ros_node_harness import book_path
     from std_msgs.msg import Header
     from test_ros_motions import planned_message
-    from test_ros_node import book_path
     from trajectory_msgs.msg import JointTrajectoryPoint
 
     harness = kinova_node(**{"response.joint_trajectories": 2})
@@ -184,8 +184,8 @@ def test_node_seed_a_turn_away_starts_the_joint_trajectory_there(kinova: RobotMo
     from geometry_msgs.msg import Pose, PoseArray, PoseStamped
     from grasp_safety_msgs.srv import RankGrasps
     from nav_msgs.msg import Path as PathMsg
+    from ros_node_harness import pose_from_yaml
     from std_msgs.msg import Header
-    from test_ros_node import pose_from_yaml
 
     seed = [3.0 + 2.0 * math.pi, *OTHERS]
     harness = kinova_node(**{"ik_seed": seed, "response.joint_trajectories": 1})

@@ -101,7 +101,7 @@ def test_a_partial_armature_mapping_keeps_the_mjcf_armature_of_the_other_joints(
     """Naming one joint must not zero the others' rotor inertia (that would lower every
     effective mass): in the model, a scenario (value and range) and the node parameters."""
     from grasp_safety_ros.ros.parameters import settings_from_parameters
-    from grasp_safety_ros.ros.robot_bundle import build_robot
+    from grasp_safety_ros.ros.robot.bundle import build_robot
     from grasp_safety_ros.scenario.schema import parse_robot
 
     kept = [*ARMATURE[:3], 0.1]
@@ -186,7 +186,7 @@ def test_mjcf_body_with_geoms_and_no_inertial_is_refused() -> None:
 
 def test_node_takes_an_mjcf_robot_description() -> None:
     from grasp_safety_ros.ros.parameters import settings_from_parameters
-    from grasp_safety_ros.ros.robot_bundle import build_robot
+    from grasp_safety_ros.ros.robot.bundle import build_robot
 
     settings = settings_from_parameters(
         {"robot_description": arm_mjcf(), "base_frame": "base_link", "tip_frame": "tool"}

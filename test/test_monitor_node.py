@@ -46,7 +46,7 @@ from grasp_safety_ros.core.analyses.speed_scaling import (
 )
 from grasp_safety_ros.paths import config_file
 from grasp_safety_ros.ros.monitor.parameters import MonitorSettings, monitor_settings
-from grasp_safety_ros.ros.robot_bundle import build_robot
+from grasp_safety_ros.ros.robot.bundle import build_robot
 
 PARAMS = config_file("grasp_safety_monitor.yaml")
 HAS_LAUNCH = ROS2.exists() and any(

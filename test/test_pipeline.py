@@ -17,7 +17,7 @@ import yaml
 
 pytest.importorskip("rclpy")
 
-from test_ros_node import BOOK, BOOK_YAML, NodeUnderTest, book_request
+from ros_node_harness import BOOK, BOOK_YAML, NodeUnderTest, book_request
 from tolerances import effort_tolerances, path_tolerance
 
 from grasp_safety_ros.cli.main import rank_scenario

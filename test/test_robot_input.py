@@ -15,7 +15,7 @@ from grasp_safety_ros.core.method.effective_mass import translational_mobilities
 from grasp_safety_ros.core.model.description import resolve_urdf
 from grasp_safety_ros.core.model.robot import find_frame
 from grasp_safety_ros.ros.parameters import settings_from_parameters
-from grasp_safety_ros.ros.robot_bundle import build_robot
+from grasp_safety_ros.ros.robot.bundle import build_robot
 
 
 def urdf_text(name: str) -> str:

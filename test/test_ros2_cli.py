@@ -30,7 +30,7 @@ from ros_domains import claim_ros_domain
 
 from grasp_safety_ros.paths import config_file
 from grasp_safety_ros.ros.parameters import PARAMETERS
-from grasp_safety_ros.ros.read_only import UNCHANGED
+from grasp_safety_ros.ros.runtime.read_only import UNCHANGED
 
 BIN = Path(sys.executable).parent
 ROS2 = BIN / "ros2"

@@ -16,9 +16,9 @@ from rclpy.context import Context
 from rclpy.parameter import Parameter
 from ros_domains import claim_ros_domain
 
-from grasp_safety_ros.ros.declaration import declared_type, descriptor, typed
 from grasp_safety_ros.ros.node import GraspSafetyNode, StartupError
 from grasp_safety_ros.ros.parameters import PARAMETERS, check_parameter
+from grasp_safety_ros.ros.parameters.declaration import declared_type, descriptor, typed
 
 ARM = {"robot_description": serial_arm_urdf(ARM6_AXES), "base_frame": "base_link"}
 ARM["tip_frame"] = "tool"

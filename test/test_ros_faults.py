@@ -23,7 +23,7 @@ from nav_msgs.msg import Path as PathMsg
 from rcl_interfaces.srv import SetParameters
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
-from test_ros_node import (  # noqa: F401  (_localhost_only: autouse fixture)
+from ros_node_harness import (  # noqa: F401  (_localhost_only: autouse fixture)
     NODE_PARAMETERS,
     NodeUnderTest,
     _localhost_only,
@@ -40,6 +40,7 @@ from test_ros_node_process import (  # noqa: F401  (ros_env: fixture)
 
 from grasp_safety_ros.ros import node as node_module
 from grasp_safety_ros.ros.node import EXECUTOR_THREADS
+from grasp_safety_ros.ros.robot import source as robot_source
 
 TEST_DIR = Path(__file__).resolve().parent
 
@@ -236,7 +237,7 @@ def test_bug_in_a_parameter_change_is_refused_not_fatal(
     def broken(*args: Any, **kwargs: Any) -> None:
         raise ValueError("Several frames match the filter - please specify the FrameType")
 
-    monkeypatch.setattr(node_module, "build_robot", broken)
+    monkeypatch.setattr(robot_source, "build_robot", broken)  # the robot group's rebuild
     (result,) = ros.set_parameters(tip_frame="right_wrist")
     monkeypatch.undo()
     assert not result.successful
@@ -443,7 +444,7 @@ import sys
 sys.path.insert(0, sys.argv[1])
 import rclpy
 from grasp_safety_msgs.srv import RankGrasps
-from test_ros_node import book_request
+from ros_node_harness import book_request
 request = book_request()
 try:
     request.grasps.poses[1].position.x = 1  # an int in a float64 field

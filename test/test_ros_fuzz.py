@@ -31,9 +31,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.errors import InvalidArgument
 from nav_msgs.msg import Path
-from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray, Header, String
-from test_ros_node import (  # noqa: F401  (_localhost_only: autouse fixture)
+from ros_node_harness import (  # noqa: F401  (_localhost_only: autouse fixture)
     LATCHED,
     MAX_GRASPS,
     NODE_PARAMETERS,
@@ -42,6 +40,8 @@ from test_ros_node import (  # noqa: F401  (_localhost_only: autouse fixture)
     book_request,
     same_messages,
 )
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, Header, String
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from grasp_safety_ros.core.exceptions import InvalidInputError

@@ -8,16 +8,16 @@ import threading
 from collections.abc import Iterator
 
 import pytest
-from test_ros_node import (  # noqa: F401  (_localhost_only: autouse fixture)
+from ros_node_harness import (  # noqa: F401  (_localhost_only: autouse fixture)
     NODE_PARAMETERS,
     NodeUnderTest,
     _localhost_only,
     book_request,
 )
 
-from grasp_safety_ros.ros import memory
-from grasp_safety_ros.ros.memory import IDLE_BEFORE_TRIM_S, TRIM_MIN_FREE_KIB, IdleTrim
-from grasp_safety_ros.ros.ranking_job import FairComputeLock
+from grasp_safety_ros.ros.runtime import memory
+from grasp_safety_ros.ros.runtime.memory import IDLE_BEFORE_TRIM_S, TRIM_MIN_FREE_KIB, IdleTrim
+from grasp_safety_ros.ros.service.ranking_job import FairComputeLock
 
 
 class Clock:

@@ -17,8 +17,7 @@ from geometry_msgs.msg import PoseArray, PoseStamped, Quaternion, Transform, Vec
 from grasp_safety_msgs.msg import GraspRanking
 from grasp_safety_msgs.srv import RankGrasps
 from nav_msgs.msg import Path
-from std_msgs.msg import Header
-from test_ros_node import (
+from ros_node_harness import (
     BOOK,
     BOOK_GRASPS,
     DT_S,
@@ -28,8 +27,8 @@ from test_ros_node import (
     _localhost_only,  # noqa: F401  (autouse fixture: localhost discovery, log dir)
     assert_matches_core,
     book_request,
-    core_evaluator,  # noqa: F401  (fixture)
 )
+from std_msgs.msg import Header
 from trajectory_msgs.msg import (
     JointTrajectory,
     JointTrajectoryPoint,
@@ -111,7 +110,7 @@ def waypoint_trajectory() -> WaypointTrajectory:
 
 @pytest.fixture(scope="module")
 def core_waypoint_ranking(
-    core_evaluator: GraspSafetyEvaluator,  # noqa: F811
+    core_evaluator: GraspSafetyEvaluator,
     waypoint_trajectory: WaypointTrajectory,
 ) -> Any:
     return core_evaluator.rank(
@@ -147,7 +146,7 @@ def planned_message(positions: np.ndarray, times: np.ndarray, names: list[str]) 
 
 def test_joint_trajectories_per_grasp(
     ros: NodeUnderTest,
-    core_evaluator: GraspSafetyEvaluator,  # noqa: F811
+    core_evaluator: GraspSafetyEvaluator,
     core_waypoint_ranking,
     waypoint_trajectory: WaypointTrajectory,
 ) -> None:

@@ -37,9 +37,9 @@ from std_msgs.msg import Header
 from grasp_safety_ros.cli.main import main as cli_main
 from grasp_safety_ros.core.analyses.multi_objective import rank_with_quality
 from grasp_safety_ros.core.exceptions import InvalidInputError
-from grasp_safety_ros.ros.executor import NodeExecutor, join_callbacks
 from grasp_safety_ros.ros.node import EXECUTOR_THREADS, GraspSafetyNode
-from grasp_safety_ros.ros.qos import subscription_qos
+from grasp_safety_ros.ros.runtime.rclpy_private import NodeExecutor, join_callbacks
+from grasp_safety_ros.ros.topics.qos import subscription_qos
 from grasp_safety_ros.scenario.schema import load_scenario
 
 pytest.importorskip("moveit_msgs.msg", reason="moveit_msgs not built (make setup)")

@@ -20,8 +20,8 @@ from grasp_safety_msgs.srv import RankGrasps
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from ros_domains import claim_ros_domain
+from ros_node_harness import book_request
 from std_msgs.msg import String
-from test_ros_node import book_request
 
 from grasp_safety_ros.paths import config_file
 

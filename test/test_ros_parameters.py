@@ -20,11 +20,11 @@ from grasp_safety_ros.core.analyses.exposed_points import (
 from grasp_safety_ros.paths import config_file
 from grasp_safety_ros.ros.parameters import (
     PARAMETERS,
-    ResponseContent,
     check_parameter,
     settings_from_parameters,
 )
-from grasp_safety_ros.ros.robot_bundle import build_robot
+from grasp_safety_ros.ros.robot.bundle import build_robot
+from grasp_safety_ros.ros.service.response import ResponseContent
 
 MINIMAL = {"base_frame": "base_link", "tip_frame": "tool"}
 

@@ -1,6 +1,6 @@
-"""ros.read_only: read-only parameters answered on the node's set_parameters service, whose
-callback it wraps (rclpy has no public hook there), and nothing wrapped without parameter
-services."""
+"""ros.runtime.read_only: read-only parameters answered on the node's set_parameters service,
+whose callback it wraps (rclpy has no public hook there: ros.runtime.rclpy_private), and
+nothing wrapped without parameter services."""
 
 from __future__ import annotations
 
@@ -17,10 +17,11 @@ from rclpy.context import Context
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from grasp_safety_ros.ros.read_only import UNCHANGED, answer_read_only_parameters
+from grasp_safety_ros.ros.runtime.read_only import UNCHANGED, answer_read_only_parameters
 
 LAYOUT_CHANGED = (
-    "rclpy's parameter services changed: ros/read_only.py relies on Node.services yielding "
+    "rclpy's parameter services changed: ros/runtime/rclpy_private.py replace_service_callback "
+    "(used by ros/runtime/read_only.py) relies on Node.services yielding "
     "a Service named <node>/set_parameters whose .callback(request, response) it replaces; "
     "port it to a public hook on that service if rclpy has one now "
     "(add_pre_set_parameters_callback cannot answer: rclpy refuses the list it empties)"
@@ -77,7 +78,7 @@ def test_the_set_parameters_callback_rclpy_offers_is_wrapped(context: Context) -
 def test_a_dumped_double_read_back_as_text_is_the_same_value() -> None:
     """``ros2 param dump`` writes 1e-06, which ``ros2 param load`` reads as the string
     '1e-06': a read-only parameter at that value is unchanged, another value is refused."""
-    from grasp_safety_ros.ros.read_only import UNCHANGED, read_only_result
+    from grasp_safety_ros.ros.runtime.read_only import UNCHANGED, read_only_result
 
     assert read_only_result("ik.position_tolerance_m", "1e-06", 1e-6).reason == UNCHANGED
     assert read_only_result("ik.position_tolerance_m", 1e-6, 1e-6).successful

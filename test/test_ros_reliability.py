@@ -44,19 +44,19 @@ from grasp_safety_ros.ros.conversions import (
     object_inertia_from_msg,
     trajectory_from_msg,
 )
-from grasp_safety_ros.ros.diagnostics import NodeStatus
-from grasp_safety_ros.ros.executor import join_started
-from grasp_safety_ros.ros.message_checks import (
+from grasp_safety_ros.ros.parameters import check_parameter, parameter_constraints
+from grasp_safety_ros.ros.robot.bundle import build_robot
+from grasp_safety_ros.ros.runtime.process import join_started
+from grasp_safety_ros.ros.service.message_checks import (
     INT_AS_FLOAT_HINT,
     NonFiniteResultError,
     check_finite_result,
     check_no_subnormals,
     first_subnormal,
 )
-from grasp_safety_ros.ros.parameters import check_parameter, parameter_constraints
-from grasp_safety_ros.ros.ranking_job import ClientWatch, FairComputeLock
-from grasp_safety_ros.ros.robot_bundle import build_robot
-from grasp_safety_ros.ros.topic_inputs import MAX_ABS_GRASP_QUALITY, check_quality
+from grasp_safety_ros.ros.service.ranking_job import ClientWatch, FairComputeLock
+from grasp_safety_ros.ros.topics.diagnostics import NodeStatus
+from grasp_safety_ros.ros.topics.inputs import MAX_ABS_GRASP_QUALITY, check_quality
 from grasp_safety_ros.scenario import schema as scenario
 
 # --- Count parameters (D) ----------------------------------------------------------------------
@@ -298,7 +298,7 @@ def test_fair_lock_times_out_and_stops() -> None:
 
 
 def test_client_watch_follows_the_requests_client(monkeypatch: pytest.MonkeyPatch) -> None:
-    from grasp_safety_ros.ros import ranking_job
+    from grasp_safety_ros.ros.service import ranking_job
 
     monkeypatch.setattr(ranking_job, "CLIENT_CHECK_PERIOD_S", 0.0)
     present = [b"a", b"b"]
@@ -318,7 +318,7 @@ def test_client_watch_follows_the_requests_client(monkeypatch: pytest.MonkeyPatc
 def test_client_watch_without_identity_needs_every_client_gone(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    from grasp_safety_ros.ros import ranking_job
+    from grasp_safety_ros.ros.service import ranking_job
 
     monkeypatch.setattr(ranking_job, "CLIENT_CHECK_PERIOD_S", 0.0)
     present = [b"a", b"b"]

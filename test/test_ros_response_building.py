@@ -27,7 +27,7 @@ from grasp_safety_ros.core.method.posture import PostureConfig
 from grasp_safety_ros.core.method.ranking import Grasp
 from grasp_safety_ros.core.pipeline import PipelineRequest, run_pipeline
 from grasp_safety_ros.ros.conversions import pose_msg_from_transform, report_msg, results
-from grasp_safety_ros.ros.response import ResponseContent
+from grasp_safety_ros.ros.service.response import ResponseContent
 
 CONTENTS = (
     ResponseContent(),  # every joint trajectory, per-sample arrays

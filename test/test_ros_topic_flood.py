@@ -13,8 +13,7 @@ from geometry_msgs.msg import PoseArray, PoseStamped
 from grasp_safety_msgs.msg import GraspRanking
 from nav_msgs.msg import Path
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-from std_msgs.msg import Header
-from test_ros_node import (  # noqa: F401  (_localhost_only: autouse fixture)
+from ros_node_harness import (  # noqa: F401  (_localhost_only: autouse fixture)
     LATCHED,
     NODE_PARAMETERS,
     NodeUnderTest,
@@ -22,9 +21,10 @@ from test_ros_node import (  # noqa: F401  (_localhost_only: autouse fixture)
     book_path,
     book_request,
 )
+from std_msgs.msg import Header
 
-from grasp_safety_ros.ros.memory import memory_kib
-from grasp_safety_ros.ros.qos import INPUT_DEPTHS
+from grasp_safety_ros.ros.runtime.memory import memory_kib
+from grasp_safety_ros.ros.topics.qos import INPUT_DEPTHS
 
 KEEP_ALL = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from geometry_msgs.msg import Pose, PoseArray
 from nav_msgs.msg import Path
 
-from grasp_safety_ros.ros.topic_inputs import PublisherSequences, TopicInputs
+from grasp_safety_ros.ros.topics.inputs import PublisherSequences, TopicInputs
 
 
 def candidates(count: int) -> PoseArray:

@@ -161,7 +161,7 @@ def test_the_service_orders_by_safe_duration_as_the_cli_does(
     """The node with the retime.* parameters and rank_by safe_duration gives the CLI's order
     for the same book request (the pipeline is the same; the node's defaults are the table's)."""
     pytest.importorskip("rclpy")
-    from test_ros_node import BOOK, BOOK_YAML, NodeUnderTest, book_request
+    from ros_node_harness import BOOK, BOOK_YAML, NodeUnderTest, book_request
 
     tmp_path = tmp_path_factory.mktemp("service")
     data = book(

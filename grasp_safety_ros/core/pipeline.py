@@ -22,7 +22,7 @@ MoveIt ``GraspPlanning`` server): build a ``PipelineRequest``, call ``run_pipeli
 after each unit of work of each stage (one grasp, or one batch of grasps, of rank, postures
 and each analysis) and before and after each report stage (``done`` 0 then 1 of 1); it may raise
 any exception to abandon the request, which then propagates unchanged (the node raises when
-its client left, its compute time is spent or it shuts down: ``ros.ranking_job``).
+its client left, its compute time is spent or it shuts down: ``ros.service.ranking_job``).
 ``timings``, when given, receives each stage's wall time ``{stage}``, the calling thread's
 CPU time ``{stage}_cpu`` and the process's (worker threads included) ``{stage}_process_cpu``
 [s] (the benchmarks read them).

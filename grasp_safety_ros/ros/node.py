@@ -1,16 +1,18 @@
 """The ``grasp_safety`` node: ranks candidate grasps with the core, over a service and topics.
 
-A thin adapter: messages are converted in the conversions package, parameters validated in
-parameters.py, requests prepared in ranking_inputs.py and computed by core.pipeline.run_pipeline
-(ranking, postures, every enabled analysis, armature range). See docs/ros/interface.md.
+A thin adapter, its parts grouped by role: messages are converted in the conversions package,
+parameters validated in parameters/, requests prepared in service/ranking_inputs.py and computed
+by core.pipeline.run_pipeline (ranking, postures, every enabled analysis, armature range); the
+robot's source in robot/source.py, /diagnostics in topics/diagnostics.py, the process and the
+executor in runtime/. See docs/ros/interface.md.
 
 Threads: a NodeExecutor (a MultiThreadedExecutor) with EXECUTOR_THREADS threads. The service
 sits in its own reentrant callback group, the input topics in a mutually exclusive one,
 everything else (parameters, /robot_description, /joint_states, the diagnostics timer) in the
 default group. One ranking computes at a time (the compute lock: the core's solvers keep
 scratch data), in arrival order and in slices: a ranking hands the lock to waiting requests
-after 0.2 s at its next progress check (ranking_job.FairComputeLock), so a small request does
-not wait for a large one; a request that cannot get the lock within
+after 0.2 s at its next progress check (service.ranking_job.FairComputeLock), so a small
+request does not wait for a large one; a request that cannot get the lock within
 ``service_busy_timeout_s`` is answered busy, a ranking longer than ``max_compute_time_s``
 (time queued not counted) or whose client has left the ROS graph is abandoned
 (docs/ros/reliability.md). The GIL still makes a long ranking share the CPU with the other
@@ -29,27 +31,22 @@ from collections.abc import Callable, Sequence
 from functools import partial
 from typing import Any, NoReturn
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Inertia, InertiaStamped, PoseArray
 from grasp_safety_msgs.msg import GraspRanking
 from grasp_safety_msgs.srv import RankGrasps
 from nav_msgs.msg import Path
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
-from rclpy.event_handler import (
-    QoSMessageLostInfo,
-    SubscriptionEventCallbacks,
-)
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.exceptions import (
     InvalidParameterTypeException,
     InvalidParameterValueException,
 )
-from rclpy.executors import Executor, ExternalShutdownException
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.subscription import Subscription
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray, Header, String
+from std_msgs.msg import Float64MultiArray, String
 from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 from visualization_msgs.msg import MarkerArray
 
@@ -57,7 +54,6 @@ from ..core.analyses.safety_report import SafetyReport
 from ..core.exceptions import GraspSafetyError, InvalidInputError
 from ..core.model.inertia import ObjectInertia
 from ..core.pipeline import PipelineRequest, run_pipeline
-from .arm_points import check_arm_point_links
 from .conversions import (
     check_frame_id,
     check_grasp_array,
@@ -66,34 +62,30 @@ from .conversions import (
     report_msg,
     trajectory_from_msg,
 )
-from .declaration import declare_node_parameters, typed_parameters
-from .diagnostics import NodeStatus, status_msg
-from .errors import (
+from .moveit import offer_plan_grasps
+from .parameters import PARAMETERS, NodeSettings, check_parameter, settings_from_parameters
+from .parameters.declaration import declare_node_parameters, typed_parameters
+from .robot.bundle import build_robot
+from .robot.source import RobotSource
+from .runtime.memory import IdleTrim
+from .runtime.process import run_node
+from .runtime.rclpy_private import request_header
+from .runtime.read_only import answer_read_only_parameters
+from .service.clients import ServiceClients
+from .service.errors import (
     BusyError,
     NotReadyError,
     ShuttingDownError,
     StartupError,
+    internal_error,
 )
-from .executor import request_header
-from .memory import IdleTrim
-from .message_checks import check_finite_result, check_no_subnormals
-from .moveit import offer_plan_grasps
-from .on_demand import OnDemandPublisher
-from .parameters import PARAMETERS, NodeSettings, check_parameter, settings_from_parameters
-from .process import run_node
-from .qos import INPUT_DEPTHS, LATCHED, SERVICE, subscription_qos
-from .ranking_inputs import markers_builder, ranking_inputs
-from .ranking_job import (
-    ClientWatch,
-    FairComputeLock,
-    Snapshot,
-    progress_check,
-)
-from .read_only import answer_read_only_parameters
-from .robot_bundle import RobotBundle, build_robot
-from .robot_group import PENDING_FIELDS, ROBOT_GROUP, group_complete, pending_reason
-from .service_clients import ServiceClients
-from .topic_inputs import PublisherSequences, TopicInputs, check_quality
+from .service.message_checks import check_finite_result, check_no_subnormals
+from .service.ranking_inputs import markers_builder, ranking_inputs
+from .service.ranking_job import ClientWatch, FairComputeLock, Snapshot, progress_check
+from .topics.diagnostics import NodeStatus
+from .topics.inputs import PublisherSequences, TopicInputs, check_quality
+from .topics.on_demand import OnDemandPublisher
+from .topics.qos import INPUT_DEPTHS, LATCHED, SERVICE, subscription_qos
 
 NODE_NAME = "grasp_safety"
 EXECUTOR_THREADS = 4
@@ -104,8 +96,12 @@ _TIMED_SOURCES = ("candidate_grasps", "object_trajectory", "object_multi_dof_tra
 _STANDARD_OVERRIDES = ("use_sim_time", "qos_overrides.", "start_type_description_service")
 
 
-class GraspSafetyNode(Node):
+class GraspSafetyNode(RobotSource):
     """Ranks grasps by the effective mass of robot + object along the object's trajectory.
+
+    Its robot (where it comes from, the robot parameter group) is robot.source.RobotSource's
+    part, its /diagnostics topics.diagnostics.DiagnosticsNode's; the wiring, the parameter
+    callback, the service, the input topics and the ranking are here.
 
     Args:
         **kwargs: Passed to rclpy.node.Node (e.g. ``context``, ``parameter_overrides``).
@@ -113,6 +109,8 @@ class GraspSafetyNode(Node):
     Raises:
         StartupError: a parameter is invalid or the robot description cannot be used.
     """
+
+    diagnostics_name = NODE_NAME
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
@@ -132,12 +130,12 @@ class GraspSafetyNode(Node):
         self._startup_rejection = ""
         self._startup_failure = ""
         self._waiting_for_robot = False
-        self._topic_description: str | None = None
+        self._topic_description = None
         self._joint_state: tuple[Sequence[str], Sequence[float]] | None = None
         self._topic_inputs = TopicInputs()
         self._inertia_override: ObjectInertia | None = None
         self._status = NodeStatus()
-        self._pending_robot: dict[str, Any] = {}  # robot group values accepted, not applied
+        self._pending_robot = {}
         self._idle_trim = IdleTrim()
 
         self.add_pre_set_parameters_callback(typed_parameters)
@@ -242,19 +240,9 @@ class GraspSafetyNode(Node):
                 callback(msg, info["received_timestamp"]) if timed else callback(msg)
             except Exception as error:  # last resort: keep serving
                 self.get_logger().error(f"{source}: internal error:\n{traceback.format_exc()}")
-                self._report_error(source, _internal_error(error))
+                self._report_error(source, internal_error(error))
 
         return guarded
-
-    def _on_message_lost(self, source: str, info: QoSMessageLostInfo) -> None:
-        """The middleware reports messages of a topic lost before the node took them."""
-        with self._state_lock:
-            increase = self._status.record_lost(source, info.total_count, info.total_count_change)
-            total = self._status.lost_by_source[source]
-        self.get_logger().warning(
-            f"{source}: {increase} message(s) lost before the node took them ({total} in all; "
-            f"the middleware reported {info.total_count_change} of {info.total_count})"
-        )
 
     def abandon_rankings(self) -> None:
         """Make the running ranking (and any later one) stop at its next progress check: for
@@ -275,54 +263,6 @@ class GraspSafetyNode(Node):
                     f"ignoring unknown parameter '{name}'; parameters: {', '.join(PARAMETERS)}"
                 )
 
-    def _log_robot(self, bundle: RobotBundle) -> None:
-        robot = bundle.robot
-        self.get_logger().info(
-            f"robot from {bundle.origin}: {robot.base_frame} -> {robot.tip_frame}, "
-            f"{robot.num_joints} joints ({', '.join(robot.joint_names)})"
-        )
-
-    @property
-    def has_robot(self) -> bool:
-        """Whether a robot model is loaded (requests can be answered)."""
-        with self._state_lock:
-            return self._robot is not None
-
-    def wait_for_robot(self, executor: Executor) -> None:
-        """Spin ``executor`` until a robot model is loaded (at start-up, from the topic).
-
-        Raises:
-            StartupError: nothing usable arrived within robot_description_timeout_s.
-        """
-        if self.has_robot:
-            return
-        timeout = self._settings.robot_description_timeout_s
-        self.get_logger().info(
-            "parameters robot_description and urdf are empty: waiting "
-            + (f"up to {timeout:g} s" if timeout > 0 else "for ever")
-            + " for /robot_description"
-        )
-        deadline = time.monotonic() + timeout
-        self._waiting_for_robot = True
-        try:
-            self._spin_until_robot(executor, timeout, deadline)
-        finally:
-            self._waiting_for_robot = False
-
-    def _spin_until_robot(self, executor: Executor, timeout: float, deadline: float) -> None:
-        while not self.has_robot:
-            if self._startup_failure:
-                raise StartupError(self._startup_failure)
-            if timeout > 0 and time.monotonic() > deadline:
-                raise StartupError(
-                    "no robot description: parameters robot_description and urdf are empty and "
-                    f"nothing arrived on /robot_description within {timeout:g} s "
-                    "(robot_description_timeout_s)"
-                )
-            if not self.context.ok():
-                raise ExternalShutdownException()
-            executor.spin_once(timeout_sec=0.1)
-
     # --- Parameters --------------------------------------------------------------------------
 
     def _on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
@@ -341,116 +281,13 @@ class GraspSafetyNode(Node):
             return SetParametersResult(successful=False, reason=reason)
         except Exception as error:  # last resort: refuse the change rather than stop
             self.get_logger().error(f"parameters: internal error:\n{traceback.format_exc()}")
-            reason = _internal_error(error)
+            reason = internal_error(error)
             if not self._started:
                 self._startup_rejection = reason
             return SetParametersResult(successful=False, reason=reason)
         return SetParametersResult(successful=True)
 
-    def _apply_parameters(self, changes: dict[str, Any]) -> None:
-        """Apply a parameter change (raises GraspSafetyError to refuse it).
-
-        The robot group (ROBOT_GROUP) is applied together. ``ros2 param load`` of a new robot's
-        file sets its parameters one at a time, each alone inconsistent with the others' old
-        values (a frame not in the robot, a seed of another length): such a change is accepted
-        as pending, the old model serving, and the group is applied once a change makes it
-        consistent. A change that completes the group (every one of urdf or
-        robot_description, base_frame, tip_frame, ik_seed pending) and leaves it inconsistent is
-        refused with the reason; the others stay pending (log and /diagnostics say so). Errors
-        of a parameter alone (type, range, an unreadable URDF) are refused as before.
-        """
-        changes = {name: value for name, value in changes.items() if name in PARAMETERS}
-        if not changes:
-            return
-        with self._state_lock:
-            robot_changes = {k: v for k, v in changes.items() if k in ROBOT_GROUP}
-            pending = {**self._pending_robot, **robot_changes}
-            values = {**self._values, **pending, **changes}
-            settings = settings_from_parameters(values)
-            bundle, reason = self._robot, ""
-            if not pending and bundle is not None:  # build_robot checks a new robot's
-                check_arm_point_links(settings.analysis.arm_points_m, bundle.robot)
-            if pending:
-                try:
-                    bundle = build_robot(settings, self._topic_description)
-                except GraspSafetyError as error:
-                    if getattr(error, "field", None) not in PENDING_FIELDS:
-                        raise
-                    reason = pending_reason(pending, error, self._robot)
-                    if group_complete(pending):
-                        self._status.robot_parameters_pending = reason
-                        raise InvalidInputError(", ".join(sorted(robot_changes)), reason) from None
-                    others = {k: v for k, v in changes.items() if k not in ROBOT_GROUP}
-                    values, bundle = {**self._values, **others}, self._robot
-                    settings = settings_from_parameters(values)
-                    if bundle is not None:
-                        check_arm_point_links(settings.analysis.arm_points_m, bundle.robot)
-                self._pending_robot = pending if reason else {}
-                self._status.robot_parameters_pending = reason
-            period_changed = settings.diagnostics_period_s != self._settings.diagnostics_period_s
-            robot_changed = bundle is not self._robot
-            self._values, self._settings, self._robot = values, settings, bundle
-        if reason:
-            self.get_logger().warning(reason)
-            self._publish_diagnostics()
-        self.get_logger().info(f"parameters set: {', '.join(sorted(changes))}")
-        if robot_changed and pending:
-            self._publish_diagnostics()  # the pending state, if any, is cleared
-        if robot_changed and bundle is not None:
-            self._log_robot(bundle)
-        if period_changed:
-            self._diagnostics_timer.cancel()
-            self.destroy_timer(self._diagnostics_timer)
-            self._diagnostics_timer = self.create_timer(
-                settings.diagnostics_period_s, self._on_diagnostics_timer
-            )
-
     # --- Robot description and joint states --------------------------------------------------
-
-    def _on_robot_description(self, msg: String) -> None:
-        with self._state_lock:
-            self._topic_description = msg.data
-            settings = self._settings
-        if settings.robot_source:
-            given_by = "robot_description" if settings.robot_description else "urdf"
-            reason = (
-                f"ignored: the parameter {given_by} gives the robot (empty robot_description "
-                "and urdf to take it from the topic)"
-            )
-            with self._state_lock:
-                self._status.ignored_descriptions += 1
-                first = self._status.robot_description_error != reason
-                self._status.robot_description_error = reason
-            if first:  # once, not per message
-                self.get_logger().info(f"/robot_description {reason}")
-            return
-        try:
-            if not msg.data.lstrip().startswith("<"):  # never a file path or a package name
-                raise InvalidInputError(
-                    "/robot_description",
-                    f"must be URDF XML; got {len(msg.data)} characters not starting with '<'",
-                )
-            bundle = build_robot(settings, msg.data)
-        except Exception as error:  # GraspSafetyError, or a bug on a strange description
-            reason = str(error)
-            if not isinstance(error, GraspSafetyError):
-                self.get_logger().error(f"/robot_description:\n{traceback.format_exc()}")
-                reason = _internal_error(error)
-            if self._waiting_for_robot:
-                # wait_for_robot raises it, main() logs it once
-                self._startup_failure = f"robot from /robot_description: {reason}"
-            else:
-                with self._state_lock:
-                    self._status.robot_description_error = reason
-                self._report_error("/robot_description", reason)  # the working model stays
-            return
-        with self._state_lock:
-            if _robot_key(self._settings) != _robot_key(settings):
-                return  # robot parameters changed meanwhile; they rebuilt the model
-            self._robot = bundle
-            self._status.robot_description_error = ""
-        if bundle is not None:
-            self._log_robot(bundle)
 
     def _on_joint_states(self, msg: JointState) -> None:
         with self._state_lock:
@@ -491,7 +328,7 @@ class GraspSafetyNode(Node):
         except Exception as error:  # last resort: answer and log rather than drop the request
             self.get_logger().error(f"rank_grasps: internal error:\n{traceback.format_exc()}")
             response.success = False
-            response.message = _internal_error(error)
+            response.message = internal_error(error)
             self._report_error("rank_grasps", error)
         return response
 
@@ -703,48 +540,6 @@ class GraspSafetyNode(Node):
             f"{compute_time_s:.3f} s; order {list(report.order)}"
         )
         return result
-
-    # --- Diagnostics -------------------------------------------------------------------------
-
-    def _report_error(self, source: str, error: BaseException | str) -> None:
-        with self._state_lock:
-            self._status.record_refusal(source, error)
-        self.get_logger().warning(f"{source}: refused: {error}")
-        self._publish_diagnostics()
-
-    def diagnostics_status(self) -> DiagnosticStatus:
-        """The node's current DiagnosticStatus (also published on /diagnostics)."""
-        with self._state_lock:
-            return status_msg(self._status, self._settings, self._robot, NODE_NAME)
-
-    def _on_diagnostics_timer(self) -> None:
-        """Give the heap freed by the last rankings back to the system once the node is idle
-        (memory.IdleTrim; the allocator keeps its high-water mark otherwise), then publish
-        the status."""
-        if self._idle_trim.run(self._compute_lock):
-            with self._state_lock:
-                self._status.heap_trims = self._idle_trim.trims
-        self._publish_diagnostics()
-
-    def _publish_diagnostics(self) -> None:
-        if self._diagnostics_pub.get_subscription_count() == 0:
-            return  # volatile: nobody would receive it
-        self._diagnostics_pub.publish(
-            DiagnosticArray(
-                header=Header(stamp=self.get_clock().now().to_msg()),
-                status=[self.diagnostics_status()],
-            )
-        )
-
-
-def _robot_key(settings: NodeSettings) -> tuple[Any, ...]:
-    """The settings a robot model depends on."""
-    return (settings.robot_source, settings.base_frame, settings.tip_frame, settings.ik_seed)
-
-
-def _internal_error(error: BaseException) -> str:
-    """The answer to an unexpected exception (a bug): its type and text."""
-    return f"internal error: {type(error).__name__}: {error}"
 
 
 def main(args: list[str] | None = None) -> NoReturn:

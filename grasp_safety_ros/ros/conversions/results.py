@@ -22,7 +22,7 @@ from ...core.method.ranking import GraspEvaluation, Ranking
 from ...core.method.results import PostureSelection
 from ...core.model.armature import armature_ratio
 from ...core.model.robot import NO_ARMATURE_NOTE
-from ..response import ResponseContent
+from ..service.response import ResponseContent
 from ._fast import (
     _slot_constructor,
     _template_constructor,

@@ -7,7 +7,7 @@ from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from grasp_safety_msgs.msg import RegionSpeed, SpeedScalingStatus
 from std_msgs.msg import Header
 
-from ..robot_bundle import RobotBundle
+from ..robot.bundle import RobotBundle
 from .governor import Decision, GovernorCounters
 from .parameters import MonitorSettings
 

@@ -44,10 +44,10 @@ from ...core.analyses.arm_sites import resolve_arm_sites
 from ...core.analyses.speed_scaling import IncreaseLimiter, SpeedScaling, payload_speed_model
 from ...core.exceptions import GraspSafetyError
 from ..conversions import check_frame_id, object_inertia_from_msg
-from ..declaration import declare_node_parameters, typed_parameters
-from ..errors import StartupError
-from ..qos import LATCHED
-from ..robot_bundle import build_robot
+from ..parameters.declaration import declare_node_parameters, typed_parameters
+from ..robot.bundle import build_robot
+from ..service.errors import StartupError
+from ..topics.qos import LATCHED
 from .governor import Decision, Governor
 from .messages import diagnostic_status, status_msg
 from .parameters import (

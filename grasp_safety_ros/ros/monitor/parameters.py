@@ -1,5 +1,5 @@
 """The monitor's parameters: those it shares with the ranking node (same names, specs and
-checks: ros/parameters.py) and its own, validated as pure functions (no rclpy)."""
+checks: ros/parameters/) and its own, validated as pure functions (no rclpy)."""
 
 from __future__ import annotations
 
@@ -16,7 +16,6 @@ from ...core.exceptions import InvalidInputError
 from ...core.input_checks import finite_array, finite_float
 from ...core.model.inertia import ObjectInertia
 from ..conversions.geometry import inertia_tensor_from_components
-from ..declaration import ParameterTable
 from ..parameters import (
     PARAMETERS,
     NodeSettings,
@@ -26,7 +25,8 @@ from ..parameters import (
     parameter_constraints,
     settings_from_parameters,
 )
-from ..values import show
+from ..parameters.declaration import ParameterTable
+from ..parameters.values import show
 
 SHARED: tuple[str, ...] = (
     "robot_description",

@@ -34,10 +34,10 @@ from ..conversions.geometry import (
     stamp_to_seconds,
 )
 from ..conversions.requests import transforms_from_pose_msgs
-from ..errors import ShuttingDownError
-from ..message_checks import check_no_subnormals
-from ..qos import SERVICE
-from ..ranking_job import Snapshot
+from ..service.errors import ShuttingDownError
+from ..service.message_checks import check_no_subnormals
+from ..service.ranking_job import Snapshot
+from ..topics.qos import SERVICE
 from .grasps import goal_pose, object_path, planner_qualities, pose_array_of_grasps, ranked_grasps
 
 SOURCE = "grasp_safety"

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from ..core.exceptions import GraspSafetyError, InvalidInputError
+from ...core.exceptions import GraspSafetyError, InvalidInputError
 
 MIN_NORMAL = sys.float_info.min
 """Nonzero magnitudes below this (2.2e-308) are subnormal."""

@@ -5,19 +5,22 @@ and rclpy's ``start_type_description_service``); loading that file back with ``r
 printed "Set parameter ... failed: Trying to set a read-only parameter" for each, which reads as
 if the load had gone wrong. rclpy refuses a read-only parameter before any node callback sees
 it, so the node answers them on its ``set_parameters`` service itself (the service's callback
-wrapped: rclpy has no public hook there): the current value again is a success that says
-nothing changed; another value is refused with what to do instead. Everything else goes to
-rclpy's own callback unchanged.
+wrapped, in rclpy_private: rclpy has no public hook there): the current value again is a
+success that says nothing changed; another value is refused with what to do instead.
+Everything else goes to rclpy's own callback unchanged.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 from rcl_interfaces.msg import SetParametersResult
 from rcl_interfaces.srv import SetParameters
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+
+from .rclpy_private import replace_service_callback
 
 UNCHANGED = "unchanged: read-only, and already this value (read at start-up)"
 
@@ -49,28 +52,28 @@ def read_only_result(name: str, value: Any, current: Any) -> SetParametersResult
 def answer_read_only_parameters(node: Node) -> None:
     """Wrap ``node``'s ``set_parameters`` service so that read-only parameters are answered by
     read_only_result (module docstring); nothing to wrap without parameter services
-    (``start_parameter_services=False``). Relies on ``Node.services`` and ``Service.callback``
-    (test_ros_read_only.py fails if rclpy changes them)."""
-    name = f"{node.get_fully_qualified_name()}/set_parameters"
-    service = next((s for s in node.services if s.service_name == name), None)
-    if service is None:
-        return  # no set_parameters service: nobody can load a params file into the node
-    delegate = service.callback
+    (``start_parameter_services=False``). The swap is private rclpy API
+    (rclpy_private.replace_service_callback; test_ros_read_only.py fails if rclpy changes it)."""
 
-    def set_parameters(
-        request: SetParameters.Request, response: SetParameters.Response
-    ) -> SetParameters.Response:
-        for message in request.parameters:
-            parameter = Parameter.from_parameter_msg(message)
-            if node.has_parameter(parameter.name) and (
-                node.describe_parameter(parameter.name).read_only
-            ):
-                current = node.get_parameter(parameter.name).value
-                response.results.append(read_only_result(parameter.name, parameter.value, current))
-            else:
-                alone = SetParameters.Request(parameters=[message])
-                answer: SetParameters.Response = delegate(alone, SetParameters.Response())
-                response.results.extend(answer.results)
-        return response
+    def answering(delegate: Callable[[Any, Any], Any]) -> Callable[[Any, Any], Any]:
+        def set_parameters(
+            request: SetParameters.Request, response: SetParameters.Response
+        ) -> SetParameters.Response:
+            for message in request.parameters:
+                parameter = Parameter.from_parameter_msg(message)
+                if node.has_parameter(parameter.name) and (
+                    node.describe_parameter(parameter.name).read_only
+                ):
+                    current = node.get_parameter(parameter.name).value
+                    result = read_only_result(parameter.name, parameter.value, current)
+                    response.results.append(result)
+                else:
+                    alone = SetParameters.Request(parameters=[message])
+                    answer: SetParameters.Response = delegate(alone, SetParameters.Response())
+                    response.results.extend(answer.results)
+            return response
 
-    service.callback = set_parameters
+        return set_parameters
+
+    # no set_parameters service: nobody can load a params file into the node
+    replace_service_callback(node, f"{node.get_fully_qualified_name()}/set_parameters", answering)

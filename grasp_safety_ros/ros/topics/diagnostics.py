@@ -1,15 +1,23 @@
-"""What the node reports on /diagnostics: its counters and their DiagnosticStatus."""
+"""What the node reports on /diagnostics: its counters, their DiagnosticStatus, and the node's
+base class that counts and publishes them."""
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass, field
+from typing import ClassVar
 
-from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.event_handler import QoSMessageLostInfo
+from rclpy.node import Node
+from rclpy.publisher import Publisher
+from std_msgs.msg import Header
 
-from ..core.model.robot import NO_ARMATURE_NOTE, RobotModel
-from .memory import memory_kib
-from .parameters import NodeSettings
-from .robot_bundle import RobotBundle
+from ...core.model.robot import NO_ARMATURE_NOTE, RobotModel
+from ..parameters import NodeSettings
+from ..robot.bundle import RobotBundle
+from ..runtime.memory import IdleTrim, memory_kib
+from ..service.ranking_job import FairComputeLock
 
 _INT32_LIMIT = 2**31
 """DDS counts messages in signed 32-bit integers: a count at or beyond is not one."""
@@ -138,3 +146,59 @@ def status_msg(
         hardware_id=f"{settings.base_frame}->{settings.tip_frame}",
         values=[KeyValue(key=k, value=str(v)) for k, v in values.items()],
     )
+
+
+class DiagnosticsNode(Node):
+    """The /diagnostics part of the grasp_safety node (a base class of GraspSafetyNode, which
+    sets the attributes below): refusals and lost messages counted in its NodeStatus, which
+    is published after each event and on the ``diagnostics_period_s`` timer."""
+
+    diagnostics_name: ClassVar[str]
+    """The DiagnosticStatus name (the node's default name)."""
+    _state_lock: threading.Lock
+    _status: NodeStatus
+    _settings: NodeSettings
+    _robot: RobotBundle | None
+    _compute_lock: FairComputeLock
+    _idle_trim: IdleTrim
+    _diagnostics_pub: Publisher
+
+    def _report_error(self, source: str, error: BaseException | str) -> None:
+        with self._state_lock:
+            self._status.record_refusal(source, error)
+        self.get_logger().warning(f"{source}: refused: {error}")
+        self._publish_diagnostics()
+
+    def diagnostics_status(self) -> DiagnosticStatus:
+        """The node's current DiagnosticStatus (also published on /diagnostics)."""
+        with self._state_lock:
+            return status_msg(self._status, self._settings, self._robot, self.diagnostics_name)
+
+    def _on_diagnostics_timer(self) -> None:
+        """Give the heap freed by the last rankings back to the system once the node is idle
+        (memory.IdleTrim; the allocator keeps its high-water mark otherwise), then publish
+        the status."""
+        if self._idle_trim.run(self._compute_lock):
+            with self._state_lock:
+                self._status.heap_trims = self._idle_trim.trims
+        self._publish_diagnostics()
+
+    def _publish_diagnostics(self) -> None:
+        if self._diagnostics_pub.get_subscription_count() == 0:
+            return  # volatile: nobody would receive it
+        self._diagnostics_pub.publish(
+            DiagnosticArray(
+                header=Header(stamp=self.get_clock().now().to_msg()),
+                status=[self.diagnostics_status()],
+            )
+        )
+
+    def _on_message_lost(self, source: str, info: QoSMessageLostInfo) -> None:
+        """The middleware reports messages of a topic lost before the node took them."""
+        with self._state_lock:
+            increase = self._status.record_lost(source, info.total_count, info.total_count_change)
+            total = self._status.lost_by_source[source]
+        self.get_logger().warning(
+            f"{source}: {increase} message(s) lost before the node took them ({total} in all; "
+            f"the middleware reported {info.total_count_change} of {info.total_count})"
+        )

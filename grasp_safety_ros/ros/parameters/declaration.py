@@ -18,14 +18,9 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from ..core.exceptions import InvalidInputError
-from .parameters import (
-    PARAMETERS,
-    ParameterConstraints,
-    ParameterSpec,
-    check_parameter,
-    parameter_constraints,
-)
+from ...core.exceptions import InvalidInputError
+from .checks import ParameterConstraints, check_parameter, parameter_constraints
+from .table import PARAMETERS, ParameterSpec
 
 
 class ParameterTable(NamedTuple):

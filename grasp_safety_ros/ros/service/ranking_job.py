@@ -20,16 +20,16 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..core.method.ranking import Ranking
-from ..core.model.inertia import ObjectInertia
-from ..core.pipeline import Progress
+from ...core.method.ranking import Ranking
+from ...core.model.inertia import ObjectInertia
+from ...core.pipeline import Progress
+from ..parameters import NodeSettings
+from ..robot.bundle import RobotBundle
 from .errors import (
     ClientGoneError,
     ComputeTimeExceededError,
     ShuttingDownError,
 )
-from .parameters import NodeSettings
-from .robot_bundle import RobotBundle
 
 SLICE_S = 0.2
 """Compute time a ranking keeps the lock for while others wait [s]."""

@@ -6,9 +6,9 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from ..core.exceptions import GraspSafetyError
-from .parameters import ROBOT_PARAMETERS
-from .robot_bundle import RobotBundle
+from ...core.exceptions import GraspSafetyError
+from ..parameters import ROBOT_PARAMETERS
+from .bundle import RobotBundle
 
 ROBOT_GROUP = frozenset({*ROBOT_PARAMETERS, "ik_seed"})
 """Parameters that make the robot model; applied together (GraspSafetyNode._apply_parameters)."""

@@ -13,9 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from ..core.analyses.whole_arm import MAX_SITES, resolve_arm_sites
-from ..core.exceptions import InvalidInputError
-from ..core.model.robot import RobotModel
+from ...core.analyses.whole_arm import MAX_SITES, resolve_arm_sites
+from ...core.exceptions import InvalidInputError
+from ...core.model.robot import RobotModel
 from .values import show, string_list
 
 LINKS = "whole_arm.point_links"

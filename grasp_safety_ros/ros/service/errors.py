@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from ..core.exceptions import GraspSafetyError
+from ...core.exceptions import GraspSafetyError
 
 
 class StartupError(GraspSafetyError):
@@ -28,3 +28,8 @@ class ShuttingDownError(GraspSafetyError):
 
 class ClientGoneError(GraspSafetyError):
     """The request's client left the ROS graph: the ranking was abandoned."""
+
+
+def internal_error(error: BaseException) -> str:
+    """The answer to an unexpected exception (a bug): its type and text."""
+    return f"internal error: {type(error).__name__}: {error}"

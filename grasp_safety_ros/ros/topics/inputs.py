@@ -13,8 +13,8 @@ from geometry_msgs.msg import PoseArray
 from nav_msgs.msg import Path
 from trajectory_msgs.msg import MultiDOFJointTrajectory
 
-from ..core.exceptions import InvalidInputError
-from ..core.input_checks import finite_array
+from ...core.exceptions import InvalidInputError
+from ...core.input_checks import finite_array
 
 MAX_ABS_GRASP_QUALITY = 1e9
 """Grasp qualities beyond +/-1e9 are refused: the min-max normalisation of the combined score

@@ -16,7 +16,7 @@ from rclpy.service import Service
 from rclpy.service_introspection import ServiceIntrospectionState
 from service_msgs.msg import ServiceEventInfo
 
-from .qos import SERVICE
+from ..topics.qos import SERVICE
 from .ranking_job import ClientWatch
 
 SERVICE_EVENTS_KEPT = 1024

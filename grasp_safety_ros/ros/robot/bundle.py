@@ -6,18 +6,18 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from ..core.exceptions import FrameNotFoundError, GraspSafetyError, InvalidInputError
-from ..core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
-from ..core.method.warm_up import warm_up
-from ..core.model.armature import (
+from ...core.exceptions import FrameNotFoundError, GraspSafetyError, InvalidInputError
+from ...core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
+from ...core.method.warm_up import warm_up
+from ...core.model.armature import (
     ArmatureRange,
     armature_range,
     published_for,
     published_values,
 )
-from ..core.model.robot import RobotModel
-from .arm_points import check_arm_point_links
-from .parameters import PUBLISHED_PARAMETER, NodeSettings
+from ...core.model.robot import RobotModel
+from ..parameters import PUBLISHED_PARAMETER, NodeSettings
+from ..parameters.arm_points import check_arm_point_links
 
 
 @dataclass(frozen=True)

@@ -1,24 +1,31 @@
-"""The node's executor: service callbacks that can read their request's header.
+"""Every use of private rclpy API in the node, in one place; each fails loudly in a test if
+rclpy changes under it.
 
-rclpy hands a service callback the request only; the header (sequence number, reception time)
-lets the node find the client that sent it among its service's introspection events, to stop
-the ranking when that client leaves (ranking_job.ClientWatch).
+- NodeExecutor overrides ``Executor._take_service`` so a service callback can read its
+  request's header (request_header: sequence number, reception time); with it the node finds
+  the client that sent the request among its service's introspection events, to stop the
+  ranking when that client leaves (service.ranking_job.ClientWatch). Public replacement: a
+  service callback that receives the request header (rclpy hands it the request only).
+  Checked by test_ros_rclpy_private.py.
+- join_callbacks joins the executor's callback thread pool (``MultiThreadedExecutor._executor``)
+  because Jazzy's ``Executor.shutdown`` does not wait for outstanding callbacks as documented.
+  Public replacement: an ``Executor.shutdown`` that waits. Checked by test_ros_rclpy_private.py.
+- replace_service_callback swaps the callback of one of the node's own services
+  (``Node.services``, ``Service.callback``), used by read_only.py on ``set_parameters``.
+  Public replacement: a hook on the parameter services that can answer a request
+  (``add_pre_set_parameters_callback`` cannot: rclpy refuses the list it empties). Checked by
+  test_ros_read_only.py.
 """
 
 from __future__ import annotations
 
 import threading
-import time
 from collections.abc import Callable
 from typing import Any
 
 from rclpy.exceptions import InvalidHandle
-from rclpy.executors import (
-    Executor,
-    ExternalShutdownException,
-    MultiThreadedExecutor,
-    await_or_execute,
-)
+from rclpy.executors import MultiThreadedExecutor, await_or_execute
+from rclpy.node import Node
 
 _CALLBACK = threading.local()
 """``header``: the request header of the service callback running in this thread (set by
@@ -60,38 +67,6 @@ def request_header() -> Any:
     return getattr(_CALLBACK, "header", None)
 
 
-SPIN_PERIOD_S = 0.1
-"""How often the spin thread of main() looks whether it should stop [s]."""
-
-
-def spin_until(executor: Executor, spinning: threading.Event) -> None:
-    """Spin ``executor`` while ``spinning`` is set. Executor.shutdown destroys its guard
-    condition at once, so it must not run while another thread waits in spin()
-    (std::terminate at exit)."""
-    try:
-        while spinning.is_set() and executor.context.ok():
-            executor.spin_once(timeout_sec=SPIN_PERIOD_S)
-    except ExternalShutdownException:  # rclpy.shutdown() elsewhere: main() then stops
-        pass
-
-
-def join_started(thread: threading.Thread, timeout_s: float) -> None:
-    """Join ``thread`` (at most ``timeout_s``) even when its ``start()`` was cut short: a
-    signal handler's exception in the main thread can interrupt ``start()`` after the thread
-    was launched but before it counts as started, and ``join()`` then raises ("cannot join
-    thread before it is started") while the thread runs on. Waits for it to count as started;
-    a thread never launched is given up after ``timeout_s``."""
-    deadline = time.monotonic() + timeout_s
-    while True:
-        try:
-            thread.join(timeout=max(0.0, deadline - time.monotonic()))
-            return
-        except RuntimeError:  # launched, not yet started (or never launched)
-            if time.monotonic() >= deadline:
-                return
-            time.sleep(0.001)
-
-
 def join_callbacks(executor: MultiThreadedExecutor) -> None:
     """Wait until every callback the executor started has returned (its response sent).
 
@@ -104,3 +79,15 @@ def join_callbacks(executor: MultiThreadedExecutor) -> None:
     pool = getattr(executor, "_executor", None)  # rclpy's ThreadPoolExecutor of callbacks
     if pool is not None:
         pool.shutdown(wait=True)
+
+
+def replace_service_callback(
+    node: Node, service_name: str, wrap: Callable[[Callable[[Any, Any], Any]], Any]
+) -> bool:
+    """Replace the callback of ``node``'s service ``service_name`` (fully qualified) by
+    ``wrap(current callback)``; False (nothing replaced) when the node has no such service."""
+    service = next((s for s in node.services if s.service_name == service_name), None)
+    if service is None:
+        return False
+    service.callback = wrap(service.callback)
+    return True

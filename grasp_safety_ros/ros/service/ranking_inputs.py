@@ -14,14 +14,14 @@ from nav_msgs.msg import Path
 from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 from visualization_msgs.msg import MarkerArray
 
-from ..core.analyses.exposed_points import check_metric_point, check_metric_point_has_points
-from ..core.analyses.safety_report import AnalysisOptions, SafetyReport
-from ..core.exceptions import InvalidInputError
-from ..core.method.ranking import Grasp, Ranking, check_metric
-from ..core.model.trajectory import ObjectTrajectory
-from ..core.model.waypoint_trajectory import WaypointTrajectory
-from ..core.pipeline import PipelineRequest
-from .conversions import (
+from ...core.analyses.exposed_points import check_metric_point, check_metric_point_has_points
+from ...core.analyses.safety_report import AnalysisOptions, SafetyReport
+from ...core.exceptions import InvalidInputError
+from ...core.method.ranking import Grasp, Ranking, check_metric
+from ...core.model.trajectory import ObjectTrajectory
+from ...core.model.waypoint_trajectory import WaypointTrajectory
+from ...core.pipeline import PipelineRequest
+from ..conversions import (
     grasps_from_pose_array,
     grasps_with_joint_trajectories,
     markers_msg,
@@ -29,8 +29,8 @@ from .conversions import (
     seed_from_joint_state,
     trajectory_from_msg,
 )
+from ..robot.bundle import RobotBundle
 from .ranking_job import Snapshot, labels_only
-from .robot_bundle import RobotBundle
 
 
 def ranking_inputs(

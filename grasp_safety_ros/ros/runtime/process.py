@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import signal
 import threading
+import time
 from collections.abc import Callable
 from typing import Any, Protocol, cast
 
@@ -13,8 +14,39 @@ from rclpy.executors import Executor, ExternalShutdownException, MultiThreadedEx
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
-from .errors import StartupError
-from .executor import NodeExecutor, join_callbacks, join_started, spin_until
+from ..service.errors import StartupError
+from .rclpy_private import NodeExecutor, join_callbacks
+
+SPIN_PERIOD_S = 0.1
+"""How often the spin thread of main() looks whether it should stop [s]."""
+
+
+def spin_until(executor: Executor, spinning: threading.Event) -> None:
+    """Spin ``executor`` while ``spinning`` is set. Executor.shutdown destroys its guard
+    condition at once, so it must not run while another thread waits in spin()
+    (std::terminate at exit)."""
+    try:
+        while spinning.is_set() and executor.context.ok():
+            executor.spin_once(timeout_sec=SPIN_PERIOD_S)
+    except ExternalShutdownException:  # rclpy.shutdown() elsewhere: main() then stops
+        pass
+
+
+def join_started(thread: threading.Thread, timeout_s: float) -> None:
+    """Join ``thread`` (at most ``timeout_s``) even when its ``start()`` was cut short: a
+    signal handler's exception in the main thread can interrupt ``start()`` after the thread
+    was launched but before it counts as started, and ``join()`` then raises ("cannot join
+    thread before it is started") while the thread runs on. Waits for it to count as started;
+    a thread never launched is given up after ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        try:
+            thread.join(timeout=max(0.0, deadline - time.monotonic()))
+            return
+        except RuntimeError:  # launched, not yet started (or never launched)
+            if time.monotonic() >= deadline:
+                return
+            time.sleep(0.001)
 
 
 class ServedNode(Protocol):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import array
 from typing import Any
 
-from ..core.exceptions import InvalidInputError
+from ...core.exceptions import InvalidInputError
 
 
 def show(value: Any) -> str:

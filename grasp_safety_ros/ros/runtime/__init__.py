@@ -1,0 +1,3 @@
+"""The node's process: start-up, spin thread and shut-down (process), memory figures and
+trimming (memory), read-only parameters in ``ros2 param load`` (read_only), and the only uses of
+private rclpy API (rclpy_private)."""
