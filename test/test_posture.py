@@ -70,6 +70,37 @@ def test_config_rejects_bad_values() -> None:
         PostureConfig(duplicate_tolerance_rad=0.0)
     with pytest.raises(InvalidInputError, match=r"posture\.early_stop: must be true or false"):
         PostureConfig(early_stop=1)  # type: ignore[arg-type]
+    for bad in (0, 10_001, 2.0, True):
+        with pytest.raises(InvalidInputError, match=r"posture\.restart_iterations: must be"):
+            PostureConfig(restart_iterations=bad)  # type: ignore[arg-type]
+
+
+def test_restart_iterations_cut_the_restart_ik_short(baxter, baxter_book) -> None:
+    """Gauss-Newton's state is its iterate: a restart that converges within k iterations
+    converges with k, to the same configuration bit for bit, and one that converges only
+    later does not (compiled and Python IK); the config's own limit selects as None."""
+    evaluator, grasps, trajectory, ranking = baxter_book
+    python = GraspSafetyEvaluator(baxter, EvaluationConfig(workers=1, backend="python"))
+    poses = [
+        trajectory.transform_object_to_base_start * pin.SE3(g.transform_tip_to_object)
+        for g in grasps
+    ]
+    seeds = np.array(
+        [baxter.q_from_positions(s) for s in restart_seeds(evaluator, PostureConfig(16))]
+    )
+    for solver in (evaluator.ik, python.ik):
+        q, converged = solver.solve_poses(poses, seeds)
+        iterations = np.array([[solver.solve(pose, s)[2] for s in seeds] for pose in poses])
+        for k in (1, 10, 30):
+            q_k, converged_k = solver.solve_poses(poses, seeds, max_iterations=k)
+            assert np.array_equal(converged_k, converged & (iterations <= k))
+            assert np.array_equal(q_k[converged_k], q[converged_k])
+    limit = evaluator.ik.config.max_iterations
+    same = [
+        select_postures(evaluator, grasps, BOOK, trajectory, ranking, PostureConfig(8, **c))
+        for c in ({}, {"restart_iterations": limit})
+    ]
+    assert pickle.dumps(same[0].postures) == pickle.dumps(same[1].postures)
 
 
 def test_zero_restarts_is_the_single_ik_bit_for_bit(baxter_book) -> None:

@@ -72,6 +72,9 @@ MAX_RESTARTS = 1000
 DEFAULT_RESTARTS = 8
 """Default restarts everywhere (core.options; docs/analyses.md, "Posture selection")."""
 
+MAX_RESTART_ITERATIONS = 10_000
+"""Largest ``PostureConfig.restart_iterations``."""
+
 FOLLOW_ROWS = 64
 """Start postures per kernel call in ``select_posture_batch`` (bounds its buffers: ~45 floats
 per posture and sample)."""
@@ -94,12 +97,18 @@ class PostureConfig:
             time (``bench/postures.py``, 8 restarts, Panda, Baxter), as the postures' scores
             differ by a few percent, so a lower bound of a worse one exceeds the best only
             near the end; and the node's and the dataset's records have no stopped count yet.
+        restart_iterations: Largest Gauss-Newton iterations of each restart's IK at the
+            start pose, in [1, MAX_RESTART_ITERATIONS]; None (default): the IK's own
+            ``ik.max_iterations`` (100), the selection as before. Fewer drop the seeds that
+            converge slowly, which changes the selection of some grasps: measured in
+            docs/performance_pipeline.md ("Posture selection"), a product decision.
     """
 
     restarts: int = DEFAULT_RESTARTS
     seed: int = 0
     duplicate_tolerance_rad: float = 1e-3
     early_stop: bool = False
+    restart_iterations: int | None = None
 
     def __post_init__(self) -> None:
         for name, value, top in (
@@ -118,6 +127,16 @@ class PostureConfig:
             raise InvalidInputError(
                 "posture.duplicate_tolerance_rad",
                 f"must be a finite number > 0, got {tolerance!r}",
+            )
+        iterations = self.restart_iterations
+        if iterations is not None and (
+            not isinstance(iterations, int)
+            or isinstance(iterations, bool)
+            or not 1 <= iterations <= MAX_RESTART_ITERATIONS
+        ):
+            raise InvalidInputError(
+                "posture.restart_iterations",
+                f"must be null or an integer in [1, {MAX_RESTART_ITERATIONS}], got {iterations!r}",
             )
         if not isinstance(self.early_stop, bool):
             raise InvalidInputError(
@@ -296,6 +315,7 @@ def select_posture_batch(
             for k in searched
         ],
         np.array([robot.q_from_positions(seed) for seed in seeds]).reshape(len(seeds), nq),
+        config.restart_iterations,
     )
     tolerance = config.duplicate_tolerance_rad
     for row, k in enumerate(searched):
