@@ -253,7 +253,7 @@ class IKSolver:
                     )
             return q, converged
         settings = self.settings
-        if max_iterations is not None:
+        if max_iterations is not None and settings is not None:
             settings = settings._replace(max_iterations=int(max_iterations))
         call_kernel(
             _kernels().solve_poses,
