@@ -9,8 +9,8 @@ ranking is run with ``posture.restarts`` = 0 (the paper's single IK), 2, 4, 8, 1
   of the process (the latter less inflated when other processes share the cores); its CPU
   time as a multiple of the ranking's (single IK, measured in the same run; issue 21's
   target: <= 1.5 at 8 restarts); at 8 restarts also with ``PostureConfig.early_stop``, and
-  with it and ``restart_iterations`` = CAPPED_ITERATIONS (a change of results: the grasps
-  whose kept score changes are counted);
+  with it and ``restart_iterations`` = CAPPED_ITERATIONS, or ``restart_stall_iterations`` =
+  STALL_ITERATIONS (changes of results: the grasps whose kept score changes are counted);
 - the gain: mean over the grasps feasible with the single IK of 1 - score / score_single_ik
   [%], and grasps feasible with selection but not with the single IK.
 
@@ -38,6 +38,11 @@ from grasp_safety_ros.scenario.schema import load_scenario
 
 RESTARTS = (0, 2, 4, 8, 16, 32, 64)
 CAPPED_ITERATIONS = 30
+STALL_ITERATIONS = 10
+VARIANTS = {
+    "capped": {"restart_iterations": CAPPED_ITERATIONS},
+    "stall": {"restart_stall_iterations": STALL_ITERATIONS},
+}
 
 
 def _workloads(grasps: int) -> list[tuple[str, Any, Any, Any, Any, Any]]:
@@ -101,8 +106,9 @@ def bench_postures(
         rows = []
         for restarts in restart_counts:
             config = PostureConfig(restarts=restarts)
-            times, cpu_times, early_cpu_times, capped_cpu_times = [], [], [], []
-            capped = None
+            times, cpu_times, early_cpu_times = [], [], []
+            variant_cpu: dict[str, list[float]] = {name: [] for name in VARIANTS}
+            variants: dict[str, Any] = {}
             for _ in range(repeats):
                 selected, stages = run(config)
                 times.append(stages["postures"])
@@ -110,8 +116,9 @@ def bench_postures(
                 if restarts == 8:
                     early = replace(config, early_stop=True)
                     early_cpu_times.append(run(early)[1]["postures_process_cpu"])
-                    capped, stages = run(replace(early, restart_iterations=CAPPED_ITERATIONS))
-                    capped_cpu_times.append(stages["postures_process_cpu"])
+                    for variant, changes in VARIANTS.items():
+                        variants[variant], stages = run(replace(early, **changes))
+                        variant_cpu[variant].append(stages["postures_process_cpu"])
             gains = [
                 1.0 - p.score / p.score_single_ik
                 for p in selected.postures
@@ -143,14 +150,15 @@ def bench_postures(
                 rows[-1]["early_stop_cpu_vs_ranking"] = statistics.median(
                     early_cpu_times
                 ) / statistics.median(ranking_cpu)
-                rows[-1]["capped_cpu_vs_ranking"] = statistics.median(
-                    capped_cpu_times
-                ) / statistics.median(ranking_cpu)
-                rows[-1]["capped_changed_grasps"] = sum(
-                    1
-                    for a, b in zip(selected.postures, capped.postures, strict=True)
-                    if not np.array_equal([a.score], [b.score], equal_nan=True)
-                )
+                for variant, other in variants.items():
+                    rows[-1][f"{variant}_cpu_vs_ranking"] = statistics.median(
+                        variant_cpu[variant]
+                    ) / statistics.median(ranking_cpu)
+                    rows[-1][f"{variant}_changed_grasps"] = sum(
+                        1
+                        for a, b in zip(selected.postures, other.postures, strict=True)
+                        if not np.array_equal([a.score], [b.score], equal_nan=True)
+                    )
             print(
                 f"[postures] {name}: restarts {restarts:>2}: "
                 f"{rows[-1]['ms_per_grasp']:7.2f} ms/grasp "
@@ -183,9 +191,11 @@ def print_postures(results: dict[str, Any]) -> None:
         if row is not None:
             print(
                 f"{name:<24} x{row['cpu_vs_ranking']:.2f}, with early_stop "
-                f"x{row['early_stop_cpu_vs_ranking']:.2f}, and restart_iterations "
+                f"x{row['early_stop_cpu_vs_ranking']:.2f}; and restart_iterations "
                 f"{CAPPED_ITERATIONS} x{row['capped_cpu_vs_ranking']:.2f} "
-                f"({row['capped_changed_grasps']} grasps' kept score changed)"
+                f"({row['capped_changed_grasps']} grasps' kept score changed), or "
+                f"restart_stall_iterations {STALL_ITERATIONS} x{row['stall_cpu_vs_ranking']:.2f} "
+                f"({row['stall_changed_grasps']} changed)"
             )
 
 

@@ -73,12 +73,16 @@ def test_config_rejects_bad_values() -> None:
     for bad in (0, 10_001, 2.0, True):
         with pytest.raises(InvalidInputError, match=r"posture\.restart_iterations: must be"):
             PostureConfig(restart_iterations=bad)  # type: ignore[arg-type]
+        with pytest.raises(InvalidInputError, match=r"posture\.restart_stall_iterations: must"):
+            PostureConfig(restart_stall_iterations=bad)  # type: ignore[arg-type]
 
 
 def test_restart_iterations_cut_the_restart_ik_short(baxter, baxter_book) -> None:
     """Gauss-Newton's state is its iterate: a restart that converges within k iterations
     converges with k, to the same configuration bit for bit, and one that converges only
-    later does not (compiled and Python IK); the config's own limit selects as None."""
+    later does not (compiled and Python IK); giving up on a stall every k iterations keeps a
+    subset of the solutions, bit for bit, all those within 2k iterations (the first check);
+    the config's own limit selects as None."""
     evaluator, grasps, trajectory, ranking = baxter_book
     python = GraspSafetyEvaluator(baxter, EvaluationConfig(workers=1, backend="python"))
     poses = [
@@ -95,6 +99,11 @@ def test_restart_iterations_cut_the_restart_ik_short(baxter, baxter_book) -> Non
             q_k, converged_k = solver.solve_poses(poses, seeds, max_iterations=k)
             assert np.array_equal(converged_k, converged & (iterations <= k))
             assert np.array_equal(q_k[converged_k], q[converged_k])
+            # giving up on a stall: a subset of the same solutions, the same iterates
+            q_s, converged_s = solver.solve_poses(poses, seeds, stall_iterations=k)
+            assert np.array_equal(converged_s, converged_s & converged)
+            assert np.array_equal(q_s[converged_s], q[converged_s])
+            assert np.array_equal(converged_s[iterations <= 2 * k], converged[iterations <= 2 * k])
     limit = evaluator.ik.config.max_iterations
     same = [
         select_postures(evaluator, grasps, BOOK, trajectory, ranking, PostureConfig(8, **c))

@@ -39,7 +39,7 @@ import pinocchio as pin
 from ..exceptions import InvalidInputError
 from ..model.robot import RobotModel
 from .compiled import call_kernel, chain_arrays_or_reason, plain_array
-from .packed import ChainArrays, IKSettings, grasp_buffers
+from .packed import STALL_RATIO, ChainArrays, IKSettings, grasp_buffers
 
 
 def _numba_installed() -> bool:
@@ -236,10 +236,13 @@ class IKSolver:
         transforms_tip_to_base: Sequence[pin.SE3],
         seeds_q: np.ndarray,
         max_iterations: int | None = None,
+        stall_iterations: int = 0,
     ) -> tuple[np.ndarray, np.ndarray]:
         """``solve`` of each tip pose g from each seed r (seeds_q (R, nq)), compiled in one
         kernel call: the configurations (G, R, nq) and whether each converged (G, R);
-        ``max_iterations`` replaces the config's (None: the config's)."""
+        ``max_iterations`` replaces the config's (None: the config's); ``stall_iterations``
+        k > 0 gives a solve up when k iterations cut its error by less than
+        ``packed.STALL_RATIO`` (IKSettings.stall_iterations)."""
         seeds_q = np.asarray(seeds_q, dtype=float).reshape(-1, self.robot.model.nq)
         shape = (len(transforms_tip_to_base), len(seeds_q))
         q = np.empty((*shape, self.robot.model.nq))
@@ -249,12 +252,17 @@ class IKSolver:
             for g, target in enumerate(targets):
                 for r, seed in enumerate(seeds_q):
                     q[g, r], converged[g, r], _ = self._solve_python(
-                        target, seed, max_iterations=max_iterations
+                        target, seed, max_iterations=max_iterations, stall=stall_iterations
                     )
             return q, converged
         settings = self.settings
-        if max_iterations is not None and settings is not None:
-            settings = settings._replace(max_iterations=int(max_iterations))
+        if settings is not None:
+            settings = settings._replace(
+                max_iterations=settings.max_iterations
+                if max_iterations is None
+                else max_iterations,
+                stall_iterations=int(stall_iterations),
+            )
         call_kernel(
             _kernels().solve_poses,
             self.chain,
@@ -274,12 +282,14 @@ class IKSolver:
         q_init: np.ndarray,
         first_residual: np.ndarray | None = None,
         max_iterations: int | None = None,
+        stall: int = 0,
     ) -> tuple[np.ndarray, bool, int]:
         """Gauss-Newton from q_init: (q, converged, iterations); the error at q_init (tip frame)
         is added to ``first_residual`` when given (the predictor's D); ``max_iterations``
-        replaces the config's (None: the config's)."""
+        replaces the config's (None: the config's); ``stall``: IKSettings.stall_iterations."""
         model, data, config = self.robot.model, self.data, self.config
         iterations = config.max_iterations if max_iterations is None else max_iterations
+        checkpoint = math.inf
         frame_id = self.robot.tip_frame_id
         lower, upper = self._lower_q, self._upper_q
         q = np.minimum(np.maximum(np.array(q_init, dtype=float), lower), upper)
@@ -301,6 +311,11 @@ class IKSolver:
                 return q, True, iteration
             if iteration == iterations:
                 break
+            if stall > 0 and iteration > 0 and iteration % stall == 0:
+                norm = math.sqrt(error.dot(error))
+                if norm > STALL_RATIO * checkpoint:
+                    return q, False, iteration
+                checkpoint = norm
             frame_jacobian = pin.getFrameJacobian(
                 model, data, frame_id, pin.ReferenceFrame.LOCAL
             ).reshape(6, n)  # eigenpy returns a 6x1 matrix as a vector
