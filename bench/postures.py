@@ -8,16 +8,21 @@ ranking is run with ``posture.restarts`` = 0 (the paper's single IK), 2, 4, 8, 1
   ``rank``; the single IK excluded), one core, median over repeats: wall-clock and CPU time
   of the process (the latter less inflated when other processes share the cores); its CPU
   time as a multiple of the ranking's (single IK, measured in the same run; issue 21's
-  target: <= 1.5 at 8 restarts); at 8 restarts also with ``PostureConfig.early_stop``;
+  target: <= 1.5 at 8 restarts); at 8 restarts also with ``PostureConfig.early_stop``, and
+  with it and ``restart_iterations`` = CAPPED_ITERATIONS, or ``restart_stall_iterations`` =
+  STALL_ITERATIONS (changes of results: the grasps whose kept score changes are counted);
 - the gain: mean over the grasps feasible with the single IK of 1 - score / score_single_ik
   [%], and grasps feasible with selection but not with the single IK.
 
-Run alone: .venv/bin/python bench/run.py --postures-only [--json bench/results_postures.json]
+Run alone: .venv/bin/python bench/run.py --postures-only [--json bench/results_postures.json],
+or the smallest meaningful run: .venv/bin/python bench/postures.py --grasps 20 --restarts 0 8
 """
 
 from __future__ import annotations
 
+import argparse
 import statistics
+from collections.abc import Sequence
 from dataclasses import replace
 from typing import Any
 
@@ -32,6 +37,12 @@ from grasp_safety_ros.paths import config_file
 from grasp_safety_ros.scenario.schema import load_scenario
 
 RESTARTS = (0, 2, 4, 8, 16, 32, 64)
+CAPPED_ITERATIONS = 30
+STALL_ITERATIONS = 10
+VARIANTS = {
+    "capped": {"restart_iterations": CAPPED_ITERATIONS},
+    "stall": {"restart_stall_iterations": STALL_ITERATIONS},
+}
 
 
 def _workloads(grasps: int) -> list[tuple[str, Any, Any, Any, Any, Any]]:
@@ -66,7 +77,9 @@ def _workloads(grasps: int) -> list[tuple[str, Any, Any, Any, Any, Any]]:
     return loads
 
 
-def bench_postures(grasps: int = 20, repeats: int = 3) -> dict[str, Any]:
+def bench_postures(
+    grasps: int = 20, repeats: int = 3, restart_counts: Sequence[int] = RESTARTS
+) -> dict[str, Any]:
     """Cost [ms per grasp] and gain [%] of posture selection per restart count and workload."""
     results: dict[str, Any] = {}
     for name, evaluator, candidates, inertia, trajectory, seed in _workloads(grasps):
@@ -91,9 +104,11 @@ def bench_postures(grasps: int = 20, repeats: int = 3) -> dict[str, Any]:
         ]
         ranking_ms = 1e3 * statistics.median(ranking_cpu) / len(candidates)
         rows = []
-        for restarts in RESTARTS:
+        for restarts in restart_counts:
             config = PostureConfig(restarts=restarts)
             times, cpu_times, early_cpu_times = [], [], []
+            variant_cpu: dict[str, list[float]] = {name: [] for name in VARIANTS}
+            variants: dict[str, Any] = {}
             for _ in range(repeats):
                 selected, stages = run(config)
                 times.append(stages["postures"])
@@ -101,6 +116,9 @@ def bench_postures(grasps: int = 20, repeats: int = 3) -> dict[str, Any]:
                 if restarts == 8:
                     early = replace(config, early_stop=True)
                     early_cpu_times.append(run(early)[1]["postures_process_cpu"])
+                    for variant, changes in VARIANTS.items():
+                        variants[variant], stages = run(replace(early, **changes))
+                        variant_cpu[variant].append(stages["postures_process_cpu"])
             gains = [
                 1.0 - p.score / p.score_single_ik
                 for p in selected.postures
@@ -132,6 +150,15 @@ def bench_postures(grasps: int = 20, repeats: int = 3) -> dict[str, Any]:
                 rows[-1]["early_stop_cpu_vs_ranking"] = statistics.median(
                     early_cpu_times
                 ) / statistics.median(ranking_cpu)
+                for variant, other in variants.items():
+                    rows[-1][f"{variant}_cpu_vs_ranking"] = statistics.median(
+                        variant_cpu[variant]
+                    ) / statistics.median(ranking_cpu)
+                    rows[-1][f"{variant}_changed_grasps"] = sum(
+                        1
+                        for a, b in zip(selected.postures, other.postures, strict=True)
+                        if not np.array_equal([a.score], [b.score], equal_nan=True)
+                    )
             print(
                 f"[postures] {name}: restarts {restarts:>2}: "
                 f"{rows[-1]['ms_per_grasp']:7.2f} ms/grasp "
@@ -149,7 +176,8 @@ def bench_postures(grasps: int = 20, repeats: int = 3) -> dict[str, Any]:
 def print_postures(results: dict[str, Any]) -> None:
     """The table of ``bench_postures``."""
     print("\nposture selection: CPU ms per grasp (one core) / mean score gain vs the single IK")
-    header = f"{'workload':<24}" + "".join(f"{'r=' + str(r):>16}" for r in RESTARTS)
+    counts = [row["restarts"] for row in next(iter(results.values()))]
+    header = f"{'workload':<24}" + "".join(f"{'r=' + str(r):>16}" for r in counts)
     print(header)
     for name, rows in results.items():
         cells = "".join(
@@ -159,8 +187,24 @@ def print_postures(results: dict[str, Any]) -> None:
         print(f"{name:<24}{cells}")
     print("\nposture selection, 8 restarts: CPU time as a multiple of the ranking's (same run)")
     for name, rows in results.items():
-        row = next(row for row in rows if row["restarts"] == 8)
-        print(
-            f"{name:<24} x{row['cpu_vs_ranking']:.2f}, with early_stop "
-            f"x{row['early_stop_cpu_vs_ranking']:.2f}"
-        )
+        row = next((row for row in rows if row["restarts"] == 8), None)
+        if row is not None:
+            print(
+                f"{name:<24} x{row['cpu_vs_ranking']:.2f}, with early_stop "
+                f"x{row['early_stop_cpu_vs_ranking']:.2f}; and restart_iterations "
+                f"{CAPPED_ITERATIONS} x{row['capped_cpu_vs_ranking']:.2f} "
+                f"({row['capped_changed_grasps']} grasps' kept score changed), or "
+                f"restart_stall_iterations {STALL_ITERATIONS} x{row['stall_cpu_vs_ranking']:.2f} "
+                f"({row['stall_changed_grasps']} changed)"
+            )
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--grasps", type=int, default=20, help="grasps per arm workload")
+    parser.add_argument("--repeats", type=int, default=3, help="runs per figure (median)")
+    parser.add_argument(
+        "--restarts", type=int, nargs="+", default=list(RESTARTS), help="restart counts"
+    )
+    args = parser.parse_args()
+    print_postures(bench_postures(args.grasps, args.repeats, args.restarts))

@@ -8,6 +8,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from conftest import ARM7_AXES, BAXTER_SEED, book_trajectory, random_positions, serial_arm_urdf
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from tolerances import path_tolerance
 
 from grasp_safety_ros.core import (
@@ -68,6 +70,46 @@ def test_config_rejects_bad_values() -> None:
         PostureConfig(duplicate_tolerance_rad=0.0)
     with pytest.raises(InvalidInputError, match=r"posture\.early_stop: must be true or false"):
         PostureConfig(early_stop=1)  # type: ignore[arg-type]
+    for bad in (0, 10_001, 2.0, True):
+        with pytest.raises(InvalidInputError, match=r"posture\.restart_iterations: must be"):
+            PostureConfig(restart_iterations=bad)  # type: ignore[arg-type]
+        with pytest.raises(InvalidInputError, match=r"posture\.restart_stall_iterations: must"):
+            PostureConfig(restart_stall_iterations=bad)  # type: ignore[arg-type]
+
+
+def test_restart_iterations_cut_the_restart_ik_short(baxter, baxter_book) -> None:
+    """Gauss-Newton's state is its iterate: a restart that converges within k iterations
+    converges with k, to the same configuration bit for bit, and one that converges only
+    later does not (compiled and Python IK); giving up on a stall every k iterations keeps a
+    subset of the solutions, bit for bit, all those within 2k iterations (the first check);
+    the config's own limit selects as None."""
+    evaluator, grasps, trajectory, ranking = baxter_book
+    python = GraspSafetyEvaluator(baxter, EvaluationConfig(workers=1, backend="python"))
+    poses = [
+        trajectory.transform_object_to_base_start * pin.SE3(g.transform_tip_to_object)
+        for g in grasps
+    ]
+    seeds = np.array(
+        [baxter.q_from_positions(s) for s in restart_seeds(evaluator, PostureConfig(16))]
+    )
+    for solver in (evaluator.ik, python.ik):
+        q, converged = solver.solve_poses(poses, seeds)
+        iterations = np.array([[solver.solve(pose, s)[2] for s in seeds] for pose in poses])
+        for k in (1, 10, 30):
+            q_k, converged_k = solver.solve_poses(poses, seeds, max_iterations=k)
+            assert np.array_equal(converged_k, converged & (iterations <= k))
+            assert np.array_equal(q_k[converged_k], q[converged_k])
+            # giving up on a stall: a subset of the same solutions, the same iterates
+            q_s, converged_s = solver.solve_poses(poses, seeds, stall_iterations=k)
+            assert np.array_equal(converged_s, converged_s & converged)
+            assert np.array_equal(q_s[converged_s], q[converged_s])
+            assert np.array_equal(converged_s[iterations <= 2 * k], converged[iterations <= 2 * k])
+    limit = evaluator.ik.config.max_iterations
+    same = [
+        select_postures(evaluator, grasps, BOOK, trajectory, ranking, PostureConfig(8, **c))
+        for c in ({}, {"restart_iterations": limit})
+    ]
+    assert pickle.dumps(same[0].postures) == pickle.dumps(same[1].postures)
 
 
 def test_zero_restarts_is_the_single_ik_bit_for_bit(baxter_book) -> None:
@@ -112,34 +154,59 @@ def test_selection_never_scores_worse_and_reports_consistently(baxter_book) -> N
     assert any(p.score < p.score_single_ik - 1e-4 for p in selected.postures)
 
 
-@pytest.mark.parametrize("robot_kind", ["arm6", "arm7"])
-def test_never_worse_on_random_grasps(robot_kind: str, request: pytest.FixtureRequest) -> None:
-    robot: RobotModel = request.getfixturevalue(robot_kind)
-    rng = np.random.default_rng(7)
-    evaluator = GraspSafetyEvaluator(robot, EvaluationConfig(workers=1))
-    seed = random_positions(robot, rng)
-    tip = robot.transform_tip_to_base(seed)
-    grasps = []
-    for k in range(6):
-        offset = pin.SE3(pin.exp3(rng.normal(scale=0.3, size=3)), rng.normal(scale=0.05, size=3))
-        grasps.append(Grasp(offset, f"g{k}"))
-    # object start so that grasp 0's tip is exactly at the seed's tip pose; move by 5 cm
-    start = tip * grasps[0].transform_tip_to_object.inverse()
-    goal = pin.SE3(start.rotation @ pin.exp3(np.array([0.0, 0.0, 0.2])), start.translation)
-    goal.translation = goal.translation + np.array([0.03, -0.04, 0.02])
-    trajectory = ObjectTrajectory(start, goal, 1.0, 0.05)
-    ranking = evaluator.rank(grasps, BOOK, trajectory, seed_positions=seed)
-    selected = select_postures(
-        evaluator, grasps, BOOK, trajectory, ranking, PostureConfig(restarts=10)
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    st.integers(0, 2**16),
+    st.lists(st.sampled_from("xyz"), min_size=6, max_size=7),
+    st.sampled_from(METRICS),
+)
+def test_never_worse_than_the_single_ik_on_random_arms(
+    seed: int, axes: list[str], metric: str
+) -> None:
+    """The property of the module docstring, on a random 6- or 7-joint arm, random grasps
+    and every metric: the kept posture is feasible whenever the single IK is and scores at
+    most its score, exactly (a kept restart scores strictly lower, else the single IK
+    itself is kept); the early stop keeps the same posture, bit for bit, and only moves
+    postures from the feasible count to the stopped count."""
+    robot = RobotModel.from_urdf(serial_arm_urdf(axes, seed=seed), "base_link", "tool")
+    rng = np.random.default_rng(seed)
+    evaluator = GraspSafetyEvaluator(robot, EvaluationConfig(workers=1, metric=metric))
+    start_positions = random_positions(robot, rng)
+    grasps = [
+        Grasp(pin.SE3(pin.exp3(rng.normal(scale=0.3, size=3)), rng.normal(scale=0.05, size=3)))
+        for _ in range(4)
+    ]
+    # grasp 0's tip is at the start posture's tip pose: its single IK starts feasible
+    start = (
+        robot.transform_tip_to_base(start_positions) * grasps[0].transform_tip_to_object.inverse()
     )
-    assert ranking.evaluations[0].feasible
-    for single, kept, p in zip(
-        ranking.evaluations, selected.evaluations, selected.postures, strict=True
-    ):
+    goal = pin.SE3(start.rotation @ pin.exp3(rng.normal(scale=0.2, size=3)), start.translation)
+    goal.translation = goal.translation + rng.normal(scale=0.03, size=3)
+    trajectory = ObjectTrajectory(start, goal, 1.0, 0.05)
+    ranking = evaluator.rank(grasps, BOOK, trajectory, seed_positions=start_positions)
+    full, early = (
+        select_postures(
+            evaluator, grasps, BOOK, trajectory, ranking, PostureConfig(8, seed, 1e-3, stop)
+        )
+        for stop in (False, True)
+    )
+    for k, single in enumerate(ranking.evaluations):
+        kept, p, q = full.evaluations[k], full.postures[k], early.postures[k]
         if single.feasible:
             assert kept.feasible and kept.score <= single.score
+            assert (p.selected == 0) == (kept is single)
+            assert p.selected == 0 or kept.score < single.score
         else:
             assert kept.feasible == (p.postures_feasible > 0)
+        assert p.postures_stopped == 0
+        assert (q.selected, q.postures_tried) == (p.selected, p.postures_tried)
+        assert np.array_equal([q.score], [p.score], equal_nan=True)
+        assert np.array_equal(early.evaluations[k].joint_positions, kept.joint_positions)
+        assert np.array_equal(early.evaluations[k].effective_mass_kg, kept.effective_mass_kg)
+        assert (
+            q.postures_feasible <= p.postures_feasible <= q.postures_feasible + q.postures_stopped
+        )
+        assert q.postures_feasible + q.postures_stopped <= q.postures_tried
 
 
 def test_seven_dof_start_posture_as_good_as_many_random_ik_solutions(baxter_book) -> None:

@@ -111,7 +111,8 @@ def _solve_pose_into(chain, settings, target_rotation, target_translation, q_ini
     lower_q, upper_q = chain.lower_q, chain.upper_q
     for k in range(q.shape[0]):
         q[k] = min(max(q_init[k], lower_q[k]), upper_q[k])
-    max_iterations = settings.max_iterations
+    max_iterations, stall = settings.max_iterations, settings.stall_iterations
+    checkpoint = math.inf
     for iteration in range(max_iterations + 1):
         _forward_kinematics(chain, q, ws)
         _relative_pose(fr, ft, target_rotation, target_translation, er, et)  # current^-1 target
@@ -128,6 +129,14 @@ def _solve_pose_into(chain, settings, target_rotation, target_translation, q_ini
             return True, iteration
         if iteration == max_iterations:
             break
+        if stall > 0 and iteration > 0 and iteration % stall == 0:
+            norm = 0.0
+            for j in range(6):
+                norm += error[j] * error[j]
+            norm = math.sqrt(norm)
+            if norm > settings.stall_ratio * checkpoint:
+                return False, iteration
+            checkpoint = norm
         _local_jacobian(chain, ws, jac)
         for i in range(3):  # inverse error transform
             it[i] = -(er[0, i] * et[0] + er[1, i] * et[1] + er[2, i] * et[2])

@@ -39,7 +39,7 @@ import pinocchio as pin
 from ..exceptions import InvalidInputError
 from ..model.robot import RobotModel
 from .compiled import call_kernel, chain_arrays_or_reason, plain_array
-from .packed import ChainArrays, IKSettings, grasp_buffers
+from .packed import STALL_RATIO, ChainArrays, IKSettings, grasp_buffers
 
 
 def _numba_installed() -> bool:
@@ -232,24 +232,41 @@ class IKSolver:
         return self._solve_python(transform_target_to_world, q_init)
 
     def solve_poses(
-        self, transforms_tip_to_base: Sequence[pin.SE3], seeds_q: np.ndarray
+        self,
+        transforms_tip_to_base: Sequence[pin.SE3],
+        seeds_q: np.ndarray,
+        max_iterations: int | None = None,
+        stall_iterations: int = 0,
     ) -> tuple[np.ndarray, np.ndarray]:
         """``solve`` of each tip pose g from each seed r (seeds_q (R, nq)), compiled in one
-        kernel call: the configurations (G, R, nq) and whether each converged (G, R)."""
+        kernel call: the configurations (G, R, nq) and whether each converged (G, R);
+        ``max_iterations`` replaces the config's (None: the config's); ``stall_iterations``
+        k > 0 gives a solve up when k iterations cut its error by less than
+        ``packed.STALL_RATIO`` (IKSettings.stall_iterations)."""
         seeds_q = np.asarray(seeds_q, dtype=float).reshape(-1, self.robot.model.nq)
         shape = (len(transforms_tip_to_base), len(seeds_q))
         q = np.empty((*shape, self.robot.model.nq))
         converged = np.zeros(shape, dtype=np.bool_)
-        if not self.compiled:
-            for g, transform in enumerate(transforms_tip_to_base):
-                for r, seed in enumerate(seeds_q):
-                    q[g, r], converged[g, r], _ = self.solve(transform, seed)
-            return q, converged
         targets = [self.robot.transform_base_to_world * pose for pose in transforms_tip_to_base]
+        if not self.compiled:
+            for g, target in enumerate(targets):
+                for r, seed in enumerate(seeds_q):
+                    q[g, r], converged[g, r], _ = self._solve_python(
+                        target, seed, max_iterations=max_iterations, stall=stall_iterations
+                    )
+            return q, converged
+        settings = self.settings
+        if settings is not None:
+            settings = settings._replace(
+                max_iterations=settings.max_iterations
+                if max_iterations is None
+                else max_iterations,
+                stall_iterations=int(stall_iterations),
+            )
         call_kernel(
             _kernels().solve_poses,
             self.chain,
-            self.settings,
+            settings,
             plain_array(np.array([target.rotation for target in targets]).reshape(-1, 3, 3)),
             plain_array(np.array([target.translation for target in targets]).reshape(-1, 3)),
             plain_array(seeds_q),
@@ -264,17 +281,22 @@ class IKSolver:
         transform_target_to_world: pin.SE3,
         q_init: np.ndarray,
         first_residual: np.ndarray | None = None,
+        max_iterations: int | None = None,
+        stall: int = 0,
     ) -> tuple[np.ndarray, bool, int]:
         """Gauss-Newton from q_init: (q, converged, iterations); the error at q_init (tip frame)
-        is added to ``first_residual`` when given (the predictor's D)."""
+        is added to ``first_residual`` when given (the predictor's D); ``max_iterations``
+        replaces the config's (None: the config's); ``stall``: IKSettings.stall_iterations."""
         model, data, config = self.robot.model, self.data, self.config
+        iterations = config.max_iterations if max_iterations is None else max_iterations
+        checkpoint = math.inf
         frame_id = self.robot.tip_frame_id
         lower, upper = self._lower_q, self._upper_q
         q = np.minimum(np.maximum(np.array(q_init, dtype=float), lower), upper)
         n = model.nv
         position_tolerance = config.position_tolerance_m
         orientation_tolerance = config.orientation_tolerance_rad
-        for iteration in range(config.max_iterations + 1):
+        for iteration in range(iterations + 1):
             pin.computeJointJacobians(model, data, q)  # forward kinematics + joint Jacobians
             current = pin.updateFramePlacement(model, data, frame_id)
             error_transform = current.actInv(transform_target_to_world)
@@ -287,8 +309,13 @@ class IKSolver:
                 and math.sqrt(error[3:].dot(error[3:])) <= orientation_tolerance
             ):
                 return q, True, iteration
-            if iteration == config.max_iterations:
+            if iteration == iterations:
                 break
+            if stall > 0 and iteration > 0 and iteration % stall == 0:
+                norm = math.sqrt(error.dot(error))
+                if norm > STALL_RATIO * checkpoint:
+                    return q, False, iteration
+                checkpoint = norm
             frame_jacobian = pin.getFrameJacobian(
                 model, data, frame_id, pin.ReferenceFrame.LOCAL
             ).reshape(6, n)  # eigenpy returns a 6x1 matrix as a vector
@@ -296,7 +323,7 @@ class IKSolver:
             q = pin.integrate(model, q, self._damped_step(jacobian, error))
             np.maximum(q, lower, out=q)
             np.minimum(q, upper, out=q)
-        return q, False, config.max_iterations
+        return q, False, iterations
 
     def _damped_step(self, jacobian: np.ndarray, error: np.ndarray) -> np.ndarray:
         """Damped minimum-norm solution of jacobian @ step = error (6 x n), step-limited.

@@ -34,6 +34,12 @@ class ChainArrays(NamedTuple):
     armature: np.ndarray  # (n,) reflected rotor inertia [kg m^2, kg if prismatic]
 
 
+STALL_RATIO = 0.9
+"""IKSettings.stall_iterations = k > 0: a solve gives up at iteration 2k, 3k, ... when its
+error's norm (the tip pose error's 6-vector log) is above STALL_RATIO times its norm k
+iterations before (posture selection's restarts: PostureConfig.restart_stall_iterations)."""
+
+
 class IKSettings(NamedTuple):
     """IKConfig and the velocity limits as the compiled IK reads them (one value)."""
 
@@ -46,6 +52,8 @@ class IKSettings(NamedTuple):
     any_velocity_check: bool
     check_velocity: np.ndarray  # (n,) bool: joint speed checked against velocity_limits
     velocity_limits: np.ndarray  # (n,) [rad/s or m/s]
+    stall_iterations: int = 0  # k > 0: give up when k iterations cut the error < stall_ratio
+    stall_ratio: float = STALL_RATIO
 
 
 class BodyInertias(NamedTuple):

@@ -13,15 +13,23 @@ solutions, and the effective mass depends on which one the arm is in. The paper 
 3. each distinct start posture followed along the whole trajectory with the evaluator's own
    warm start (seeded with it: sample 0 converges at once, in 0 iterations, to that
    posture), and scored; the postures of all grasps of a batch in one kernel call
-   (``GraspSafetyEvaluator.follow_postures``). With ``early_stop`` (selecting by the score),
-   a posture is stopped as soon as a lower bound of its score (the running max, or the
-   running weighted sum, of its effective masses, all > 0) exceeds the single IK's score: it
-   could only lose;
+   (``GraspSafetyEvaluator.follow_postures``). With ``early_stop`` (selecting by the
+   score), the j-th new postures of all grasps are followed together, j = 1, 2, ..., and a
+   posture is stopped as soon as a lower bound of its score (the running max, or the running
+   weighted sum, of its effective masses, all > 0, widened by the sums' rounding) exceeds the
+   lowest score of its grasp's feasible postures so far (the single IK's and earlier ones'):
+   it could only lose;
 4. the feasible one with the lowest score is kept (ties: the earliest, so the single IK).
-   The early stop changes no choice: a stopped posture scores above the single IK's, and a
-   posture that is not stopped is the one the full evaluation gives, bit for bit. It changes
-   the record: a stopped posture counts as tried, not as feasible, and is not in the score
-   range.
+
+Never worse than the single IK, with or without the early stop: when the single IK is
+feasible it is candidate 0, so the minimum over the candidates is at most its score, and on
+equal scores argmin keeps the earliest, the single IK itself. The early stop changes no
+choice: a stopped posture scores strictly above a feasible posture already found, so it is
+neither the minimum nor the first of equal minima, and a posture that is not stopped is the
+one the full evaluation gives, bit for bit (``test_posture.py``: a property test over random
+arms, grasps and metrics, with and without it). It changes the record: a stopped posture
+counts as tried and as stopped (``PostureSelection.postures_stopped``), not as feasible, and
+is not in the score range.
 
 A ``PostureCriterion`` may replace the score in step 4 (core.analyses.whole_arm's, with
 ``rank_by: whole_arm``: the worst predicted force over the arm's points); the single IK is
@@ -64,6 +72,9 @@ MAX_RESTARTS = 1000
 DEFAULT_RESTARTS = 8
 """Default restarts everywhere (core.options; docs/analyses.md, "Posture selection")."""
 
+MAX_RESTART_ITERATIONS = 10_000
+"""Largest ``PostureConfig.restart_iterations``."""
+
 FOLLOW_ROWS = 64
 """Start postures per kernel call in ``select_posture_batch`` (bounds its buffers: ~45 floats
 per posture and sample)."""
@@ -81,16 +92,29 @@ class PostureConfig:
         duplicate_tolerance_rad: Start postures closer than this (largest joint difference)
             [rad or m] to one already found are not followed again.
         early_stop: Stop following a start posture as soon as its score certainly exceeds
-            the single IK's (module docstring; the same choice, a shorter record). Off by
-            default: it changed the time by under 4 % (``bench/postures.py``, 8 restarts,
-            Panda, Baxter, book), as the postures' scores differ by a few percent, so a
-            lower bound of a worse one exceeds the best only near the end.
+            that of a posture of the same grasp already found (module docstring; the same
+            choice, a shorter record). Off by default: it saved 6-10 % of posture selection's
+            time (``bench/postures.py``, 8 restarts, Panda, Baxter), as the postures' scores
+            differ by a few percent, so a lower bound of a worse one exceeds the best only
+            near the end; and the node's and the dataset's records have no stopped count yet.
+        restart_iterations: Largest Gauss-Newton iterations of each restart's IK at the
+            start pose, in [1, MAX_RESTART_ITERATIONS]; None (default): the IK's own
+            ``ik.max_iterations`` (100), the selection as before. Fewer drop the seeds that
+            converge slowly, which changes the selection of some grasps: measured in
+            docs/performance_pipeline.md ("Posture selection"), a product decision.
+        restart_stall_iterations: k in [1, MAX_RESTART_ITERATIONS]: each restart's IK gives
+            up when k iterations cut its error by less than ``packed.STALL_RATIO`` (10 %)
+            (IKSettings.stall_iterations); None (default): never, the selection as before.
+            Drops fewer slowly converging seeds than ``restart_iterations`` for the same IK
+            time (measured as it), also a product decision.
     """
 
     restarts: int = DEFAULT_RESTARTS
     seed: int = 0
     duplicate_tolerance_rad: float = 1e-3
     early_stop: bool = False
+    restart_iterations: int | None = None
+    restart_stall_iterations: int | None = None
 
     def __post_init__(self) -> None:
         for name, value, top in (
@@ -110,6 +134,20 @@ class PostureConfig:
                 "posture.duplicate_tolerance_rad",
                 f"must be a finite number > 0, got {tolerance!r}",
             )
+        for name, iterations in (
+            ("posture.restart_iterations", self.restart_iterations),
+            ("posture.restart_stall_iterations", self.restart_stall_iterations),
+        ):
+            if iterations is not None and (
+                not isinstance(iterations, int)
+                or isinstance(iterations, bool)
+                or not 1 <= iterations <= MAX_RESTART_ITERATIONS
+            ):
+                raise InvalidInputError(
+                    name,
+                    f"must be null or an integer in [1, {MAX_RESTART_ITERATIONS}], "
+                    f"got {iterations!r}",
+                )
         if not isinstance(self.early_stop, bool):
             raise InvalidInputError(
                 "posture.early_stop", f"must be true or false, got {self.early_stop!r}"
@@ -287,6 +325,8 @@ def select_posture_batch(
             for k in searched
         ],
         np.array([robot.q_from_positions(seed) for seed in seeds]).reshape(len(seeds), nq),
+        config.restart_iterations,
+        config.restart_stall_iterations or 0,
     )
     tolerance = config.duplicate_tolerance_rad
     for row, k in enumerate(searched):
@@ -301,27 +341,17 @@ def select_posture_batch(
                 continue  # within the tolerance of a start posture already found
             found.append(positions)
         starts[k] = found[1:] if single_ik.feasible else found  # the single IK's is evaluated
-    rows = [(k, positions) for k in searched for positions in starts[k]]
-    followed: list[GraspEvaluation | None] = []
-    for first in range(0, len(rows), FOLLOW_ROWS):  # the new start postures, in kernel calls
-        batch = rows[first : first + FOLLOW_ROWS]
-        followed += evaluator.follow_postures(
-            [single_iks[k].index for k, _ in batch],
-            [grasps[k] for k, _ in batch],
-            object_inertia,
-            sampled,
-            metric,
-            np.array([robot.q_from_positions(p) for _, p in batch]).reshape(len(batch), nq),
-            np.array(
-                [
-                    single_iks[k].score
-                    if config.early_stop and criterion is None and single_iks[k].feasible
-                    else math.inf
-                    for k, _ in batch
-                ]
-            ),
-        )
-    remaining = iter(followed)
+    followed = _follow(
+        evaluator,
+        grasps,
+        object_inertia,
+        sampled,
+        single_iks,
+        config,
+        metric,
+        [(k, starts[k]) for k in searched],
+        criterion is None,
+    )
     results = []
     for k, (grasp, single_ik) in enumerate(zip(grasps, single_iks, strict=True)):
         if k not in starts:  # a planned motion: its posture is given
@@ -332,12 +362,66 @@ def select_posture_batch(
                 evaluator,
                 (grasp, object_inertia, trajectory),
                 single_ik,
-                [next(remaining) for _ in starts[k]],
+                followed[k],
                 (config, len(seeds) + 1, single_ik.feasible or reached[k]),
                 criterion,
             )
         )
     return results
+
+
+def _follow(
+    evaluator: GraspSafetyEvaluator,
+    grasps: Sequence[Grasp],
+    object_inertia: ObjectInertia,
+    sampled: SampledTrajectory,
+    single_iks: Sequence[GraspEvaluation],
+    config: PostureConfig,
+    metric: str,
+    starts: list[tuple[int, list[np.ndarray]]],
+    by_score: bool,
+) -> dict[int, list[GraspEvaluation | None]]:
+    """Each grasp k's new start postures followed (None: stopped early), in kernel calls of
+    up to FOLLOW_ROWS postures.
+
+    With the early stop (selecting by the score) the j-th postures of all grasps go in one
+    wave, and a posture is stopped once its score certainly exceeds the lowest score of its
+    grasp's feasible postures so far (the single IK's and earlier waves'), not just the
+    single IK's: a stopped posture scores above one already found, so it is never the argmin
+    (nor the first of equal ones), and the kept posture is the one without the stop.
+    """
+    robot = evaluator.robot
+    nq = robot.model.nq
+    stopping = config.early_stop and by_score
+    best = {
+        k: single_iks[k].score if stopping and single_iks[k].feasible else math.inf
+        for k, _ in starts
+    }
+    waves = max((len(found) for _, found in starts), default=0) if stopping else 1
+    rows = [
+        [(k, positions) for k, found in starts for positions in found[j : j + 1]]
+        if stopping
+        else [(k, positions) for k, found in starts for positions in found]
+        for j in range(waves)
+    ]
+    followed: dict[int, list[GraspEvaluation | None]] = {k: [] for k, _ in starts}
+    for wave in rows:
+        for first in range(0, len(wave), FOLLOW_ROWS):
+            batch = wave[first : first + FOLLOW_ROWS]
+            results = evaluator.follow_postures(
+                [single_iks[k].index for k, _ in batch],
+                [grasps[k] for k, _ in batch],
+                object_inertia,
+                sampled,
+                metric,
+                np.array([robot.q_from_positions(p) for _, p in batch]).reshape(len(batch), nq),
+                np.array([best[k] for k, _ in batch]),
+            )
+            for (k, _), result in zip(batch, results, strict=True):
+                followed[k].append(result)
+                if stopping and result is not None and result.feasible:
+                    best[k] = min(best[k], result.score)
+    return followed
 
 
 def _choose(
@@ -368,6 +452,7 @@ def _choose(
             start_positions=np.empty(0),
             postures_tried=len(candidates),
             postures_feasible=0,
+            postures_stopped=followed.count(None),
             selected=-1,
             criterion=SCORE_CRITERION if criterion is None else criterion.name,
         )
@@ -393,6 +478,7 @@ def _choose(
         start_positions=np.array(chosen.joint_positions[0]),
         postures_tried=len(candidates),
         postures_feasible=len(feasible),
+        postures_stopped=followed.count(None),
         selected=best,
         criterion=SCORE_CRITERION if criterion is None else criterion.name,
         criterion_value=float(values[chosen_k]),

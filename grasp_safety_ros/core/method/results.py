@@ -138,6 +138,8 @@ class PostureSelection:
             IK's counts as one, also when it fails).
         postures_feasible: Of those, the ones whose whole trajectory is feasible (with
             ``PostureConfig.early_stop``: not counting those stopped early).
+        postures_stopped: Of those, the ones stopped early (``PostureConfig.early_stop``):
+            certainly scoring above a posture already found, neither feasible nor not.
         selected: Which of the tried postures was kept (0: the single IK's); -1 if none.
         criterion: What chose the posture: SCORE_CRITERION or a posture criterion's name
             (core.method.posture.PostureCriterion).
@@ -158,3 +160,4 @@ class PostureSelection:
     criterion: str = SCORE_CRITERION
     criterion_value: float = math.nan
     criterion_single_ik: float = math.nan
+    postures_stopped: int = 0
