@@ -59,6 +59,10 @@ ABBREVIATED = (re.compile(r"poses=\[.*\]\)$", re.M), "poses=[...])")
 WAITING = re.compile(r"^Waiting for at least \d+ matching subscription\(s\)\.\.\.\n", re.M)
 """``ros2 topic pub``'s progress line, printed once a second until discovery has matched its
 publisher (none to several times): left out of the outputs shown."""
+COMPILING = re.compile(
+    r"^compiling kernel \S+ \(first use on this machine\) \.\.\. [0-9.]+ s\n", re.M
+)
+"""A kernel compiled on the way (core.kernels._jit): depends on the machine's cache, not shown."""
 TIMINGS = (
     (re.compile(r"^(batch: \d+/\d+ chunks, )\d+(?:\.\d+)? s$", re.M), r"\1… s"),
     (re.compile(r", \d+ \(grasp, sample\)/s"), ", … (grasp, sample)/s"),
@@ -136,10 +140,10 @@ def run_shown(command: str, root: Path = ROOT, cwd: Path | None = None) -> str:
 
 def as_shown(output: str, root: Path = ROOT) -> str:
     """An output as the docs show it: the checkout's path as ``<checkout>``, whole messages
-    abbreviated, progress lines left out, times, stamps and rates as ``…``."""
+    abbreviated, progress and kernel-compile lines left out, times, stamps and rates as ``…``."""
     venv = root / ".venv"  # a venv linked into the checkout is shown as the checkout's
     output = output.replace(str(venv.resolve()), str(venv)).replace(str(root), "<checkout>")
-    output = ABBREVIATED[0].sub(ABBREVIATED[1], WAITING.sub("", output))
+    output = ABBREVIATED[0].sub(ABBREVIATED[1], COMPILING.sub("", WAITING.sub("", output)))
     for pattern, replacement in TIMINGS:
         output = pattern.sub(replacement, output)
     return output

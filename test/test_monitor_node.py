@@ -387,6 +387,18 @@ def test_ros2_topic_echo_receives_the_factor(monitor: tuple[Client, Path, dict])
     assert re.search(r"^factor: [0-9.]+$", echoed.stdout, re.MULTILINE), echoed.stdout
 
 
+def set_parameter(env: dict[str, str], node: str, name: str, value: str) -> None:
+    """``ros2 param set``, again while the node is not yet discovered (a loaded machine: the
+    command then answers "Node not found", nothing on stdout), for at most 60 s."""
+    deadline = time.monotonic() + 60.0
+    while True:
+        done = ros2(env, "param", "set", node, name, value)
+        if "successful" in done.stdout or time.monotonic() > deadline:
+            break
+        time.sleep(0.5)
+    assert "successful" in done.stdout, done.stdout + done.stderr
+
+
 @pytest.mark.skipif(not ROS2.exists(), reason=f"no ros2 command line in {BIN}")
 def test_closed_loop_factor_is_the_last_one_times_the_state_headroom(
     monitor: tuple[Client, Path, dict], offline: dict[str, SpeedScaling]
@@ -394,7 +406,7 @@ def test_closed_loop_factor_is_the_last_one_times_the_state_headroom(
     client, _, env = monitor
     name = "speed_scaling.closed_loop"
     node = "/grasp_safety_monitor"
-    assert "successful" in ros2(env, "param", "set", node, name, "true").stdout
+    set_parameter(env, node, name, "true")
     try:
         q, qd = panda_trajectory(duration_s=1.0, stroke_rad=0.8)
         rows = slice(200, 260)
