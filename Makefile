@@ -19,6 +19,8 @@ export PIP_CONSTRAINT := $(if $(filter 0,$(LOCKED)),,$(abspath $(LOCK)))
 IFACE_STAMP := $(VENV)/.interfaces
 KERNELS_STAMP := $(VENV)/.kernels
 KERNELS := grasp_safety_ros/core/kernels
+# a class deriving from NamedTuple (core.kernels._jit selects the same files for the digest)
+NAMED_TUPLE := ^class [A-Za-z0-9_]+\(.*NamedTuple
 # interface packages: msg_defs/ and the used subsets of ../shared/interfaces/ (control_msgs,
 # moveit_msgs; built once per machine and cached, see scripts/build_interfaces.sh)
 IFACE_SRC := $(shell find msg_defs ../shared/interfaces -type f 2>/dev/null) \
@@ -55,7 +57,7 @@ $(STAMP): $(CORE_STAMP) requirements.txt $(LOCK)
 # Compile the kernels, or load them from numba's cache of the same sources, shared by the
 # checkouts of this machine (see core/kernels/_jit.py); a line per kernel compiled.
 $(KERNELS_STAMP): $(STAMP) $(wildcard $(KERNELS)/*.py) \
-  $(shell grep -rl --include='*.py' NamedTuple grasp_safety_ros/core)
+  $(shell grep -rlE --include='*.py' '$(NAMED_TUPLE)' grasp_safety_ros/core)
 	$(PY) -c "from grasp_safety_ros.core.method.warm_up import announce_compiles, warm_up; announce_compiles(); print(f'compiled kernels ready ({warm_up():.1f} s)')"
 	touch $@
 

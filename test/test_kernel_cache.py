@@ -47,6 +47,13 @@ def test_digest_follows_the_packed_types_handed_to_the_kernels(tmp_path: Path) -
     packed.write_text("class C(NamedTuple):\n    upper: float\n    lower: float\n")
     assert _jit.sources_digest(kernels) != before
     assert packed in _jit.kernel_sources(kernels)
+    mention = tmp_path / "core" / "method" / "mention.py"  # the word alone defines nothing
+    mention.write_text('"""Uses a frozen dataclass, not a NamedTuple."""\n')
+    assert mention not in _jit.kernel_sources(kernels)
+    assert _jit.sources_digest(kernels) == _jit.sources_digest(kernels)
+    derived = tmp_path / "core" / "method" / "derived.py"
+    derived.write_text("class D(typing.NamedTuple):\n    a: float\n")
+    assert derived in _jit.kernel_sources(kernels)
     real = {p.name for p in _jit.kernel_sources()}
     assert {"compiled.py", "effective_mass.py", "trajectory.py"} <= real or "packed.py" in real
 

@@ -69,6 +69,9 @@ KEEP_RECENT_S = 86_400.0
 may load from it)."""
 DIGEST_LENGTH = 20
 _DIGEST_NAME = re.compile(f"[0-9a-f]{{{DIGEST_LENGTH}}}")
+_DEFINES_NAMED_TUPLE = re.compile(r"^class \w+\(.*\bNamedTuple\b", re.M)
+"""A class statement deriving from NamedTuple (a word in a docstring does not count; the
+Makefile's kernel step selects the same files with the same pattern)."""
 
 
 def kernel_sources(folder: Path = KERNELS_FOLDER) -> list[Path]:
@@ -76,7 +79,7 @@ def kernel_sources(folder: Path = KERNELS_FOLDER) -> list[Path]:
     to the kernels): numba keys a NamedTuple argument by its field types, not its field names,
     so a cached kernel would read a reordered field at its old place."""
     core = folder.parent
-    typed = {path for path in core.rglob("*.py") if "NamedTuple" in path.read_text("utf-8")}
+    typed = {path for path in core.rglob("*.py") if _DEFINES_NAMED_TUPLE.search(path.read_text())}
     return sorted(set(folder.glob("*.py")) | typed)
 
 
