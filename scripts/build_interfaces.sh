@@ -182,7 +182,8 @@ done
 KEY=$( { echo "$PYINC"; "$PY" -c 'import sys; print(sys.version)'
   ls "$VENV/$SITE_REL" | grep -E '^(ros_|numpy-).*\.dist-info$'
   echo "${CMAKE_ARGS[*]##-DPython3_EXECUTABLE=*}"  # not the venv's path: shared by checkouts
-  sha256sum "$ROOT/scripts/stage_interfaces.py" | cut -d' ' -f1
+  uname -m  # the architecture: a home shared by several machines shares this cache
+  sha256sum "$ROOT/scripts/stage_interfaces.py" "$ROOT/scripts/build_interfaces.sh" | cut -d' ' -f1
   tree_digest "$STAGE"; } | sha256sum | cut -c1-16)
 CACHED=$CACHE_ROOT/$KEY
 if [ ! -d "$CACHED" ]; then

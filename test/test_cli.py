@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import json
 import subprocess
 import sys
@@ -202,3 +203,21 @@ def test_json_file_holds_the_evaluations_arrays_exactly(tmp_path: Path) -> None:
         assert np.array_equal(np.array(samples["q"]), evaluation.joint_positions)
         assert np.array_equal(np.array(samples["effective_mass_kg"]), evaluation.effective_mass_kg)
         assert grasp["score"] == evaluation.score
+
+
+class _ClosedPipe(io.TextIOBase):
+    """A stdout whose reader has gone (``| head`` after its bytes): every write fails."""
+
+    def write(self, text: str) -> int:
+        raise BrokenPipeError(32, "Broken pipe")
+
+
+def test_outputs_are_written_even_when_the_reader_stops_early(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    out = tmp_path / "out.json"
+    monkeypatch.setattr(sys, "stdout", _ClosedPipe())
+    monkeypatch.setattr(sys, "stderr", io.StringIO())  # main closes it on a broken pipe
+    scenario = str(config_file("book_baxter.yaml"))
+    assert main(["rank", scenario, "--json", str(out), "--no-per-sample"]) == 0
+    assert sorted(json.loads(out.read_text())["ranking"]) == [0, 1, 2]

@@ -13,6 +13,8 @@ from test_site_speeds import one_link
 
 from grasp_safety_ros.cli.main import rank_scenario
 from grasp_safety_ros.cli.report import report_to_dict
+from grasp_safety_ros.cli.retime_report import retime_lines
+from grasp_safety_ros.core.analyses import retime
 from grasp_safety_ros.core.analyses.safe_duration import (
     compare_with_standard,
     standard_mass_estimate_kg,
@@ -247,3 +249,27 @@ def test_region_series_stay_under_their_limits_on_the_grid(ranked) -> None:
         assert np.all(motion.region_speed_m_s <= motion.region_limit_m_s * (1 + 1e-6))
         planned = motion.planned_region_speed_m_s / motion.planned_region_limit_m_s
         assert planned.max() == pytest.approx(motion.planned_worst_ratio, rel=1e-12)
+
+
+def test_a_grasp_whose_output_samples_are_too_many_is_left_unretimed_alone(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # f = 0.5 retimes the three grasps to about 2.32, 2.23 and 2.16 s (planned: 2 s); at most
+    # 40 samples of 0.057 s cover 2.28 s: only the first is over, by 2 % (no tie to round).
+    monkeypatch.setattr(retime, "MAX_OUTPUT_SAMPLES", 40)
+    limits = {"joint_acceleration_limits": ACCELERATIONS, "safety_factor": 0.5}
+    data = book(
+        retime={**limits, "output_dt_s": 0.057}, rank_by="safe_duration", posture={"restarts": 1}
+    )
+    report = rank_scenario(parse_scenario(data, tmp_path))
+    first, *others = report.retimed
+    assert first is None and "retime.output_dt_s" in report.retime_reasons[0]
+    for motion in others:
+        assert motion is not None and motion.safe_duration_s <= 40 * 0.057
+        assert np.diff(motion.times_s)[:-1] == pytest.approx(0.057, rel=1e-12)
+    assert sorted(report.order) == [1, 2]
+    assert "retime.output_dt_s" in " ".join(retime_lines(report))
+    assert report_to_dict(report)["grasps"][0]["retime_reason"] == report.retime_reasons[0]
+    with pytest.raises(InvalidInputError) as error:  # 2 s / 0.049 s: 41 > 40, before any work
+        rank_scenario(parse_scenario(book(retime={**limits, "output_dt_s": 0.049}), tmp_path))
+    assert error.value.field == "retime.output_dt_s"

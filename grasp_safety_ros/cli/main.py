@@ -122,7 +122,10 @@ def _write_outputs(
     plot_path: Path | None,
     title: str,
     per_sample: bool = True,
-) -> None:
+) -> list[Path]:
+    """Write the --json and --plot files; returns the paths written, in order. Called before
+    the table is printed, so a reader that stops early (``| head``) cannot cost a file."""
+    written: list[Path] = []
     if json_path is not None:
         from .report import report_json_bytes
 
@@ -134,7 +137,7 @@ def _write_outputs(
             raise InvalidInputError(
                 "--json", f"cannot write '{json_path}': {error.strerror or error}"
             ) from None
-        print(f"wrote {json_path}")
+        written.append(json_path)
     if plot_path is not None:
         from .plotting import plot_report
 
@@ -143,17 +146,25 @@ def _write_outputs(
             if report.retimed:
                 from .retime_plot import plot_retimed
 
-                for written in plot_retimed(report, plot_path, title):
-                    print(f"wrote {written}")
+                written.extend(plot_retimed(report, plot_path, title))
         except (OSError, ValueError) as error:  # ValueError: a format matplotlib lacks
             reason = getattr(error, "strerror", None) or " ".join(str(error).split())
             raise InvalidInputError("--plot", f"cannot write '{plot_path}': {reason}") from None
-        print(f"wrote {plot_path}")
+        written.append(plot_path)
+    return written
+
+
+def _print_results(scenario: Scenario, report: SafetyReport, written: list[Path]) -> None:
+    from .report import report_text
+
+    print(run_header(scenario, report))
+    print(report_text(report))
+    for path in written:
+        print(f"wrote {path}")
 
 
 def _command_rank(args: argparse.Namespace) -> int:
     from ..scenario.schema import load_scenario
-    from .report import report_text
 
     scenario = load_scenario(args.scenario)
     if args.retime and scenario.options.retime is None:  # the limits: refused when missing
@@ -166,24 +177,25 @@ def _command_rank(args: argparse.Namespace) -> int:
         retime = parse_retime(section, requested=True)
         scenario = replace(scenario, options=replace(scenario.options, retime=retime))
     report = rank_scenario(scenario, args.metric)
-    print(run_header(scenario, report))
-    print(report_text(report))
-    _write_outputs(report, args.json, args.plot, Path(args.scenario).name, args.per_sample)
+    written = _write_outputs(
+        report, args.json, args.plot, Path(args.scenario).name, args.per_sample
+    )
+    _print_results(scenario, report, written)
     return 0
 
 
 def _command_demo(args: argparse.Namespace) -> int:
     from ..scenario.schema import load_scenario
-    from .report import report_text
 
     path = config_file(DEMO_SCENARIO)
     print(f"demo: the paper's book experiment on Baxter ({path})")
     scenario = load_scenario(path)
     report = rank_scenario(scenario, backend=DEMO_BACKEND)
-    print(run_header(scenario, report))
-    print(report_text(report))
     out = Path(args.out)
-    _write_outputs(report, out / "ranking.json", out / "ranking.png", "book on Baxter (demo)")
+    written = _write_outputs(
+        report, out / "ranking.json", out / "ranking.png", "book on Baxter (demo)"
+    )
+    _print_results(scenario, report, written)
     return 0
 
 
@@ -304,7 +316,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         one_line = " ".join(line.strip() for line in str(error).splitlines())
         print(f"grasp-safety: error: {one_line}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    except BrokenPipeError:  # output piped into a reader that stopped early (head, less)
+    except BrokenPipeError:  # a reader that stopped early (head): the files are written by then
         sys.stderr.close()
         return 0
 

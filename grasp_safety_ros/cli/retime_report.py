@@ -17,13 +17,16 @@ def _number(value: float) -> float | None:
     return float(value) if math.isfinite(value) else None
 
 
-def retimed_to_dict(motion: RetimedMotion | None, per_sample: bool = True) -> dict[str, Any]:
-    """One grasp's retiming: ``safe_duration_s`` (None: infeasible or no timing found), the
-    planner's worst ratio and the uniform T_min; with ``per_sample`` the trajectory
-    ``{t_s, q, qd, qdd}`` (rows in ``joint_names`` order), the binding constraint per sample
-    and its ratio, and per region the worst site's speed and its limit f · v_max."""
+def retimed_to_dict(
+    motion: RetimedMotion | None, per_sample: bool = True, reason: str = "none found"
+) -> dict[str, Any]:
+    """One grasp's retiming: ``safe_duration_s`` (None: infeasible or no timing found, with
+    ``retime_reason`` why), the planner's worst ratio and the uniform T_min; with
+    ``per_sample`` the trajectory ``{t_s, q, qd, qdd}`` (rows in ``joint_names`` order), the
+    binding constraint per sample and its ratio, and per region the worst site's speed and
+    its limit f · v_max."""
     if motion is None:
-        return {"safe_duration_s": None}
+        return {"safe_duration_s": None, "retime_reason": reason}
     result: dict[str, Any] = {
         "safe_duration_s": motion.safe_duration_s,
         "planned_duration_s": motion.planned_duration_s,
@@ -83,6 +86,12 @@ def _most_binding(motion: RetimedMotion) -> str:
     return max(set(labels), key=labels.count) if labels else "none"
 
 
+def _reason(report: SafetyReport, k: int) -> str:
+    """Why grasp ``k`` has no retimed motion."""
+    reasons = report.retime_reasons
+    return (reasons[k] if k < len(reasons) else "") or "infeasible or none found"
+
+
 def retime_lines(report: SafetyReport) -> list[str]:
     """One line per grasp in the final order: safe duration, planned and uniform T_min, what
     binds most; then the standard's estimate where it is optimistic."""
@@ -93,7 +102,7 @@ def retime_lines(report: SafetyReport) -> list[str]:
         motion = report.retimed[k] if report.retimed else None
         name = evaluations[k].name or f"grasp {k}"
         if motion is None:
-            lines.append(f"  {name}: no safe timing (infeasible or none found)")
+            lines.append(f"  {name}: no safe timing ({_reason(report, k)})")
             continue
         uniform = motion.uniform_feasible_duration_s
         lines.append(
@@ -130,7 +139,7 @@ def add_retime_to_grasp(
     """Grasp ``k``'s retiming (when on) and the standard's estimate (with the whole arm or
     the retiming) into its JSON entry ``grasp``."""
     if report.retimed:
-        grasp.update(retimed_to_dict(report.retimed[k], per_sample))
+        grasp.update(retimed_to_dict(report.retimed[k], per_sample, _reason(report, k)))
     if report.whole_arm or report.retimed:
         grasp["standard_mass_estimate"] = standard_mass_to_dict(report, k)
 

@@ -229,7 +229,7 @@ class RetimeStage:
         if options.retime is None:  # not wanted: nothing to add
             return report
         evaluations, redundancy = report.ranking.evaluations, report.redundancy
-        retimed = retime_grasps(
+        retimed, reasons = retime_grasps(
             robot,
             options.retime,
             report.arm_sites or resolve_arm_sites(robot, options.arm_points_m),
@@ -243,7 +243,7 @@ class RetimeStage:
         order = report.order
         if options.rank_by == "safe_duration":
             order = order_by_safe_duration(retimed, report.scores, [e.index for e in evaluations])
-        return replace(report, retimed=retimed, order=order)
+        return replace(report, retimed=retimed, retime_reasons=reasons, order=order)
 
 
 REPORT_STAGES: tuple[ReportStage, ...] = (ArmatureRangeStage(), RetimeStage())

@@ -8,8 +8,9 @@ points s_i (the planned samples), the largest path velocities ṡ_i with piecewi
 acceleration s̈ between them, at rest at both ends, subject at every grid point to:
 
 - joint velocities |q'(s_i)| ṡ ≤ v_lim (``toppra.constraint.JointVelocityConstraint``);
-- joint accelerations |q''(s_i) ṡ² + q'(s_i) s̈| ≤ a_lim (``JointAccelerationConstraint``,
-  collocation: the acceleration at grid point i with the s̈ of the segment starting there);
+- joint accelerations |q''(s) ṡ² + q'(s) s̈| ≤ a_lim (``JointAccelerationConstraint``,
+  ``DiscretizationType.Interpolation``: with the s̈ of segment i, at both its ends s_i and
+  s_i+1, ṡ²_i+1 = ṡ²_i + 2 s̈ (s_i+1 - s_i));
 - every site k (``site_speeds``: arm sites, tip, object points; armature and object in the
   effective mass): |J_k q'(s_i)| ṡ ≤ f · v_max,k(s_i), with f the safety factor and v_max,k the
   admissible transient-contact speed of the limiting permitted region for the site's effective
@@ -50,6 +51,21 @@ MIN_SAMPLES = 3
 
 MAX_OUTPUT_SAMPLES = 100_000
 """Most samples a uniform ``output_dt_s`` may produce."""
+
+
+def check_output_dt(output_dt_s: float | None, planned_durations_s: Sequence[float]) -> None:
+    """Refuse a uniform ``output_dt_s`` [s] that gives more than MAX_OUTPUT_SAMPLES samples
+    over the longest planned duration [s] (a safe duration longer still fails that grasp)."""
+    if output_dt_s is None or not len(planned_durations_s):
+        return
+    longest = max(planned_durations_s)
+    if longest / output_dt_s > MAX_OUTPUT_SAMPLES:
+        raise InvalidInputError(
+            "retime.output_dt_s",
+            f"must be >= {longest / MAX_OUTPUT_SAMPLES:.3g} s (at most {MAX_OUTPUT_SAMPLES} "
+            f"samples over the longest planned duration {longest:.3g} s), got {output_dt_s:g}",
+        )
+
 
 AT_REST = "at rest"
 """The binding label of a sample where nothing moves."""
@@ -413,10 +429,10 @@ def _output_samples(
         times = grid_times
     else:
         dt = finite_float(output_dt_s, "retime.output_dt_s", 0.0, None, True)
-        if duration / dt > MAX_OUTPUT_SAMPLES:
-            raise InvalidInputError(
-                "retime.output_dt_s",
-                f"gives more than {MAX_OUTPUT_SAMPLES} samples over {duration:.3g} s",
+        if duration / dt > MAX_OUTPUT_SAMPLES:  # a per-path condition: not the request's
+            raise GraspSafetyError(
+                f"retime.output_dt_s {dt:g} s gives more than {MAX_OUTPUT_SAMPLES} samples "
+                f"over this grasp's safe duration {duration:.3g} s"
             )
         times = np.append(np.arange(0.0, duration, dt), duration)
         times = times[np.concatenate([np.diff(times) > 0.0, [True]])]

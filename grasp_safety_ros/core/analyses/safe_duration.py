@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -30,7 +30,7 @@ from ..method.ranking import Grasp, GraspEvaluation
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
 from .arm_sites import ArmSites
-from .retime import RETIME_FIELD, RetimedMotion, RetimeLimits, retime_path
+from .retime import RETIME_FIELD, RetimedMotion, RetimeLimits, check_output_dt, retime_path
 from .site_speeds import SiteSpeedModel
 
 UNRETIMABLE_S = float(np.finfo(float).max)
@@ -114,13 +114,17 @@ def retime_grasps(
     regions: Sequence[str] | None,
     resolved: Sequence[np.ndarray | None] | None = None,
     step: Callable[[], None] | None = None,
-) -> tuple[RetimedMotion | None, ...]:
-    """Every grasp's retimed motion (None: infeasible, or TOPP-RA found no timing), in
-    candidate order; ``step()`` after each grasp. Bad limits raise once, naming the field."""
+) -> tuple[tuple[RetimedMotion | None, ...], tuple[str, ...]]:
+    """Every grasp's retimed motion (None: infeasible, or no timing found) and why it has
+    none ("" where it has one), in candidate order; ``step()`` after each grasp. Bad limits
+    or ``output_dt_s`` raise once, naming the field; one grasp's failure is that grasp's."""
     options.limits(robot)  # refuse bad input before any work
+    planned = [e.times_s[-1] - e.times_s[0] for e in evaluations if e.feasible]
+    check_output_dt(options.output_dt_s, planned)
     results: list[RetimedMotion | None] = []
+    reasons: list[str] = []
     for k, (grasp, evaluation) in enumerate(zip(grasps, evaluations, strict=True)):
-        motion = None
+        motion, reason = None, "infeasible"
         if evaluation.feasible:
             try:
                 motion = retime_evaluation(
@@ -134,14 +138,16 @@ def retime_grasps(
                     regions,
                     None if resolved is None else resolved[k],
                 )
+                reason = ""
             except InvalidInputError:
                 raise
-            except GraspSafetyError:
-                motion = None
+            except GraspSafetyError as error:
+                reason = " ".join(str(error).split())
         results.append(motion)
+        reasons.append(reason)
         if step is not None:
             step()
-    return tuple(results)
+    return tuple(results), tuple(reasons)
 
 
 def order_by_safe_duration(
@@ -190,12 +196,13 @@ class SafeDurationPostureCriterion:
     ) -> np.ndarray:
         """The safe duration [s] of each feasible evaluation of ``grasp``."""
         robot = evaluator.robot
+        options = replace(self.options, output_dt_s=None)  # the duration only: the grid's
         values = []
         for evaluation in evaluations:
             try:
                 motion = retime_evaluation(
                     robot,
-                    self.options,
+                    options,
                     self.sites,
                     object_inertia,
                     grasp,

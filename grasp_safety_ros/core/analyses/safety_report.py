@@ -229,6 +229,7 @@ class SafetyReport:
         retimed: Each grasp's motion retimed to the site speed limits (None: infeasible or
             no timing found), when ``options.retime`` is set (core.pipeline's RetimeStage,
             which also sets ``order`` under ``rank_by: safe_duration``).
+        retime_reasons: Why each grasp has no retimed motion ("" where it has one).
         standard_mass_estimate_kg: ISO/TS 15066's m_R = M/2 + m_L [kg] (safe_duration).
     """
 
@@ -247,6 +248,7 @@ class SafetyReport:
     arm_sites: ArmSites | None = None
     armature_range: ArmatureRangeAnalysis | None = None
     retimed: tuple[RetimedMotion | None, ...] = ()
+    retime_reasons: tuple[str, ...] = ()
     standard_mass_estimate_kg: float = float("nan")
 
 

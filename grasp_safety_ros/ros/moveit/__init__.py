@@ -14,7 +14,9 @@ def offer_plan_grasps(node: Any, **hooks: Any) -> Any:
     an info line when moveit_msgs is not installed."""
     try:
         from .server import GraspPlanningServer
-    except ImportError as error:
+    except ModuleNotFoundError as error:  # moveit_msgs missing; any other import error raises
+        if (error.name or "").partition(".")[0] != "moveit_msgs":
+            raise
         node.get_logger().info(
             f"~/plan_grasps not offered: {error} (make setup builds moveit_msgs from "
             "../shared/interfaces)"

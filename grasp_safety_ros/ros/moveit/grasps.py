@@ -28,9 +28,15 @@ from grasp_safety_msgs.msg import GraspRanking
 from moveit_msgs.msg import CollisionObject, Grasp
 from nav_msgs.msg import Path
 from std_msgs.msg import Header
+from trajectory_msgs.msg import MultiDOFJointTrajectory
 
 from ...core.exceptions import InvalidInputError
-from ..conversions.geometry import duration_msg
+from ..conversions.geometry import (
+    check_frame_id,
+    duration_msg,
+    duration_to_seconds,
+    stamp_to_seconds,
+)
 
 _KEYS = {"safety": "safety_score", "effort": "effort_score", "whole_arm": "whole_arm_rank_force_n"}
 """The evaluation field each rank_by orders by, lowest first."""
@@ -95,6 +101,44 @@ def goal_pose(values: Sequence[float]) -> Pose:
     q = pose.orientation
     q.x, q.y, q.z, q.w = (float(v) for v in values[3:])
     return pose
+
+
+def trajectory_goal(
+    latest: Path | MultiDOFJointTrajectory | None, base_frame: str
+) -> tuple[Pose, float] | None:
+    """The last pose of an object trajectory (``base_frame``: its frame must be this one) and
+    its duration [s], or None for no trajectory or one without poses."""
+    if isinstance(latest, Path) and latest.poses:
+        field = "object_trajectory"
+        check_frame_id(latest.header.frame_id, [base_frame], f"{field}.header.frame_id")
+        first, last = latest.poses[0], latest.poses[-1]
+        if last.header.frame_id:
+            index = len(latest.poses) - 1
+            check_frame_id(last.header.frame_id, [base_frame], f"{field}.poses[{index}].header")
+        duration = stamp_to_seconds(last.header.stamp) - stamp_to_seconds(first.header.stamp)
+        return last.pose, max(duration, 0.0)
+    if isinstance(latest, MultiDOFJointTrajectory) and latest.points:
+        field = "object_multi_dof_trajectory"
+        check_frame_id(latest.header.frame_id, [base_frame], f"{field}.header.frame_id")
+        first, last = latest.points[0], latest.points[-1]
+        if len(last.transforms) != 1:
+            raise InvalidInputError(
+                f"{field}.points[{len(latest.points) - 1}].transforms",
+                f"must hold exactly one transform (the object), got {len(last.transforms)}",
+            )
+        end = last.transforms[0]
+        pose = Pose()
+        pose.position.x, pose.position.y, pose.position.z = (
+            end.translation.x,
+            end.translation.y,
+            end.translation.z,
+        )
+        pose.orientation = end.rotation
+        duration = duration_to_seconds(last.time_from_start) - duration_to_seconds(
+            first.time_from_start
+        )
+        return pose, max(duration, 0.0)
+    return None
 
 
 def safety_qualities(ranking: GraspRanking) -> dict[int, float]:

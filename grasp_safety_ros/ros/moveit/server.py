@@ -28,17 +28,20 @@ from rclpy.node import Node
 from trajectory_msgs.msg import MultiDOFJointTrajectory
 
 from ...core.exceptions import GraspSafetyError, InvalidInputError
-from ..conversions.geometry import (
-    check_frame_id,
-    duration_to_seconds,
-    stamp_to_seconds,
-)
+from ..conversions.geometry import check_frame_id
 from ..conversions.requests import transforms_from_pose_msgs
 from ..service.errors import ShuttingDownError
 from ..service.message_checks import check_no_subnormals
 from ..service.ranking_job import Snapshot
 from ..topics.qos import SERVICE
-from .grasps import goal_pose, object_path, planner_qualities, pose_array_of_grasps, ranked_grasps
+from .grasps import (
+    goal_pose,
+    object_path,
+    planner_qualities,
+    pose_array_of_grasps,
+    ranked_grasps,
+    trajectory_goal,
+)
 
 SOURCE = "grasp_safety"
 """``error_code.source`` of the answers this server makes itself."""
@@ -203,7 +206,7 @@ class GraspPlanningServer:
             f"{field}[0].grasp_pose.header.frame_id",
         )
         transforms_from_pose_msgs(poses.poses, field, ".grasp_pose.pose")  # names a bad one
-        goal, duration_s = self._goal()
+        goal, duration_s = self._goal(settings.base_frame)
         path = object_path(request.target, settings.base_frame, goal, duration_s)
         quality = planner_qualities(grasps) if self._parameter("planner_quality") else None
         ranking = self._rank(
@@ -218,31 +221,15 @@ class GraspPlanningServer:
         )
         return ranked_grasps(grasps, ranking, self._parameter("infeasible"))
 
-    def _goal(self) -> tuple[Pose, float]:
+    def _goal(self, base_frame: str) -> tuple[Pose, float]:
         """The object's goal pose (base frame) and the motion's duration [s] (0: the node's
         trajectory.duration_s): moveit.object_goal, else the end of ~/object_trajectory."""
         values = self._parameter("object_goal")
         if len(values) == 7:
             return goal_pose(values), 0.0
-        latest = self._latest_trajectory()
-        if isinstance(latest, Path) and latest.poses:
-            first, last = latest.poses[0], latest.poses[-1]
-            duration = stamp_to_seconds(last.header.stamp) - stamp_to_seconds(first.header.stamp)
-            return last.pose, max(duration, 0.0)
-        if isinstance(latest, MultiDOFJointTrajectory) and latest.points:
-            first, last = latest.points[0], latest.points[-1]
-            end = last.transforms[0]
-            pose = Pose()
-            pose.position.x, pose.position.y, pose.position.z = (
-                end.translation.x,
-                end.translation.y,
-                end.translation.z,
-            )
-            pose.orientation = end.rotation
-            duration = duration_to_seconds(last.time_from_start) - duration_to_seconds(
-                first.time_from_start
-            )
-            return pose, max(duration, 0.0)
+        goal = trajectory_goal(self._latest_trajectory(), base_frame)
+        if goal is not None:
+            return goal
         raise InvalidInputError(
             "moveit.object_goal",
             "is empty and no ~/object_trajectory has arrived: set the object's goal pose "
