@@ -72,6 +72,7 @@ def monitor_command() -> list[str]:
         *("--params-file", str(PARAMS)),
         *("-p", "speed_scaling.max_increase_per_s:=1000000000.0"),
         *("-p", "speed_scaling.closed_loop:=false"),  # the state's own factor (no controller)
+        *("-p", "speed_scaling.controller_latency_s:=0.0"),  # closed loop: the last factor
         *("-r", f"~/speed_scaling:={CONTROLLER_TOPIC}"),
     ]
 
@@ -81,6 +82,7 @@ def settings() -> MonitorSettings:
     flat = _flatten(values)
     flat["speed_scaling.max_increase_per_s"] = 1e9
     flat["speed_scaling.closed_loop"] = False
+    flat["speed_scaling.controller_latency_s"] = 0.0
     return monitor_settings(flat)
 
 
@@ -101,14 +103,18 @@ def offline() -> dict[str, SpeedScaling]:
     bundle = build_robot(config.node, None)
     assert bundle is not None
     sites = resolve_arm_sites(bundle.robot)
-    payload = config.payload
+    payload, margin, rest = config.payload, config.margin, config.rest_speed_m_s
     return {
         "payload": SpeedScaling(
             payload_speed_model(
                 bundle.robot, sites, payload.inertia, payload.points_in_tip_m, None
-            )
+            ),
+            margin,
+            rest,
         ),
-        "none": SpeedScaling(payload_speed_model(bundle.robot, sites, None, None, None)),
+        "none": SpeedScaling(
+            payload_speed_model(bundle.robot, sites, None, None, None), margin, rest
+        ),
     }
 
 
