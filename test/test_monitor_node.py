@@ -17,6 +17,7 @@ from __future__ import annotations
 import itertools
 import re
 import subprocess
+import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -217,10 +218,14 @@ def monitor(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Client, 
             client.spin_until(lambda: client.statuses, 1.0)  # status matched too
             yield client, log, env
         finally:
-            client.close()
+            before = len(client.factors)
             stop(process)
+            client.spin_until(lambda: len(client.factors) > before, 5.0)
+            on_exit = client.factors[before:]
+            client.close()
     output = log.read_text()
     assert process.returncode == 0, output
+    assert on_exit and on_exit[-1] == 0.0, on_exit  # its latched factor does not outlive it
     assert "Traceback" not in output, output
 
 
@@ -345,7 +350,7 @@ def test_bad_states_give_0_with_the_reason_then_recover(
     check_replay(client, offline["payload"], q[250:260], qd[250:260], first=stamp + 1)
 
 
-def test_payload_in_the_wrong_frame_is_refused_and_m_0_carries_nothing(
+def test_payload_in_the_wrong_frame_gives_0_until_a_valid_one_and_m_0_carries_nothing(
     monitor: tuple[Client, Path, dict], offline: dict[str, SpeedScaling]
 ) -> None:
     client, log, _ = monitor
@@ -357,7 +362,11 @@ def test_payload_in_the_wrong_frame_is_refused_and_m_0_carries_nothing(
     assert client.spin_until(lambda: refusal in log.read_text(), 10.0), log.read_text()
     q, qd = panda_trajectory(duration_s=1.0, stroke_rad=0.8)
     client.publish_states(JOINTS, q[300:310], qd[300:310], first=9500)
-    check_replay(client, offline["payload"], q[300:310], qd[300:310], first=9500)  # kept
+    client.spin_until(lambda: len(assessed(client, 9500, 10)) >= 9, 5.0)
+    held = assessed(client, 9500, 10).values()  # the carried object is unknown: factor 0
+    assert held and all(
+        s.factor == 0.0 and s.fail_safe == f"payload refused: {refusal}" for s in held
+    )
     nothing = InertiaStamped()
     nothing.header.frame_id = "panda_hand"
     client.payload.publish(nothing)
@@ -457,6 +466,20 @@ def test_replay_of_the_safe_retiming_needs_no_scaling(
 
 
 @pytest.mark.skipif(not HAS_LAUNCH, reason=f"no ros2 launch in {BIN}")
+def test_missing_interface_package_is_one_line_and_exit_1() -> None:
+    blocked = (
+        "import sys; sys.modules['control_msgs'] = None; "
+        "from grasp_safety_ros.ros.monitor.node import run; raise SystemExit(run([]))"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", blocked], capture_output=True, text=True, timeout=60.0
+    )
+    assert done.returncode == 1, done.stderr
+    lines = (done.stdout + done.stderr).strip().splitlines()
+    assert len(lines) == 1 and "control_msgs missing" in lines[0], lines
+    assert "make setup" in lines[0] and "../shared/interfaces" in lines[0]
+
+
 def test_launch_file_remaps_the_factor_to_the_controller(tmp_path: Path) -> None:
     """``ros2 launch grasp_safety_ros grasp_safety_monitor.launch.py controller:=arm_ctrl``:
     the factor (0: no state yet) on /arm_ctrl/speed_scaling_input; Ctrl-C stops it cleanly."""

@@ -35,6 +35,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header, String
 
@@ -63,8 +64,8 @@ try:  # built by `make setup`; without them the executable says so in one line (
     from .messages import diagnostic_status, status_msg
 except ImportError as missing:
     MISSING_INTERFACES = (
-        f"interface package {missing.name or missing} missing: build it with `make setup` "
-        "(control_msgs needs ../shared/interfaces beside the checkout)"
+        f"interface package {(missing.name or str(missing)).split('.')[0]} missing: build it "
+        "with `make setup` (control_msgs needs ../shared/interfaces beside the checkout)"
     )
 else:
     MISSING_INTERFACES = ""
@@ -304,21 +305,31 @@ class MonitorNode(Node):
         )
 
 
+def _interrupt(signal_number: int, frame: Any) -> None:
+    raise KeyboardInterrupt(signal.Signals(signal_number).name)
+
+
 def _internal_error(error: BaseException) -> str:
     return f"internal error: {type(error).__name__}: {error}"
 
 
 def run(args: list[str] | None = None) -> int:
-    """Run the monitor until SIGINT/SIGTERM or shut-down; 1 on a start-up error (one line)."""
+    """Run the monitor until SIGINT/SIGTERM or shut-down; 1 on a start-up error (one line).
+
+    The monitor handles the signals itself (rclpy's handlers would shut the context down
+    first): on the way out it publishes factor 0, so its latched factor does not outlive it.
+    """
     logger = rclpy.logging.get_logger(NODE_NAME)
     if MISSING_INTERFACES:
         logger.error(f"start-up failed: {MISSING_INTERFACES}")
         return 1
     try:
-        rclpy.init(args=args)
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except RuntimeError as error:  # bad --ros-args or params file
         logger.error(f"start-up failed: {str(error).strip().splitlines()[0]}")
         return 1
+    for number in (signal.SIGINT, signal.SIGTERM):  # raised in spin: its timers wake it
+        signal.signal(number, _interrupt)
     node: MonitorNode | None = None
     status = 0
     try:
