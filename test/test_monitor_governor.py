@@ -273,6 +273,7 @@ def test_a_lagging_controller_never_exceeds_the_need_within_the_latency_window(
     peak, settled = worst(0.002 * lag + 1e-9)
     assert peak <= 1.0 + 16 * EPS
     assert settled == pytest.approx(1.0, rel=16 * EPS)  # and it reaches the need
+    assert worst(0.05)[0] <= 1.0 + 16 * EPS  # a wider window: still never above the need
     assert worst(0.0)[0] > 1.0 + 1e-3  # the last published factor over-estimates the headroom
 
 
