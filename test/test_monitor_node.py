@@ -22,6 +22,7 @@ import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -41,11 +42,14 @@ from test_ros2_cli import BIN, PREFIX, ROS2, ros2, ros2_all, ros_env, stop
 from grasp_safety_ros.core.analyses.arm_sites import resolve_arm_sites
 from grasp_safety_ros.core.analyses.retime import RetimeLimits, retime_path
 from grasp_safety_ros.core.analyses.speed_scaling import (
+    IncreaseLimiter,
     SpeedScaling,
     closed_loop_factor,
     payload_speed_model,
 )
 from grasp_safety_ros.paths import config_file
+from grasp_safety_ros.ros.monitor.governor import Decision, Governor
+from grasp_safety_ros.ros.monitor.node import MonitorNode
 from grasp_safety_ros.ros.monitor.parameters import MonitorSettings, monitor_settings
 from grasp_safety_ros.ros.robot.bundle import build_robot
 
@@ -528,3 +532,24 @@ def test_parameter_changes_refused_with_the_reason(monitor: tuple[Client, Path, 
     assert refused in margin.stdout + margin.stderr, margin
     assert "urdf: read at start-up only" in urdf.stdout + urdf.stderr, urdf
     assert "no valid /joint_states" in described.stdout, described
+
+
+def test_an_error_while_publishing_is_logged_and_publishes_0() -> None:
+    """``_publish`` alone (no rclpy context): the first send raises, the second is the
+    fail-safe with the error's one line."""
+    node = MonitorNode.__new__(MonitorNode)  # only what _publish uses
+    sent: list[Decision] = []
+    logged: list[str] = []
+
+    def send(decision: Decision, stamp: Any) -> None:
+        sent.append(decision)
+        if len(sent) == 1:
+            raise RuntimeError("publisher gone")
+
+    node._send = send  # type: ignore[method-assign]
+    node._governor = Governor(0.1, IncreaseLimiter(2.0, 1.0, 0.0))
+    node.get_logger = lambda: SimpleNamespace(error=logged.append)  # type: ignore[method-assign]
+    node._publish(Decision(1.0, 1.0, None, ""), None)
+    assert [d.factor for d in sent] == [1.0, 0.0]
+    assert sent[1].fail_safe == "internal error: RuntimeError: publisher gone"
+    assert len(logged) == 1 and "RuntimeError: publisher gone" in logged[0]
