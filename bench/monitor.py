@@ -77,7 +77,7 @@ def analysis() -> SpeedScaling:
     model = payload_speed_model(
         bundle.robot, sites, payload.inertia, payload.points_in_tip_m, None
     )
-    return SpeedScaling(model, settings.margin)
+    return SpeedScaling(model, settings.margin, settings.rest_speed_m_s)
 
 
 def states(count: int) -> tuple[np.ndarray, np.ndarray]:

@@ -139,6 +139,8 @@ BASE = {"urdf": "example-robot-data:panda", "base_frame": "panda_link0", "tip_fr
         ({"speed_scaling.margin": 1.2}, "speed_scaling.margin"),
         ({"speed_scaling.max_increase_per_s": 0.0}, "speed_scaling.max_increase_per_s"),
         ({"joint_states_timeout_s": -1.0}, "joint_states_timeout_s"),
+        ({"speed_scaling.rest_speed_m_s": 0.5}, "speed_scaling.rest_speed_m_s"),
+        ({"speed_scaling.controller_latency_s": -0.01}, "speed_scaling.controller_latency_s"),
         ({"payload.mass_kg": 2000.0}, "payload.mass_kg"),
         ({"payload.box_size_m": [0.1, 0.1]}, "payload.box_size_m"),
         ({"payload.points_in_tip_m": [0.1, 0.1]}, "payload.points_in_tip_m"),
@@ -210,3 +212,80 @@ def test_closed_loop_factor_at_rest_and_in_motion() -> None:
     assert closed_loop_factor(0.0, 0.5) == 0.0  # still moving after a 0: stay at 0
     assert closed_loop_factor(0.5, 0.8) == 0.4
     assert closed_loop_factor(0.5, 3.0) == 1.0
+
+
+def rest_scaling(scaling: SpeedScaling, rest_speed_m_s: float) -> SpeedScaling:
+    return SpeedScaling(scaling.speed_model, scaling.margin, rest_speed_m_s)
+
+
+@pytest.mark.parametrize("rest_speed_m_s", [0.0, 0.001])
+def test_noisy_rest_after_a_fail_safe_recovers_at_the_rate_limit(
+    scaling: SpeedScaling, rest_speed_m_s: float
+) -> None:
+    rate, period = 2.0, 0.001953125  # 1/512 s: times exact in binary
+    monitor = governor(rest_scaling(scaling, rest_speed_m_s), rate)
+    monitor.closed_loop, monitor.controller_latency_s = True, 0.05
+    monitor.fail("no /joint_states yet", 0.0)
+    noise = np.random.default_rng(7).normal(0.0, 1e-5, (700, 7))  # encoder noise [rad/s]
+    # the sites' speeds: at most |J| |q̇| ~ 1 m x 1e-4 rad/s, far below 0.001 m/s
+    factors = [
+        monitor.on_state(JOINTS, [0.3] * 7, n.tolist(), period * (k + 1)).factor
+        for k, n in enumerate(noise)
+    ]
+    if rest_speed_m_s == 0.0:  # every site "moves": 0 x headroom stays 0 (the defect)
+        assert max(factors) == 0.0
+        return
+    elapsed = period * np.arange(len(factors))  # the rise starts at the first state
+    np.testing.assert_allclose(factors, np.minimum(1.0, rate * elapsed), rtol=0, atol=8 * EPS)
+
+
+def run_against_a_lagging_controller(
+    monitor: Governor, q: np.ndarray, nominal: np.ndarray, lag: int, steps: int
+) -> np.ndarray:
+    """A controller whose state shows the factor published ``lag`` messages before the last
+    one (0 before any; lag 0: the last one, no latency): the factors it applied to the
+    ``steps`` states (0.002 s apart)."""
+    published: list[float] = []
+    applied = np.zeros(steps)
+    for k in range(steps):
+        applied[k] = published[k - 1 - lag] if k > lag else 0.0
+        state = (applied[k] * nominal).tolist()
+        published.append(monitor.on_state(JOINTS, q.tolist(), state, 0.002 * k).factor)
+    return applied
+
+
+@pytest.mark.parametrize("lag", [1, 10])  # 2 ms, 20 ms
+def test_a_lagging_controller_never_exceeds_the_need_within_the_latency_window(
+    scaling: SpeedScaling, lag: int
+) -> None:
+    q, nominal = np.full(7, 0.3), np.array([2.0, -1.5, 1.8, 2.2, -2.5, 1.9, 2.4])
+    need = scaling.assess(q, nominal).factor  # the unscaled motion's factor
+    assert 0.0 < need < 0.9
+
+    def worst(latency_s: float) -> tuple[float, float]:
+        monitor = governor(rest_scaling(scaling, 0.001), rate=2.0)
+        monitor.closed_loop, monitor.controller_latency_s = True, latency_s
+        applied = run_against_a_lagging_controller(monitor, q, nominal, lag, 1000)
+        return float(applied.max()) / need, float(applied[-1]) / need
+
+    # the window covers the lag: the factor assumed applied is at or below the applied one,
+    # so the target never exceeds the need; tolerance: a few roundings of the products
+    peak, settled = worst(0.002 * lag + 1e-9)
+    assert peak <= 1.0 + 16 * EPS
+    assert settled == pytest.approx(1.0, rel=16 * EPS)  # and it reaches the need
+    assert worst(0.05)[0] <= 1.0 + 16 * EPS  # a wider window: still never above the need
+    assert worst(0.0)[0] > 1.0 + 1e-3  # the last published factor over-estimates the headroom
+
+
+def test_a_refused_payload_gives_0_with_the_refusal_until_a_valid_one(
+    scaling: SpeedScaling,
+) -> None:
+    monitor = governor(scaling)
+    assert monitor.on_state(JOINTS, [0.3] * 7, [0.01] * 7, 0.0).fail_safe == ""
+    refusal = "payload refused: payload.inertia: mass must be at most max_mass_kg=5"
+    monitor.refuse_payload(refusal)
+    decision = monitor.on_state(JOINTS, [0.3] * 7, [0.01] * 7, 0.0625)
+    assert (decision.factor, decision.fail_safe) == (0.0, refusal)
+    monitor.refuse_payload("")  # a valid payload arrived
+    assert monitor.on_state(JOINTS, [0.3] * 7, [0.01] * 7, 0.125).fail_safe == ""
+    assert monitor.on_state(JOINTS, [0.3] * 7, [0.01] * 7, 0.1875).factor == 1.0

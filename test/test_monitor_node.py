@@ -17,10 +17,12 @@ from __future__ import annotations
 import itertools
 import re
 import subprocess
+import sys
 import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -40,11 +42,14 @@ from test_ros2_cli import BIN, PREFIX, ROS2, ros2, ros2_all, ros_env, stop
 from grasp_safety_ros.core.analyses.arm_sites import resolve_arm_sites
 from grasp_safety_ros.core.analyses.retime import RetimeLimits, retime_path
 from grasp_safety_ros.core.analyses.speed_scaling import (
+    IncreaseLimiter,
     SpeedScaling,
     closed_loop_factor,
     payload_speed_model,
 )
 from grasp_safety_ros.paths import config_file
+from grasp_safety_ros.ros.monitor.governor import Decision, Governor
+from grasp_safety_ros.ros.monitor.node import MonitorNode
 from grasp_safety_ros.ros.monitor.parameters import MonitorSettings, monitor_settings
 from grasp_safety_ros.ros.robot.bundle import build_robot
 
@@ -72,6 +77,7 @@ def monitor_command() -> list[str]:
         *("--params-file", str(PARAMS)),
         *("-p", "speed_scaling.max_increase_per_s:=1000000000.0"),
         *("-p", "speed_scaling.closed_loop:=false"),  # the state's own factor (no controller)
+        *("-p", "speed_scaling.controller_latency_s:=0.0"),  # closed loop: the last factor
         *("-r", f"~/speed_scaling:={CONTROLLER_TOPIC}"),
     ]
 
@@ -81,6 +87,7 @@ def settings() -> MonitorSettings:
     flat = _flatten(values)
     flat["speed_scaling.max_increase_per_s"] = 1e9
     flat["speed_scaling.closed_loop"] = False
+    flat["speed_scaling.controller_latency_s"] = 0.0
     return monitor_settings(flat)
 
 
@@ -101,14 +108,18 @@ def offline() -> dict[str, SpeedScaling]:
     bundle = build_robot(config.node, None)
     assert bundle is not None
     sites = resolve_arm_sites(bundle.robot)
-    payload = config.payload
+    payload, margin, rest = config.payload, config.margin, config.rest_speed_m_s
     return {
         "payload": SpeedScaling(
             payload_speed_model(
                 bundle.robot, sites, payload.inertia, payload.points_in_tip_m, None
-            )
+            ),
+            margin,
+            rest,
         ),
-        "none": SpeedScaling(payload_speed_model(bundle.robot, sites, None, None, None)),
+        "none": SpeedScaling(
+            payload_speed_model(bundle.robot, sites, None, None, None), margin, rest
+        ),
     }
 
 
@@ -211,10 +222,14 @@ def monitor(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Client, 
             client.spin_until(lambda: client.statuses, 1.0)  # status matched too
             yield client, log, env
         finally:
-            client.close()
+            before = len(client.factors)
             stop(process)
+            client.spin_until(lambda: len(client.factors) > before, 5.0)
+            on_exit = client.factors[before:]
+            client.close()
     output = log.read_text()
     assert process.returncode == 0, output
+    assert on_exit and on_exit[-1] == 0.0, on_exit  # its latched factor does not outlive it
     assert "Traceback" not in output, output
 
 
@@ -339,7 +354,7 @@ def test_bad_states_give_0_with_the_reason_then_recover(
     check_replay(client, offline["payload"], q[250:260], qd[250:260], first=stamp + 1)
 
 
-def test_payload_in_the_wrong_frame_is_refused_and_m_0_carries_nothing(
+def test_payload_in_the_wrong_frame_gives_0_until_a_valid_one_and_m_0_carries_nothing(
     monitor: tuple[Client, Path, dict], offline: dict[str, SpeedScaling]
 ) -> None:
     client, log, _ = monitor
@@ -351,7 +366,11 @@ def test_payload_in_the_wrong_frame_is_refused_and_m_0_carries_nothing(
     assert client.spin_until(lambda: refusal in log.read_text(), 10.0), log.read_text()
     q, qd = panda_trajectory(duration_s=1.0, stroke_rad=0.8)
     client.publish_states(JOINTS, q[300:310], qd[300:310], first=9500)
-    check_replay(client, offline["payload"], q[300:310], qd[300:310], first=9500)  # kept
+    client.spin_until(lambda: len(assessed(client, 9500, 10)) >= 9, 5.0)
+    held = assessed(client, 9500, 10).values()  # the carried object is unknown: factor 0
+    assert held and all(
+        s.factor == 0.0 and s.fail_safe == f"payload refused: {refusal}" for s in held
+    )
     nothing = InertiaStamped()
     nothing.header.frame_id = "panda_hand"
     client.payload.publish(nothing)
@@ -451,6 +470,20 @@ def test_replay_of_the_safe_retiming_needs_no_scaling(
 
 
 @pytest.mark.skipif(not HAS_LAUNCH, reason=f"no ros2 launch in {BIN}")
+def test_missing_interface_package_is_one_line_and_exit_1() -> None:
+    blocked = (
+        "import sys; sys.modules['control_msgs'] = None; "
+        "from grasp_safety_ros.ros.monitor.node import run; raise SystemExit(run([]))"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", blocked], capture_output=True, text=True, timeout=60.0
+    )
+    assert done.returncode == 1, done.stderr
+    lines = (done.stdout + done.stderr).strip().splitlines()
+    assert len(lines) == 1 and "control_msgs missing" in lines[0], lines
+    assert "make setup" in lines[0] and "../shared/interfaces" in lines[0]
+
+
 def test_launch_file_remaps_the_factor_to_the_controller(tmp_path: Path) -> None:
     """``ros2 launch grasp_safety_ros grasp_safety_monitor.launch.py controller:=arm_ctrl``:
     the factor (0: no state yet) on /arm_ctrl/speed_scaling_input; Ctrl-C stops it cleanly."""
@@ -499,3 +532,24 @@ def test_parameter_changes_refused_with_the_reason(monitor: tuple[Client, Path, 
     assert refused in margin.stdout + margin.stderr, margin
     assert "urdf: read at start-up only" in urdf.stdout + urdf.stderr, urdf
     assert "no valid /joint_states" in described.stdout, described
+
+
+def test_an_error_while_publishing_is_logged_and_publishes_0() -> None:
+    """``_publish`` alone (no rclpy context): the first send raises, the second is the
+    fail-safe with the error's one line."""
+    node = MonitorNode.__new__(MonitorNode)  # only what _publish uses
+    sent: list[Decision] = []
+    logged: list[str] = []
+
+    def send(decision: Decision, stamp: Any) -> None:
+        sent.append(decision)
+        if len(sent) == 1:
+            raise RuntimeError("publisher gone")
+
+    node._send = send  # type: ignore[method-assign]
+    node._governor = Governor(0.1, IncreaseLimiter(2.0, 1.0, 0.0))
+    node.get_logger = lambda: SimpleNamespace(error=logged.append)  # type: ignore[method-assign]
+    node._publish(Decision(1.0, 1.0, None, ""), None)
+    assert [d.factor for d in sent] == [1.0, 0.0]
+    assert sent[1].fail_safe == "internal error: RuntimeError: publisher gone"
+    assert len(logged) == 1 and "RuntimeError: publisher gone" in logged[0]

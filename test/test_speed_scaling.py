@@ -22,6 +22,7 @@ from grasp_safety_ros.core.analyses.speed_scaling import (
     IncreaseLimiter,
     SpeedScaling,
     check_margin,
+    check_rest_speed,
     headroom,
     payload_speed_model,
     region_speeds,
@@ -68,6 +69,25 @@ def test_factor_of_given_speeds_and_limits() -> None:
     assert scaling_factor(np.zeros(0), np.zeros(0)) == 1.0
     assert headroom(speeds, limits, margin=0.5) == 0.25
     assert headroom(np.zeros(2), np.ones(2)) == math.inf
+
+
+def test_sites_at_or_below_the_rest_speed_do_not_limit() -> None:
+    speeds = np.array([0.0005, 0.001, 0.5])
+    limits = np.array([1e-6, 1e-6, 0.25])  # the two slow ones would give 0.002 and 0.001
+    assert headroom(speeds, limits, rest_speed_m_s=0.001) == 0.5
+    assert headroom(speeds, limits) == pytest.approx(0.001, rel=EPS)  # rest 0: they limit
+    assert scaling_factor(speeds[:2], limits[:2], rest_speed_m_s=0.001) == 1.0
+    assert headroom(speeds[:2], limits[:2], rest_speed_m_s=0.001) == math.inf
+    (status,) = region_speeds(
+        ("a", "b"), speeds[:2], np.ones(2), [BODY_REGIONS["chest"]], rest_speed_m_s=0.001
+    )
+    assert (status.site, status.speed_m_s, status.factor) == ("", 0.0, 1.0)
+
+
+@pytest.mark.parametrize("rest", [-0.001, 0.011, math.nan])
+def test_rest_speed_outside_its_range_is_refused(rest: float) -> None:
+    with pytest.raises(InvalidInputError, match=r"speed_scaling\.rest_speed_m_s: must be"):
+        check_rest_speed(rest)
 
 
 @pytest.mark.parametrize("margin", [0.0, -0.1, 1.5, math.nan])

@@ -10,7 +10,8 @@ on q and the direction of q̇ only), so the largest admissible factor is
 
     f = min(1, min_k margin · v_max,k / |v_k|)
 
-over the sites that move (a site at rest does not limit), v_max,k the smallest admissible
+over the sites that move (a site at rest, slower than ``rest_speed_m_s``, does not limit:
+encoder noise never stops the robot), v_max,k the smallest admissible
 speed of site k over the assessed regions (those where the TS permits transient contact) and
 ``margin`` in (0, 1] the fraction of it aimed at. ``IncreaseLimiter`` bounds how fast the
 published factor may rise (never how fast it falls). Everything here is ROS-free; the node
@@ -49,26 +50,48 @@ def check_margin(margin: float, field_name: str = "speed_scaling.margin") -> flo
     return value
 
 
-def headroom(speed_m_s: np.ndarray, max_speed_m_s: np.ndarray, margin: float = 1.0) -> float:
-    """min over moving sites of margin · v_max / |v| for (K,) speeds and limits [m/s]: how many
-    times faster the motion could be; inf when no site moves (sites at rest do not limit)."""
+MAX_REST_SPEED_M_S = 0.01
+"""Largest rest speed [m/s]: far below every region's v_max, so a site ignored as at rest at
+factor f (f·|v| <= rest) would be admitted at that f anyway (rest <= v_max)."""
+
+
+def check_rest_speed(value: float, field_name: str = "speed_scaling.rest_speed_m_s") -> float:
+    """The rest speed as a float in [0, MAX_REST_SPEED_M_S] [m/s], else InvalidInputError."""
+    return finite_float(value, field_name, minimum=0.0, maximum=MAX_REST_SPEED_M_S)
+
+
+def headroom(
+    speed_m_s: np.ndarray,
+    max_speed_m_s: np.ndarray,
+    margin: float = 1.0,
+    rest_speed_m_s: float = 0.0,
+) -> float:
+    """min over moving sites (|v| > ``rest_speed_m_s``) of margin · v_max / |v| for (K,)
+    speeds and limits [m/s]: how many times faster the motion could be; inf when no site moves
+    (sites at rest do not limit)."""
     speeds = np.asarray(speed_m_s, dtype=float)
-    moving = speeds > 0.0
+    moving = speeds > rest_speed_m_s
     if not moving.any():
         return math.inf
     return float(np.min(margin * np.asarray(max_speed_m_s, dtype=float)[moving] / speeds[moving]))
 
 
-def scaling_factor(speed_m_s: np.ndarray, max_speed_m_s: np.ndarray, margin: float = 1.0) -> float:
+def scaling_factor(
+    speed_m_s: np.ndarray,
+    max_speed_m_s: np.ndarray,
+    margin: float = 1.0,
+    rest_speed_m_s: float = 0.0,
+) -> float:
     """f = min(1, headroom): 1 when no site moves."""
-    return min(1.0, headroom(speed_m_s, max_speed_m_s, margin))
+    return min(1.0, headroom(speed_m_s, max_speed_m_s, margin, rest_speed_m_s))
 
 
 def closed_loop_factor(applied: float, state_headroom: float) -> float:
     """The factor for the unscaled motion when the measured state already moves at
     ``applied`` times it (a controller applying the published factor): its sites' speeds are
     those of the state divided by ``applied``, so f = min(1, applied · headroom); 1 when no
-    site moves (the factor cannot be inferred from a motion at rest, and rest is safe)."""
+    site moves (the factor cannot be inferred from a motion at rest, and rest is safe; never
+    0 · inf)."""
     if math.isinf(state_headroom):
         return 1.0
     return min(1.0, applied * state_headroom)
@@ -101,12 +124,14 @@ def region_speeds(
     effective_mass_kg: np.ndarray,
     regions: Sequence[BodyRegion],
     margin: float = 1.0,
+    rest_speed_m_s: float = 0.0,
 ) -> tuple[RegionSpeed, ...]:
     """Per region (transient contact permitted), the worst of K sites with (K,) speeds [m/s]
-    and effective masses [kg] (first on ties)."""
+    and effective masses [kg] (first on ties); sites at or below ``rest_speed_m_s`` are at
+    rest."""
     speeds = np.asarray(speed_m_s, dtype=float)
     masses = np.asarray(effective_mass_kg, dtype=float)
-    moving = np.flatnonzero(speeds > 0.0)
+    moving = np.flatnonzero(speeds > rest_speed_m_s)
     result = []
     for region in regions:
         if not len(moving):
@@ -179,13 +204,16 @@ class SpeedScaling:
     Attributes:
         speed_model: The robot, payload, sites and regions (``payload_speed_model``).
         margin: Fraction of v_max aimed at, in (0, 1].
+        rest_speed_m_s: Sites at or below this speed are at rest (do not limit) [m/s].
     """
 
     speed_model: SiteSpeedModel
     margin: float = 1.0
+    rest_speed_m_s: float = 0.0
 
     def __post_init__(self) -> None:
         self.margin = check_margin(self.margin)
+        self.rest_speed_m_s = check_rest_speed(self.rest_speed_m_s)
 
     def assess(self, positions: np.ndarray, velocities: np.ndarray) -> StateScaling:
         """The scaling of the chain state: joint positions [rad or m] and velocities [rad/s
@@ -197,11 +225,12 @@ class SpeedScaling:
         speeds = site_speeds(self.speed_model, robot.q_from_positions(q)[None], qd[None])
         speed, mass = speeds.speed_per_unit[0], speeds.effective_mass_kg[0]
         limit = speeds.max_speed_m_s[0]
-        room = headroom(speed, limit, self.margin)
+        rest = self.rest_speed_m_s
+        room = headroom(speed, limit, self.margin, rest)
         factor = min(1.0, room)
         site = region = ""
         if factor < 1.0:
-            moving = speed > 0.0
+            moving = speed > rest
             ratios = np.where(moving, speed / np.where(moving, limit, 1.0), 0.0)
             k = int(np.argmax(ratios))
             site = self.speed_model.sites.names[k]
@@ -212,7 +241,12 @@ class SpeedScaling:
             limiting_site=site,
             limiting_region=region,
             regions=region_speeds(
-                self.speed_model.sites.names, speed, mass, self.speed_model.regions, self.margin
+                self.speed_model.sites.names,
+                speed,
+                mass,
+                self.speed_model.regions,
+                self.margin,
+                rest,
             ),
         )
 

@@ -27,16 +27,15 @@ from typing import Any, NoReturn
 
 import rclpy
 from builtin_interfaces.msg import Time
-from control_msgs.msg import SpeedScalingFactor
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import InertiaStamped
-from grasp_safety_msgs.msg import SpeedScalingStatus
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.exceptions import InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header, String
 
@@ -49,7 +48,6 @@ from ..robot.bundle import build_robot
 from ..service.errors import StartupError
 from ..topics.qos import LATCHED
 from .governor import Decision, Governor
-from .messages import diagnostic_status, status_msg
 from .parameters import (
     MONITOR_TABLE,
     RUNTIME,
@@ -58,6 +56,19 @@ from .parameters import (
     monitor_settings,
     payload_points,
 )
+
+try:  # built by `make setup`; without them the executable says so in one line (run)
+    from control_msgs.msg import SpeedScalingFactor
+    from grasp_safety_msgs.msg import SpeedScalingStatus
+
+    from .messages import diagnostic_status, status_msg
+except ImportError as missing:
+    MISSING_INTERFACES = (
+        f"interface package {(missing.name or str(missing)).split('.')[0]} missing: build it "
+        "with `make setup` (control_msgs needs ../shared/interfaces beside the checkout)"
+    )
+else:
+    MISSING_INTERFACES = ""
 
 NODE_NAME = "grasp_safety_monitor"
 NEWEST_STATE = QoSProfile(
@@ -96,6 +107,7 @@ class MonitorNode(Node):
                 self._settings.joint_states_timeout_s,
                 IncreaseLimiter(self._settings.max_increase_per_s, 0.0, time.monotonic()),
                 self._settings.closed_loop,
+                self._settings.controller_latency_s,
             )
             self._rebuild()
         except (GraspSafetyError, InvalidParameterValueException) as error:
@@ -131,7 +143,9 @@ class MonitorNode(Node):
 
     def _on_payload(self, msg: InertiaStamped) -> None:
         """A new carried object (m = 0: nothing), inertia in the tip frame; refused (one line
-        on the log and /diagnostics, the previous payload kept) in another frame."""
+        on the log and /diagnostics) in another frame or over max_mass_kg: then factor 0 with
+        the refusal as the reason until a valid payload arrives (the carried object is not
+        the previous one any more)."""
         node = self._settings.node
         try:
             check_frame_id(msg.header.frame_id, [node.tip_frame], "payload.header.frame_id")
@@ -146,7 +160,10 @@ class MonitorNode(Node):
                 raise
         except GraspSafetyError as error:
             self._refuse("payload", error)
+            self._governor.refuse_payload(self._last_refusal)
+            self._publish(self._governor.fail(self._last_refusal, time.monotonic()), None)
             return
+        self._governor.refuse_payload("")
         self.get_logger().info(
             f"payload: {inertia.mass_kg:g} kg" if inertia else "payload: nothing carried (m = 0)"
         )
@@ -175,7 +192,8 @@ class MonitorNode(Node):
             payload.points_in_tip_m,
             self._settings.node.analysis.iso_regions,
         )
-        self._governor.set_scaling(SpeedScaling(model, self._settings.margin))
+        settings = self._settings
+        self._governor.set_scaling(SpeedScaling(model, settings.margin, settings.rest_speed_m_s))
         self.get_logger().info(
             f"robot from {self._bundle.origin}: {robot.base_frame} -> {robot.tip_frame}, "
             f"{robot.num_joints} joints, {len(model.sites)} sites, regions "
@@ -207,6 +225,7 @@ class MonitorNode(Node):
         self._governor.timeout_s = settings.joint_states_timeout_s
         self._governor.limiter.max_increase_per_s = settings.max_increase_per_s
         self._governor.closed_loop = settings.closed_loop
+        self._governor.controller_latency_s = settings.controller_latency_s
         if self._governor.scaling is not None:
             self._governor.scaling.margin = settings.margin
         self.destroy_timer(self._watchdog)
@@ -224,6 +243,17 @@ class MonitorNode(Node):
             self._publish(decision, None)
 
     def _publish(self, decision: Decision, stamp: Time | None) -> None:
+        try:
+            self._send(decision, stamp)
+        except Exception as error:  # a defect: log it, fail safe, keep spinning
+            self.get_logger().error(f"publish: internal error:\n{traceback.format_exc()}")
+            self._send(self._governor.fail(_internal_error(error), time.monotonic()), None)
+
+    def publish_stop(self) -> None:
+        """Factor 0 on shutdown: the latched factor must not outlive the monitor."""
+        self._factor_pub.publish(SpeedScalingFactor(factor=0.0))
+
+    def _send(self, decision: Decision, stamp: Time | None) -> None:
         first_failure = decision.fail_safe and (
             self._last is None or self._last.fail_safe != decision.fail_safe
         )
@@ -275,18 +305,31 @@ class MonitorNode(Node):
         )
 
 
+def _interrupt(signal_number: int, frame: Any) -> None:
+    raise KeyboardInterrupt(signal.Signals(signal_number).name)
+
+
 def _internal_error(error: BaseException) -> str:
     return f"internal error: {type(error).__name__}: {error}"
 
 
 def run(args: list[str] | None = None) -> int:
-    """Run the monitor until SIGINT/SIGTERM or shut-down; 1 on a start-up error (one line)."""
+    """Run the monitor until SIGINT/SIGTERM or shut-down; 1 on a start-up error (one line).
+
+    The monitor handles the signals itself (rclpy's handlers would shut the context down
+    first): on the way out it publishes factor 0, so its latched factor does not outlive it.
+    """
     logger = rclpy.logging.get_logger(NODE_NAME)
+    if MISSING_INTERFACES:
+        logger.error(f"start-up failed: {MISSING_INTERFACES}")
+        return 1
     try:
-        rclpy.init(args=args)
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except RuntimeError as error:  # bad --ros-args or params file
         logger.error(f"start-up failed: {str(error).strip().splitlines()[0]}")
         return 1
+    for number in (signal.SIGINT, signal.SIGTERM):  # raised in spin: its timers wake it
+        signal.signal(number, _interrupt)
     node: MonitorNode | None = None
     status = 0
     try:
@@ -303,6 +346,10 @@ def run(args: list[str] | None = None) -> int:
         for number in (signal.SIGINT, signal.SIGTERM):  # a second signal (ros2 launch sends
             signal.signal(number, signal.SIG_IGN)  # one more) no longer interrupts teardown
         if node is not None:
+            try:
+                node.publish_stop()
+            except Exception as error:  # the context may be gone: say so, still tear down
+                logger.error(f"shutdown: could not publish factor 0: {error}")
             node.destroy_node()
         rclpy.try_shutdown()
     return status

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from ...core.analyses.exposed_points import box_corners_in_object
-from ...core.analyses.speed_scaling import check_margin
+from ...core.analyses.speed_scaling import MAX_REST_SPEED_M_S, check_margin, check_rest_speed
 from ...core.exceptions import InvalidInputError
 from ...core.input_checks import finite_array, finite_float
 from ...core.model.inertia import ObjectInertia
@@ -56,6 +56,16 @@ _OWN: dict[str, ParameterSpec] = {
         "for the unscaled motion is the last published one times the state's margin * v_max / "
         "speed; false: the state's own factor (a motion this factor does not slow)",
     ),
+    "speed_scaling.rest_speed_m_s": ParameterSpec(
+        0.001,
+        "sites at or below this speed are at rest and do not limit the factor (encoder noise) "
+        f"[m/s], in [0, {MAX_REST_SPEED_M_S:g}]",
+    ),
+    "speed_scaling.controller_latency_s": ParameterSpec(
+        0.05,
+        "the controller's command-to-state latency [s], >= 0: in closed loop the factor "
+        "assumed applied is the lowest published within this window",
+    ),
     "speed_scaling.max_increase_per_s": ParameterSpec(
         2.0, "largest rise of the published factor per second [1/s], > 0; falls are immediate"
     ),
@@ -93,7 +103,7 @@ RUNTIME: tuple[str, ...] = (
     "speed_scaling.margin",
     "speed_scaling.max_increase_per_s",
 )
-RUNTIME += ("speed_scaling.closed_loop",)
+RUNTIME += ("speed_scaling.closed_loop", "speed_scaling.controller_latency_s")
 """Parameters the monitor takes at run time; the others are read at start-up only."""
 
 _POSITIVE = ("joint_states_timeout_s", "speed_scaling.max_increase_per_s")
@@ -140,6 +150,8 @@ def check_monitor_parameter(name: str, value: Any) -> Any:
         raise InvalidInputError(name, f"must be a number, got {show(value)}")
     if name == "speed_scaling.margin":
         return check_margin(float(value), name)
+    if name == "speed_scaling.rest_speed_m_s":
+        return check_rest_speed(float(value), name)
     return finite_float(value, name, minimum=0.0, strict_minimum=name in _POSITIVE)
 
 
@@ -150,6 +162,8 @@ def monitor_constraints(name: str) -> ParameterConstraints:
         "speed_scaling.margin": "in (0, 1]",
         "speed_scaling.closed_loop": "",
         "speed_scaling.max_increase_per_s": "> 0",
+        "speed_scaling.rest_speed_m_s": f"in [0, {MAX_REST_SPEED_M_S:g}]",
+        "speed_scaling.controller_latency_s": ">= 0",
         "payload.mass_kg": ">= 0, at most max_mass_kg",
         "payload.com_in_tip_m": "3 finite values",
         "payload.inertia_about_com_kgm2": "6 finite values",
@@ -203,6 +217,8 @@ class MonitorSettings:
     joint_states_timeout_s: float
     margin: float
     closed_loop: bool
+    rest_speed_m_s: float
+    controller_latency_s: float
     max_increase_per_s: float
     payload: Payload
     points_in_tip_m: tuple[float, ...]
@@ -242,6 +258,8 @@ def monitor_settings(values: Mapping[str, Any]) -> MonitorSettings:
         joint_states_timeout_s=v["joint_states_timeout_s"],
         margin=v["speed_scaling.margin"],
         closed_loop=v["speed_scaling.closed_loop"],
+        rest_speed_m_s=v["speed_scaling.rest_speed_m_s"],
+        controller_latency_s=v["speed_scaling.controller_latency_s"],
         max_increase_per_s=v["speed_scaling.max_increase_per_s"],
         payload=Payload(inertia, payload_points(inertia, points, box)),
         points_in_tip_m=points,
