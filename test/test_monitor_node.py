@@ -444,7 +444,7 @@ def test_closed_loop_factor_is_the_last_one_times_the_state_headroom(
             checked += 1
         assert checked >= 20, f"only {checked} consecutive states assessed"
     finally:
-        ros2(env, "param", "set", node, name, "false")
+        set_parameter(env, node, name, "false")
 
 
 def test_replay_of_the_safe_retiming_needs_no_scaling(
