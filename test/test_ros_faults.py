@@ -23,10 +23,10 @@ from nav_msgs.msg import Path as PathMsg
 from rcl_interfaces.srv import SetParameters
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
-from ros_node_harness import (  # noqa: F401  (_localhost_only: autouse fixture)
+from ros_node_harness import (
     NODE_PARAMETERS,
     NodeUnderTest,
-    _localhost_only,
+    _localhost_only,  # noqa: F401  (autouse fixture)
     book_path,
     book_request,
     same_messages,

@@ -31,12 +31,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.errors import InvalidArgument
 from nav_msgs.msg import Path
-from ros_node_harness import (  # noqa: F401  (_localhost_only: autouse fixture)
+from ros_node_harness import (
     LATCHED,
     MAX_GRASPS,
     NODE_PARAMETERS,
     NodeUnderTest,
-    _localhost_only,
+    _localhost_only,  # noqa: F401  (autouse fixture)
     book_request,
     same_messages,
 )

@@ -8,10 +8,10 @@ import threading
 from collections.abc import Iterator
 
 import pytest
-from ros_node_harness import (  # noqa: F401  (_localhost_only: autouse fixture)
+from ros_node_harness import (
     NODE_PARAMETERS,
     NodeUnderTest,
-    _localhost_only,
+    _localhost_only,  # noqa: F401  (autouse fixture)
     book_request,
 )
 

@@ -19,25 +19,17 @@ from grasp_safety_msgs.srv import RankGrasps
 from nav_msgs.msg import Path
 from rcl_interfaces.srv import GetParameters
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from ros_node_harness import (  # noqa: F401  (_localhost_only: autouse fixture)
+from ros_node_harness import (
     BOOK,
-    BOOK_GRASPS,
-    BOOK_YAML,
-    DT_S,
     LATCHED,
     MAX_GRASPS,
     NODE_PARAMETERS,
     NodeUnderTest,
-    _localhost_only,
+    _localhost_only,  # noqa: F401  (autouse fixture)
     assert_matches_core,
     book_path,
     book_request,
-    book_trajectory,
-    core_pipeline,
-    core_report,
-    pose_from_yaml,
     same_messages,
-    start_context,
 )
 from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray

@@ -12,25 +12,15 @@ import pytest
 from grasp_safety_msgs.msg import GraspRanking
 from rcl_interfaces.srv import GetParameters, SetParametersAtomically
 from rclpy.parameter import Parameter
-from ros_node_harness import (  # noqa: F401  (_localhost_only: autouse fixture)
-    BOOK,
-    BOOK_GRASPS,
-    BOOK_YAML,
-    DT_S,
-    LATCHED,
+from ros_node_harness import (
     MAX_GRASPS,
     NODE_PARAMETERS,
     NodeUnderTest,
-    _localhost_only,
+    _localhost_only,  # noqa: F401  (autouse fixture)
     assert_matches_core,
-    book_path,
     book_request,
-    book_trajectory,
     core_pipeline,
     core_report,
-    pose_from_yaml,
-    same_messages,
-    start_context,
 )
 
 from grasp_safety_ros.core import (

@@ -7,25 +7,12 @@ import time
 
 from conftest import ARM6_AXES, serial_arm_urdf
 from diagnostic_msgs.msg import DiagnosticStatus
-from ros_node_harness import (  # noqa: F401  (_localhost_only: autouse fixture)
+from ros_node_harness import (
     BOOK,
-    BOOK_GRASPS,
-    BOOK_YAML,
-    DT_S,
     LATCHED,
-    MAX_GRASPS,
-    NODE_PARAMETERS,
     NodeUnderTest,
-    _localhost_only,
-    assert_matches_core,
-    book_path,
+    _localhost_only,  # noqa: F401  (autouse fixture)
     book_request,
-    book_trajectory,
-    core_pipeline,
-    core_report,
-    pose_from_yaml,
-    same_messages,
-    start_context,
 )
 from std_msgs.msg import String
 

@@ -13,11 +13,11 @@ from geometry_msgs.msg import PoseArray, PoseStamped
 from grasp_safety_msgs.msg import GraspRanking
 from nav_msgs.msg import Path
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-from ros_node_harness import (  # noqa: F401  (_localhost_only: autouse fixture)
+from ros_node_harness import (
     LATCHED,
     NODE_PARAMETERS,
     NodeUnderTest,
-    _localhost_only,
+    _localhost_only,  # noqa: F401  (autouse fixture)
     book_path,
     book_request,
 )
