@@ -32,7 +32,7 @@ one feasible timing, so the retimed one is no longer (to the grid: see the tests
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -40,7 +40,7 @@ import numpy as np
 
 from ..exceptions import GraspSafetyError, InvalidInputError
 from ..input_checks import finite_float, read_only
-from ..model.robot import RobotModel
+from ..model.robot import RobotModel, per_joint_values
 from .site_speeds import SiteSpeedModel, SiteSpeeds, site_speeds
 
 RETIME_FIELD = "retime"
@@ -87,35 +87,13 @@ def joint_limits_from_input(
     """Per-joint limits (n,), chain order, each finite and > 0 [rad/s or rad/s², m/s or m/s²
     prismatic]: a list in chain order or ``{joint: value}`` (joints not named keep
     ``default``; without a default every joint must be named)."""
-    names = list(robot.joint_names)
-    if isinstance(value, Mapping):
-        values = np.full(len(names), np.nan) if default is None else np.array(default, float)
-        for name, entry in value.items():
-            if name not in names:
-                raise InvalidInputError(
-                    field, f"unknown chain joint '{name}'; chain joints: {', '.join(names)}"
-                )
-            values[names.index(name)] = _limit(entry, f"{field}.{name}")
-        missing = [n for n, v in zip(names, values, strict=True) if not np.isfinite(v)]
-        if missing:
-            raise InvalidInputError(field, f"has no finite limit for {', '.join(missing)}")
-    elif isinstance(value, (Sequence, np.ndarray)) and not isinstance(value, (str, bytes)):
-        if len(value) != len(names):
-            raise InvalidInputError(
-                field,
-                f"must have one value per chain joint ({len(names)}: {', '.join(names)}), "
-                f"got {len(value)}",
-            )
-        values = np.array(
-            [_limit(v, f"{field}[{k}] (joint '{names[k]}')") for k, v in enumerate(value)]
-        )
-    else:
-        raise InvalidInputError(
-            field,
-            f"must be a list of {len(names)} values (chain order) or a mapping "
-            f"{{joint_name: value}}, got {value!r}",
-        )
-    return read_only(values)
+    names = robot.joint_names
+    base = np.full(len(names), np.nan) if default is None else default
+    values = per_joint_values(value, names, field, _limit, base)
+    missing = [n for n, v in zip(names, values, strict=True) if not np.isfinite(v)]
+    if missing:  # a mapping without a default names every joint
+        raise InvalidInputError(field, f"has no finite limit for {', '.join(missing)}")
+    return values
 
 
 def _limit(value: Any, field: str) -> float:

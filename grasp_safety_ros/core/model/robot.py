@@ -4,8 +4,9 @@
 from __future__ import annotations
 
 import copy
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -52,22 +53,40 @@ def armature_from_input(
         InvalidInputError: a wrong count, an unknown joint, or a value not finite and >= 0
             (the message names the joint).
     """
+    return per_joint_values(
+        value,
+        joint_names,
+        field,
+        _armature_value,
+        np.zeros(len(joint_names)) if base is None else base,
+    )
+
+
+def per_joint_values(
+    value: Any,
+    joint_names: Sequence[str],
+    field: str,
+    read_one: Callable[[Any, str], float],
+    base: np.ndarray,
+) -> np.ndarray:
+    """One value per chain joint, chain order, read-only: ``value`` is a list in chain order or
+    ``{joint_name: value}`` (joints not named keep ``base``); ``read_one(entry, field)`` checks
+    one entry and names it (``field[k] (joint 'name')`` or ``field.name``).
+
+    Raises:
+        InvalidInputError: a wrong count, an unknown joint, neither a list nor a mapping, or
+            what ``read_one`` refuses.
+    """
     names = list(joint_names)
     if isinstance(value, Mapping):
-        values = np.zeros(len(names)) if base is None else np.array(base, dtype=float)
+        values = np.array(base, dtype=float)
         for name, entry in value.items():
             if name not in names:
                 raise InvalidInputError(
                     field, f"unknown chain joint '{name}'; chain joints: {', '.join(names)}"
                 )
-            values[names.index(name)] = _armature_value(entry, f"{field}.{name}")
-    else:
-        if isinstance(value, (str, bytes)) or not isinstance(value, (Sequence, np.ndarray)):
-            raise InvalidInputError(
-                field,
-                f"must be a list of {len(names)} values (chain order) or a mapping "
-                f"{{joint_name: value}}, got {value!r}",
-            )
+            values[names.index(name)] = read_one(entry, f"{field}.{name}")
+    elif isinstance(value, (Sequence, np.ndarray)) and not isinstance(value, (str, bytes)):
         if len(value) != len(names):
             raise InvalidInputError(
                 field,
@@ -75,7 +94,14 @@ def armature_from_input(
                 f"got {len(value)}",
             )
         values = np.array(
-            [_armature_value(v, f"{field}[{k}] (joint '{names[k]}')") for k, v in enumerate(value)]
+            [read_one(v, f"{field}[{k}] (joint '{names[k]}')") for k, v in enumerate(value)],
+            dtype=float,
+        )
+    else:
+        raise InvalidInputError(
+            field,
+            f"must be a list of {len(names)} values (chain order) or a mapping "
+            f"{{joint_name: value}}, got {value!r}",
         )
     values.setflags(write=False)
     return values
