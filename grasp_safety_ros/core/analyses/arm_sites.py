@@ -19,7 +19,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..exceptions import InvalidInputError
-from ..input_checks import finite_array, read_only
+from ..input_checks import check_within_reach, finite_array, read_only
 from ..model.robot import RobotModel
 
 FIRST_DEFAULT_JOINT = 3
@@ -57,7 +57,8 @@ class ArmSites:
 def check_exposed_points_m(
     value: Any, field: str = "robot.exposed_points_m"
 ) -> dict[str, np.ndarray]:
-    """Validate ``{link_name: [[x, y, z], ...]}`` (link frame [m]); returns (P, 3) arrays."""
+    """Validate ``{link_name: [[x, y, z], ...]}`` (link frame [m], each coordinate within
+    +/- MAX_ABS_POSITION_M); returns (P, 3) arrays."""
     if not isinstance(value, Mapping):
         raise InvalidInputError(
             field, f"must be a mapping {{link_name: [[x, y, z], ...]}}, got {value!r}"
@@ -73,6 +74,7 @@ def check_exposed_points_m(
             raise InvalidInputError(
                 f"{field}.{link}", f"must be a list of [x, y, z] points, got {list(array.shape)}"
             )
+        check_within_reach(array, f"{field}.{link}")  # 1e300 m: every ranking LinAlgError
         checked[link] = read_only(array, copy=True)
     total = sum(len(points) for points in checked.values())
     if total > MAX_SITES:
