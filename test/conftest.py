@@ -157,6 +157,22 @@ def random_rotation(rng: np.random.Generator) -> np.ndarray:
     return pin.Quaternion(*quat).toRotationMatrix()
 
 
+@pytest.fixture()
+def context() -> Iterator[Any]:
+    """An rclpy Context of the test's own, in a claimed ROS domain (ros_domains.py) with
+    localhost discovery, shut down after the test (rclpy imported here: lazily)."""
+    import rclpy
+    from rclpy.context import Context
+    from ros_domains import claim_ros_domain
+
+    with pytest.MonkeyPatch.context() as patch, claim_ros_domain() as claim:
+        patch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+        rclpy_context = Context()
+        rclpy.init(context=rclpy_context, domain_id=claim.domain_id)
+        yield rclpy_context
+        rclpy.shutdown(context=rclpy_context)
+
+
 # --- The grasp_safety node over real rclpy (ros_node_harness.py, imported lazily: rclpy) -------
 # A test module using them imports ros_node_harness._localhost_only (autouse) first.
 

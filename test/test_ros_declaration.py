@@ -5,16 +5,13 @@ a bad override refused at start-up naming the parameter. In-process node, own rc
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from typing import Any
 
 import pytest
-import rclpy
 from conftest import ARM6_AXES, serial_arm_urdf
 from rcl_interfaces.msg import ParameterType
 from rclpy.context import Context
 from rclpy.parameter import Parameter
-from ros_domains import claim_ros_domain
 
 from grasp_safety_ros.ros.node import GraspSafetyNode, StartupError
 from grasp_safety_ros.ros.parameters import PARAMETERS, check_parameter
@@ -76,16 +73,6 @@ def test_typed_converts_only_without_loss(
         assert list(converted.value) == value
     else:
         assert converted.value == value and type(converted.value) is type(value)
-
-
-@pytest.fixture()
-def context() -> Iterator[Context]:
-    with pytest.MonkeyPatch.context() as patch, claim_ros_domain() as claim:
-        patch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-        context = Context()
-        rclpy.init(context=context, domain_id=claim.domain_id)
-        yield context
-        rclpy.shutdown(context=context)
 
 
 def start(context: Context, **overrides: Any) -> GraspSafetyNode:

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import inspect
 import threading
-from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
@@ -13,7 +12,6 @@ import pytest
 
 pytest.importorskip("rclpy")
 
-import rclpy
 from rcl_interfaces.msg import ParameterValue
 from rcl_interfaces.srv import GetParameters
 from rclpy.context import Context
@@ -35,14 +33,6 @@ POOL_CHANGED = (
     "rclpy's MultiThreadedExecutor no longer keeps its callback pool in ._executor: "
     "ros/runtime/rclpy_private.py join_callbacks waits on it at shut-down"
 )
-
-
-@pytest.fixture()
-def context() -> Iterator[Context]:
-    context = Context()
-    rclpy.init(context=context)
-    yield context
-    rclpy.shutdown(context=context)
 
 
 def test_the_overridden_take_service_is_rclpys() -> None:

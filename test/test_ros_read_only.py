@@ -4,13 +4,10 @@ nothing wrapped without parameter services."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-
 import pytest
 
 pytest.importorskip("rclpy")
 
-import rclpy
 from rcl_interfaces.msg import ParameterDescriptor
 from rcl_interfaces.srv import SetParameters
 from rclpy.context import Context
@@ -26,14 +23,6 @@ LAYOUT_CHANGED = (
     "port it to a public hook on that service if rclpy has one now "
     "(add_pre_set_parameters_callback cannot answer: rclpy refuses the list it empties)"
 )
-
-
-@pytest.fixture()
-def context() -> Iterator[Context]:
-    context = Context()
-    rclpy.init(context=context)
-    yield context
-    rclpy.shutdown(context=context)
 
 
 def test_without_parameter_services_nothing_is_wrapped(context: Context) -> None:
