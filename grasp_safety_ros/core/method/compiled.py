@@ -164,7 +164,9 @@ def augmented_bodies(
     return out
 
 
-def plain_array(array: Any) -> np.ndarray:
-    """A C-contiguous, writable float64 array of ``array`` (copied only when needed)."""
-    array = np.ascontiguousarray(array, dtype=float)
+def plain_array(array: Any, dtype: Any = float) -> np.ndarray:
+    """A C-contiguous, writable array of ``array`` (float64 unless ``dtype``; copied only when
+    needed): numba types a read-only array apart, so a frozen input would compile the kernel
+    once more."""
+    array = np.ascontiguousarray(array, dtype=dtype)
     return array if array.flags.writeable else array.copy()

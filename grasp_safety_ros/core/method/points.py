@@ -114,7 +114,7 @@ def site_masses(
         np.ascontiguousarray(counts, dtype=np.int64),
         np.ascontiguousarray(site_joints, dtype=np.int64),
         plain_array(points_in_joint_m),
-        np.ascontiguousarray(support, dtype=bool),
+        plain_array(support, bool),  # ArmSites.support is frozen
         plain_array(joint_velocities),
         float(stationary_speed_m_s),
         positions,
