@@ -23,7 +23,7 @@ from conftest import ARM6_AXES, serial_arm_urdf
 
 from grasp_safety_ros.cli.main import main, rank_scenario
 from grasp_safety_ros.core import RobotModel
-from grasp_safety_ros.core.exceptions import InvalidInputError
+from grasp_safety_ros.core.exceptions import GraspSafetyError, InvalidInputError
 from grasp_safety_ros.core.input_checks import quat_xyzw_from_rotation
 from grasp_safety_ros.scenario.schema import load_scenario
 
@@ -404,6 +404,43 @@ def test_bad_files_are_reported_with_file_and_key(dataset: Dataset, tmp_path: Pa
     (failure,) = summary["failures"]
     assert (failure["file"], failure["key"]) == ("bad/quat.yaml", "grasps.grasp_2.orientation")
     assert "unit quaternion" in failure["reason"] and summary["grasps"] == 4
+
+
+class _FieldlessError(GraspSafetyError):
+    """An error about no one field (as RobotModelError): it has no ``field`` or ``reason``."""
+
+
+def test_errors_naming_no_field_are_rows_and_refusals_of_the_whole(
+    dataset: Dataset, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A GraspSafetyError other than InvalidInputError / FrameNotFoundError, raised while a
+    file is checked, read or ranked, is reported under the key "/" with its message (it
+    crashed the batch with an AttributeError on ``.field`` before)."""
+    from grasp_safety_ros.dataset import batch, sources
+
+    def raising(*args: Any, **kwargs: Any) -> Any:
+        raise _FieldlessError("not for this chain")
+
+    spec = dict(dataset.spec, sources=[{"format": "acronym", "path": "acronym/a.h5"}])
+    path = dataset.write_spec("fieldless.yaml", spec)  # 5 grasps: chunks of 3 and 2
+    for stage, module, name in (
+        ("ranked", batch, "run_pipeline"),
+        ("read", batch, "load_block"),
+    ):
+        with monkeypatch.context() as patch:
+            patch.setattr(module, name, raising)
+            summary = run_batch(path, tmp_path / stage, workers=1)
+        rows = read_batch(tmp_path / stage).to_pylist()
+        assert [(r["error_key"], r["error"], r["feasible"]) for r in rows] == [
+            ("/", "not for this chain", False)
+        ] * 5, stage
+        assert summary["unreadable_grasps"] == 5 and summary["files_refused"] == 0, stage
+    monkeypatch.setattr(sources, "_count_grasps", raising)  # checking the file
+    summary = run_batch(path, tmp_path / "checked", workers=1)
+    assert summary["refused_files"] == [
+        {"file": "acronym/a.h5", "key": "/", "reason": "not for this chain"}
+    ]
+    assert summary["grasps"] == 0
 
 
 @pytest.mark.parametrize(

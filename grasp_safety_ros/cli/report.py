@@ -14,8 +14,8 @@ from ..core.method.executable import (
     rates_for_execution,
     rates_for_execution_many,
 )
-from ..core.method.posture import SCORE_CRITERION, PostureSelection
 from ..core.method.ranking import GraspEvaluation, Ranking
+from ..core.method.results import SCORE_CRITERION, PostureSelection
 from ..core.model.armature import ArmatureRatio, armature_ratio
 from ..core.model.robot import NO_ARMATURE_NOTE
 from .report_values import force_ratio_text, name_width, number, numbers
@@ -87,7 +87,7 @@ def ranking_to_dict(ranking: Ranking, per_sample: bool = True) -> dict[str, Any]
     their per-sample arrays when ``per_sample``) and the backend that ran (``compiled`` or
     ``python``, with the reason of a fallback)."""
     evaluations = ranking.evaluations
-    velocities = [None] * len(evaluations)
+    velocities: list[np.ndarray | None] = [None] * len(evaluations)
     if per_sample:  # the splines of all grasps in one pass
         trajectories = [(e.times_s, e.joint_positions, e.planned_joint_rates) for e in evaluations]
         velocities = [v for v, _ in rates_for_execution_many(trajectories)]

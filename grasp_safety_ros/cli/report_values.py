@@ -5,16 +5,17 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import SupportsFloat
 
 import numpy as np
 
 from ..core.analyses.iso15066 import ADMISSIBLE_RATIO_TOLERANCE
 
 
-def number(value: float) -> float | None:
+def number(value: SupportsFloat) -> float | None:
     """A finite float, or None (JSON null) for NaN and inf."""
-    value = float(value)
-    return value if math.isfinite(value) else None
+    finite = float(value)
+    return finite if math.isfinite(finite) else None
 
 
 def numbers(values: np.ndarray) -> np.ndarray:

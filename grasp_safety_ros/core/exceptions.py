@@ -102,3 +102,11 @@ def _frame_choices(frame: str, by_kind: Mapping[str, Sequence[str]]) -> str:
 
 class RobotModelError(GraspSafetyError):
     """The robot description cannot be read or does not fit the method."""
+
+
+def field_and_reason(error: GraspSafetyError, whole: str = "/") -> tuple[str, str]:
+    """The field ``error`` names and what is wrong with it; for an error about no one field
+    (only InvalidInputError and FrameNotFoundError name one), ``whole`` and the message."""
+    if isinstance(error, (InvalidInputError, FrameNotFoundError)):
+        return error.field, error.reason
+    return whole, str(error)

@@ -31,7 +31,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from .. import __version__
-from ..core.exceptions import GraspSafetyError, InvalidInputError
+from ..core.exceptions import GraspSafetyError, InvalidInputError, field_and_reason
 from ..core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
 from ..core.method.warm_up import warm_up
 from ..core.model.robot import resolve_urdf
@@ -219,7 +219,7 @@ def evaluate_chunk(payload: SpecPayload, chunk: Chunk, workers: int) -> ChunkRes
     try:
         block = load_block(spec, chunk.source, chunk.start, chunk.stop)
     except GraspSafetyError as error:
-        block = _unreadable(chunk, error.field, error.reason)
+        block = _unreadable(chunk, *field_and_reason(error))
     except OSError as error:
         block = _unreadable(chunk, "/", f"cannot read: {error.strerror or error}")
     report, samples = None, 0
@@ -229,7 +229,7 @@ def evaluate_chunk(payload: SpecPayload, chunk: Chunk, workers: int) -> ChunkRes
             report = run_pipeline(evaluator, block.scenario.request(evaluator.robot))
             samples = len(block.scenario.grasps) * block.scenario.trajectory.num_samples
         except GraspSafetyError as error:
-            block = _unreadable(chunk, error.field, error.reason)
+            block = _unreadable(chunk, *field_and_reason(error))
     metric = block.scenario.metric if block.scenario is not None else spec.metric
     columns = block_columns(block, report, metric, payload.per_sample)
     return ChunkResult(
@@ -245,7 +245,7 @@ def evaluate_chunk(payload: SpecPayload, chunk: Chunk, workers: int) -> ChunkRes
 # In the driver -----------------------------------------------------------------------------
 
 
-def _atomic_write(path: Path, write: Callable[[Path], None]) -> None:
+def _atomic_write(path: Path, write: Callable[[Path], object]) -> None:
     """``write`` to a temporary file beside ``path``, then rename it over ``path``."""
     temporary = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     try:

@@ -41,8 +41,8 @@ def report_columns(report: SafetyReport, per_sample: bool = False) -> dict[str, 
         put("score_single_ik", None if p is None else p.score_single_ik)
         put("score_range_low", None if p is None else p.score_range[0])
         put("score_range_high", None if p is None else p.score_range[1])
-        started = p is not None and len(p.start_positions) > 0
-        put("start_positions", p.start_positions.tolist() if started else None)
+        starts = None if p is None else p.start_positions
+        put("start_positions", starts.tolist() if starts is not None and len(starts) else None)
         put("postures_tried", None if p is None else p.postures_tried)
         put("postures_feasible", None if p is None else p.postures_feasible)
         put("iso_ts_15066_worst_force_ratio", _worst_ratio(a))

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from ..core.exceptions import GraspSafetyError, InvalidInputError
+from ..core.exceptions import GraspSafetyError, InvalidInputError, field_and_reason
 from ..core.input_checks import finite_array, finite_float, pose_from_position_quat
 from ..core.method.ranking import Grasp
 from ..core.model.inertia import ObjectInertia
@@ -113,7 +113,7 @@ def discover(spec: BatchSpec) -> tuple[list[SourceFile], list[Failure]]:
                 count = _count_grasps(spec, source.format, path)
                 files.append(SourceFile(source.format, path, name, _sha256(path), count))
             except GraspSafetyError as error:
-                failures.append(Failure(name, error.field, error.reason))
+                failures.append(Failure(name, *field_and_reason(error)))
             except OSError as error:
                 failures.append(Failure(name, "/", f"cannot read: {error.strerror or error}"))
     return files, failures
@@ -141,6 +141,10 @@ def load_block(spec: BatchSpec, source: SourceFile, start: int, stop: int) -> Gr
 
 
 def _dataset_scenario(spec: BatchSpec, inertia: ObjectInertia, grasps: list[Grasp]) -> Scenario:
+    """The scenario of a dataset's grasps: the SPEC's robot and motion (parse_spec requires
+    both when an ACRONYM or GraspGen source is given)."""
+    if spec.robot is None or spec.trajectory is None:
+        raise InvalidInputError("robot", "and motion are required by acronym and graspgen sources")
     return Scenario(
         robot=spec.robot,
         object_inertia=inertia,
@@ -253,7 +257,7 @@ def _acronym_block(spec: BatchSpec, source: SourceFile, start: int, stop: int) -
         inertia = _acronym_inertia(h5, spec)
         matrices = np.asarray(_acronym_transforms(h5)[start:stop], dtype=float)
         label_key = "grasps/qualities/flex/object_in_gripper"
-        labels = (
+        labels: list[float | None] = (
             [float(v) for v in np.asarray(h5[label_key][start:stop]).ravel()]
             if label_key in h5
             else [None] * len(matrices)
@@ -304,7 +308,8 @@ def _graspgen_pose(entry: Any, key: str) -> tuple[pin.SE3, float | None]:
     orientation = mapping(grasp.get("orientation"), f"{key}.orientation")
     xyz = finite_array(orientation.get("xyz"), f"{key}.orientation.xyz", (3,))
     w = finite_float(orientation.get("w"), f"{key}.orientation.w")
-    pose = pose_from_position_quat(grasp.get("position"), [*xyz, w], key)
+    position: Any = grasp.get("position")  # checked by pose_from_position_quat
+    pose = pose_from_position_quat(position, [*xyz, w], key)
     confidence = grasp.get("confidence")
     return pose, None if confidence is None else finite_float(confidence, f"{key}.confidence")
 
@@ -321,6 +326,8 @@ def _graspgen_block(spec: BatchSpec, source: SourceFile, start: int, stop: int) 
             field = field.replace(".position_m", ".position")
             entries.append((name, None, field, error.reason))
             labels.append(None)
+    if spec.object_defaults is None:  # parse_spec requires it for graspgen sources
+        raise InvalidInputError("object", "is required for graspgen sources (they carry no mass)")
     return _block(spec, source, start, spec.object_defaults, entries, labels)
 
 

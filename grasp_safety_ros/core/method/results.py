@@ -71,7 +71,7 @@ class GraspEvaluation:
     direction_is_worst_case: np.ndarray
     tip_speed_m_s: np.ndarray
     ik_iterations: np.ndarray
-    links_only_effective_mass_kg: np.ndarray | None = None
+    links_only_effective_mass_kg: np.ndarray = None  # type: ignore[assignment]  # __post_init__
     planned_joint_rates: tuple[np.ndarray, np.ndarray] | None = None
 
     def __post_init__(self) -> None:

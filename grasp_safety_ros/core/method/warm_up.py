@@ -51,7 +51,8 @@ def warm_up(evaluator: GraspSafetyEvaluator | None = None) -> float:
     start = time.perf_counter()
     if evaluator is None:
         evaluator = GraspSafetyEvaluator(RobotModel.from_urdf(_WARM_UP_URDF, "base", "b"))
-    if not evaluator.ik.compiled:
+    chain = evaluator.ik.chain
+    if not evaluator.ik.compiled or chain is None:  # compiled implies a chain
         return 0.0
     robot = evaluator.robot
     pose = robot.transform_tip_to_base(robot.default_seed_positions())
@@ -76,24 +77,26 @@ def warm_up(evaluator: GraspSafetyEvaluator | None = None) -> float:
         evaluator.ik.solve_trajectory_arrays(  # the analyses' IK and mobility kernels
             rotations, translations, np.array([0.0, 0.01]), np.array([0.0, 1.0]), seed_q
         )
-        translational_mobilities_in_base(
-            robot, box, pin.SE3.Identity(), np.array([seed_q]), evaluator.ik.chain
-        )
+        translational_mobilities_in_base(robot, box, pin.SE3.Identity(), np.array([seed_q]), chain)
         positions = np.array([robot.default_seed_positions()])
-        terms, counts = grasps_terms(
-            robot, evaluator.ik.chain, box, [pin.SE3.Identity()], [positions]
-        )
+        terms, counts = grasps_terms(robot, chain, box, [pin.SE3.Identity()], [positions])
         still = np.ones((1, 1, 1), dtype=bool)  # the point kernels of the analyses
         tip_point_masses(
-            terms, counts, np.eye(3), np.zeros((1, 1, 3)), np.zeros((1, 1, 1, 3)), still, [0]
+            terms,
+            counts,
+            np.eye(3),
+            np.zeros((1, 1, 3)),
+            np.zeros((1, 1, 1, 3)),
+            still,
+            np.zeros(1, np.int64),
         )
         n = robot.model.nv
         support, rates = np.ones((1, n), dtype=bool), np.zeros((1, 1, n))
-        site_masses(terms, counts, [0], np.zeros((1, 3)), support, rates, 1e-9)
+        site_masses(terms, counts, np.zeros(1, np.int64), np.zeros((1, 3)), support, rates, 1e-9)
         tip_following_rates(terms.tip_jacobians, counts, np.zeros((1, 1, 6)), rates)
         perturbed_effective_masses(  # the inertia-uncertainty kernel
             robot,
-            evaluator.ik.chain,
+            chain,
             [box],
             [pin.SE3.Identity()],
             [positions],
@@ -102,7 +105,7 @@ def warm_up(evaluator: GraspSafetyEvaluator | None = None) -> float:
         )
         bodies = augmented_bodies(robot, box, np.eye(3)[None], np.zeros((1, 3)))
         joint_dynamics(  # the effort analysis's kernel
-            evaluator.ik.chain,
+            chain,
             bodies,
             positions[None],
             configurations(robot, positions)[None],
@@ -124,7 +127,9 @@ def announce_compiles(stream: TextIO | None = None) -> None:
     in between is not written to); a stream that cannot be written is skipped."""
     from ..kernels._jit import announce_compiles as announce
 
-    announce(_Announcements(stream))
+    # _jit's parameter says TextIO (a kernel file: fixed with the next kernel change); it
+    # only writes and flushes, as _Announcements does
+    announce(_Announcements(stream))  # type: ignore[arg-type]
 
 
 class _Announcements:

@@ -41,6 +41,8 @@ _SCALAR_TYPES = {
     str: Parameter.Type.STRING,
 }
 _ARRAY_TYPES = {float: Parameter.Type.DOUBLE_ARRAY, str: Parameter.Type.STRING_ARRAY}
+_Declaration = tuple[str] | tuple[str, Parameter.Type] | tuple[str, Any, ParameterDescriptor]
+"""An item of ``Node.declare_parameters``'s list (its own type: lists are invariant)."""
 _TYPE_WORDS = {
     Parameter.Type.BOOL: "true or false",
     Parameter.Type.INTEGER: "an integer",
@@ -130,7 +132,7 @@ def declare_node_parameters(node: Node, table: ParameterTable = RANKING_NODE) ->
         InvalidInputError: naming the first bad override.
     """
     overrides = node._parameter_overrides  # rclpy keeps them here; there is no public setter
-    declarations: list[tuple[str, object, ParameterDescriptor]] = []
+    declarations: list[_Declaration] = []
     empty: list[Parameter] = []
     for name, spec in table.specs.items():
         kind = declared_type(name, table)

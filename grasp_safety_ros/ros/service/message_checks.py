@@ -10,7 +10,7 @@ import math
 import sys
 from collections.abc import Callable
 from operator import attrgetter
-from typing import Any
+from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
@@ -24,23 +24,35 @@ INT_AS_FLOAT_HINT = (
 """Why a float field holds a subnormal: Jazzy's rclpy, with its field checks off (the
 default), serialises the int 1 of ``Point(x=1)`` as 5e-324 (and -1 as NaN)."""
 
+
+class _Message(Protocol):
+    """A rosidl-generated message, as far as these checks read its class (rosidl's Python
+    classes carry no type information)."""
+
+    __slots__: ClassVar[tuple[str, ...]]
+    SLOT_TYPES: ClassVar[tuple[Any, ...]]
+
+    @classmethod
+    def get_fields_and_field_types(cls) -> dict[str, str]: ...
+
+
 _FLOATS = ("double", "float")
-_Plan = tuple[tuple[str, bool, Any], ...]
-_PLANS: dict[type, _Plan] = {}
-_FLAT: dict[type, tuple[str, ...] | None] = {}
+_Plan = tuple[tuple[str, bool, type[_Message] | None], ...]
+_PLANS: dict[type[_Message], _Plan] = {}
+_FLAT: dict[type[_Message], tuple[str, ...] | None] = {}
 
 
 class NonFiniteResultError(GraspSafetyError):
     """A ranking gave a NaN or infinite score to a grasp it ordered: refused, not answered."""
 
 
-def _plan(message_type: type) -> _Plan:
+def _plan(message_type: type[_Message]) -> _Plan:
     """(field, is a sequence, nested message type or None for floats) of every field of
     ``message_type`` that holds floats or messages."""
     plan = _PLANS.get(message_type)
     if plan is None:
         example = message_type()
-        entries = []
+        entries: list[tuple[str, bool, type[_Message] | None]] = []
         for name, kind in message_type.get_fields_and_field_types().items():
             is_sequence = kind.startswith("sequence<") or kind.endswith("]")
             base = kind.removeprefix("sequence<").split(",")[0].split("[")[0].rstrip(">")
@@ -54,7 +66,7 @@ def _plan(message_type: type) -> _Plan:
     return plan
 
 
-def _item_type(message_type: type, name: str) -> type:
+def _item_type(message_type: type[_Message], name: str) -> type[_Message]:
     """The message type of the items of sequence field ``name`` (from the generated class's
     slot types)."""
     slot_types = dict(zip(message_type.__slots__, message_type.SLOT_TYPES, strict=False))
@@ -65,24 +77,26 @@ def _item_type(message_type: type, name: str) -> type:
     return getattr(module, item.name)
 
 
-def _flat_paths(message_type: type) -> tuple[str, ...] | None:
+def _flat_paths(message_type: type[_Message]) -> tuple[str, ...] | None:
     """Dotted paths of every float of a message type without sequences (Pose: 7), else None."""
     if message_type not in _FLAT:
-        paths: list[str] | None = []
-        for name, is_sequence, nested in _plan(message_type):
-            if is_sequence:
-                paths = None
-                break
-            if nested is None:
-                paths.append(name)
-                continue
-            inner = _flat_paths(nested)
-            if inner is None:
-                paths = None
-                break
-            paths.extend(f"{name}.{path}" for path in inner)
-        _FLAT[message_type] = None if paths is None else tuple(paths)
+        _FLAT[message_type] = _float_paths(message_type)
     return _FLAT[message_type]
+
+
+def _float_paths(message_type: type[_Message]) -> tuple[str, ...] | None:
+    paths: list[str] = []
+    for name, is_sequence, nested in _plan(message_type):
+        if is_sequence:
+            return None
+        if nested is None:
+            paths.append(name)
+            continue
+        inner = _flat_paths(nested)
+        if inner is None:
+            return None
+        paths.extend(f"{name}.{path}" for path in inner)
+    return tuple(paths)
 
 
 def _first_subnormal_index(values: np.ndarray) -> int | None:
