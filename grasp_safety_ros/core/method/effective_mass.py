@@ -166,7 +166,8 @@ def translational_mobilities_in_base(
 def effective_masses_along(mobilities: np.ndarray, directions: np.ndarray) -> np.ndarray:
     """``effective_mass_along`` for (N, 3, 3) mobilities and (N, 3) directions [kg]."""
     units = directions / np.sqrt(np.einsum("ni,ni->n", directions, directions))[:, None]
-    return 1.0 / np.einsum("ni,nij,nj->n", units, mobilities, units)
+    masses: np.ndarray = 1.0 / np.einsum("ni,nij,nj->n", units, mobilities, units)
+    return masses
 
 
 def translational_mobility_in_base(
@@ -184,7 +185,8 @@ def translational_mobility_in_base(
         model, data, robot.tip_frame_id, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
     ).reshape(6, model.nv)  # eigenpy returns a 6x1 matrix as a vector
     jacobian_tip_in_base = robot.transform_base_to_world.rotation.T @ jacobian_tip_in_world[:3]
-    return jacobian_tip_in_base @ minv @ jacobian_tip_in_base.T
+    mobility: np.ndarray = jacobian_tip_in_base @ minv @ jacobian_tip_in_base.T
+    return mobility
 
 
 def effective_mass_along(mobility: np.ndarray, direction: np.ndarray) -> float:

@@ -29,6 +29,7 @@ from __future__ import annotations
 import math
 import threading
 from collections.abc import Iterator, Sequence
+from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -234,6 +235,7 @@ class IKSolver:
         LAPACK's LU here, by LDL^T in the compiled kernel (equal to rounding).
         """
         damping = 1e-12 + 1e-3 * float(error.dot(error))
+        step: np.ndarray
         if jacobian.shape[1] >= 6:
             step = (
                 jacobian.T
@@ -504,7 +506,7 @@ def _lapack_dgesv() -> Any:
     return dgesv
 
 
-def _kernels() -> Any:
+def _kernels() -> ModuleType:
     """The IK kernels (numba compiles them, or loads them from its cache, on first use)."""
     from ..kernels import ik
 

@@ -12,9 +12,9 @@ from __future__ import annotations
 from collections.abc import Sequence
 from concurrent.futures import Executor
 from functools import partial
-from typing import Any
 
 import numpy as np
+import pinocchio as pin
 
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
@@ -58,7 +58,7 @@ def perturbed_effective_masses(
     robot: RobotModel,
     chain: ChainArrays,
     inertias: Sequence[ObjectInertia],
-    transforms_tip_to_object: Sequence[Any],
+    transforms_tip_to_object: Sequence[pin.SE3],
     joint_positions: Sequence[np.ndarray],
     directions_in_base: Sequence[np.ndarray],
     worst: Sequence[np.ndarray],
@@ -103,7 +103,7 @@ def _chunk_masses(
     robot: RobotModel,
     chain: ChainArrays,
     inertias: Sequence[ObjectInertia],
-    transforms_tip_to_object: Sequence[Any],
+    transforms_tip_to_object: Sequence[pin.SE3],
     joint_positions: Sequence[np.ndarray],
     directions_in_base: Sequence[np.ndarray],
     worst: Sequence[np.ndarray],

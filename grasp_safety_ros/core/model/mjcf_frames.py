@@ -82,7 +82,7 @@ def _mujoco_positions(model: pin.Model, mj_model: Any, q: np.ndarray) -> np.ndar
     name, measured from their ``ref`` (MuJoCo's qpos0); the others at qpos0."""
     import mujoco
 
-    qpos = mj_model.qpos0.copy()
+    qpos: np.ndarray = mj_model.qpos0.copy()
     step = pin.difference(model, pin.neutral(model), q)
     for joint_id in range(1, model.njoints):
         joint, name = model.joints[joint_id], model.names[joint_id]

@@ -22,12 +22,14 @@ import signal
 import sys
 import time
 import traceback
+from collections.abc import Callable
 from functools import partial
+from types import FrameType
 from typing import Any, NoReturn
 
 import rclpy
 from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import InertiaStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.exceptions import InvalidParameterValueException
@@ -36,6 +38,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from rclpy.signals import SignalHandlerOptions
+from rclpy.timer import Timer
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header, String
 
@@ -233,7 +236,7 @@ class MonitorNode(Node):
 
     # --- Outputs -----------------------------------------------------------------------------
 
-    def _create_watchdog(self) -> Any:
+    def _create_watchdog(self) -> Timer:
         period = self._settings.joint_states_timeout_s / WATCHDOG_CHECKS_PER_TIMEOUT
         return self.create_timer(period, self._on_watchdog)
 
@@ -271,7 +274,7 @@ class MonitorNode(Node):
         self.get_logger().warning(self._last_refusal)
         self._publish_diagnostics()
 
-    def _guarded(self, callback: Any) -> Any:
+    def _guarded(self, callback: Callable[[Any], None]) -> Callable[[Any], None]:
         def guarded(msg: Any) -> None:
             try:
                 callback(msg)
@@ -281,7 +284,7 @@ class MonitorNode(Node):
 
         return guarded
 
-    def diagnostics_status(self) -> Any:
+    def diagnostics_status(self) -> DiagnosticStatus:
         """The monitor's current DiagnosticStatus (also published on /diagnostics)."""
         payload = self._payload.inertia
         return diagnostic_status(
@@ -305,7 +308,7 @@ class MonitorNode(Node):
         )
 
 
-def _interrupt(signal_number: int, frame: Any) -> None:
+def _interrupt(signal_number: int, frame: FrameType | None) -> None:
     raise KeyboardInterrupt(signal.Signals(signal_number).name)
 
 

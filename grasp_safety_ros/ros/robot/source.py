@@ -185,6 +185,6 @@ class RobotSource(DiagnosticsNode):
             self._log_robot(bundle)
 
 
-def robot_key(settings: NodeSettings) -> tuple[Any, ...]:
+def robot_key(settings: NodeSettings) -> tuple[str, str, str, tuple[float, ...] | None]:
     """The settings a robot model depends on."""
     return (settings.robot_source, settings.base_frame, settings.tip_frame, settings.ik_seed)

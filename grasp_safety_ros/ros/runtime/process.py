@@ -6,7 +6,8 @@ import signal
 import threading
 import time
 from collections.abc import Callable
-from typing import Any, Protocol, cast
+from types import FrameType
+from typing import Protocol, cast
 
 import rclpy
 import rclpy.utilities
@@ -66,7 +67,7 @@ class _Stop(Exception):  # noqa: N818  (a signal, not an error)
     """SIGINT or SIGTERM arrived: raised in the main thread by the node's signal handler."""
 
 
-def _raise_stop(signal_number: int, frame: Any) -> None:
+def _raise_stop(signal_number: int, frame: FrameType | None) -> None:
     raise _Stop(signal.Signals(signal_number).name)
 
 
