@@ -4,10 +4,15 @@ ISO/TS 15066 force ratios per body region."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..core.analyses.safety_report import SafetyReport
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
 
 def _label(name: str, index: int) -> str:
@@ -91,7 +96,7 @@ def plot_report(report: SafetyReport, path: str | Path, title: str = "") -> Path
     return path
 
 
-def _plot_iso(report: SafetyReport, ax, fig) -> None:
+def _plot_iso(report: SafetyReport, ax: Axes, fig: Figure) -> None:
     assessments = [a for a in report.iso if a.feasible]
     regions = [r.region.name for r in assessments[0].regions]
     ratios = np.array([[r.worst_force_ratio for r in a.regions] for a in assessments])

@@ -75,7 +75,7 @@ def load_any_model(source: str) -> tuple[pin.Model, str]:
 
 
 def _joint_type(model: pin.Model, joint_id: int) -> str:
-    short = model.joints[joint_id].shortname().removeprefix("JointModel")
+    short: str = model.joints[joint_id].shortname().removeprefix("JointModel")
     for prefix, name in _JOINT_TYPES.items():
         if short.startswith(prefix) and (prefix != "R" or not short.startswith("RUB")):
             return name

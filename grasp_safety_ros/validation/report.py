@@ -158,7 +158,8 @@ def _late_impact_note(results: dict[str, Any]) -> str:
 
 
 def _variant(summary: dict[str, Any], key: str) -> dict[str, Any] | None:
-    return summary.get("variants", {}).get(key)
+    variant: dict[str, Any] | None = summary.get("variants", {}).get(key)
+    return variant
 
 
 def _variant_of_both(

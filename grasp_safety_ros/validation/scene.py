@@ -174,7 +174,9 @@ def rotation_z_onto(direction: Sequence[float] | np.ndarray) -> np.ndarray:
     """A rotation matrix whose z axis is the unit vector along ``direction``."""
     unit = np.asarray(direction, dtype=float)
     unit = unit / np.linalg.norm(unit)
-    return pin.Quaternion.FromTwoVectors(np.array([0.0, 0.0, 1.0]), unit).toRotationMatrix()
+    quat = pin.Quaternion.FromTwoVectors(np.array([0.0, 0.0, 1.0]), unit)
+    rotation: np.ndarray = quat.toRotationMatrix()
+    return rotation
 
 
 @dataclass(frozen=True)
@@ -393,7 +395,8 @@ def joint_space_inertia(scene: Scene, positions: np.ndarray) -> np.ndarray:
     mujoco.mj_forward(model, data)
     full = np.zeros((model.nv, model.nv))
     mujoco.mj_fullM(model, data, full)
-    return full[np.ix_(scene.arm_dof, scene.arm_dof)]
+    inertia: np.ndarray = full[np.ix_(scene.arm_dof, scene.arm_dof)]
+    return inertia
 
 
 def tip_translational_jacobian(scene: Scene) -> np.ndarray:

@@ -177,7 +177,8 @@ def _direction_at(evaluation: GraspEvaluation, time_s: float) -> np.ndarray:
             for k in range(3)
         ]
     )
-    return direction / np.linalg.norm(direction)
+    unit: np.ndarray = direction / np.linalg.norm(direction)
+    return unit
 
 
 def _contact_normal_force(scene: Scene) -> float:

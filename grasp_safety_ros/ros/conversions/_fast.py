@@ -45,7 +45,7 @@ collector_paused = _CollectorPause()
 """Pauses the garbage collector for ranking_msg and report_msg (re-entrant, thread-safe)."""
 
 
-def float64_array(values: Sequence[float] | np.ndarray) -> array.array:
+def float64_array(values: Sequence[float] | np.ndarray) -> array.array[float]:
     """``array('d')`` of ``values``: what a float64[] field holds; built from the bytes, so
     the message setter stores it as is instead of converting element by element."""
     return array.array("d", np.ascontiguousarray(values, dtype=np.float64).tobytes())

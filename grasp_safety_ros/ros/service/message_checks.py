@@ -74,7 +74,8 @@ def _item_type(message_type: type[_Message], name: str) -> type[_Message]:
     module = sys.modules.get(".".join(item.namespaces)) or __import__(
         ".".join(item.namespaces), fromlist=[item.name]
     )
-    return getattr(module, item.name)
+    item_type: type[_Message] = getattr(module, item.name)
+    return item_type
 
 
 def _flat_paths(message_type: type[_Message]) -> tuple[str, ...] | None:
