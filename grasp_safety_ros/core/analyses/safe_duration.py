@@ -26,9 +26,11 @@ import numpy as np
 
 from ..exceptions import GraspSafetyError, InvalidInputError
 from ..input_checks import finite_float
-from ..method.ranking import Grasp, GraspEvaluation
+from ..method.ranking import Grasp, GraspEvaluation, GraspSafetyEvaluator
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
+from ..model.trajectory import ObjectTrajectory
+from ..model.waypoint_trajectory import WaypointTrajectory
 from .arm_sites import ArmSites
 from .retime import RETIME_FIELD, RetimedMotion, RetimeLimits, check_output_dt, retime_path
 from .site_speeds import SiteSpeedModel
@@ -188,10 +190,10 @@ class SafeDurationPostureCriterion:
 
     def __call__(
         self,
-        evaluator: Any,
+        evaluator: GraspSafetyEvaluator,
         grasp: Grasp,
         object_inertia: ObjectInertia,
-        trajectory: Any,
+        trajectory: ObjectTrajectory | WaypointTrajectory,
         evaluations: Sequence[GraspEvaluation],
     ) -> np.ndarray:
         """The safe duration [s] of each feasible evaluation of ``grasp``."""
