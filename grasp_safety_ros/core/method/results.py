@@ -71,7 +71,8 @@ class GraspEvaluation:
     direction_is_worst_case: np.ndarray
     tip_speed_m_s: np.ndarray
     ik_iterations: np.ndarray
-    links_only_effective_mass_kg: np.ndarray = None  # type: ignore[assignment]  # __post_init__
+    # None given: __post_init__ puts effective_mass_kg there (the attribute is always an array)
+    links_only_effective_mass_kg: np.ndarray = None  # type: ignore[assignment]
     planned_joint_rates: tuple[np.ndarray, np.ndarray] | None = None
 
     def __post_init__(self) -> None:
