@@ -25,7 +25,7 @@ from collections import Counter
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -42,6 +42,9 @@ from .rows import block_columns
 from .schema import SCHEMA_VERSION, grasp_schema, table
 from .sources import Failure, GraspBlock, SourceFile, discover, load_block, scenario_of
 from .spec import BatchSpec, parse_spec
+
+if TYPE_CHECKING:
+    from distributed import Client  # imported when a batch runs on Dask
 
 PARTS = "parts"
 """Subfolder of the part files."""
@@ -334,7 +337,9 @@ def _run_local(
         yield evaluate_chunk(payload, chunk, workers)
 
 
-def _run_dask(payload: SpecPayload, chunks: Sequence[Chunk], client: Any) -> Iterator[ChunkResult]:
+def _run_dask(
+    payload: SpecPayload, chunks: Sequence[Chunk], client: Client
+) -> Iterator[ChunkResult]:
     """The chunks as one Dask graph (the SPEC a single shared node), computed at once; the
     results as they complete."""
     import dask
@@ -352,7 +357,7 @@ def _run_dask(payload: SpecPayload, chunks: Sequence[Chunk], client: Any) -> Ite
         future.release()
 
 
-def _connect(address: str) -> Any:
+def _connect(address: str) -> Client:
     """A ``distributed.Client`` of the scheduler at ``address``; a one-line error naming
     ``--scheduler`` when there is none (timeout: distributed.comm.timeouts.connect)."""
     from distributed import Client
@@ -406,7 +411,7 @@ def run_batch(
     *,
     workers: int = 0,
     scheduler: str | None = None,
-    client: Any = None,
+    client: Client | None = None,
     resume: bool = False,
     per_sample: bool = False,
 ) -> dict[str, Any]:

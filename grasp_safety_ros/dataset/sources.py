@@ -13,7 +13,7 @@ import hashlib
 import os
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pinocchio as pin
@@ -25,6 +25,9 @@ from ..core.model.inertia import ObjectInertia
 from ..scenario.fields import load_yaml, mapping
 from ..scenario.schema import MAX_OBJECT_MASS_KG, Scenario, load_scenario
 from .spec import BatchSpec
+
+if TYPE_CHECKING:
+    import h5py  # imported when an ACRONYM file is read
 
 MAX_YAML_SOURCE_BYTES = 256_000_000
 """Largest GraspGen YAML file read [bytes]."""
@@ -187,7 +190,7 @@ def _block(
 # ACRONYM -----------------------------------------------------------------------------------
 
 
-def _open_hdf5(path: Path) -> Any:
+def _open_hdf5(path: Path) -> h5py.File:
     import h5py
 
     try:
@@ -196,7 +199,7 @@ def _open_hdf5(path: Path) -> Any:
         raise InvalidInputError("/", f"not a readable HDF5 file: {error}") from None
 
 
-def _acronym_transforms(h5: Any) -> Any:
+def _acronym_transforms(h5: h5py.File) -> h5py.Dataset:
     if "grasps/transforms" not in h5:
         raise InvalidInputError("grasps/transforms", "is required (N x 4 x 4 gripper poses)")
     transforms = h5["grasps/transforms"]
@@ -207,7 +210,7 @@ def _acronym_transforms(h5: Any) -> Any:
     return transforms
 
 
-def _acronym_inertia(h5: Any, spec: BatchSpec) -> ObjectInertia:
+def _acronym_inertia(h5: h5py.File, spec: BatchSpec) -> ObjectInertia:
     """The file's object/mass and object/inertia (about the CoM; both or neither) and
     object/com (default the origin); the SPEC's object where the file has none of the three;
     neither: refused naming object/mass. A mass alone does not say how it is distributed, and
