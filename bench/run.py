@@ -57,6 +57,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import numpy as np
 from _common import rel_diff, summary, timed, top_functions
 from continuous import bench_continuous
+from kdl_chain import build_chain, load_pykdl
 from pipeline import (
     bench_batch_per_worker,
     bench_pipeline,
@@ -65,7 +66,7 @@ from pipeline import (
     print_pipeline,
 )
 from postures import bench_postures, print_postures
-from pykdl_peer import PyKDLPipeline, build_chain, load_pykdl
+from pykdl_peer import PyKDLPipeline
 from reference import ReferenceIK, reference_effective_masses
 from run_report import issue21_rows, print_issue21, print_table
 from whole_arm import bench_whole_arm, print_whole_arm
