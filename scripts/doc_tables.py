@@ -364,22 +364,60 @@ def render_bench_whole_arm() -> str:
 _UNITS = {"s": " s", "ms": " ms", "us": " µs", "x": ""}
 
 
-def _target_value(value: float, unit: str) -> str:
-    if unit == "x":
-        return f"×{value:.1f}"
+def _typeset(text: str) -> str:
+    """A bench row's plain text as the docs write it: ≤, ≥, ×, µs."""
+    text = text.replace("<=", "≤").replace(">=", "≥").replace(" us", " µs")
+    return _cell(re.sub(r"(?<![\w.])x(?=\d)", "×", text))
+
+
+def _measured(value: float, unit: str) -> str:
     return (f"{value:,.0f}" if value >= 100 else f"{value:.3g}") + _UNITS[unit]
 
 
+def _runs(results: dict[str, Any]) -> str:
+    """Which run measured each section, with its 1-min load average before and after."""
+    by_run: dict[str, list[str]] = {}
+    for name, section in results["sections"].items():
+        before, after = section["load_average_1min"]
+        loads = "" if before is None else f", load {before:.1f} → {after:.1f}"
+        spent = f", {section['wall_s']:.0f} s" if "wall_s" in section else ""
+        by_run.setdefault(str(section["run"]), []).append(f"{name}{spent}{loads}")
+    return "; ".join(f"{run}: {', '.join(names)}" for run, names in by_run.items())
+
+
 def render_bench_targets() -> str:
-    """Issue 21's targets: each measure of the last ``make bench``, its target and whether it
-    was met, from bench/results.json."""
+    """Issue 30's targets, each beside the figure of the last ``make bench``, and issue 28's
+    no-regression rows (this run against the previous committed one), from
+    bench/results.json."""
+    results = _bench()
+    verdicts = {True: "met", False: "not met", None: ""}
     lines = ["| measure | this run | target | |", "|---|---|---|---|"]
-    for row in _bench()["issue21_targets"]:
-        unit = row["unit"]
-        bound = "≤ " + _target_value(row["target"], unit)
+    lines += [
+        f"| {_typeset(r['measure'])} | {_typeset(r['value'])} | {_typeset(r['target'])} | "
+        f"{verdicts[r['met']]} |"
+        for r in results["issue30_targets"]
+    ]
+    previous = results["previous"] or {"source": "none", "load_average_1min": [None, None]}
+    before, after = previous["load_average_1min"]
+    loads = "" if before is None else f", load {before:.1f} → {after:.1f}"
+    lines += [
+        "",
+        f"Sections by run: {_runs(results)}.",
+        "",
+        f"No regression (issue 28): this run beside the previous committed run "
+        f"({previous['source']}{loads}); a ratio above "
+        f"×{results['no_regression_tolerance']:g} is reported as slower:",
+        "",
+        "| measure | this run | previous | ratio | |",
+        "|---|---|---|---|---|",
+    ]
+    for r in results["no_regression"]:
+        unit = r["unit"]
+        old = "" if r["previous"] is None else _measured(r["previous"], unit)
+        ratio = "" if r["ratio"] is None else f"×{r['ratio']:.2f}"
         lines.append(
-            f"| {row['measure']} | {_target_value(row['value'], unit)} | {bound} | "
-            f"{'met' if row['met'] else 'not met'} |"
+            f"| {_typeset(r['measure'])} | {_measured(r['value'], unit)} | {old} | {ratio} | "
+            f"{r['verdict']} |"
         )
     return "\n".join(lines) + "\n"
 
