@@ -38,13 +38,14 @@ Sections (SECTIONS, each a key of the results, in run order; ``arms`` is bench/a
 - issue 21's and issue 30's target tables from the figures above (bench/targets.py; a row
   not measured says why), and issue 28's no-regression table: the core's µs per sample, the
   CLI and the service rows against the previous committed results (``previous``: the figures
-  of the file --json overwrites, or the previous run that file carries when it was assembled
-  with --merge).
+  of the file --json overwrites; with --merge, the previous run that file carries).
 
 Each section records its run, wall time and load average (``sections``).
 
 Usage: .venv/bin/python bench/run.py --json bench/results.json   (``make bench``; not a test;
-about 8-10 minutes on 2 quiet cores, WALL_TIME below)
+about 3 minutes on 2 cores at load 1.3-2.7: the service 77 s, the arms 48, the pipeline 26,
+the rest 15; ``make bench`` first runs ``make setup``, which compiles the kernels after an edit of
+them: 3-5 more minutes, once)
        .venv/bin/python bench/run.py --only pipeline,batch_per_worker --merge --json
        bench/results.json   (re-measure some sections, keep the others)
 """
@@ -232,22 +233,24 @@ def git_revision(path: Path) -> str:
     return done.stdout.strip() if done.returncode == 0 else ""
 
 
-def previous_run(path: Path) -> dict[str, Any] | None:
-    """What this run's figures are compared with: those of the results at ``path`` (the
-    previous committed run), or, when that file was assembled from several runs
-    (``--merge``), the previous run it carries."""
+def previous_run(path: Path, merge: bool) -> dict[str, Any] | None:
+    """What this run's figures are compared with: the figures of the results at ``path`` (the
+    previous committed run), with its load average (lowest and highest of its sections); when
+    ``merge`` adds sections to that file, the previous run it already carries."""
     if not path.exists():
         return None
     old = json.loads(path.read_text())
-    runs = {s.get("run") for s in (old.get("sections") or {"all": {}}).values()}
-    if len(runs) > 1:
-        return old.get("previous")
+    if merge and old.get("previous"):
+        return old["previous"]
     machine = old.get("machine") or {}
-    loads = (machine.get("load_average_1min_before"), machine.get("load_average_1min_after"))
+    loads = [machine.get("load_average_1min_before"), machine.get("load_average_1min_after")]
+    if old.get("sections"):
+        every = [load for s in old["sections"].values() for load in s["load_average_1min"]]
+        loads = [min(every), max(every)]
     revision = git_revision(path)
     return {
         "source": f"{path.name} at {revision}" if revision else path.name,
-        "load_average_1min": list(loads),
+        "load_average_1min": loads,
         "figures": regression_figures(old),
     }
 
@@ -313,7 +316,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     sections: dict[str, Any] = {}
     provenance: dict[str, Any] = {}
-    previous = previous_run(args.json) if args.json else None
+    previous = previous_run(args.json, args.merge) if args.json else None
     old: dict[str, Any] = {}
     if args.merge:
         old = json.loads(args.json.read_text())
@@ -389,10 +392,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print_issue21(results["issue21_targets"])
     print_issue30(results["issue30_targets"])
     print_no_regression(results["no_regression"], previous)
-    print(
-        "\nsections [s]: "
-        + ", ".join(f"{n} {p.get('wall_s', 0):.0f}" for n, p in provenance.items() if n in chosen)
-    )
+    spent = ", ".join(f"{name} {provenance[name]['wall_s']:.0f}" for name in chosen)
+    print(f"\nsections, wall time [s]: {spent}")
     return 0
 
 

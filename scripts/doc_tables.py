@@ -202,11 +202,13 @@ def render_bench_arms() -> str:
             f"| feasible grasps of {continuous['grasps']} | {continuous['feasible_grasps']} |",
         ]
     machine = results["machine"]
+    before, after = machine["load_average_1min_before"], machine["load_average_1min_after"]
+    if "sections" in results:  # the arms' own run (bench/run.py --merge keeps sections apart)
+        before, after = results["sections"]["arms"]["load_average_1min"]
     lines += [
         "",
         f"Machine: {machine['cores_available']} cores, Python {machine['python']}, load average "
-        f"{machine['load_average_1min_before']:.1f} before and "
-        f"{machine['load_average_1min_after']:.1f} after the run.",
+        f"{before:.1f} before and {after:.1f} after the run.",
     ]
     return "\n".join(lines) + "\n"
 
@@ -382,7 +384,7 @@ def _runs(results: dict[str, Any]) -> str:
         loads = "" if before is None else f", load {before:.1f} → {after:.1f}"
         spent = f", {section['wall_s']:.0f} s" if "wall_s" in section else ""
         by_run.setdefault(str(section["run"]), []).append(f"{name}{spent}{loads}")
-    return "; ".join(f"{run}: {', '.join(names)}" for run, names in by_run.items())
+    return "; ".join(f"{run}: {', '.join(names)}" for run, names in sorted(by_run.items()))
 
 
 def render_bench_targets() -> str:
