@@ -331,7 +331,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                         old_machine.get("load_average_1min_after"),
                     ],
                 }
-    kdl, kdl_reason = None, "skipped (--no-peer)"
+    kdl: Any = None
+    kdl_reason: str | None = "skipped (--no-peer)"
     if "arms" not in chosen:
         kdl_reason = old.get("pykdl_unavailable_reason") if args.merge else "arms not run"
     elif not args.no_peer:

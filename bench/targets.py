@@ -176,7 +176,7 @@ _CLI_FIGURES = (
     ("rank_1000", "CLI 1,000 x 201 --json"),
     ("rank_1000_no_per_sample", "CLI 1,000 x 201 --json --no-per-sample"),
 )
-_SERVICE_FIGURES = (
+_SERVICE_FIGURES: tuple[tuple[str | None, str], ...] = (
     (None, "posture.restarts 0"),
     ("per_sample_off", "posture.restarts 0, per_sample false"),
     ("node_defaults", "node defaults"),
@@ -198,8 +198,8 @@ def regression_figures(results: dict[str, Any]) -> dict[str, list[Any]]:
         if key in cli:
             figures[label] = [cli[key] if key == "help_s" else cli[key]["wall_s"], "s"]
     service = results.get("service") or {}
-    for key, label in _SERVICE_FIGURES:
-        measured = service if key is None else service.get(key)
+    for configuration, label in _SERVICE_FIGURES:
+        measured = service if configuration is None else service.get(configuration)
         if not measured or "latency_ms" not in measured:
             continue
         figures[f"service, {label}, 10 x 101 median"] = [measured["latency_ms"]["median"], "ms"]
