@@ -43,7 +43,7 @@ Sections (SECTIONS, each a key of the results, in run order; ``arms`` is bench/a
 Each section records its run, wall time and load average (``sections``).
 
 Usage: .venv/bin/python bench/run.py --json bench/results.json   (``make bench``; not a test;
-about 3 minutes on 2 cores at load 1.3-2.7: the service 77 s, the arms 48, the pipeline 26,
+about 3 minutes on 2 cores at load 1.3-2.7: the service 77 s, the arms 48, the pipeline 34,
 the rest 15; ``make bench`` first runs ``make setup``, which compiles the kernels after an edit of
 them: 3-5 more minutes, once)
        .venv/bin/python bench/run.py --only pipeline,batch_per_worker --merge --json
