@@ -393,8 +393,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         print_issue21(results["issue21_targets"])
     print_issue30(results["issue30_targets"])
     print_no_regression(results["no_regression"], previous)
-    spent = ", ".join(f"{name} {provenance[name]['wall_s']:.0f}" for name in chosen)
-    print(f"\nsections, wall time [s]: {spent}")
+    spent = []
+    for name in chosen:
+        before, after = provenance[name]["load_average_1min"]
+        spent.append(
+            f"{name} {provenance[name]['wall_s']:.0f} s (load {before:.1f} -> {after:.1f})"
+        )
+    print(f"\nsections, wall time and 1-min load average: {', '.join(spent)}")
     return 0
 
 
