@@ -256,7 +256,7 @@ def previous_run(path: Path, merge: bool) -> dict[str, Any] | None:
 
 
 # ----------------------------------------------------------------------------- main
-def main(argv: Sequence[str] | None = None) -> int:
+def parse_arguments(argv: Sequence[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", type=Path, help="write the results as JSON here")
     parser.add_argument("--arms", default="panda,baxter", help="comma-separated: panda,baxter")
@@ -292,58 +292,45 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="run only the whole-pipeline section (bench/pipeline.py, ~3 min)",
     )
     args = parser.parse_args(argv)
-    if args.pipeline_only:
-        pipeline = bench_pipeline()
-        if args.json:
-            args.json.parent.mkdir(parents=True, exist_ok=True)
-            args.json.write_text(json.dumps({"pipeline": pipeline}, indent=2) + "\n")
-        print_pipeline(pipeline)
-        print_issue30(issue30_rows({"pipeline": pipeline}))
-        return 0
-    if args.postures_only:
-        postures = bench_postures(args.posture_grasps)
-        if args.json:
-            args.json.parent.mkdir(parents=True, exist_ok=True)
-            args.json.write_text(json.dumps({"posture_selection": postures}, indent=2) + "\n")
-        print_postures(postures)
-        return 0
-    chosen = SECTIONS if args.only is None else tuple(args.only.split(","))
-    unknown = sorted(set(chosen) - set(SECTIONS))
+    args.chosen = SECTIONS if args.only is None else tuple(args.only.split(","))
+    unknown = sorted(set(args.chosen) - set(SECTIONS))
     if unknown:
         parser.error(f"--only: unknown sections {unknown}; valid: {','.join(SECTIONS)}")
     if args.merge and not (args.json and args.json.exists()):
         parser.error("--merge needs an existing --json file")
+    return args
 
-    sections: dict[str, Any] = {}
-    provenance: dict[str, Any] = {}
-    previous = previous_run(args.json, args.merge) if args.json else None
-    old: dict[str, Any] = {}
-    if args.merge:
-        old = json.loads(args.json.read_text())
-        old_machine = old.get("machine") or {}
-        for name in SECTIONS:
-            if name in old:
-                sections[name] = old[name]
-                provenance[name] = (old.get("sections") or {}).get(name) or {
-                    "run": previous["source"] if previous else "earlier",
-                    "load_average_1min": [
-                        old_machine.get("load_average_1min_before"),
-                        old_machine.get("load_average_1min_after"),
-                    ],
-                }
-    kdl: Any = None
-    kdl_reason: str | None = "skipped (--no-peer)"
-    if "arms" not in chosen:
-        kdl_reason = old.get("pykdl_unavailable_reason") if args.merge else "arms not run"
-    elif not args.no_peer:
-        kdl, kdl_reason = load_pykdl()
-    if kdl is None and "arms" in chosen:
-        print(f"bench: PyKDL peer skipped: {kdl_reason}", file=sys.stderr)
+
+def kept_sections(
+    old: dict[str, Any], previous: dict[str, Any] | None
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The sections of an existing results file (--merge) and their runs; a file written
+    before runs were recorded per section gives its sections the previous run's name and its
+    machine's load."""
+    machine = old.get("machine") or {}
+    sections, provenance = {}, {}
+    for name in SECTIONS:
+        if name in old:
+            sections[name] = old[name]
+            provenance[name] = (old.get("sections") or {}).get(name) or {
+                "run": previous["source"] if previous else "earlier",
+                "load_average_1min": [
+                    machine.get("load_average_1min_before"),
+                    machine.get("load_average_1min_after"),
+                ],
+            }
+    return sections, provenance
+
+
+def measure(
+    args: argparse.Namespace, kdl: Any, sections: dict[str, Any], provenance: dict[str, Any]
+) -> None:
+    """Run the chosen sections in order into ``sections``, each one's run, wall time and load
+    average into ``provenance``."""
     run = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
-    load_before = os.getloadavg()
     runners = section_runners(args, kdl)
     for name in SECTIONS:
-        if name not in chosen:
+        if name not in args.chosen:
             continue
         print(f"[{name}] started", file=sys.stderr)
         before, start = os.getloadavg()[0], time.perf_counter()
@@ -356,6 +343,62 @@ def main(argv: Sequence[str] | None = None) -> int:
             "load_average_1min": [before, os.getloadavg()[0]],
         }
 
+
+def print_results(results: dict[str, Any], chosen: Sequence[str]) -> None:
+    """The tables of the sections this run measured, then the target and no-regression
+    tables and each section's wall time and load."""
+    if "arms" in chosen:
+        print_table(results)
+    if "posture_selection" in chosen:
+        print_postures(results["posture_selection"])
+    if "whole_arm" in chosen:
+        print_whole_arm(results["whole_arm"])
+    if "pipeline" in chosen:
+        print_pipeline(results["pipeline"])
+        print_issue21(results["issue21_targets"])
+    print_issue30(results["issue30_targets"])
+    print_no_regression(results["no_regression"], results["previous"])
+    spent = []
+    for name in chosen:
+        run = results["sections"][name]
+        before, after = run["load_average_1min"]
+        spent.append(f"{name} {run['wall_s']:.0f} s (load {before:.1f} -> {after:.1f})")
+    print(f"\nsections, wall time and 1-min load average: {', '.join(spent)}")
+
+
+def write_json(path: Path | None, results: dict[str, Any]) -> None:
+    if path:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        text = json.dumps(results, indent=2, default=lambda x: None if x != x else x)
+        path.write_text(text + "\n")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = parse_arguments(argv)
+    if args.pipeline_only:
+        pipeline = bench_pipeline()
+        write_json(args.json, {"pipeline": pipeline})
+        print_pipeline(pipeline)
+        print_issue30(issue30_rows({"pipeline": pipeline}))
+        return 0
+    if args.postures_only:
+        postures = bench_postures(args.posture_grasps)
+        write_json(args.json, {"posture_selection": postures})
+        print_postures(postures)
+        return 0
+    previous = previous_run(args.json, args.merge) if args.json else None
+    old = json.loads(args.json.read_text()) if args.merge else {}
+    sections, provenance = kept_sections(old, previous) if args.merge else ({}, {})
+    kdl: Any = None
+    kdl_reason: str | None = "skipped (--no-peer)"
+    if "arms" not in args.chosen:
+        kdl_reason = old.get("pykdl_unavailable_reason") if args.merge else "arms not run"
+    elif not args.no_peer:
+        kdl, kdl_reason = load_pykdl()
+    if kdl is None and "arms" in args.chosen:
+        print(f"bench: PyKDL peer skipped: {kdl_reason}", file=sys.stderr)
+    load_before = os.getloadavg()
+    measure(args, kdl, sections, provenance)
     results = {
         **summarise(sections),
         **sections,
@@ -378,28 +421,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             "(see sections.*.load_average_1min), CPU times (cpu_*) much less"
         ),
     }
-    text = json.dumps(results, indent=2, default=lambda x: None if x != x else x)
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(text + "\n")
-    if "arms" in chosen:
-        print_table(results)
-    if "posture_selection" in chosen:
-        print_postures(sections["posture_selection"])
-    if "whole_arm" in chosen:
-        print_whole_arm(sections["whole_arm"])
-    if "pipeline" in chosen:
-        print_pipeline(sections["pipeline"])
-        print_issue21(results["issue21_targets"])
-    print_issue30(results["issue30_targets"])
-    print_no_regression(results["no_regression"], previous)
-    spent = []
-    for name in chosen:
-        before, after = provenance[name]["load_average_1min"]
-        spent.append(
-            f"{name} {provenance[name]['wall_s']:.0f} s (load {before:.1f} -> {after:.1f})"
-        )
-    print(f"\nsections, wall time and 1-min load average: {', '.join(spent)}")
+    write_json(args.json, results)
+    print_results(results, args.chosen)
     return 0
 
 
