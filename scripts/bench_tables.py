@@ -20,6 +20,15 @@ def _bench() -> dict[str, Any]:
     return json.loads(BENCH.read_text())
 
 
+def _arms_load(results: dict[str, Any]) -> list[float]:
+    """The 1-min load average before and after the arms' section (bench/run.py --merge keeps
+    sections of several runs; older results have the whole run's)."""
+    if "sections" in results:
+        return results["sections"]["arms"]["load_average_1min"]
+    machine = results["machine"]
+    return [machine["load_average_1min_before"], machine["load_average_1min_after"]]
+
+
 def render_bench_arms() -> str:
     """The ranking's speed per (grasp, sample) on Panda and Baxter, from bench/results.json."""
     arms = _bench()["arms"]
@@ -92,9 +101,7 @@ def render_bench_arms() -> str:
             f"| feasible grasps of {continuous['grasps']} | {continuous['feasible_grasps']} |",
         ]
     machine = results["machine"]
-    before, after = machine["load_average_1min_before"], machine["load_average_1min_after"]
-    if "sections" in results:  # the arms' own run (bench/run.py --merge keeps sections apart)
-        before, after = results["sections"]["arms"]["load_average_1min"]
+    before, after = _arms_load(results)
     lines += [
         "",
         f"Machine: {machine['cores_available']} cores, Python {machine['python']}, load average "
