@@ -70,7 +70,13 @@ from continuous import bench_continuous
 from kdl_chain import load_pykdl
 from pipeline import bench_batch_per_worker, bench_pipeline, print_pipeline
 from postures import bench_postures, print_postures
-from run_report import issue21_rows, print_issue21, print_table
+from run_report import (
+    issue21_rows,
+    print_arms,
+    print_continuous,
+    print_issue21,
+    print_service,
+)
 from targets import (
     REGRESSION_TOLERANCE,
     issue30_rows,
@@ -348,7 +354,11 @@ def print_results(results: dict[str, Any], chosen: Sequence[str]) -> None:
     """The tables of the sections this run measured, then the target and no-regression
     tables and each section's wall time and load."""
     if "arms" in chosen:
-        print_table(results)
+        print_arms(results["arms"])
+    if "continuous_arm" in chosen:
+        print_continuous(results)
+    if "service" in chosen:
+        print_service(results["service"])
     if "posture_selection" in chosen:
         print_postures(results["posture_selection"])
     if "whole_arm" in chosen:
