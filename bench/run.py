@@ -40,7 +40,9 @@ Sections (SECTIONS, each a key of the results, in run order; ``arms`` is bench/a
   CLI and the service rows against the previous committed results (``previous``: the figures
   of the file --json overwrites; with --merge, the previous run that file carries).
 
-Each section records its run, wall time and load average (``sections``).
+Each section records its run, wall time and load average (``sections``). A section that
+raises is recorded with its error, its rows say so, the others are still measured and written,
+and the run exits with status 1.
 
 Usage: .venv/bin/python bench/run.py --json bench/results.json   (``make bench``; not a test;
 about 3 minutes on 2 cores at load 1.3-2.7: the service 77 s, the arms 48, the pipeline 34,
@@ -59,6 +61,7 @@ import platform
 import subprocess
 import sys
 import time
+import traceback
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -160,9 +163,10 @@ def section_runners(args: argparse.Namespace, kdl: Any) -> dict[str, Callable[[]
     }
 
 
-def summarise(sections: dict[str, Any]) -> dict[str, Any]:
+def summarise(sections: dict[str, Any], failed: dict[str, str]) -> dict[str, Any]:
     """The top-level figures (worst arm) and issue 21's and 30's target rows from the
-    sections' results (sections not present give None or rows that say so)."""
+    sections' results (sections not present give None or rows that say so, with the error of
+    those in ``failed``)."""
     arms = sections.get("arms") or {}
     continuous = sections.get("continuous_arm")
 
@@ -223,7 +227,7 @@ def summarise(sections: dict[str, Any]) -> dict[str, Any]:
         "distance_to_floor": worst("distance_to_floor"),
         "service_latency_ms_median": service.get("median_ms"),
         "issue21_targets": issue21_rows(arms, pipeline, service) if pipeline else None,
-        "issue30_targets": issue30_rows(sections),
+        "issue30_targets": issue30_rows(sections, failed),
     }
 
 
@@ -332,7 +336,8 @@ def measure(
     args: argparse.Namespace, kdl: Any, sections: dict[str, Any], provenance: dict[str, Any]
 ) -> None:
     """Run the chosen sections in order into ``sections``, each one's run, wall time and load
-    average into ``provenance``."""
+    average (and the error of a section that raised one, which is then left out) into
+    ``provenance``."""
     run = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     runners = section_runners(args, kdl)
     for name in SECTIONS:
@@ -340,30 +345,39 @@ def measure(
             continue
         print(f"[{name}] started", file=sys.stderr)
         before, start = os.getloadavg()[0], time.perf_counter()
-        sections[name] = runners[name]()
+        error = None
+        try:
+            sections[name] = runners[name]()
+        except Exception as raised:  # one failing section must not lose the others' figures
+            traceback.print_exc()
+            error = f"{type(raised).__name__}: {raised}"
+            sections.pop(name, None)  # --merge: not the earlier run's figures either
         wall_s = time.perf_counter() - start
-        print(f"[{name}] done in {wall_s:.0f} s", file=sys.stderr)
+        print(f"[{name}] {'FAILED' if error else 'done'} in {wall_s:.0f} s", file=sys.stderr)
         provenance[name] = {
             "run": run,
             "wall_s": wall_s,
             "load_average_1min": [before, os.getloadavg()[0]],
         }
+        if error:
+            provenance[name]["error"] = error
 
 
 def print_results(results: dict[str, Any], chosen: Sequence[str]) -> None:
     """The tables of the sections this run measured, then the target and no-regression
     tables and each section's wall time and load."""
-    if "arms" in chosen:
+    measured = [name for name in chosen if name in results]
+    if "arms" in measured:
         print_arms(results["arms"])
-    if "continuous_arm" in chosen:
+    if "continuous_arm" in measured:
         print_continuous(results)
-    if "service" in chosen:
+    if "service" in measured:
         print_service(results["service"])
-    if "posture_selection" in chosen:
+    if "posture_selection" in measured:
         print_postures(results["posture_selection"])
-    if "whole_arm" in chosen:
+    if "whole_arm" in measured:
         print_whole_arm(results["whole_arm"])
-    if "pipeline" in chosen:
+    if "pipeline" in measured:
         print_pipeline(results["pipeline"])
         print_issue21(results["issue21_targets"])
     print_issue30(results["issue30_targets"])
@@ -409,8 +423,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"bench: PyKDL peer skipped: {kdl_reason}", file=sys.stderr)
     load_before = os.getloadavg()
     measure(args, kdl, sections, provenance)
+    failed = {name: run["error"] for name, run in provenance.items() if "error" in run}
     results = {
-        **summarise(sections),
+        **summarise(sections, failed),
         **sections,
         "no_regression": no_regression_rows(sections, previous),
         "no_regression_tolerance": REGRESSION_TOLERANCE,
@@ -433,7 +448,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     }
     write_json(args.json, results)
     print_results(results, args.chosen)
-    return 0
+    for name, error in failed.items():
+        print(f"bench: section {name} FAILED: {error}", file=sys.stderr)
+    return 1 if failed else 0
 
 
 if __name__ == "__main__":

@@ -48,11 +48,12 @@ _PIPELINE_ROWS = (
 section's results, bound, format."""
 
 
-def _pipeline_rows(pipeline: dict[str, Any] | None) -> list[dict[str, Any]]:
-    """Start-up, the CLI, posture selection and the analyses (bench/pipeline.py)."""
+def _pipeline_rows(pipeline: dict[str, Any] | None, absent: str) -> list[dict[str, Any]]:
+    """Start-up, the CLI, posture selection and the analyses (bench/pipeline.py); ``absent``
+    is the value of each row when the section is missing."""
     if pipeline is None:
         return [
-            _row(measure, NOT_RUN, target, None)
+            _row(measure, absent, target, None)
             for measure, target, *_ in ((_START_UP, _START_UP_TARGET), *_PIPELINE_ROWS)
         ]
     start = pipeline["cli"].get("rank_start_up")
@@ -78,13 +79,13 @@ def _pipeline_rows(pipeline: dict[str, Any] | None) -> list[dict[str, Any]]:
     return rows
 
 
-def _whole_arm_row(whole_arm: dict[str, Any] | None) -> dict[str, Any]:
+def _whole_arm_row(whole_arm: dict[str, Any] | None, absent: str) -> dict[str, Any]:
     """The whole arm's cost against the compiled ranking of the same grasps in the same
     section (both CPU time per (grasp, sample): wall time of one and CPU time of the other
     would not compare under load)."""
     measure = "whole arm per (grasp, sample), Panda, default sites"
     if not whole_arm or "panda" not in whole_arm:
-        return _row(measure, NOT_RUN, "<= x2 the core's", None)
+        return _row(measure, absent, "<= x2 the core's", None)
     panda = whole_arm["panda"]
     site_us, core_us = panda["us_per_sample"], panda["ranking_us_per_sample"]
     return _row(
@@ -96,10 +97,18 @@ def _whole_arm_row(whole_arm: dict[str, Any] | None) -> dict[str, Any]:
     )
 
 
-def issue30_rows(results: dict[str, Any]) -> list[dict[str, Any]]:
+def issue30_rows(
+    results: dict[str, Any], failed: dict[str, str] | None = None
+) -> list[dict[str, Any]]:
     """Issue 30's targets, each beside this run's figure: measure, value (text), target
-    (text), met (True, False, or None where not measured or measured by hand)."""
-    pipeline_rows = _pipeline_rows(results.get("pipeline"))
+    (text), met (True, False, or None where not measured or measured by hand). ``failed``:
+    the error of each section that raised one, which its rows give as the reason."""
+
+    def absent(section: str) -> str:
+        error = (failed or {}).get(section)
+        return NOT_RUN if error is None else f"not measured: section {section} failed: {error}"
+
+    pipeline_rows = _pipeline_rows(results.get("pipeline"), absent("pipeline"))
     rows = [
         _row(
             "fresh clone, empty caches: make demo to its table",
@@ -108,21 +117,23 @@ def issue30_rows(results: dict[str, Any]) -> list[dict[str, Any]]:
             None,
         ),
         *pipeline_rows[:3],
-        _whole_arm_row(results.get("whole_arm")),
+        _whole_arm_row(results.get("whole_arm"), absent("whole_arm")),
         *pipeline_rows[3:],
     ]
     batch = results.get("batch_per_worker")
     rows.append(
         _row(
             "batch per worker, bench/batch.py (1 local worker, fastest of its repeats)",
-            NOT_RUN if batch is None else f"{batch['grasp_samples_per_s']:,.0f} /s",
+            absent("batch_per_worker")
+            if batch is None
+            else f"{batch['grasp_samples_per_s']:,.0f} /s",
             ">= 20,000 /s, rows unchanged",
             None if batch is None else batch["grasp_samples_per_s"] >= 20_000,
         )
     )
     service = results.get("service")
     targets = {t["row"]: t for t in (service or {}).get("targets") or ()}
-    missing = NOT_RUN if service is None else f"not measured: {service.get('reason')}"
+    missing = absent("service") if service is None else f"not measured: {service.get('reason')}"
     for key, label, target_ms in (
         ("10 grasps x 101 samples, median", "service, node defaults, 10 x 101", 15.0),
         ("100 grasps x 201 samples, one client", "service, node defaults, 100 x 201", 100.0),
@@ -143,7 +154,7 @@ def issue30_rows(results: dict[str, Any]) -> list[dict[str, Any]]:
         rows.append(
             _row(
                 f"core us per (grasp, sample), {name.capitalize()}",
-                NOT_RUN if value is None else f"{value:.2f} us",
+                absent("arms") if value is None else f"{value:.2f} us",
                 f"<= {target:g} us",
                 None if value is None else value <= target,
             )

@@ -123,3 +123,12 @@ def test_no_regression_compares_each_figure_with_the_previous_run(
 def test_a_figure_without_a_previous_one_says_so() -> None:
     rows = targets.no_regression_rows(sections(), None)
     assert rows and all(r["verdict"] == "no previous figure" for r in rows)
+
+
+def test_rows_of_a_failed_section_give_its_error() -> None:
+    partial = sections()
+    del partial["whole_arm"]
+    rows = targets.issue30_rows(partial, failed={"whole_arm": "KeyError: 'panda'"})
+    (row,) = [r for r in rows if r["measure"].startswith("whole arm")]
+    assert row["value"] == "not measured: section whole_arm failed: KeyError: 'panda'"
+    assert targets.unmeasured(rows) == [row["measure"]]
