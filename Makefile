@@ -89,8 +89,11 @@ demo: $(CORE_STAMP)
 test: setup lint
 	$(PY) -m pytest -q test
 
+# Every section (about 3 minutes on 2 cores; bench/run.py's docstring), then the docs' tables
+# rendered from bench/results.json (the generated blocks only; make docs also re-captures).
 bench: setup
 	$(PY) bench/run.py --json bench/results.json
+	$(PY) scripts/render_docs.py
 
 # ruff check, ruff format --check, then mypy (its configuration: pyproject.toml)
 LINTED := grasp_safety_ros test bench examples launch scripts

@@ -25,7 +25,6 @@ Run alone: .venv/bin/python bench/run.py --pipeline-only [--json bench/results_p
 from __future__ import annotations
 
 import json
-import os
 import statistics
 import subprocess
 import sys
@@ -162,7 +161,7 @@ def bench_cli(folder: Path, repeats: int = 3) -> dict[str, Any]:
         key = f"rank_{grasps}" + ("_no_per_sample" if flags else "")
         times = [
             _wall([str(CLI), "rank", str(scenario), "--json", str(out), *flags])
-            for _ in range(repeats if grasps <= 100 else 1)
+            for _ in range(repeats)  # issue 30 targets 1,000 x 201 too: one run is too noisy
         ]
         results[key] = {"wall_s": statistics.median(times), "json_bytes": out.stat().st_size}
     return results
@@ -286,9 +285,6 @@ def print_pipeline(results: dict[str, Any]) -> None:
         )
 
 
-NOT_MEASURED = "not measured this run"
-
-
 def bench_batch_per_worker(grasps: int = 960) -> dict[str, Any]:
     """bench/batch.py's local one-worker throughput alone (its workload, warm process, the
     fastest of its REPEATS runs) for issue 30's row: (grasp, sample)/s per worker."""
@@ -306,111 +302,3 @@ def bench_batch_per_worker(grasps: int = 960) -> dict[str, Any]:
         "grasp_samples_per_s": max(r["grasp_samples_per_s"] for r in runs),
         "repeats_per_s": [r["grasp_samples_per_s"] for r in runs],
     }
-
-
-def issue30_rows(
-    pipeline: dict[str, Any],
-    arms: dict[str, Any] | None = None,
-    whole_arm: dict[str, Any] | None = None,
-    service: dict[str, Any] | None = None,
-    batch: dict[str, Any] | None = None,
-) -> list[dict[str, Any]]:
-    """Issue 30's targets, each beside this run's figure (rows this run did not measure say so):
-    measure, value (text), target (text), met (True, False or None)."""
-    cli = pipeline["cli"]
-    core = pipeline["in_process"]
-    start = cli["rank_start_up"]
-    rows: list[dict[str, Any]] = []
-
-    def row(measure: str, value: str | None, target: str, met: bool | None) -> None:
-        rows.append(
-            {
-                "measure": measure,
-                "value": value or NOT_MEASURED,
-                "target": target,
-                "met": met if value else None,
-            }
-        )
-
-    row(
-        "fresh clone, empty caches: make demo to its table",
-        None,
-        "<= 150 s, visible progress (by hand: docs/performance_pipeline.md)",
-        None,
-    )
-    rank_s, ratio = start["rank_1_s"], start["rank_1_vs_import_pinocchio"]
-    row(
-        "grasp-safety rank 1 x 201, whole process, warm caches",
-        f"{rank_s['median']:.2f} s [{rank_s['min']:.2f}..{rank_s['max']:.2f}], "
-        f"x{ratio['median']:.2f} [{ratio['min']:.2f}..{ratio['max']:.2f}] import pinocchio",
-        "<= 0.5 s and <= x1.5 import pinocchio",
-        rank_s["median"] <= 0.5 and ratio["median"] <= 1.5,
-    )
-    for key, label, target in (
-        ("rank_100", "CLI 100 x 201 --json", 1.0),
-        ("rank_1000", "CLI 1,000 x 201 --json", 3.0),
-    ):
-        wall = cli[key]["wall_s"]
-        row(label, f"{wall:.2f} s", f"<= {target:g} s", wall <= target)
-    if arms and whole_arm and "panda" in arms and "panda" in whole_arm:
-        site_us = whole_arm["panda"]["us_per_sample"]
-        core_us = arms["panda"]["us_per_sample_with_ik"]["median"]
-        row(
-            "whole arm per (grasp, sample), Panda",
-            f"{site_us:.2f} us = x{site_us / core_us:.2f} the core's {core_us:.2f} us",
-            "<= x2 the core's",
-            site_us <= 2 * core_us,
-        )
-    else:
-        row("whole arm per (grasp, sample), Panda", None, "<= x2 the core's", None)
-    row(
-        "posture selection (8 restarts) / single-IK ranking",
-        f"x{core['postures_vs_ranking']:.2f}",
-        "<= x2",
-        core["postures_vs_ranking"] <= 2.0,
-    )
-    row(
-        "default analyses / ranking",
-        f"x{core['analyses_vs_ranking']:.2f}",
-        "<= x1.5",
-        core["analyses_vs_ranking"] <= 1.5,
-    )
-    per_worker = None if batch is None else batch["grasp_samples_per_s"]
-    row(
-        "batch per worker, bench/batch.py (1 local worker, fastest of its repeats)",
-        None if per_worker is None else f"{per_worker:,.0f} /s",
-        ">= 20,000 /s, rows unchanged",
-        None if per_worker is None else per_worker >= 20_000,
-    )
-    targets = {t["row"]: t for t in (service or {}).get("targets") or ()}
-    for key, label, target_ms in (
-        ("10 grasps x 101 samples, median", "service, node defaults, 10 x 101", 15.0),
-        ("100 grasps x 201 samples, one client", "service, node defaults, 100 x 201", 100.0),
-    ):
-        measured = targets.get(key)
-        value = None if measured is None else measured["measured_ms"]
-        row(
-            label,
-            None if value is None else f"{value:.1f} ms",
-            f"<= {target_ms:g} ms",
-            None if value is None else value <= target_ms,
-        )
-    for name, target in (("panda", 1.0), ("baxter", 1.3)):
-        arm = (arms or {}).get(name)
-        value = None if arm is None else arm["us_per_sample_with_ik"]["median"]
-        row(
-            f"core us per (grasp, sample), {name}",
-            None if value is None else f"{value:.2f} us",
-            f"<= {target:g} us",
-            None if value is None else value <= target,
-        )
-    return rows
-
-
-def print_issue30(rows: list[dict[str, Any]]) -> None:
-    """The rows of ``issue30_rows`` as a table, with the load average now."""
-    load = ", ".join(f"{x:.1f}" for x in os.getloadavg())
-    print(f"\nIssue 30's targets, this run (load average {load}):")
-    for r in rows:
-        verdict = {True: "met", False: "NOT met", None: ""}[r["met"]]
-        print(f"  {r['measure']}: {r['value']} (target {r['target']}) {verdict}".rstrip())

@@ -7,6 +7,8 @@ The same on a chain with continuous joints (Kinova Jaco2, ``--continuous-arm``):
 serial, and its CPU time per sample relative to the slowest revolute arm's.
 Measured in one process, interleaved, repeated (median and spread):
 
+Sections (SECTIONS, each a key of the results, in run order; ``arms`` is bench/arm.py):
+
 - ours, serial (one core): ``GraspSafetyEvaluator.rank`` with the compiled kernels; µs per
   (grasp, sample) with IK (whole rank / (grasps x samples)) and without IK (effective mass
   from given joint positions / feasible samples); total wall time; IK iterations per sample;
@@ -33,358 +35,68 @@ Measured in one process, interleaved, repeated (median and spread):
   analyses as multiples of the ranking's own time, the start-up of a one-grasp ranking against
   ``import pinocchio``; alone: ``bench/run.py --pipeline-only``;
 - the batch's throughput per worker (bench/batch.py's workload, one local worker);
-- issue 21's and issue 30's target tables from the figures above (rows not measured say so).
+- issue 21's and issue 30's target tables from the figures above (bench/targets.py; a row
+  not measured says why), and issue 28's no-regression table: the core's µs per sample, the
+  CLI and the service rows against the previous committed results (``previous``: the figures
+  of the file --json overwrites; with --merge, the previous run that file carries).
 
-Usage: .venv/bin/python bench/run.py --json bench/results.json   (not a test; ~2-4 minutes)
+Each section records its run, wall time and load average (``sections``). A section that
+raises is recorded with its error, its rows say so, the others are still measured and written,
+and the run exits with status 1.
+
+Usage: .venv/bin/python bench/run.py --json bench/results.json   (``make bench``; not a test;
+about 3 minutes on 2 cores at load 1.3-2.7: the service 77 s, the arms 48, the pipeline 34,
+the rest 15; ``make bench`` first runs ``make setup``, which compiles the kernels after an edit of
+them: 3-5 more minutes, once)
+       .venv/bin/python bench/run.py --only pipeline,batch_per_worker --merge --json
+       bench/results.json   (re-measure some sections, keep the others)
 """
 
 from __future__ import annotations
 
 import argparse
-import cProfile
-import itertools
 import json
 import os
 import platform
+import subprocess
 import sys
 import time
+import traceback
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import numpy as np
-from _common import rel_diff, summary, timed, top_functions
+from arm import bench_arm
 from continuous import bench_continuous
-from pipeline import (
-    bench_batch_per_worker,
-    bench_pipeline,
-    issue30_rows,
-    print_issue30,
-    print_pipeline,
-)
+from kdl_chain import load_pykdl
+from pipeline import bench_batch_per_worker, bench_pipeline, print_pipeline
 from postures import bench_postures, print_postures
-from pykdl_peer import PyKDLPipeline, build_chain, load_pykdl
-from reference import ReferenceIK, reference_effective_masses
-from run_report import issue21_rows, print_issue21, print_table
-from whole_arm import bench_whole_arm, print_whole_arm
-from workload import ARMS, ArmWorkload, box_object, grasps_around_box
-
-from grasp_safety_ros.core import GraspSafetyEvaluator
-from grasp_safety_ros.core.method.effective_mass import (
-    effective_masses_along,
-    translational_mobilities_in_base,
+from run_report import (
+    issue21_rows,
+    print_arms,
+    print_continuous,
+    print_issue21,
+    print_service,
 )
+from targets import (
+    REGRESSION_TOLERANCE,
+    issue30_rows,
+    no_regression_rows,
+    print_issue30,
+    print_no_regression,
+    regression_figures,
+)
+from whole_arm import bench_whole_arm, print_whole_arm
+from workload import ARMS
+
 from grasp_safety_ros.core.method.ik import compiled_available
 from grasp_safety_ros.core.method.pool import default_workers
-from grasp_safety_ros.core.method.ranking import EvaluationConfig, Ranking
-from grasp_safety_ros.core.model.robot import resolve_urdf
-
-FLOPS_PER_EVALUATION = 4000.0
-FLOPS_PER_IK_ITERATION = 2000.0
-FLOPS_PER_US = 6000.0
-"""Assumed sustained scalar double rate of one core: 6 GFLOP/s (one FMA per cycle, 3 GHz)."""
 
 
-def self_motion_fractions(robot: Any, q_path: np.ndarray) -> np.ndarray:
-    """|(I - J^+ J) dq| / |dq| of each joint step dq of q_path, J the tip Jacobian at its
-    start: the share of the step that moves the arm along its self-motion manifold."""
-    import pinocchio as pin
-
-    model, data = robot.model, robot.model.createData()
-    jacobians = np.array(
-        [
-            pin.computeFrameJacobian(model, data, q, robot.tip_frame_id, pin.LOCAL)
-            for q in q_path[:-1]
-        ]
-    )
-    steps = np.array([pin.difference(model, a, b) for a, b in itertools.pairwise(q_path)])
-    row_space = np.einsum("nij,nj->ni", np.linalg.pinv(jacobians) @ jacobians, steps)
-    norms = np.linalg.norm(steps, axis=1)
-    moving = norms > 0
-    return np.linalg.norm(steps - row_space, axis=1)[moving] / norms[moving]
-
-
-# ----------------------------------------------------------------------------- one arm
-def bench_arm(arm: ArmWorkload, args: argparse.Namespace, kdl: Any) -> dict[str, Any]:
-    robot = arm.robot()
-    trajectory = arm.trajectory(2.0, 0.01)
-    obj = box_object()
-    grasps = grasps_around_box(np.array(arm.approach_from), args.grasps)
-    seed = np.array(arm.seed_positions)
-    samples = trajectory.num_samples
-    total = len(grasps) * samples
-    serial = GraspSafetyEvaluator(robot, EvaluationConfig(workers=1))
-    pooled = GraspSafetyEvaluator(robot, EvaluationConfig(workers=0, parallel_min_samples=1))
-    fallback = GraspSafetyEvaluator(robot, EvaluationConfig(backend="python", workers=1))
-    out: dict[str, Any] = {
-        "robot": f"{arm.urdf} {arm.base_frame} -> {arm.tip_frame}",
-        "grasps": len(grasps),
-        "samples_per_grasp": samples,
-        "backend": "compiled" if serial.ik.compiled else "python",
-        "workers": default_workers(),
-    }
-
-    def rank(evaluator: GraspSafetyEvaluator) -> Ranking:
-        return evaluator.rank(grasps, obj, trajectory, seed_positions=seed)
-
-    print(f"[{arm.name}] warm-up (numba compiles or loads its cache)", file=sys.stderr)
-    warm_s, ranking = timed(lambda: rank(serial))
-    out["first_call_s"] = warm_s
-    rank(pooled)
-    feasible = [e for e in ranking.evaluations if e.feasible]
-    feasible_samples = sum(len(e.times_s) for e in feasible)
-    iterations = np.concatenate([e.ik_iterations for e in feasible])
-    out["feasible_grasps"] = len(feasible)
-    out["ik_iterations_per_sample"] = float(iterations.mean())
-    out["ik_iterations_per_sample_excluding_first"] = float(
-        np.concatenate([e.ik_iterations[1:] for e in feasible]).mean()
-    )
-
-    # The pre-issue implementation (every grasp): the body of reference_evaluate, timed.
-    print(f"[{arm.name}] the pre-issue implementation (secant warm start)", file=sys.stderr)
-    reference_ik = ReferenceIK(robot)
-    seed_q = robot.q_from_positions(seed)
-    times_s = trajectory.times_s()
-    s_values, _, _ = trajectory.path_parameter(times_s)
-    reference_paths: list[np.ndarray | None] = []
-    start = time.perf_counter()
-    for grasp in grasps:
-        poses, tangents = trajectory.tip_path(grasp.transform_tip_to_object, s_values)
-        q_path, _, reason = reference_ik.solve_trajectory(poses, times_s, s_values, seed_q)
-        if not reason:
-            reference_effective_masses(robot, grasp.transform_tip_to_object, obj, q_path, tangents)
-        reference_paths.append(None if reason else q_path)
-    reference_s = time.perf_counter() - start
-    # Its effective-mass code on our joint paths (the identity that still holds), and how its
-    # joint paths differ from ours (self-motion).
-    worst, path_diff = 0.0, 0.0
-    ours_self_motion, reference_self_motion = [], []
-    for grasp, evaluation, q_reference in zip(
-        grasps, ranking.evaluations, reference_paths, strict=True
-    ):
-        if q_reference is not None and len(q_reference) > 1:
-            reference_self_motion.append(float(self_motion_fractions(robot, q_reference).max()))
-        if not evaluation.feasible:
-            continue
-        q_ours = np.array([robot.q_from_positions(p) for p in evaluation.joint_positions])
-        _, tangents = trajectory.tip_path(grasp.transform_tip_to_object, s_values)
-        masses = reference_effective_masses(
-            robot, grasp.transform_tip_to_object, obj, q_ours, tangents
-        )
-        worst = max(worst, rel_diff(evaluation.effective_mass_kg, masses))
-        if len(q_ours) > 1:
-            ours_self_motion.append(float(self_motion_fractions(robot, q_ours).max()))
-        if q_reference is not None:
-            path_diff = max(path_diff, float(np.abs(q_reference - q_ours).max()))
-    names_ours = {g.name for g, e in zip(grasps, ranking.evaluations, strict=True) if e.feasible}
-    names_reference = {
-        g.name for g, q in zip(grasps, reference_paths, strict=True) if q is not None
-    }
-    out["reference"] = {
-        "ik_warm_start": "secant (extrapolates the previous joint step)",
-        "wall_s": reference_s,
-        "us_per_sample_with_ik": reference_s / total * 1e6,
-        "feasible_grasps": len(names_reference),
-        "feasible_only_with_ours": sorted(names_ours - names_reference),
-        "feasible_only_with_reference": sorted(names_reference - names_ours),
-        "effective_mass_max_rel_diff_on_our_paths": worst,
-        "max_joint_path_diff_rad": path_diff,
-    }
-    out["self_motion_fraction"] = {
-        "ours_max": max(ours_self_motion, default=0.0),
-        "ours_median_of_grasp_max": float(np.median(ours_self_motion)),
-        "reference_max": max(reference_self_motion, default=0.0),
-        "reference_median_of_grasp_max": float(np.median(reference_self_motion)),
-    }
-
-    # Peer.
-    peer = None
-    if kdl is not None:
-        path, is_xml = resolve_urdf(arm.urdf)
-        urdf_text = path if is_xml else Path(path).read_text()
-        chain = build_chain(kdl, urdf_text, arm.base_frame, arm.tip_frame)
-        peer = PyKDLPipeline(kdl, chain, serial.config.ik)
-    peer_grasps = grasps[: args.peer_grasps]
-    peer_total = len(peer_grasps) * samples
-
-    def run_peer() -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray]]:
-        assert peer is not None
-        return [
-            peer.evaluate(
-                trajectory,
-                np.array(g.transform_tip_to_object.rotation),
-                np.array(g.transform_tip_to_object.translation),
-                obj.mass_kg,
-                np.array(obj.com_in_object_m),
-                np.array(obj.inertia_about_com_kgm2),
-                seed,
-            )
-            for g in peer_grasps
-        ]
-
-    # Effective mass only (IK excluded): from the joint positions found above.
-    chain_arrays = serial.ik.chain if serial.ik.compiled else None
-    moving = [(g, e) for g, e in zip(grasps, ranking.evaluations, strict=True) if e.feasible]
-
-    def effective_mass_only() -> None:
-        for grasp, evaluation in moving:
-            mobilities = translational_mobilities_in_base(
-                robot,
-                obj,
-                grasp.transform_tip_to_object,
-                evaluation.joint_positions,
-                chain_arrays,
-            )
-            effective_masses_along(mobilities, evaluation.directions_in_base)
-
-    def peer_effective_mass_only(results: list) -> None:
-        assert peer is not None
-        for grasp, (reason, _, q_all, _) in zip(peer_grasps, results, strict=True):
-            if reason:
-                continue
-            s_values, _, _ = trajectory.path_parameter(trajectory.times_s())
-            r = np.array(grasp.transform_tip_to_object.rotation)
-            p = np.array(grasp.transform_tip_to_object.translation)
-            _, _, tangents = peer.tip_path(trajectory, r, p, s_values)
-            peer.effective_masses(
-                q_all,
-                tangents,
-                r,
-                p,
-                obj.mass_kg,
-                np.array(obj.com_in_object_m),
-                np.array(obj.inertia_about_com_kgm2),
-            )
-
-    effective_mass_only()  # compiles (or loads) the batch kernel before timing
-    timings: dict[str, list[float]] = {
-        k: [] for k in ("serial", "without_ik", "parallel", "peer", "peer_without_ik")
-    }
-    peer_results: list = []
-    cpu: dict[str, list[float]] = {"serial": [], "peer": []}
-    for repeat in range(args.repeats):
-        print(f"[{arm.name}] repeat {repeat + 1}/{args.repeats}", file=sys.stderr)
-        cpu_start = time.process_time()
-        timings["serial"].append(timed(lambda: rank(serial))[0])
-        cpu["serial"].append(time.process_time() - cpu_start)
-        timings["without_ik"].append(timed(effective_mass_only)[0])
-        timings["parallel"].append(timed(lambda: rank(pooled))[0])
-        if peer is not None and repeat < args.peer_repeats:
-            cpu_start = time.process_time()
-            elapsed, peer_results = timed(run_peer)
-            cpu["peer"].append(time.process_time() - cpu_start)
-            timings["peer"].append(elapsed)
-            start = time.perf_counter()
-            peer_effective_mass_only(peer_results)
-            timings["peer_without_ik"].append(time.perf_counter() - start)
-    fallback_s, fallback_ranking = timed(lambda: rank(fallback))
-
-    with_ik = summary([t / total * 1e6 for t in timings["serial"]])
-    without_ik = summary([t / feasible_samples * 1e6 for t in timings["without_ik"]])
-    out["us_per_sample_with_ik"] = with_ik
-    out["cpu_us_per_sample_with_ik"] = summary([t / total * 1e6 for t in cpu["serial"]])
-    out["us_per_sample_without_ik"] = without_ik
-    out["wall_s_serial"] = summary(timings["serial"])
-    out["wall_s_parallel"] = summary(timings["parallel"])
-    out["us_per_sample_with_ik_parallel"] = summary([t / total * 1e6 for t in timings["parallel"]])
-    out["parallel_speedup"] = with_ik["median"] / out["us_per_sample_with_ik_parallel"]["median"]
-    out["python_backend_us_per_sample_with_ik"] = fallback_s / total * 1e6
-    pairs = list(zip(fallback_ranking.evaluations, ranking.evaluations, strict=True))
-    out["python_backend_max_rel_diff"] = max(
-        (
-            rel_diff(a.effective_mass_kg, b.effective_mass_kg)
-            for a, b in pairs
-            if a.feasible and b.feasible
-        ),
-        default=0.0,
-    )
-    out["python_backend_same_feasibility"] = all(a.feasible == b.feasible for a, b in pairs)
-    # The last iterate of a sample that does not converge (100 iterations) is chaotic: the
-    # joints it leaves at a limit, named in the reason, may differ by rounding.
-    out["python_backend_reasons_differ"] = [b.name for a, b in pairs if a.reason != b.reason]
-    out["python_backend_same_ik_iterations"] = all(
-        np.array_equal(a.ik_iterations, b.ik_iterations) for a, b in pairs
-    )
-    floor = (
-        FLOPS_PER_EVALUATION + FLOPS_PER_IK_ITERATION * out["ik_iterations_per_sample"]
-    ) / FLOPS_PER_US
-    out["floor_us_per_sample"] = floor
-    out["distance_to_floor"] = with_ik["median"] / floor
-    out["distance_to_floor_without_ik"] = without_ik["median"] / (
-        FLOPS_PER_EVALUATION / FLOPS_PER_US
-    )
-
-    if peer is not None:
-        peer_feasible_samples = sum(len(m) for reason, m, _, _ in peer_results if not reason)
-        out["pykdl"] = {
-            "grasps": len(peer_grasps),
-            "us_per_sample_with_ik": summary([t / peer_total * 1e6 for t in timings["peer"]]),
-            "cpu_us_per_sample_with_ik": summary([t / peer_total * 1e6 for t in cpu["peer"]]),
-            "us_per_sample_without_ik": summary(
-                [t / max(peer_feasible_samples, 1) * 1e6 for t in timings["peer_without_ik"]]
-            ),
-        }
-        # The KDL solver calls alone (FK + Jacobian + mass matrix at each solved sample, with
-        # q set from Python): what the peer would cost with all its numpy glue compiled away.
-        q_rows = [row for reason, _, q_all, _ in peer_results if not reason for row in q_all]
-        start = time.perf_counter()
-        for row in q_rows:
-            peer._set_q(row)
-            peer.fk.JntToCart(peer._q, peer._frame)
-            peer.jac.JntToJac(peer._q, peer._jacobian)
-            peer.dyn.JntToMass(peer._q, peer._mass)
-        out["pykdl"]["kdl_calls_us_per_sample"] = (
-            (time.perf_counter() - start) / max(len(q_rows), 1) * 1e6
-        )
-        diffs, agree = [], True
-        for (reason, masses, _, _), evaluation in zip(
-            peer_results, ranking.evaluations, strict=False
-        ):
-            agree &= (not reason) == evaluation.feasible
-            if not reason and evaluation.feasible:
-                diffs.append(rel_diff(masses, evaluation.effective_mass_kg))
-        out["pykdl"]["max_rel_diff"] = max(diffs, default=float("nan"))
-        out["pykdl"]["same_feasibility"] = agree
-        ours_peer_subset = out["us_per_sample_with_ik"]["median"]
-        out["speedup_vs_pykdl"] = (
-            out["pykdl"]["us_per_sample_with_ik"]["median"] / ours_peer_subset
-        )
-        out["speedup_vs_pykdl_cpu"] = (
-            out["pykdl"]["cpu_us_per_sample_with_ik"]["median"]
-            / out["cpu_us_per_sample_with_ik"]["median"]
-        )
-        out["speedup_vs_pykdl_without_ik"] = (
-            out["pykdl"]["us_per_sample_without_ik"]["median"] / without_ik["median"]
-        )
-
-    # Where the time goes.
-    profile = cProfile.Profile()
-    elapsed, _ = timed(lambda: profile.runcall(rank, serial))
-    out["profile_ours"] = top_functions(profile, elapsed)
-    if peer is not None:
-        profile = cProfile.Profile()
-        few = peer_grasps[:5]
-        start = time.perf_counter()
-        for g in few:
-            profile.runcall(
-                peer.evaluate,
-                trajectory,
-                np.array(g.transform_tip_to_object.rotation),
-                np.array(g.transform_tip_to_object.translation),
-                obj.mass_kg,
-                np.array(obj.com_in_object_m),
-                np.array(obj.inertia_about_com_kgm2),
-                seed,
-            )
-        out["profile_pykdl"] = top_functions(profile, time.perf_counter() - start)
-    return out
-
-
-# ----------------------------------------------------------------------------- continuous joints
 # ----------------------------------------------------------------------------- service
-def service_latency(arm: ArmWorkload, repeats: int) -> dict[str, Any]:
+def service_latency(repeats: int) -> dict[str, Any]:
     """The node's service cost (bench/service.py), Baxter: 10 grasps x 101 samples (latency,
     the ranking's own time, spans) and 1,000 grasps x 201 samples end to end, for issue 12's
     comparable configuration (``posture.restarts`` 0, default response: the top-level keys),
@@ -416,8 +128,145 @@ def service_latency(arm: ArmWorkload, repeats: int) -> dict[str, Any]:
     }
 
 
+# ----------------------------------------------------------------------------- sections
+SECTIONS = (
+    "arms",
+    "continuous_arm",
+    "posture_selection",
+    "whole_arm",
+    "pipeline",
+    "batch_per_worker",
+    "service",
+)
+"""The measured sections, in run order; each is a key of the results."""
+
+
+def section_runners(args: argparse.Namespace, kdl: Any) -> dict[str, Callable[[], Any]]:
+    """Each section's measurement (module docstring), by its key in the results."""
+    names = args.arms.split(",")
+    return {
+        "arms": lambda: {name: bench_arm(ARMS[name], args, kdl) for name in names},
+        "continuous_arm": lambda: (
+            None
+            if args.continuous_arm == "none"
+            else bench_continuous(ARMS[args.continuous_arm], args.repeats)
+        ),
+        "posture_selection": lambda: bench_postures(args.posture_grasps),
+        "whole_arm": lambda: {name: bench_whole_arm(ARMS[name]) for name in names},
+        "pipeline": bench_pipeline,
+        "batch_per_worker": bench_batch_per_worker,
+        "service": lambda: (
+            {"median_ms": None, "reason": "skipped (--no-service)"}
+            if args.no_service
+            else service_latency(args.service_repeats)
+        ),
+    }
+
+
+def summarise(sections: dict[str, Any], failed: dict[str, str]) -> dict[str, Any]:
+    """The top-level figures (worst arm) and issue 21's and 30's target rows from the
+    sections' results (sections not present give None or rows that say so, with the error of
+    those in ``failed``)."""
+    arms = sections.get("arms") or {}
+    continuous = sections.get("continuous_arm")
+
+    def worst(key: str, pick: Callable[[Any], float] = max) -> float | None:
+        values = [
+            a[key]["median"] if isinstance(a[key], dict) else a[key]
+            for a in arms.values()
+            if key in a
+        ]
+        return pick(values) if values else None
+
+    def over_arms(pick: Callable[[dict[str, Any]], Any], combine: Callable = max) -> Any:
+        return combine(pick(a) for a in arms.values()) if arms else None
+
+    pykdl = [a["pykdl"] for a in arms.values() if "pykdl" in a]
+    slowest_cpu = worst("cpu_us_per_sample_with_ik")
+    pipeline, service = sections.get("pipeline"), sections.get("service") or {}
+    return {
+        "us_per_sample_with_ik": worst("us_per_sample_with_ik"),
+        "us_per_sample_without_ik": worst("us_per_sample_without_ik"),
+        "cpu_us_per_sample_with_ik": slowest_cpu,
+        "us_per_sample_with_ik_parallel": worst("us_per_sample_with_ik_parallel"),
+        "wall_s_100x201_serial": worst("wall_s_serial"),
+        "wall_s_100x201_parallel": worst("wall_s_parallel"),
+        "ik_iterations_per_sample": worst("ik_iterations_per_sample"),
+        "us_per_sample_with_ik_continuous": (
+            continuous["us_per_sample_with_ik"]["median"] if continuous else None
+        ),
+        "continuous_vs_revolute_cpu": (
+            continuous["cpu_us_per_sample_with_ik"]["median"] / slowest_cpu
+            if continuous and slowest_cpu
+            else None
+        ),
+        "pykdl_us_per_sample_with_ik": max(
+            (p["us_per_sample_with_ik"]["median"] for p in pykdl), default=None
+        ),
+        "speedup_vs_pykdl": worst("speedup_vs_pykdl", min),
+        "max_rel_diff_vs_pykdl": max((p["max_rel_diff"] for p in pykdl), default=None),
+        "max_rel_diff_compiled_vs_python": over_arms(lambda a: a["python_backend_max_rel_diff"]),
+        "compiled_vs_python_same_feasibility_and_iterations": over_arms(
+            lambda a: (
+                a["python_backend_same_feasibility"] and a["python_backend_same_ik_iterations"]
+            ),
+            all,
+        ),
+        "max_rel_diff_vs_reference_effective_mass": over_arms(
+            lambda a: a["reference"]["effective_mass_max_rel_diff_on_our_paths"]
+        ),
+        "feasible_grasps": {name: a["feasible_grasps"] for name, a in arms.items()},
+        "feasible_grasps_reference_secant": {
+            name: a["reference"]["feasible_grasps"] for name, a in arms.items()
+        },
+        "self_motion_fraction_max": over_arms(lambda a: a["self_motion_fraction"]["ours_max"]),
+        "self_motion_fraction_max_reference_secant": over_arms(
+            lambda a: a["self_motion_fraction"]["reference_max"]
+        ),
+        "floor_us_per_sample": worst("floor_us_per_sample", min),
+        "distance_to_floor": worst("distance_to_floor"),
+        "service_latency_ms_median": service.get("median_ms"),
+        "issue21_targets": issue21_rows(arms, pipeline, service) if pipeline else None,
+        "issue30_targets": issue30_rows(sections, failed),
+    }
+
+
+def git_revision(path: Path) -> str:
+    """The last commit that changed ``path`` (short hash and date), or "" outside git."""
+    done = subprocess.run(
+        ["git", "log", "-1", "--format=%h %cs", "--", path.name],
+        cwd=path.parent,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    return done.stdout.strip() if done.returncode == 0 else ""
+
+
+def previous_run(path: Path, merge: bool) -> dict[str, Any] | None:
+    """What this run's figures are compared with: the figures of the results at ``path`` (the
+    previous committed run), with its load average (lowest and highest of its sections); when
+    ``merge`` adds sections to that file, the previous run it already carries."""
+    if not path.exists():
+        return None
+    old = json.loads(path.read_text())
+    if merge and old.get("previous"):
+        return old["previous"]
+    machine = old.get("machine") or {}
+    loads = [machine.get("load_average_1min_before"), machine.get("load_average_1min_after")]
+    if old.get("sections"):
+        every = [load for s in old["sections"].values() for load in s["load_average_1min"]]
+        loads = [min(every), max(every)]
+    revision = git_revision(path)
+    return {
+        "source": f"{path.name} at {revision}" if revision else path.name,
+        "load_average_1min": loads,
+        "figures": regression_figures(old),
+    }
+
+
 # ----------------------------------------------------------------------------- main
-def main(argv: Sequence[str] | None = None) -> int:
+def parse_arguments(argv: Sequence[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", type=Path, help="write the results as JSON here")
     parser.add_argument("--arms", default="panda,baxter", help="comma-separated: panda,baxter")
@@ -432,6 +281,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--no-peer", action="store_true", help="skip PyKDL")
     parser.add_argument("--no-service", action="store_true", help="skip the node latency")
     parser.add_argument(
+        "--only",
+        help=f"comma-separated sections to run (of {','.join(SECTIONS)}; default: all)",
+    )
+    parser.add_argument(
+        "--merge",
+        action="store_true",
+        help="keep the other sections of the existing --json file (each section records its "
+        "run; the previous run the file is compared with is kept)",
+    )
+    parser.add_argument(
         "--postures-only",
         action="store_true",
         help="run only the posture-selection section (bench/postures.py, ~1 min)",
@@ -443,113 +302,136 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="run only the whole-pipeline section (bench/pipeline.py, ~3 min)",
     )
     args = parser.parse_args(argv)
+    args.chosen = SECTIONS if args.only is None else tuple(args.only.split(","))
+    unknown = sorted(set(args.chosen) - set(SECTIONS))
+    if unknown:
+        parser.error(f"--only: unknown sections {unknown}; valid: {','.join(SECTIONS)}")
+    if args.merge and not (args.json and args.json.exists()):
+        parser.error("--merge needs an existing --json file")
+    return args
+
+
+def kept_sections(
+    old: dict[str, Any], previous: dict[str, Any] | None
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The sections of an existing results file (--merge) and their runs; a file written
+    before runs were recorded per section gives its sections the previous run's name and its
+    machine's load."""
+    machine = old.get("machine") or {}
+    sections, provenance = {}, {}
+    for name in SECTIONS:
+        if name in old:
+            sections[name] = old[name]
+            provenance[name] = (old.get("sections") or {}).get(name) or {
+                "run": previous["source"] if previous else "earlier",
+                "load_average_1min": [
+                    machine.get("load_average_1min_before"),
+                    machine.get("load_average_1min_after"),
+                ],
+            }
+    return sections, provenance
+
+
+def measure(
+    args: argparse.Namespace, kdl: Any, sections: dict[str, Any], provenance: dict[str, Any]
+) -> None:
+    """Run the chosen sections in order into ``sections``, each one's run, wall time and load
+    average (and the error of a section that raised one, which is then left out) into
+    ``provenance``."""
+    run = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
+    runners = section_runners(args, kdl)
+    for name in SECTIONS:
+        if name not in args.chosen:
+            continue
+        print(f"[{name}] started", file=sys.stderr)
+        before, start = os.getloadavg()[0], time.perf_counter()
+        error = None
+        try:
+            sections[name] = runners[name]()
+        except Exception as raised:  # one failing section must not lose the others' figures
+            traceback.print_exc()
+            error = f"{type(raised).__name__}: {raised}"
+            sections.pop(name, None)  # --merge: not the earlier run's figures either
+        wall_s = time.perf_counter() - start
+        print(f"[{name}] {'FAILED' if error else 'done'} in {wall_s:.0f} s", file=sys.stderr)
+        provenance[name] = {
+            "run": run,
+            "wall_s": wall_s,
+            "load_average_1min": [before, os.getloadavg()[0]],
+        }
+        if error:
+            provenance[name]["error"] = error
+
+
+def print_results(results: dict[str, Any], chosen: Sequence[str]) -> None:
+    """The tables of the sections this run measured, then the target and no-regression
+    tables and each section's wall time and load."""
+    measured = [name for name in chosen if name in results]
+    if "arms" in measured:
+        print_arms(results["arms"])
+    if "continuous_arm" in measured:
+        print_continuous(results)
+    if "service" in measured:
+        print_service(results["service"])
+    if "posture_selection" in measured:
+        print_postures(results["posture_selection"])
+    if "whole_arm" in measured:
+        print_whole_arm(results["whole_arm"])
+    if "pipeline" in measured:
+        print_pipeline(results["pipeline"])
+        print_issue21(results["issue21_targets"])
+    print_issue30(results["issue30_targets"])
+    print_no_regression(results["no_regression"], results["previous"])
+    spent = []
+    for name in chosen:
+        run = results["sections"][name]
+        before, after = run["load_average_1min"]
+        spent.append(f"{name} {run['wall_s']:.0f} s (load {before:.1f} -> {after:.1f})")
+    print(f"\nsections, wall time and 1-min load average: {', '.join(spent)}")
+
+
+def write_json(path: Path | None, results: dict[str, Any]) -> None:
+    if path:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        text = json.dumps(results, indent=2, default=lambda x: None if x != x else x)
+        path.write_text(text + "\n")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = parse_arguments(argv)
     if args.pipeline_only:
         pipeline = bench_pipeline()
-        if args.json:
-            args.json.parent.mkdir(parents=True, exist_ok=True)
-            args.json.write_text(json.dumps({"pipeline": pipeline}, indent=2) + "\n")
+        write_json(args.json, {"pipeline": pipeline})
         print_pipeline(pipeline)
-        print_issue30(issue30_rows(pipeline))
+        print_issue30(issue30_rows({"pipeline": pipeline}))
         return 0
     if args.postures_only:
         postures = bench_postures(args.posture_grasps)
-        if args.json:
-            args.json.parent.mkdir(parents=True, exist_ok=True)
-            args.json.write_text(json.dumps({"posture_selection": postures}, indent=2) + "\n")
+        write_json(args.json, {"posture_selection": postures})
         print_postures(postures)
         return 0
-
-    load_before = os.getloadavg()
-    kdl, kdl_reason = (None, "skipped (--no-peer)") if args.no_peer else load_pykdl()
-    if kdl is None:
+    previous = previous_run(args.json, args.merge) if args.json else None
+    old = json.loads(args.json.read_text()) if args.merge else {}
+    sections, provenance = kept_sections(old, previous) if args.merge else ({}, {})
+    kdl: Any = None
+    kdl_reason: str | None = "skipped (--no-peer)"
+    if "arms" not in args.chosen:
+        kdl_reason = old.get("pykdl_unavailable_reason") if args.merge else "arms not run"
+    elif not args.no_peer:
+        kdl, kdl_reason = load_pykdl()
+    if kdl is None and "arms" in args.chosen:
         print(f"bench: PyKDL peer skipped: {kdl_reason}", file=sys.stderr)
-    arms = {}
-    for name in args.arms.split(","):
-        arms[name] = bench_arm(ARMS[name], args, kdl)
-    continuous = (
-        None
-        if args.continuous_arm == "none"
-        else bench_continuous(ARMS[args.continuous_arm], args.repeats)
-    )
-    print("[postures] cost and gain of posture selection", file=sys.stderr)
-    posture_selection = bench_postures(args.posture_grasps)
-    print("[whole arm] cost of the whole-arm exposure per sample", file=sys.stderr)
-    whole_arm = {name: bench_whole_arm(ARMS[name]) for name in arms}
-    print("[pipeline] CLI, posture selection and analyses vs the ranking", file=sys.stderr)
-    pipeline = bench_pipeline()
-    print("[batch] grasp-safety batch per worker (bench/batch.py's workload)", file=sys.stderr)
-    batch = bench_batch_per_worker()
-    if args.no_service:
-        service = {"median_ms": None, "reason": "skipped (--no-service)"}
-    else:
-        print("[service] 10 grasps x 101 samples through the node", file=sys.stderr)
-        service = service_latency(ARMS["baxter"], args.service_repeats)
-
-    def worst(key: str, pick: Callable[[Any], float] = max) -> float | None:
-        values = [
-            a[key]["median"] if isinstance(a[key], dict) else a[key]
-            for a in arms.values()
-            if key in a
-        ]
-        return pick(values) if values else None
-
+    load_before = os.getloadavg()
+    measure(args, kdl, sections, provenance)
+    failed = {name: run["error"] for name, run in provenance.items() if "error" in run}
     results = {
-        "us_per_sample_with_ik": worst("us_per_sample_with_ik"),
-        "us_per_sample_without_ik": worst("us_per_sample_without_ik"),
-        "cpu_us_per_sample_with_ik": worst("cpu_us_per_sample_with_ik"),
-        "us_per_sample_with_ik_parallel": worst("us_per_sample_with_ik_parallel"),
-        "wall_s_100x201_serial": worst("wall_s_serial"),
-        "wall_s_100x201_parallel": worst("wall_s_parallel"),
-        "ik_iterations_per_sample": worst("ik_iterations_per_sample"),
-        "us_per_sample_with_ik_continuous": (
-            continuous["us_per_sample_with_ik"]["median"] if continuous else None
-        ),
-        "continuous_vs_revolute_cpu": (
-            continuous["cpu_us_per_sample_with_ik"]["median"] / worst("cpu_us_per_sample_with_ik")
-            if continuous
-            else None
-        ),
-        "continuous_arm": continuous,
-        "pykdl_us_per_sample_with_ik": max(
-            (a["pykdl"]["us_per_sample_with_ik"]["median"] for a in arms.values() if "pykdl" in a),
-            default=None,
-        ),
-        "speedup_vs_pykdl": worst("speedup_vs_pykdl", min),
-        "max_rel_diff_vs_pykdl": max(
-            (a["pykdl"]["max_rel_diff"] for a in arms.values() if "pykdl" in a), default=None
-        ),
-        "max_rel_diff_compiled_vs_python": max(
-            a["python_backend_max_rel_diff"] for a in arms.values()
-        ),
-        "compiled_vs_python_same_feasibility_and_iterations": all(
-            a["python_backend_same_feasibility"] and a["python_backend_same_ik_iterations"]
-            for a in arms.values()
-        ),
-        "max_rel_diff_vs_reference_effective_mass": max(
-            a["reference"]["effective_mass_max_rel_diff_on_our_paths"] for a in arms.values()
-        ),
-        "feasible_grasps": {name: a["feasible_grasps"] for name, a in arms.items()},
-        "feasible_grasps_reference_secant": {
-            name: a["reference"]["feasible_grasps"] for name, a in arms.items()
-        },
-        "self_motion_fraction_max": max(
-            a["self_motion_fraction"]["ours_max"] for a in arms.values()
-        ),
-        "self_motion_fraction_max_reference_secant": max(
-            a["self_motion_fraction"]["reference_max"] for a in arms.values()
-        ),
-        "floor_us_per_sample": worst("floor_us_per_sample", min),
-        "distance_to_floor": worst("distance_to_floor"),
-        "service_latency_ms_median": service.get("median_ms"),
-        "service": service,
-        "posture_selection": posture_selection,
-        "whole_arm": whole_arm,
-        "pipeline": pipeline,
-        "issue21_targets": issue21_rows(arms, pipeline, service),
-        "batch_per_worker": batch,
-        "issue30_targets": issue30_rows(pipeline, arms, whole_arm, service, batch),
+        **summarise(sections, failed),
+        **sections,
+        "no_regression": no_regression_rows(sections, previous),
+        "no_regression_tolerance": REGRESSION_TOLERANCE,
+        "previous": previous,
+        "sections": provenance,
         "pykdl_unavailable_reason": kdl_reason or None,
-        "arms": arms,
         "machine": {
             "python": platform.python_version(),
             "cpu": platform.processor() or platform.machine(),
@@ -561,20 +443,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         "note": (
             "top-level figures: medians over repeats, worst arm (slowest time, smallest "
             "speedup); wall-clock times are inflated when other processes share the cores "
-            "(see machine.load_average_*), CPU times (cpu_*) much less"
+            "(see sections.*.load_average_1min), CPU times (cpu_*) much less"
         ),
     }
-    text = json.dumps(results, indent=2, default=lambda x: None if x != x else x)
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(text + "\n")
-    print_table(results)
-    print_postures(posture_selection)
-    print_whole_arm(whole_arm)
-    print_pipeline(pipeline)
-    print_issue21(results["issue21_targets"])
-    print_issue30(results["issue30_targets"])
-    return 0
+    write_json(args.json, results)
+    print_results(results, args.chosen)
+    for name, error in failed.items():
+        print(f"bench: section {name} FAILED: {error}", file=sys.stderr)
+    return 1 if failed else 0
 
 
 if __name__ == "__main__":

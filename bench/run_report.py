@@ -73,15 +73,18 @@ def print_issue21(rows: list[dict[str, Any]]) -> None:
         print(f"  {r['measure']}: {value} (target <= {r['target']:g} {r['unit']}): {verdict}")
 
 
-def print_table(results: dict[str, Any]) -> None:
-    def fmt(value: Any, spec: str = ".2f") -> str:
-        return (
-            "n/a"
-            if value is None or (isinstance(value, float) and math.isnan(value))
-            else (format(value, spec))
-        )
+def fmt(value: Any, spec: str = ".2f") -> str:
+    """A figure as text, "n/a" for None and NaN."""
+    return (
+        "n/a"
+        if value is None or (isinstance(value, float) and math.isnan(value))
+        else (format(value, spec))
+    )
 
-    for name, arm in results["arms"].items():
+
+def print_arms(arms: dict[str, Any]) -> None:
+    """The arms section (bench/arm.py), a few lines per arm."""
+    for name, arm in arms.items():
         w, wo = arm["us_per_sample_with_ik"], arm["us_per_sample_without_ik"]
         print(
             f"{name}: {arm['grasps']} grasps x {arm['samples_per_grasp']} samples, "
@@ -129,6 +132,10 @@ def print_table(results: dict[str, Any]) -> None:
             f"  floor ~{fmt(arm['floor_us_per_sample'])} us/sample; ours is "
             f"x{fmt(arm['distance_to_floor'], '.1f')} from it"
         )
+
+
+def print_continuous(results: dict[str, Any]) -> None:
+    """The continuous-joint arm's section beside the slowest revolute arm."""
     continuous = results["continuous_arm"]
     if continuous is not None:
         w = continuous["us_per_sample_with_ik"]
@@ -150,7 +157,10 @@ def print_table(results: dict[str, Any]) -> None:
             f"us/sample, max rel diff {fmt(continuous['python_backend_max_rel_diff'], '.1e')}, "
             f"{'same' if same else 'DIFFERENT'} feasibility and IK iterations"
         )
-    service = results["service"]
+
+
+def print_service(service: dict[str, Any]) -> None:
+    """The service section (bench/service.py through run.py's service_latency)."""
     if service.get("median_ms") is None:
         print(f"service latency: n/a ({service.get('reason')})")
         return
