@@ -339,7 +339,7 @@ def test_concurrent_requests_beyond_the_executor_threads_are_all_answered(
     a request waiting for the planner holds no executor thread, so the planner's answers are
     taken and every request is ranked (a request that slept on its thread until the answer
     came left no thread to take it: all timed out)."""
-    defaults.set(grasp_planner_service="/fake/delayed", planner_timeout_s=10.0)
+    defaults.set(grasp_planner_service="/fake/delayed")
     futures = [defaults.client.call_async(request()) for _ in range(EXECUTOR_THREADS + 1)]
     deadline = time.monotonic() + 120.0
     while not all(f.done() for f in futures) and time.monotonic() < deadline:
@@ -452,7 +452,7 @@ def test_shutdown_answers_a_request_waiting_for_the_planner(ros: Harness) -> Non
     assert_refused(future.result(), MoveItErrorCodes.PREEMPTED, "shutting down")
 
 
-def test_node_process_answers_a_waiting_request_at_sigint(cli_result: dict) -> None:
+def test_node_process_answers_a_waiting_request_at_sigint() -> None:
     """The console script, SIGINT while a request waits (suspended) for the slow planner: the
     executor spins until it has answered PREEMPTED (process.settle), then the node stops."""
     with claim_ros_domain() as claim, pytest.MonkeyPatch.context() as patch:
@@ -499,8 +499,13 @@ def test_node_process_answers_a_waiting_request_at_sigint(cli_result: dict) -> N
             executor.add_node(client_node)
             client = client_node.create_client(GraspPlanning, "/grasp_safety/plan_grasps")
             assert client.wait_for_service(timeout_sec=60.0), "service did not appear"
+            watchdog = threading.Timer(120.0, planner.kill)
+            watchdog.start()
+            assert planner.stdout.readline().strip() == "ready"
             future = client.call_async(request())
-            executor.spin_until_future_complete(future, timeout_sec=2.0)  # it waits (6 s)
+            # the node has forwarded the request: it waits for the planner (6 s)
+            assert planner.stdout.readline().strip() == "request /fake/slow"
+            watchdog.cancel()
             assert not future.done(), future.result()
             node.send_signal(signal.SIGINT)
             executor.spin_until_future_complete(future, timeout_sec=20.0)
