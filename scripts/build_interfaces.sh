@@ -10,7 +10,8 @@
 #     type hashes. Their install tree is kept per machine in
 #     ~/.cache/grasp_safety_ros/interfaces/<digest>/ (digest of the staged sources, these
 #     scripts, Python, numpy and the ROS wheels' versions), so a second checkout or venv copies
-#     it in seconds. A package a ROS installation already provides (its ament index, in a prefix
+#     it in seconds; the keys beyond the 6 most recently used, unused for a day, are deleted
+#     (scripts/interface_cache.py). A package a ROS installation already provides (its ament index, in a prefix
 #     of AMENT_PREFIX_PATH other than the venv) is not built, and a copy of ours is removed.
 #
 # How: colcon + the ament_cmake/rosidl wheels (requirements-interfaces.txt) build a package
@@ -196,6 +197,7 @@ if [ ! -d "$CACHED" ]; then
   mv -T "$tmp" "$CACHED" 2>/dev/null || rm -rf "$tmp"  # another checkout cached it meanwhile
   echo "upstream interfaces: built ${STAGED[*]} in $((SECONDS - start)) s, cached in $CACHED"
 fi
+touch "$CACHED" 2>/dev/null || true  # used now: the pruning at the end keeps it
 # the CMake exports name the venv that built the tree, the ament index its install dirs:
 # this venv instead (every dependency is in it)
 BUILT_IN=$(cat "$CACHED/.venv_path")
@@ -208,3 +210,4 @@ for pkg in "${STAGED[@]}"; do
 done
 echo "upstream interfaces: ${STAGED[*]} (subsets) installed into $VENV from" \
   "$CACHED${SKIP[*]:+ (provided by ROS: ${SKIP[*]})}"
+"$PY" "$ROOT/scripts/interface_cache.py" "$CACHE_ROOT"  # the keys long unused go

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import os
+import re
 from collections.abc import Iterator, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -125,6 +127,19 @@ def continuous_arm() -> RobotModel:
     return RobotModel.from_urdf(
         serial_arm_urdf(ARM7_AXES, joint_type="continuous"), "base_link", "tool"
     )
+
+
+DOCS = Path(__file__).resolve().parents[1] / "docs"
+
+
+def shown_in_docs(page: str, start: str) -> re.Pattern[str]:
+    """What ``docs/<page>`` shows from ``start`` to the next backtick (the end of its code
+    span, or of its fenced block: a log line shown alone), whitespace joined (a quote may
+    wrap), as a pattern in which the page's ``...`` stands for any text. A test that matches
+    the output it gets against it holds the page's quote of a log line."""
+    text = " ".join((DOCS / page).read_text().split())
+    (quote,) = re.findall(re.escape(start) + "[^`]*", text)
+    return re.compile(".*".join(re.escape(part) for part in quote.strip().split("...")))
 
 
 BAXTER_SEED = (0.0, -0.55, 0.0, 0.75, 0.0, 1.26, 0.0)

@@ -5,8 +5,9 @@ Usage: python fake_grasp_planner.py SPEC_JSON, where SPEC_JSON maps a service na
 ``{"grasps": [{"id", "frame", "position_m", "quat_xyzw", "quality"}], "delay_s": 0,
 "error_code": 1, "message": ""}`` ("quality" may be NaN). Each answer copies the request's
 ``group_name`` and ``target.id`` into every grasp's ``allowed_touch_objects``, so the test can
-tell the request was forwarded as is. Prints "ready" once every service is up; runs until
-killed (ROS_DOMAIN_ID and discovery from the environment).
+tell the request was forwarded as is. Prints "ready" once every service is up, then
+"request <service>" as each request arrives; runs until killed (ROS_DOMAIN_ID and discovery
+from the environment).
 """
 
 from __future__ import annotations
@@ -35,8 +36,9 @@ def grasp_msg(item: dict) -> Grasp:
     )
 
 
-def server(spec: dict):
+def server(name: str, spec: dict):
     def answer(request: GraspPlanning.Request, response: GraspPlanning.Response):
+        print(f"request {name}", flush=True)
         time.sleep(spec.get("delay_s", 0.0))
         response.grasps = [grasp_msg(item) for item in spec.get("grasps", [])]
         for grasp in response.grasps:
@@ -54,7 +56,7 @@ def main() -> None:
     node = rclpy.create_node("fake_grasp_planner")
     group = ReentrantCallbackGroup()  # a slow answer does not hold up the others
     for name, spec in specs.items():
-        node.create_service(GraspPlanning, name, server(spec), callback_group=group)
+        node.create_service(GraspPlanning, name, server(name, spec), callback_group=group)
     executor = MultiThreadedExecutor(num_threads=4)
     executor.add_node(node)
     print("ready", flush=True)

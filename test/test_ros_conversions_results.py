@@ -289,6 +289,46 @@ def test_report_message_content_drops_only_what_it_is_told(arm6: RobotModel) -> 
         assert len(full.evaluations[first].joint_trajectory.points) > 0
 
 
+PER_SAMPLE_BYTES = 8 + 8 + 8 + 3 * 8 + 1
+"""A feasible grasp's per-sample arrays by default, per sample (CDR: float64 8 bytes, bool 1):
+time_from_start_s, effective_mass_kg, links_only_effective_mass_kg, direction_xyz (3), and
+direction_is_worst_case; docs/ros/interface.md quotes it."""
+
+
+def test_response_grows_by_the_per_sample_arrays_per_grasp_and_sample(arm6: RobotModel) -> None:
+    """The serialised response (default analyses, no joint trajectory) of the same motion
+    sampled 101 and 201 times grows by PER_SAMPLE_BYTES per feasible grasp and sample, to
+    the CDR alignment padding (at most 7 bytes per array, five arrays per grasp)."""
+    from rclpy.serialization import serialize_message
+
+    sizes, samples, feasible = [], [], []
+    for dt_s in (0.01, 0.005):
+        ranking, grasps, trajectory = _ranking(arm6)
+        moved = ObjectTrajectory(
+            trajectory.transform_object_to_base_start,
+            trajectory.transform_object_to_base_goal,
+            1.0,
+            dt_s,
+        )
+        inertia = solid_box(0.5, [0.1, 0.1, 0.1])
+        evaluator = GraspSafetyEvaluator(arm6)
+        seed = ranking.evaluations[0].joint_positions[0]
+        ranked = evaluator.rank(grasps, inertia, moved, seed)
+        report = analyse(evaluator, grasps, inertia, moved, AnalysisOptions(), ranking=ranked)
+        request = PoseArray(
+            header=Header(frame_id="object"),
+            poses=[pose_msg_from_transform(g.transform_tip_to_object) for g in grasps],
+        )
+        content = ResponseContent(joint_trajectories=0)
+        message = report_msg(report, request, "base_link", Time(), 0.0, content)
+        sizes.append(len(serialize_message(message)))
+        samples.append(len(moved.times_s()))
+        feasible.append(sum(e.feasible for e in ranked.evaluations))
+    assert samples == [101, 201] and feasible[0] == feasible[1] == 2
+    growth = sizes[1] - sizes[0]
+    assert abs(growth - PER_SAMPLE_BYTES * 2 * 100) <= 2 * 5 * 7, growth
+
+
 def test_collector_is_paused_while_building_and_restored_after(arm6: RobotModel) -> None:
     report, request = _report(arm6)
     states: list[bool] = []

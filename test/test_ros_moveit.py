@@ -33,6 +33,8 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from ros_domains import claim_ros_domain
 from std_msgs.msg import Header
+from test_ros_node_process import PARAMS as NODE_PARAMS
+from test_ros_node_process import command as node_command
 
 from grasp_safety_ros.cli.main import main as cli_main
 from grasp_safety_ros.core.analyses.multi_objective import rank_with_quality
@@ -90,6 +92,7 @@ SCENARIO = {
 PLANNERS = {
     "/fake/good": {"grasps": GRASPS},
     "/fake/slow": {"grasps": GRASPS, "delay_s": 6.0},
+    "/fake/delayed": {"grasps": GRASPS, "delay_s": 1.0},
     "/fake/fails": {"error_code": MoveItErrorCodes.PLANNING_FAILED, "message": "no grasps found"},
     "/fake/empty": {"grasps": []},
     "/fake/camera_frame": {"grasps": [{**g, "frame": "camera"} for g in GRASPS]},
@@ -329,6 +332,26 @@ def test_slow_planner_times_out(defaults: Harness) -> None:
     assert defaults.call(request()).error_code.val == MoveItErrorCodes.SUCCESS  # still serving
 
 
+def test_concurrent_requests_beyond_the_executor_threads_are_all_answered(
+    defaults: Harness, cli_result: dict
+) -> None:
+    """EXECUTOR_THREADS + 1 requests wait for the planner at once (it answers each after 1 s):
+    a request waiting for the planner holds no executor thread, so the planner's answers are
+    taken and every request is ranked (a request that slept on its thread until the answer
+    came left no thread to take it: all timed out)."""
+    defaults.set(grasp_planner_service="/fake/delayed")
+    futures = [defaults.client.call_async(request()) for _ in range(EXECUTOR_THREADS + 1)]
+    deadline = time.monotonic() + 120.0
+    while not all(f.done() for f in futures) and time.monotonic() < deadline:
+        defaults.client_executor.spin_once(timeout_sec=0.1)
+    assert all(f.done() for f in futures), "not every request was answered"
+    expected = [GRASPS[k]["id"] for k in cli_result["ranking"]] + ["out_of_reach"]
+    for future in futures:
+        answer = future.result()
+        assert answer.error_code.val == MoveItErrorCodes.SUCCESS, answer.error_code.message
+        assert [g.id for g in answer.grasps] == expected
+
+
 @pytest.mark.parametrize(
     ("service", "parts"),
     [
@@ -427,6 +450,78 @@ def test_shutdown_answers_a_request_waiting_for_the_planner(ros: Harness) -> Non
     ros.client_executor.spin_until_future_complete(future, timeout_sec=30.0)
     assert future.done(), "no answer after the shut-down began"
     assert_refused(future.result(), MoveItErrorCodes.PREEMPTED, "shutting down")
+
+
+def test_node_process_answers_a_waiting_request_at_sigint() -> None:
+    """The console script, SIGINT while a request waits (suspended) for the slow planner: the
+    executor spins until it has answered PREEMPTED (process.settle), then the node stops."""
+    with claim_ros_domain() as claim, pytest.MonkeyPatch.context() as patch:
+        patch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+        env = {
+            **os.environ,
+            "ROS_DOMAIN_ID": str(claim.domain_id),
+            "RCUTILS_COLORIZED_OUTPUT": "0",
+        }
+        planner = subprocess.Popen(
+            [
+                sys.executable,
+                str(FAKE_PLANNER),
+                json.dumps({"/fake/slow": PLANNERS["/fake/slow"]}),
+            ],
+            env=env,
+            stdout=subprocess.PIPE,
+            text=True,
+            start_new_session=True,
+        )
+        goal = ",".join(str(v) for v in [*GOAL["position_m"], *GOAL["quat_xyzw"]])
+        node = subprocess.Popen(
+            node_command(
+                "--params-file",
+                NODE_PARAMS,
+                "-p",
+                "moveit.grasp_planner_service:=/fake/slow",
+                "-p",
+                "moveit.planner_timeout_s:=60.0",
+                "-p",
+                f"moveit.object_goal:=[{goal}]",
+            ),
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            start_new_session=True,
+        )
+        context = Context()
+        rclpy.init(context=context, domain_id=claim.domain_id)
+        try:
+            client_node = rclpy.create_node("plan_grasps_sigint_client", context=context)
+            executor = SingleThreadedExecutor(context=context)
+            executor.add_node(client_node)
+            client = client_node.create_client(GraspPlanning, "/grasp_safety/plan_grasps")
+            assert client.wait_for_service(timeout_sec=60.0), "service did not appear"
+            watchdog = threading.Timer(120.0, planner.kill)
+            watchdog.start()
+            assert planner.stdout.readline().strip() == "ready"
+            future = client.call_async(request())
+            # the node has forwarded the request: it waits for the planner (6 s)
+            assert planner.stdout.readline().strip() == "request /fake/slow"
+            watchdog.cancel()
+            assert not future.done(), future.result()
+            node.send_signal(signal.SIGINT)
+            executor.spin_until_future_complete(future, timeout_sec=20.0)
+            assert future.done(), (
+                "no answer after SIGINT; the node's log:\n" + node.communicate(timeout=30.0)[1]
+            )
+            assert_refused(future.result(), MoveItErrorCodes.PREEMPTED, "shutting down")
+            _, stderr = node.communicate(timeout=30.0)
+        finally:
+            rclpy.shutdown(context=context)
+            for process in (node, planner):
+                if process.poll() is None:
+                    os.killpg(process.pid, signal.SIGKILL)
+                    process.wait(timeout=10.0)
+    assert node.returncode == 0, stderr
+    assert "Traceback" not in stderr, stderr
 
 
 # --- Grasp lists (no ROS graph) -----------------------------------------------------------------

@@ -4,6 +4,8 @@ IK), the JSON, the batch column, and the standard's m_R = M/2 + m_L beside the e
 
 from __future__ import annotations
 
+import copy
+import math
 from pathlib import Path
 
 import numpy as np
@@ -84,9 +86,26 @@ def test_json_has_the_retimed_trajectory_and_the_standard_estimate(ranked) -> No
         assert set(standard["sites"]) == set(ranked.arm_sites.names)
 
 
-def test_batch_column_is_the_safe_duration(ranked) -> None:
+def binding_most_samples(motion: retime.RetimedMotion) -> str:
+    """The oracle of retime_binding: the label whose ratio exceeds 0.99 at the most samples
+    (at rest left out), the earliest to bind on a tie; "none" when nothing binds."""
+    counts: dict[str, int] = {}
+    first: dict[str, int] = {}
+    for sample, label in enumerate(motion.binding):
+        if label != retime.AT_REST and motion.binding_ratio[sample] > 0.99:
+            counts[label] = counts.get(label, 0) + 1
+            first.setdefault(label, sample)
+    return min(counts, key=lambda label: (-counts[label], first[label]), default="none")
+
+
+def test_batch_columns_are_the_safe_duration_and_what_binds(ranked) -> None:
     columns = report_columns(ranked)
     assert columns["safe_duration_s"] == [m.safe_duration_s for m in ranked.retimed]
+    bindings = [binding_most_samples(m) for m in ranked.retimed]
+    assert columns["retime_binding"] == bindings
+    assert all(b.startswith(("site ", "joint ")) for b in bindings), bindings  # f 0.8 binds
+    assert columns["retime_reason"] == [None] * len(bindings)  # every grasp has a timing
+    assert [g["retime_binding"] for g in report_to_dict(ranked)["grasps"]] == bindings
 
 
 def test_retime_requested_without_limits_is_refused_naming_the_field(tmp_path: Path) -> None:
@@ -171,7 +190,12 @@ def test_the_service_orders_by_safe_duration_as_the_cli_does(
         rank_by="safe_duration",
     )
     data.pop("effort")
+    data["grasps"].append({**data["grasps"][0], "name": "out_of_reach", "position_m": [-3, 0, 0]})
     report = rank_scenario(parse_scenario(data, tmp_path))
+    request = book_request()
+    far = copy.deepcopy(request.grasps.poses[0])
+    far.position.x, far.position.y, far.position.z = -3.0, 0.0, 0.0
+    request.grasps.poses.append(far)
     with pytest.MonkeyPatch.context() as patch:
         patch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
         patch.setenv("ROS_LOG_DIR", str(tmp_path / "ros_log"))
@@ -189,7 +213,7 @@ def test_the_service_orders_by_safe_duration_as_the_cli_does(
             }
         )
         try:
-            response = node.rank(book_request())
+            response = node.rank(request)
         finally:
             node.close()
     assert response.success, response.message
@@ -198,8 +222,14 @@ def test_the_service_orders_by_safe_duration_as_the_cli_does(
     assert len(report.order) == 3
     # The node's inputs pass through messages (a few ulps, times the IK's conditioning); the
     # retiming's LP solution moves with them continuously: equal to 1e-6.
-    for got, motion in zip(response.ranking.evaluations, report.retimed, strict=True):
+    *retimed, unreached = zip(response.ranking.evaluations, report.retimed, strict=True)
+    for got, motion in retimed:
         assert got.safe_duration_s == pytest.approx(motion.safe_duration_s, rel=1e-6)
+        assert (got.retime_binding, got.retime_reason) == (binding_most_samples(motion), "")
+    got, motion = unreached  # infeasible: no timing, and why
+    assert motion is None and report.retime_reasons[3] == "infeasible"
+    assert math.isnan(got.safe_duration_s) and not got.retimed_trajectory.points
+    assert (got.retime_binding, got.retime_reason) == ("", "infeasible")
     first = response.ranking.evaluations[report.order[0]]
     points = first.retimed_trajectory.points  # response.joint_trajectories 1: the first only
     motion = report.retimed[report.order[0]]
@@ -270,6 +300,9 @@ def test_a_grasp_whose_output_samples_are_too_many_is_left_unretimed_alone(
     assert sorted(report.order) == [1, 2]
     assert "retime.output_dt_s" in " ".join(retime_lines(report))
     assert report_to_dict(report)["grasps"][0]["retime_reason"] == report.retime_reasons[0]
+    columns = report_columns(report)  # the batch's columns say the same
+    assert columns["retime_reason"] == [report.retime_reasons[0], None, None]
+    assert columns["retime_binding"] == [None] + [binding_most_samples(m) for m in others]
     with pytest.raises(InvalidInputError) as error:  # 2 s / 0.049 s: 41 > 40, before any work
         rank_scenario(parse_scenario(book(retime={**limits, "output_dt_s": 0.049}), tmp_path))
     assert error.value.field == "retime.output_dt_s"

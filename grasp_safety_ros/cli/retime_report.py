@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ..core.analyses.retime import AT_REST, RetimedMotion
+from ..core.analyses.retime import RetimedMotion, most_binding
 from ..core.analyses.safe_duration import compare_with_standard
 from ..core.analyses.safety_report import SafetyReport
 
@@ -21,14 +21,15 @@ def retimed_to_dict(
     motion: RetimedMotion | None, per_sample: bool = True, reason: str = "none found"
 ) -> dict[str, Any]:
     """One grasp's retiming: ``safe_duration_s`` (None: infeasible or no timing found, with
-    ``retime_reason`` why), the planner's worst ratio and the uniform T_min; with
-    ``per_sample`` the trajectory ``{t_s, q, qd, qdd}`` (rows in ``joint_names`` order), the
-    binding constraint per sample and its ratio, and per region the worst site's speed and
-    its limit f · v_max."""
+    ``retime_reason`` why; else ``retime_binding``, what binds most), the planner's worst
+    ratio and the uniform T_min; with ``per_sample`` the trajectory ``{t_s, q, qd, qdd}``
+    (rows in ``joint_names`` order), the binding constraint per sample and its ratio, and per
+    region the worst site's speed and its limit f · v_max."""
     if motion is None:
         return {"safe_duration_s": None, "retime_reason": reason}
     result: dict[str, Any] = {
         "safe_duration_s": motion.safe_duration_s,
+        "retime_binding": most_binding(motion),
         "planned_duration_s": motion.planned_duration_s,
         "planned_worst_ratio": motion.planned_worst_ratio,
         "planned_worst_site": motion.planned_worst_site,
@@ -76,16 +77,6 @@ def standard_mass_to_dict(report: SafetyReport, k: int) -> dict[str, Any] | None
     return result
 
 
-def _most_binding(motion: RetimedMotion) -> str:
-    """The constraint binding (ratio > 0.99) at most samples, or ``none``."""
-    labels = [
-        label
-        for label, ratio in zip(motion.binding, motion.binding_ratio, strict=True)
-        if label != AT_REST and ratio > 0.99
-    ]
-    return max(set(labels), key=labels.count) if labels else "none"
-
-
 def _reason(report: SafetyReport, k: int) -> str:
     """Why grasp ``k`` has no retimed motion."""
     reasons = report.retime_reasons
@@ -110,7 +101,7 @@ def retime_lines(report: SafetyReport) -> list[str]:
             f"{motion.planned_duration_s:.3f} s at worst ratio {motion.planned_worst_ratio:.2f}"
             f"; uniform T_min {motion.uniform_min_duration_s:.3f} s, {uniform:.3f} s with the "
             f"joint limits, {100 * (1.0 - motion.safe_duration_s / uniform):.0f} % saved); "
-            f"binding most: {_most_binding(motion)}"
+            f"binding most: {most_binding(motion)}"
         )
     return lines
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 from typing import Any
 
 from ..core.analyses.iso15066 import PowerForceLimitAssessment
+from ..core.analyses.retime import most_binding
 from ..core.analyses.safety_report import SafetyReport
 from .schema import grasp_schema
 from .sources import LABELS, GraspBlock
@@ -51,6 +52,11 @@ def report_columns(report: SafetyReport, per_sample: bool = False) -> dict[str, 
         put("iso_ts_15066_admissible_where_permitted", a.admissible_where_permitted if a else None)
         motion = report.retimed[k] if report.retimed else None
         put("safe_duration_s", None if motion is None else motion.safe_duration_s)
+        put("retime_binding", None if motion is None else most_binding(motion))
+        put(
+            "retime_reason",
+            report.retime_reasons[k] if report.retimed and motion is None else None,
+        )
         put("backend", ranking.backend)
         if per_sample:
             for name in ("times_s", "effective_mass_kg", "tip_speed_m_s"):

@@ -51,6 +51,8 @@ GRASP_SCHEMA = pa.schema(
         pa.field("iso_ts_15066_limiting_region", pa.string()),
         pa.field("iso_ts_15066_admissible_where_permitted", pa.bool_()),
         pa.field("safe_duration_s", pa.float64()),  # retimed to the site limits (retime:)
+        pa.field("retime_binding", _TEXT),  # what sets it (JSON "retime_binding")
+        pa.field("retime_reason", _TEXT),  # why a grasp has none (JSON "retime_reason")
         pa.field("backend", _TEXT),  # compiled | python (...)
     ]
 )

@@ -251,6 +251,11 @@ class GraspSafetyNode(RobotSource):
         self._compute_lock.stop()
 
     @property
+    def requests_waiting(self) -> int:
+        """~/plan_grasps requests suspended while they wait for the upstream planner."""
+        return 0 if self._plan_grasps is None else self._plan_grasps.waiting
+
+    @property
     def abandoned_rankings(self) -> int:
         """Rankings abandoned because the node is shutting down."""
         with self._state_lock:

@@ -32,6 +32,7 @@ one feasible timing, so the retimed one is no longer (to the grid: see the tests
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -204,6 +205,17 @@ class RetimedMotion:
     region_limit_m_s: np.ndarray = field(default_factory=lambda: np.empty((0, 0)))
     planned_region_speed_m_s: np.ndarray = field(default_factory=lambda: np.empty((0, 0)))
     planned_region_limit_m_s: np.ndarray = field(default_factory=lambda: np.empty((0, 0)))
+
+
+def most_binding(motion: RetimedMotion) -> str:
+    """What sets ``motion``'s safe duration: the constraint binding (ratio > 0.99) at most
+    samples (a ``binding`` label; on a tie the one binding first), or ``none``."""
+    counts = Counter(
+        label
+        for label, ratio in zip(motion.binding, motion.binding_ratio, strict=True)
+        if label != AT_REST and ratio > 0.99
+    )
+    return counts.most_common(1)[0][0] if counts else "none"
 
 
 def region_series(speeds: SiteSpeeds, factor: float) -> tuple[np.ndarray, ...]:

@@ -14,6 +14,7 @@ from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from ...core.analyses.iso15066 import PowerForceLimitAssessment, RegionAssessment
+from ...core.analyses.retime import most_binding
 from ...core.analyses.safety_report import SafetyReport
 from ...core.analyses.whole_arm import WholeArmEvaluation, whole_arm_score
 from ...core.method.executable import rates_for_execution
@@ -530,13 +531,16 @@ def _report_msg(
 def _set_retimed(
     message: GraspRanking, report: SafetyReport, carried: Collection[int], base_frame: str
 ) -> None:
-    """``safe_duration_s`` of every retimed grasp and ``retimed_trajectory`` of those among
-    ``carried`` (the grasps that carry their joint trajectory)."""
+    """``safe_duration_s`` and ``retime_binding`` of every retimed grasp, ``retime_reason`` of
+    the others, and ``retimed_trajectory`` of those among ``carried`` (the grasps that carry
+    their joint trajectory)."""
     for k, motion in enumerate(report.retimed):
-        if motion is None:
-            continue
         evaluation = message.evaluations[k]
+        if motion is None:
+            evaluation.retime_reason = report.retime_reasons[k]
+            continue
         evaluation.safe_duration_s = float(motion.safe_duration_s)
+        evaluation.retime_binding = most_binding(motion)
         if evaluation.index in carried:
             evaluation.retimed_trajectory = joint_trajectory_msg(
                 report.ranking.joint_names,

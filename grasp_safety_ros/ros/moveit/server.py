@@ -6,9 +6,11 @@ request forwarded as is) or, with no planner, from the request's ``candidate_gra
 are ranked by the node's ranking (its robot, object and settings; the object moves from
 ``target.pose`` to the goal: ``moveit.object_goal``, or the last pose of the latest
 ``~/object_trajectory``), and answered as the same Grasp messages in the node's order
-(moveit.grasps). Threads: the service and the planner's client share a reentrant callback
-group, so in the node's multi-threaded executor the planner's answer is taken by another
-thread while the request waits for it, at most ``moveit.planner_timeout_s``.
+(moveit.grasps). Threads: the service callback is a coroutine; while it waits for the planner
+(at most ``moveit.planner_timeout_s``) it is suspended and holds no executor thread, so any
+number of requests can wait while the planner's answers are taken (a request that slept on its
+thread left none for them once EXECUTOR_THREADS requests waited). A timer of the request
+(every WAIT_STEP_S) ends the wait: planner answered, deadline passed or node shutting down.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from moveit_msgs.srv import GraspPlanning
 from nav_msgs.msg import Path
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
+from rclpy.task import Future
 from trajectory_msgs.msg import MultiDOFJointTrajectory
 
 from ...core.exceptions import GraspSafetyError, InvalidInputError
@@ -46,7 +49,7 @@ from .grasps import (
 SOURCE = "grasp_safety"
 """``error_code.source`` of the answers this server makes itself."""
 WAIT_STEP_S = 0.05
-"""How often a request waiting for the planner looks whether the node is shutting down [s]."""
+"""How often a request waiting for the planner looks whether its wait is over [s]."""
 
 
 class PlannerError(Exception):
@@ -88,7 +91,8 @@ class GraspPlanningServer:
         self._stopping = stopping
         self._group = ReentrantCallbackGroup()
         self._clients: dict[str, Any] = {}
-        self._clients_lock = threading.Lock()
+        self._clients_lock = threading.Lock()  # the clients and the waiting count
+        self._waiting = 0
         self.service = node.create_service(
             GraspPlanning,
             "~/plan_grasps",
@@ -100,14 +104,20 @@ class GraspPlanningServer:
     def _parameter(self, name: str) -> Any:
         return self._node.get_parameter(f"moveit.{name}").value
 
-    def _on_plan_grasps(
+    @property
+    def waiting(self) -> int:
+        """Requests suspended while they wait for the planner."""
+        with self._clients_lock:
+            return self._waiting
+
+    async def _on_plan_grasps(
         self, request: GraspPlanning.Request, response: GraspPlanning.Response
     ) -> GraspPlanning.Response:
         code = response.error_code
         code.source = SOURCE
         try:
             check_no_subnormals(request)
-            grasps, field = self._grasps_to_rank(request)
+            grasps, field = await self._grasps_to_rank(request)
             response.grasps = self._rerank(request, grasps, field)
             code.val = MoveItErrorCodes.SUCCESS
         except PlannerError as error:
@@ -126,12 +136,12 @@ class GraspPlanningServer:
             self._report_error("plan_grasps", code.message)
         return response
 
-    def _grasps_to_rank(self, request: GraspPlanning.Request) -> tuple[list[Any], str]:
+    async def _grasps_to_rank(self, request: GraspPlanning.Request) -> tuple[list[Any], str]:
         """The grasps to rank and their field name: the planner's answer, or without a
         planner the request's candidate_grasps."""
         service = self._parameter("grasp_planner_service")
         if service:
-            answer = self._call_planner(service, request)
+            answer = await self._call_planner(service, request)
             if answer.error_code.val != MoveItErrorCodes.SUCCESS:
                 raise PlannerError(
                     answer.error_code.val,
@@ -161,23 +171,25 @@ class GraspPlanningServer:
                     ) from None
             return self._clients[service]
 
-    def _call_planner(self, service: str, request: GraspPlanning.Request) -> Any:
+    async def _call_planner(self, service: str, request: GraspPlanning.Request) -> Any:
         """The planner's answer within moveit.planner_timeout_s (PlannerError otherwise)."""
         timeout_s = float(self._parameter("planner_timeout_s"))
         deadline = time.monotonic() + timeout_s
         client = self._client(service)
-        if not self._wait(client.service_is_ready, deadline):
+        if not await self._wait(client.service_is_ready, deadline):
             raise PlannerError(
                 MoveItErrorCodes.COMMUNICATION_FAILURE,
                 f"the grasp planner service {service} is not available (waited "
                 f"moveit.planner_timeout_s={timeout_s:g} s)",
             )
         future = client.call_async(request)
-        done = threading.Event()
-        future.add_done_callback(lambda _: done.set())
-        if not self._wait(done.is_set, deadline):
-            client.remove_pending_request(future)
-            future.cancel()
+        try:
+            answered = await self._wait(future.done, deadline)
+        finally:
+            if not future.done():  # timed out or shutting down: the answer is not awaited
+                client.remove_pending_request(future)
+                future.cancel()
+        if not answered:
             raise PlannerError(
                 MoveItErrorCodes.TIMED_OUT,
                 f"the grasp planner {service} did not answer within "
@@ -185,16 +197,38 @@ class GraspPlanningServer:
             )
         return future.result()
 
-    def _wait(self, condition: Callable[[], bool], deadline: float) -> bool:
-        """Wait until ``condition()`` (True) or ``deadline`` (time.monotonic, False), looking
-        every WAIT_STEP_S; raises ShuttingDownError once the node shuts down."""
-        while not condition():
-            if self._stopping.is_set():
-                raise ShuttingDownError("plan_grasps abandoned: the node is shutting down")
-            if time.monotonic() > deadline:
-                return False
-            time.sleep(WAIT_STEP_S)
-        return True
+    async def _wait(self, condition: Callable[[], bool], deadline: float) -> bool:
+        """Wait, suspended, until ``condition()`` (True) or ``deadline`` (time.monotonic,
+        False), looked at every WAIT_STEP_S by a timer; raises ShuttingDownError once the
+        node shuts down."""
+        over: Future = Future()
+        lock = threading.Lock()
+
+        def look() -> None:
+            with lock:
+                if over.done():
+                    return
+                if self._stopping.is_set():
+                    over.set_exception(
+                        ShuttingDownError("plan_grasps abandoned: the node is shutting down")
+                    )
+                elif condition():
+                    over.set_result(True)
+                elif time.monotonic() > deadline:
+                    over.set_result(False)
+
+        look()
+        if over.done():
+            return bool(over.result())
+        timer = self._node.create_timer(WAIT_STEP_S, look, callback_group=self._group)
+        with self._clients_lock:
+            self._waiting += 1
+        try:
+            return bool(await over)
+        finally:
+            with self._clients_lock:
+                self._waiting -= 1
+            self._node.destroy_timer(timer)
 
     def _rerank(self, request: GraspPlanning.Request, grasps: list[Any], field: str) -> list[Any]:
         """The grasps in the node's order, with their safety qualities (moveit.grasps)."""

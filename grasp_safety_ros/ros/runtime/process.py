@@ -20,6 +20,9 @@ from .rclpy_private import NodeExecutor, join_callbacks
 
 SPIN_PERIOD_S = 0.1
 """How often the spin thread of main() looks whether it should stop [s]."""
+SETTLE_S = 2.0
+"""At shut-down, how long the executor keeps spinning for the suspended requests to be
+answered [s] (each sees the shut-down within its wait's step, moveit/server.py)."""
 
 
 def spin_until(executor: Executor, spinning: threading.Event) -> None:
@@ -60,7 +63,18 @@ class ServedNode(Protocol):
 
     def abandon_rankings(self) -> None: ...
 
+    @property
+    def requests_waiting(self) -> int: ...
+
     def destroy_node(self) -> None: ...
+
+
+def settle(node: ServedNode, timeout_s: float) -> None:
+    """Wait (at most ``timeout_s``) until none of ``node``'s requests is suspended: a service
+    callback that awaits another node is resumed only by a spinning executor."""
+    deadline = time.monotonic() + timeout_s
+    while node.requests_waiting and time.monotonic() < deadline:
+        time.sleep(0.01)
 
 
 class _Stop(Exception):  # noqa: N818  (a signal, not an error)
@@ -81,7 +95,8 @@ def run_node(
     once, under the running callbacks: their responses and log lines then failed with "Failed
     to publish log message to rosout" and "exception was never retrieved"): the executor spins
     in a thread, the main thread waits; at a signal the rankings are abandoned, their requests
-    answered, the callbacks joined, the node destroyed, and one last line logged.
+    answered (a suspended request while the executor still spins: settle), the callbacks
+    joined, the node destroyed, and one last line logged.
     """
     logger = rclpy.logging.get_logger(name)
     try:
@@ -119,6 +134,7 @@ def run_node(
             signal.signal(number, signal.SIG_IGN if handler is _raise_stop else handler)
         if node is not None:
             node.abandon_rankings()
+            settle(node, SETTLE_S)  # a waiting request came through the spin thread: it spins
         if executor is not None:
             spinning.clear()  # the spin thread leaves its wait before the executor goes
             if spinner is not None:  # its start may have been cut short by the signal

@@ -39,7 +39,8 @@ class NodeExecutor(MultiThreadedExecutor):
     rclpy hands a service callback the request only; with the header the node finds the
     client that sent it among its service's introspection events, to stop the ranking when
     that client leaves (ClientWatch). In another executor the node falls back to the clients
-    present at the request's arrival.
+    present at the request's arrival. The header is for synchronous callbacks: a coroutine
+    callback (~/plan_grasps) may resume on another thread.
     """
 
     def _take_service(self, srv: Any) -> Callable[[], Any] | None:
