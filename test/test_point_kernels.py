@@ -249,7 +249,7 @@ def test_terms_in_small_chunks_give_the_same_report_and_progress_per_grasp(
     """One grasp per chunk and no chunk kept (every analysis computes its terms again): the
     same report bit for bit, and progress after every grasp of every analysis, in order, so a
     request can be abandoned between chunks."""
-    from grasp_safety_ros.core.analyses import safety_report
+    from grasp_safety_ros.core.analyses import base
 
     seed = random_positions(arm7, np.random.default_rng(18))
     trajectory = reach_trajectory(arm7, seed)
@@ -260,8 +260,8 @@ def test_terms_in_small_chunks_give_the_same_report_and_progress_per_grasp(
     evaluator = GraspSafetyEvaluator(arm7, EvaluationConfig(workers=1))
     ranking = evaluator.rank(grasps, BOX, trajectory, seed_positions=seed)
     whole = analyse(evaluator, grasps, BOX, trajectory, options, ranking=ranking)
-    monkeypatch.setattr(safety_report, "TERMS_CHUNK_SAMPLES", 1)
-    monkeypatch.setattr(safety_report, "TERMS_CACHE_SAMPLES", 1)
+    monkeypatch.setattr(base, "TERMS_CHUNK_SAMPLES", 1)
+    monkeypatch.setattr(base, "TERMS_CACHE_SAMPLES", 1)
     calls: list[tuple[int, int]] = []
     chunked = analyse(
         evaluator,
@@ -296,7 +296,8 @@ def test_exposed_points_on_recycled_terms_buffers_equal_one_chunk(
     """Without the whole arm no analysis reads the terms twice, so each chunk's terms are
     computed into the previous chunk's buffers: the exposed points stay those of one chunk for
     all grasps, bit for bit (a reader holding a view of reused buffers would differ)."""
-    from grasp_safety_ros.core.analyses import safety_report
+    from grasp_safety_ros.core.analyses import base
+    from grasp_safety_ros.core.method import backend
 
     seed = random_positions(arm7, np.random.default_rng(18))
     trajectory = reach_trajectory(arm7, seed)
@@ -307,14 +308,14 @@ def test_exposed_points_on_recycled_terms_buffers_equal_one_chunk(
     ranking = evaluator.rank(grasps, BOX, trajectory, seed_positions=seed)
     whole = analyse(evaluator, grasps, BOX, trajectory, options, ranking=ranking)
     recycled: list[bool] = []
-    computed = safety_report.grasps_terms
+    computed = backend.grasps_terms
 
     def spy(*args: object) -> object:
         recycled.append(args[-1] is not None)
         return computed(*args)
 
-    monkeypatch.setattr(safety_report, "grasps_terms", spy)
-    monkeypatch.setattr(safety_report, "TERMS_CHUNK_SAMPLES", 1)
+    monkeypatch.setattr(backend, "grasps_terms", spy)
+    monkeypatch.setattr(base, "TERMS_CHUNK_SAMPLES", 1)
     chunked = analyse(evaluator, grasps, BOX, trajectory, options, ranking=ranking)
     feasible = sum(e.feasible for e in ranking.evaluations)
     assert feasible >= 2 and recycled == [False] + [True] * (feasible - 1)  # a chunk each
