@@ -31,10 +31,10 @@ import pinocchio as pin
 
 from ..exceptions import InvalidInputError
 from ..input_checks import read_only
-from ..method.compiled import augmented_bodies, chain_arrays, pose_arrays
+from ..method.backend import Backend
+from ..method.compiled import augmented_bodies, pose_arrays
 from ..method.dynamics import joint_dynamics
 from ..method.effective_mass import augmented_model
-from ..method.ik import compiled_available
 from ..method.packed import ChainArrays
 from ..method.ranking import Grasp, GraspEvaluation
 from ..method.terms import SampleTerms, configurations
@@ -153,7 +153,7 @@ def evaluate_effort(
         return _infeasible(evaluation, limits)
     times = np.asarray(evaluation.times_s, dtype=float)
     positions = _checked_positions(robot, evaluation, joint_positions)
-    chain = chain_arrays(robot) if terms is not None and compiled_available() else None
+    chain = Backend.for_robot(robot).chain if terms is not None else None
     if chain is not None and terms is not None:
         batched = SampleTerms(*(array[None] for array in terms))
         return evaluate_efforts(

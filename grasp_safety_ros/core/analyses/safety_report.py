@@ -49,18 +49,17 @@ def posture_criterion(
     ``rank_by: whole_arm`` the whole arm's worst force for ``whole_arm_region`` over its sites
     (the defaults and ``arm_points_m``), with ``safe_duration`` the retimed duration, the
     criterion that ranks; else None (the tip score)."""
-    if options.rank_by not in ("whole_arm", "safe_duration"):
-        return None
-    sites = resolve_arm_sites(robot, options.arm_points_m)
-    if options.rank_by == "safe_duration":
-        regions = None if options.iso_regions is None else tuple(options.iso_regions)
+    if options.rank_by == "whole_arm":
+        sites = resolve_arm_sites(robot, options.arm_points_m)
+        return WholeArmPostureCriterion(sites, options.whole_arm_region)
+    if options.rank_by == "safe_duration" and options.retime is not None:  # (it must be set)
         return SafeDurationPostureCriterion(
             options.retime,
-            sites,
+            resolve_arm_sites(robot, options.arm_points_m),
             options.points_in_object_m,
-            regions,  # type: ignore[arg-type]
+            None if options.iso_regions is None else tuple(options.iso_regions),
         )
-    return WholeArmPostureCriterion(sites, options.whole_arm_region)
+    return None
 
 
 @dataclass(frozen=True)

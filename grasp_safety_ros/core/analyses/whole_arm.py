@@ -39,11 +39,12 @@ import pinocchio as pin
 
 from ..exceptions import InvalidInputError
 from ..input_checks import read_only
+from ..method.backend import Backend
 from ..method.effective_mass import augmented_model
 from ..method.executable import joint_velocities_accelerations
 from ..method.points import PSEUDO_INVERSE_RCOND, site_masses, tip_following_rates, valid_rows
 from ..method.ranking import Grasp, GraspEvaluation
-from ..method.terms import SampleTerms, grasps_terms
+from ..method.terms import SampleTerms
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
 from ..model.trajectory import ObjectMotion, ObjectPath, Trajectory
@@ -223,7 +224,7 @@ def tip_following_joint_velocities(
     spline_rates = _spline_rates(robot, times_s, [joint_positions])[0]
     pseudo_inverse = np.linalg.pinv(tip_jacobians, rcond=PSEUDO_INVERSE_RCOND)  # (N, n, 6)
     residual = tip_twists_in_world - (tip_jacobians @ spline_rates[..., None])[..., 0]
-    return spline_rates + (pseudo_inverse @ residual[..., None])[..., 0]
+    return np.asarray(spline_rates + (pseudo_inverse @ residual[..., None])[..., 0])
 
 
 @dataclass(frozen=True)
@@ -298,16 +299,13 @@ def _whole_arm_result(
 ) -> WholeArmEvaluation:
     """The evaluation from a grasp's exposure; ``assessed``: its ``assess_sites`` when already
     computed (with the grasp's fellows in a batch)."""
+    speeds, masses = exposure.speed_m_s, exposure.effective_mass_kg
     if assessed is None:
-        assessed = assess_sites(
-            exposure.speed_m_s, exposure.effective_mass_kg, duration_s, regions
-        )
+        assessed = assess_sites(speeds, masses, duration_s, regions)
     permitted = [a for a in assessed if a.transient_contact_permitted]
     limiting = max(permitted, key=lambda a: a.worst_force_ratio) if permitted else None
     feasible = evaluation.feasible
-    energy = np.where(
-        exposure.stationary, 0.0, 0.5 * exposure.effective_mass_kg * exposure.speed_m_s**2
-    )
+    energy = np.where(exposure.stationary, 0.0, 0.5 * masses * speeds**2)
     return WholeArmEvaluation(
         index=evaluation.index,
         name=evaluation.name,
@@ -472,13 +470,13 @@ def evaluate_whole_arm_on_terms(
     stationary = (speeds < STATIONARY_SPEED_M_S) & valid[..., None]
     directions = velocities / np.where(stationary | ~valid[..., None], 1.0, speeds)[..., None]
     if stationary.any():  # the rest ends: A from the terms on arrays, then its eigenvectors
-        grasp, sample, site = np.nonzero(stationary)
-        motions = terms.joint_motions[grasp, sample]  # (S, n, 6)
+        at_grasp, at_sample, at_site = np.nonzero(stationary)
+        motions = terms.joint_motions[at_grasp, at_sample]  # (S, n, 6)
         columns = motions[..., :3] + np.cross(
-            motions[..., 3:], positions[grasp, sample, site, None]
+            motions[..., 3:], positions[at_grasp, at_sample, at_site, None]
         )
-        jacobian = np.swapaxes(columns * sites.support[site, :, None], 1, 2)  # (S, 3, n)
-        minv = terms.mass_matrix_inverses[grasp, sample]
+        jacobian = np.swapaxes(columns * sites.support[at_site, :, None], 1, 2)  # (S, 3, n)
+        minv = terms.mass_matrix_inverses[at_grasp, at_sample]
         mobilities = jacobian @ minv @ np.swapaxes(jacobian, -1, -2)
         directions[stationary], masses[stationary] = _largest_mass_directions(mobilities)
     speeds[stationary] = 0.0
@@ -574,10 +572,11 @@ class WholeArmPostureCriterion:
         """The force [N] of each feasible evaluation of ``grasp``: on their terms, in one
         kernel call, with a compiled evaluator; else by Pinocchio (one augmented model)."""
         robot, count, region = evaluator.robot, len(evaluations), [self.region]
-        if evaluator.ik.compiled and evaluations:
+        backend = Backend.of(evaluator.ik)
+        if backend.compiled and evaluations:
             paths = [evaluation.joint_positions for evaluation in evaluations]
             transforms = [grasp.transform_tip_to_object] * count
-            terms = grasps_terms(robot, evaluator.ik.chain, object_inertia, transforms, paths)
+            terms = backend.grasps_terms(robot, object_inertia, transforms, paths)
             assessed = evaluate_whole_arm_on_terms(
                 robot,
                 evaluations,
