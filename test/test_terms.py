@@ -42,21 +42,30 @@ def test_shared_terms_equal_pinocchio(name: str, request: pytest.FixtureRequest)
         jacobian = pin.getFrameJacobian(
             model, data, robot.tip_frame_id, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
         )
-        assert_close_to_scale(terms.tip_jacobians[i], jacobian, "tip Jacobian", kinematic)
-        assert_close_to_scale(terms.tip_rotations[i], tip.rotation, "tip rotation", kinematic)
-        assert_close_to_scale(terms.tip_translations[i], tip.translation, "tip origin", kinematic)
+        assert_close_to_scale(terms.jacobians_tip_in_world[i], jacobian, "tip Jacobian", kinematic)
+        assert_close_to_scale(
+            terms.rotations_tip_to_world[i], tip.rotation, "tip rotation", kinematic
+        )
+        assert_close_to_scale(
+            terms.translations_tip_in_world[i], tip.translation, "tip origin", kinematic
+        )
         for k in range(robot.num_joints):
             placement = data.oMi[k + 1]
             assert_close_to_scale(
-                terms.joint_rotations[i, k], placement.rotation, "joint R", kinematic
+                terms.rotations_joint_to_world[i, k], placement.rotation, "joint R", kinematic
             )
             assert_close_to_scale(
-                terms.joint_origins[i, k], placement.translation, "joint p", kinematic
+                terms.translations_joint_in_world[i, k],
+                placement.translation,
+                "joint p",
+                kinematic,
             )
             motion = pin.getJointJacobian(model, data, k + 1, pin.ReferenceFrame.WORLD)[:, k]
-            assert_close_to_scale(terms.joint_motions[i, k], motion, "motion subspace", kinematic)
+            assert_close_to_scale(
+                terms.motions_joint_in_world[i, k], motion, "motion subspace", kinematic
+            )
         mobility = translational_mobility_in_base(robot, model, data, q)
-        assert_close_to_scale(terms.tip_mobilities[i], mobility, "tip mobility", dynamic)
+        assert_close_to_scale(terms.mobilities_tip_in_base[i], mobility, "tip mobility", dynamic)
 
 
 @needs_numba
@@ -116,9 +125,11 @@ def test_point_jacobians_from_shared_terms_equal_pinocchio(
         for k in range(robot.num_joints)
     ]
     data = model.createData()
-    tip = point_jacobians(terms, robot.num_joints - 1, terms.tip_translations[:, None])
+    tip = point_jacobians(terms, robot.num_joints - 1, terms.translations_tip_in_world[:, None])
     tolerance = kinematics_tolerance(robot)
-    assert_close_to_scale(tip[:, 0], terms.tip_jacobians[:, :3], "tip as a point", tolerance)
+    assert_close_to_scale(
+        tip[:, 0], terms.jacobians_tip_in_world[:, :3], "tip as a point", tolerance
+    )
     for i, positions in enumerate(evaluation.joint_positions[::10]):
         q = robot.q_from_positions(positions)
         pin.computeJointJacobians(model, data, q)

@@ -343,7 +343,7 @@ def evaluate_exposed_points_on_terms(
             motion_keys[key] = len(motions)
             motions.append((times, *_point_motion(trajectory, times, points)))
         motion_of[g] = motion_keys[key]
-    samples = terms.tip_jacobians.shape[1]
+    samples = terms.jacobians_tip_in_world.shape[1]
     directions = np.zeros((len(motions), samples, count_points, 3))
     stationary = np.zeros((len(motions), samples, count_points), dtype=bool)
     leading_moving = np.zeros((len(motions), samples), dtype=np.int64)

@@ -74,9 +74,9 @@ class ArmTerms(NamedTuple):
     The shared per-(grasp, sample) computation can fill these directly.
     """
 
-    joint_rotations: np.ndarray  # (N, n, 3, 3) joint frames in the world frame
-    joint_translations: np.ndarray  # (N, n, 3) [m] joint origins in the world frame
-    joint_jacobians: np.ndarray  # (N, 6, n) columns (v_O [m/s], ω [rad/s]) per unit rate
+    rotations_joint_to_world: np.ndarray  # (N, n, 3, 3) joint frames in the world frame
+    translations_joint_in_world: np.ndarray  # (N, n, 3) [m] joint origins in the world frame
+    jacobians_in_world: np.ndarray  # (N, 6, n) columns (v_O [m/s], ω [rad/s]) per unit rate
     minv: np.ndarray  # (N, n, n) M⁻¹ of the augmented model, armature included [1/(kg m²)]
     joint_velocities: np.ndarray  # (N, n) q̇ [rad/s or m/s]
 
@@ -109,10 +109,12 @@ def site_jacobians(sites: ArmSites, terms: ArmTerms) -> tuple[np.ndarray, np.nda
     """World positions (N, K, 3) [m] and translational Jacobians (N, K, 3, n) of the sites."""
     index = sites.joint_ids - 1
     positions = (
-        np.einsum("nkab,kb->nka", terms.joint_rotations[:, index], sites.points_in_joint_m)
-        + terms.joint_translations[:, index]
+        np.einsum(
+            "nkab,kb->nka", terms.rotations_joint_to_world[:, index], sites.points_in_joint_m
+        )
+        + terms.translations_joint_in_world[:, index]
     )
-    linear, angular = terms.joint_jacobians[:, :3], terms.joint_jacobians[:, 3:]
+    linear, angular = terms.jacobians_in_world[:, :3], terms.jacobians_in_world[:, 3:]
     # ω_i × p for every column i: (N, 1, n, 3) x (N, K, 1, 3)
     cross = np.cross(np.swapaxes(angular, 1, 2)[:, None], positions[:, :, None])
     jacobians = (linear[:, None] + np.swapaxes(cross, 2, 3)) * sites.support[None, :, None, :]
@@ -433,7 +435,7 @@ def evaluate_whole_arm_on_terms(
     compiled call over (grasp, sample, site) (``method.points.site_masses``), ISO/TS 15066 in
     one array pass per region.
     Equal to the Pinocchio path to rounding; each grasp's result is the one it gets alone."""
-    grasp_count, samples = len(evaluations), terms.tip_jacobians.shape[1]
+    grasp_count, samples = len(evaluations), terms.jacobians_tip_in_world.shape[1]
     paths = (
         [e.joint_positions for e in evaluations] if joint_positions is None else joint_positions
     )
@@ -455,7 +457,7 @@ def evaluate_whole_arm_on_terms(
     for group in by_times.values():
         times, count = np.asarray(evaluations[group[0]].times_s, dtype=float), counts[group[0]]
         spline_rates[group, :count] = _spline_rates(robot, times, [paths[g] for g in group])
-    rates = tip_following_rates(terms.tip_jacobians, counts, twists, spline_rates)
+    rates = tip_following_rates(terms.jacobians_tip_in_world, counts, twists, spline_rates)
     site_joints = sites.joint_ids - 1
     positions, velocities, speeds, masses = site_masses(
         terms,
@@ -471,7 +473,7 @@ def evaluate_whole_arm_on_terms(
     directions = velocities / np.where(stationary | ~valid[..., None], 1.0, speeds)[..., None]
     if stationary.any():  # the rest ends: A from the terms on arrays, then its eigenvectors
         at_grasp, at_sample, at_site = np.nonzero(stationary)
-        motions = terms.joint_motions[at_grasp, at_sample]  # (S, n, 6)
+        motions = terms.motions_joint_in_world[at_grasp, at_sample]  # (S, n, 6)
         columns = motions[..., :3] + np.cross(
             motions[..., 3:], positions[at_grasp, at_sample, at_site, None]
         )
