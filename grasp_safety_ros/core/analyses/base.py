@@ -118,7 +118,7 @@ class Shared:
         evaluations: The ranking's evaluations (one per grasp, candidate order).
         metric: The ranking's score aggregate.
         motions: Each grasp's motion (``GraspSafetyEvaluator.trajectory_for``).
-        backend: Compiled or Pinocchio, the evaluator's (``Backend.of``).
+        backend: Compiled or Pinocchio, the evaluator's.
         chunks: The feasible grasps in consecutive chunks of at most TERMS_CHUNK_SAMPLES
             samples (compiled backend; none on the Pinocchio one).
     """
@@ -139,7 +139,7 @@ class Shared:
         self.robot: RobotModel = evaluator.robot
         self.grasps, self.object_inertia, self.options = grasps, object_inertia, options
         self.evaluations, self.metric, self.motions = evaluations, metric, motions
-        self.backend = Backend.of(evaluator.ik)
+        self.backend: Backend = evaluator.backend
         self.step = step
         feasible = [k for k, e in enumerate(evaluations) if e.feasible]
         samples = [len(evaluations[k].times_s) for k in feasible]
