@@ -20,6 +20,7 @@ from grasp_safety_ros.core.method.effective_mass import (
     augmented_model,
     translational_mobility_in_base,
 )
+from grasp_safety_ros.core.method.terms import SampleTerms
 
 
 @needs_numba
@@ -95,12 +96,15 @@ def test_exposed_points_from_shared_terms_equal_pinocchio(
 def test_effort_from_shared_terms_equals_pinocchio(
     name: str, request: pytest.FixtureRequest
 ) -> None:
-    from grasp_safety_ros.core.analyses.effort import evaluate_effort
+    from grasp_safety_ros.core.analyses.effort import evaluate_effort, evaluate_efforts
+    from grasp_safety_ros.core.method.backend import Backend
 
     robot: RobotModel = request.getfixturevalue(name)
     grasp, evaluation, terms, motion = terms_case(robot, 13)
     reference = evaluate_effort(robot, evaluation, BOX, grasp, motion)
-    shared = evaluate_effort(robot, evaluation, BOX, grasp, motion, terms=terms)
+    batched = SampleTerms(*(array[None] for array in terms))
+    chain = Backend.for_robot(robot).chain
+    (shared,) = evaluate_efforts(robot, [evaluation], BOX, [grasp], motion, None, batched, chain)
     tolerances = effort_tolerances(robot, evaluation, BOX, grasp, reference)
     for field in ("joint_velocities", "joint_accelerations", "joint_torques", "peak_abs_torque"):
         expected = getattr(reference, field)
