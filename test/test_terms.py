@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-from fast_paths import BOX, TERM_ARMS, needs_numba, terms_case
+from fast_paths import BOX, TERM_ARMS, needs_numba, one_grasp, terms_case
 from tolerances import (
     assert_close_to_scale,
     dynamics_tolerance,
@@ -77,13 +77,16 @@ def test_exposed_points_from_shared_terms_equal_pinocchio(
     from grasp_safety_ros.core.analyses.exposed_points import (
         box_corners_in_object,
         evaluate_exposed_points,
+        evaluate_exposed_points_on_terms,
     )
 
     robot: RobotModel = request.getfixturevalue(name)
     grasp, evaluation, terms, motion = terms_case(robot, 12)
     points = box_corners_in_object([0.08, 0.12, 0.2])
     reference = evaluate_exposed_points(robot, evaluation, BOX, grasp, motion, points)
-    shared = evaluate_exposed_points(robot, evaluation, BOX, grasp, motion, points, terms=terms)
+    (shared,) = evaluate_exposed_points_on_terms(
+        robot, [evaluation], [grasp], [motion], points, *one_grasp(terms)
+    )
     tolerance = dynamics_tolerance(robot, terms)
     for field in ("effective_mass_kg", "directions_in_base"):
         assert_close_to_scale(getattr(shared, field), getattr(reference, field), field, tolerance)
@@ -154,7 +157,12 @@ def test_whole_arm_from_shared_terms_equals_pinocchio(
 ) -> None:
     """Sites of the whole arm (the defaults and a point on every link) on the compiled path:
     positions, directions, speeds, masses, energies and the regions' worst cases."""
-    from grasp_safety_ros.core.analyses.whole_arm import evaluate_whole_arm, resolve_arm_sites
+    from grasp_safety_ros.core.analyses.iso15066 import select_regions
+    from grasp_safety_ros.core.analyses.whole_arm import (
+        evaluate_whole_arm,
+        evaluate_whole_arm_on_terms,
+        resolve_arm_sites,
+    )
 
     robot: RobotModel = request.getfixturevalue(name)
     grasp, evaluation, terms, motion = terms_case(robot, 16)
@@ -165,7 +173,9 @@ def test_whole_arm_from_shared_terms_equals_pinocchio(
     }
     sites = resolve_arm_sites(robot, {link: [[0.03, -0.05, 0.1]] for link in sorted(links)})
     reference = evaluate_whole_arm(robot, evaluation, BOX, grasp, motion, sites)
-    shared = evaluate_whole_arm(robot, evaluation, BOX, grasp, motion, sites, terms=terms)
+    (shared,) = evaluate_whole_arm_on_terms(
+        robot, [evaluation], [motion], [grasp], sites, select_regions(None), *one_grasp(terms)
+    )
     assert reference.stationary.any() and not reference.stationary.all()  # both branches
     np.testing.assert_array_equal(shared.stationary, reference.stationary)
     kinematic, dynamic = kinematics_tolerance(robot), dynamics_tolerance(robot, terms)

@@ -339,7 +339,6 @@ def evaluate_whole_arm(
     regions: Sequence[str | BodyRegion] | None = None,
     model: pin.Model | None = None,
     joint_positions: np.ndarray | None = None,
-    terms: SampleTerms | None = None,
 ) -> WholeArmEvaluation:
     """Effective mass, speed, energy and ISO/TS 15066 ratios at every site, per sample.
 
@@ -347,9 +346,8 @@ def evaluate_whole_arm(
     same samples and tip poses (e.g. RedundancyResolution.joint_positions). ``grasp`` and
     ``trajectory`` must be the ones the evaluation was computed with; ``model``: their
     ``augmented_model`` when already built (its ``armature`` is used, as everywhere M
-    appears); ``regions``: None for all; ``terms``: the grasp's ``method.terms.SampleTerms``
-    at those joint positions (then the compiled path, ``evaluate_whole_arm_on_terms`` of this
-    grasp alone; None: Pinocchio per sample, the reference, equal to rounding).
+    appears); ``regions``: None for all. Pinocchio per sample: the reference of the compiled
+    path, ``evaluate_whole_arm_on_terms`` (equal to rounding, test_terms).
     """
     selected = select_regions(None if regions is None else list(regions))
     count_sites = len(sites)
@@ -369,19 +367,6 @@ def evaluate_whole_arm(
     )
     if positions.shape != (len(times), robot.num_joints):
         raise InvalidInputError("evaluation.joint_positions", "must have one row per sample")
-    if terms is not None:
-        batch = SampleTerms(*(array[None] for array in terms))
-        return evaluate_whole_arm_on_terms(
-            robot,
-            [evaluation],
-            [trajectory],
-            [grasp],
-            sites,
-            selected,
-            batch,
-            np.array([len(times)]),
-            [positions],
-        )[0]
     if model is None:
         model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
     q_all = np.array([robot.q_from_positions(p) for p in positions]).reshape(len(times), -1)
