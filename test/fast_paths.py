@@ -22,7 +22,7 @@ from grasp_safety_ros.core import (
 )
 from grasp_safety_ros.core.method.ik import compiled_available
 from grasp_safety_ros.core.method.ranking import Ranking
-from grasp_safety_ros.core.method.terms import grasp_terms
+from grasp_safety_ros.core.method.terms import SampleTerms, grasp_terms
 
 needs_numba = pytest.mark.skipif(not compiled_available(), reason="numba is not installed")
 RTOL = 1e-9
@@ -174,6 +174,12 @@ def terms_case(robot: RobotModel, seed: int) -> tuple:
     )
     motion = evaluator.trajectory_for(grasp, trajectory)
     return grasp, evaluation, terms, motion
+
+
+def one_grasp(terms: SampleTerms) -> tuple[SampleTerms, np.ndarray]:
+    """One grasp's terms (``grasp_terms``: axis 0 dropped) as a batch of one and its sample
+    count, as the compiled ``*_on_terms`` analyses take them."""
+    return SampleTerms(*(array[None] for array in terms)), np.array([len(terms[0])])
 
 
 TERM_ARMS = ("arm7", "baxter", "prismatic_arm", "continuous_arm", "geared_arm")

@@ -161,7 +161,13 @@ def test_analyses_share_one_augmented_model_per_grasp(
     core.method.terms), and the shared one gives the same report as each analysis building
     its own."""
     from grasp_safety_ros.core import EvaluationConfig, GraspSafetyEvaluator
-    from grasp_safety_ros.core.analyses import effort, exposed_points, redundancy, safety_report
+    from grasp_safety_ros.core.analyses import (
+        base,
+        effort,
+        exposed_points,
+        redundancy,
+        safety_report,
+    )
     from grasp_safety_ros.core.method.effective_mass import augmented_model
 
     scenario = parse_scenario(coarse(EXTENDED, redundancy=True), tmp_path)
@@ -188,13 +194,13 @@ def test_analyses_share_one_augmented_model_per_grasp(
         built.append(1)
         return augmented_model(*args)  # type: ignore[arg-type]
 
-    for module in (safety_report, exposed_points, redundancy, effort):
+    for module in (base, exposed_points, redundancy, effort):
         monkeypatch.setattr(module, "augmented_model", counting)
     shared = run()
     feasible = sum(e.feasible for e in ranking.evaluations)
     assert feasible >= 2
     assert len(built) == feasible
-    monkeypatch.setattr(safety_report, "augmented_model", lambda *args: None)  # each its own
+    monkeypatch.setattr(base, "augmented_model", lambda *args: None)  # each its own
     separate = run()
     # one more per grasp: redundancy's own (exposed points and effort read the shared terms)
     assert len(built) == 2 * feasible

@@ -9,7 +9,14 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from conftest import BAXTER_SEED, book_trajectory, random_positions
-from fast_paths import BOX, grasps_near_identity, needs_numba, reach_trajectory, terms_case
+from fast_paths import (
+    BOX,
+    grasps_near_identity,
+    needs_numba,
+    one_grasp,
+    reach_trajectory,
+    terms_case,
+)
 from tolerances import (
     assert_close_to_scale,
     condition_number,
@@ -26,10 +33,13 @@ from grasp_safety_ros.core import (
 )
 from grasp_safety_ros.core.analyses.exposed_points import (
     box_corners_in_object,
-    evaluate_exposed_points,
+    evaluate_exposed_points_on_terms,
 )
+from grasp_safety_ros.core.analyses.iso15066 import select_regions
 from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions, analyse
-from grasp_safety_ros.core.analyses.whole_arm import evaluate_whole_arm
+from grasp_safety_ros.core.analyses.whole_arm import (
+    evaluate_whole_arm_on_terms,
+)
 from grasp_safety_ros.core.method.compiled import chain_arrays
 from grasp_safety_ros.core.method.points import PSEUDO_INVERSE_RCOND
 from grasp_safety_ros.core.method.terms import grasp_terms, grasps_terms
@@ -127,8 +137,8 @@ def test_a_point_at_the_tip_has_the_tips_effective_mass(
     robot: RobotModel = request.getfixturevalue(name)
     grasp, evaluation, terms, motion = terms_case(robot, 17)
     tip_in_object = grasp.transform_tip_to_object.translation[None]
-    exposed = evaluate_exposed_points(
-        robot, evaluation, BOX, grasp, motion, tip_in_object, terms=terms
+    (exposed,) = evaluate_exposed_points_on_terms(
+        robot, [evaluation], [grasp], [motion], tip_in_object, *one_grasp(terms)
     )
     assert not exposed.direction_is_worst_case.any()
     tolerance = dynamics_tolerance(robot, terms)
@@ -188,13 +198,20 @@ def test_the_report_on_batched_terms_equals_one_grasp_at_a_time_and_pinocchio(
             evaluation.joint_positions,
         )
         tolerance = dynamics_tolerance(robot, terms)
+        one = one_grasp(terms)
         alone = (
-            evaluate_exposed_points(
-                robot, evaluation, BOX, grasp, trajectory, corners, terms=terms
-            ),
-            evaluate_whole_arm(
-                robot, evaluation, BOX, grasp, trajectory, report.arm_sites, terms=terms
-            ),
+            evaluate_exposed_points_on_terms(
+                robot, [evaluation], [grasp], [trajectory], corners, *one
+            )[0],
+            evaluate_whole_arm_on_terms(
+                robot,
+                [evaluation],
+                [trajectory],
+                [grasp],
+                report.arm_sites,
+                select_regions(None),
+                *one,
+            )[0],
         )
         for batch, single, slow in zip(ours, alone, theirs, strict=True):
             for field, value in _fields(batch).items():
@@ -249,7 +266,7 @@ def test_terms_in_small_chunks_give_the_same_report_and_progress_per_grasp(
     """One grasp per chunk and no chunk kept (every analysis computes its terms again): the
     same report bit for bit, and progress after every grasp of every analysis, in order, so a
     request can be abandoned between chunks."""
-    from grasp_safety_ros.core.analyses import safety_report
+    from grasp_safety_ros.core.analyses import base
 
     seed = random_positions(arm7, np.random.default_rng(18))
     trajectory = reach_trajectory(arm7, seed)
@@ -260,8 +277,8 @@ def test_terms_in_small_chunks_give_the_same_report_and_progress_per_grasp(
     evaluator = GraspSafetyEvaluator(arm7, EvaluationConfig(workers=1))
     ranking = evaluator.rank(grasps, BOX, trajectory, seed_positions=seed)
     whole = analyse(evaluator, grasps, BOX, trajectory, options, ranking=ranking)
-    monkeypatch.setattr(safety_report, "TERMS_CHUNK_SAMPLES", 1)
-    monkeypatch.setattr(safety_report, "TERMS_CACHE_SAMPLES", 1)
+    monkeypatch.setattr(base, "TERMS_CHUNK_SAMPLES", 1)
+    monkeypatch.setattr(base, "TERMS_CACHE_SAMPLES", 1)
     calls: list[tuple[int, int]] = []
     chunked = analyse(
         evaluator,
@@ -296,7 +313,8 @@ def test_exposed_points_on_recycled_terms_buffers_equal_one_chunk(
     """Without the whole arm no analysis reads the terms twice, so each chunk's terms are
     computed into the previous chunk's buffers: the exposed points stay those of one chunk for
     all grasps, bit for bit (a reader holding a view of reused buffers would differ)."""
-    from grasp_safety_ros.core.analyses import safety_report
+    from grasp_safety_ros.core.analyses import base
+    from grasp_safety_ros.core.method import backend
 
     seed = random_positions(arm7, np.random.default_rng(18))
     trajectory = reach_trajectory(arm7, seed)
@@ -307,14 +325,14 @@ def test_exposed_points_on_recycled_terms_buffers_equal_one_chunk(
     ranking = evaluator.rank(grasps, BOX, trajectory, seed_positions=seed)
     whole = analyse(evaluator, grasps, BOX, trajectory, options, ranking=ranking)
     recycled: list[bool] = []
-    computed = safety_report.grasps_terms
+    computed = backend.grasps_terms
 
     def spy(*args: object) -> object:
         recycled.append(args[-1] is not None)
         return computed(*args)
 
-    monkeypatch.setattr(safety_report, "grasps_terms", spy)
-    monkeypatch.setattr(safety_report, "TERMS_CHUNK_SAMPLES", 1)
+    monkeypatch.setattr(backend, "grasps_terms", spy)
+    monkeypatch.setattr(base, "TERMS_CHUNK_SAMPLES", 1)
     chunked = analyse(evaluator, grasps, BOX, trajectory, options, ranking=ranking)
     feasible = sum(e.feasible for e in ranking.evaluations)
     assert feasible >= 2 and recycled == [False] + [True] * (feasible - 1)  # a chunk each

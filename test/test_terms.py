@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-from fast_paths import BOX, TERM_ARMS, needs_numba, terms_case
+from fast_paths import BOX, TERM_ARMS, needs_numba, one_grasp, terms_case
 from tolerances import (
     assert_close_to_scale,
     dynamics_tolerance,
@@ -20,6 +20,7 @@ from grasp_safety_ros.core.method.effective_mass import (
     augmented_model,
     translational_mobility_in_base,
 )
+from grasp_safety_ros.core.method.terms import SampleTerms
 
 
 @needs_numba
@@ -42,21 +43,30 @@ def test_shared_terms_equal_pinocchio(name: str, request: pytest.FixtureRequest)
         jacobian = pin.getFrameJacobian(
             model, data, robot.tip_frame_id, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
         )
-        assert_close_to_scale(terms.tip_jacobians[i], jacobian, "tip Jacobian", kinematic)
-        assert_close_to_scale(terms.tip_rotations[i], tip.rotation, "tip rotation", kinematic)
-        assert_close_to_scale(terms.tip_translations[i], tip.translation, "tip origin", kinematic)
+        assert_close_to_scale(terms.jacobians_tip_in_world[i], jacobian, "tip Jacobian", kinematic)
+        assert_close_to_scale(
+            terms.rotations_tip_to_world[i], tip.rotation, "tip rotation", kinematic
+        )
+        assert_close_to_scale(
+            terms.translations_tip_in_world[i], tip.translation, "tip origin", kinematic
+        )
         for k in range(robot.num_joints):
             placement = data.oMi[k + 1]
             assert_close_to_scale(
-                terms.joint_rotations[i, k], placement.rotation, "joint R", kinematic
+                terms.rotations_joint_to_world[i, k], placement.rotation, "joint R", kinematic
             )
             assert_close_to_scale(
-                terms.joint_origins[i, k], placement.translation, "joint p", kinematic
+                terms.translations_joint_in_world[i, k],
+                placement.translation,
+                "joint p",
+                kinematic,
             )
             motion = pin.getJointJacobian(model, data, k + 1, pin.ReferenceFrame.WORLD)[:, k]
-            assert_close_to_scale(terms.joint_motions[i, k], motion, "motion subspace", kinematic)
+            assert_close_to_scale(
+                terms.motions_joint_in_world[i, k], motion, "motion subspace", kinematic
+            )
         mobility = translational_mobility_in_base(robot, model, data, q)
-        assert_close_to_scale(terms.tip_mobilities[i], mobility, "tip mobility", dynamic)
+        assert_close_to_scale(terms.mobilities_tip_in_base[i], mobility, "tip mobility", dynamic)
 
 
 @needs_numba
@@ -67,13 +77,16 @@ def test_exposed_points_from_shared_terms_equal_pinocchio(
     from grasp_safety_ros.core.analyses.exposed_points import (
         box_corners_in_object,
         evaluate_exposed_points,
+        evaluate_exposed_points_on_terms,
     )
 
     robot: RobotModel = request.getfixturevalue(name)
     grasp, evaluation, terms, motion = terms_case(robot, 12)
     points = box_corners_in_object([0.08, 0.12, 0.2])
     reference = evaluate_exposed_points(robot, evaluation, BOX, grasp, motion, points)
-    shared = evaluate_exposed_points(robot, evaluation, BOX, grasp, motion, points, terms=terms)
+    (shared,) = evaluate_exposed_points_on_terms(
+        robot, [evaluation], [grasp], [motion], points, *one_grasp(terms)
+    )
     tolerance = dynamics_tolerance(robot, terms)
     for field in ("effective_mass_kg", "directions_in_base"):
         assert_close_to_scale(getattr(shared, field), getattr(reference, field), field, tolerance)
@@ -86,12 +99,15 @@ def test_exposed_points_from_shared_terms_equal_pinocchio(
 def test_effort_from_shared_terms_equals_pinocchio(
     name: str, request: pytest.FixtureRequest
 ) -> None:
-    from grasp_safety_ros.core.analyses.effort import evaluate_effort
+    from grasp_safety_ros.core.analyses.effort import evaluate_effort, evaluate_efforts
+    from grasp_safety_ros.core.method.backend import Backend
 
     robot: RobotModel = request.getfixturevalue(name)
     grasp, evaluation, terms, motion = terms_case(robot, 13)
     reference = evaluate_effort(robot, evaluation, BOX, grasp, motion)
-    shared = evaluate_effort(robot, evaluation, BOX, grasp, motion, terms=terms)
+    batched = SampleTerms(*(array[None] for array in terms))
+    chain = Backend.for_robot(robot).chain
+    (shared,) = evaluate_efforts(robot, [evaluation], BOX, [grasp], motion, None, batched, chain)
     tolerances = effort_tolerances(robot, evaluation, BOX, grasp, reference)
     for field in ("joint_velocities", "joint_accelerations", "joint_torques", "peak_abs_torque"):
         expected = getattr(reference, field)
@@ -116,9 +132,11 @@ def test_point_jacobians_from_shared_terms_equal_pinocchio(
         for k in range(robot.num_joints)
     ]
     data = model.createData()
-    tip = point_jacobians(terms, robot.num_joints - 1, terms.tip_translations[:, None])
+    tip = point_jacobians(terms, robot.num_joints - 1, terms.translations_tip_in_world[:, None])
     tolerance = kinematics_tolerance(robot)
-    assert_close_to_scale(tip[:, 0], terms.tip_jacobians[:, :3], "tip as a point", tolerance)
+    assert_close_to_scale(
+        tip[:, 0], terms.jacobians_tip_in_world[:, :3], "tip as a point", tolerance
+    )
     for i, positions in enumerate(evaluation.joint_positions[::10]):
         q = robot.q_from_positions(positions)
         pin.computeJointJacobians(model, data, q)
@@ -139,7 +157,12 @@ def test_whole_arm_from_shared_terms_equals_pinocchio(
 ) -> None:
     """Sites of the whole arm (the defaults and a point on every link) on the compiled path:
     positions, directions, speeds, masses, energies and the regions' worst cases."""
-    from grasp_safety_ros.core.analyses.whole_arm import evaluate_whole_arm, resolve_arm_sites
+    from grasp_safety_ros.core.analyses.iso15066 import select_regions
+    from grasp_safety_ros.core.analyses.whole_arm import (
+        evaluate_whole_arm,
+        evaluate_whole_arm_on_terms,
+        resolve_arm_sites,
+    )
 
     robot: RobotModel = request.getfixturevalue(name)
     grasp, evaluation, terms, motion = terms_case(robot, 16)
@@ -150,7 +173,9 @@ def test_whole_arm_from_shared_terms_equals_pinocchio(
     }
     sites = resolve_arm_sites(robot, {link: [[0.03, -0.05, 0.1]] for link in sorted(links)})
     reference = evaluate_whole_arm(robot, evaluation, BOX, grasp, motion, sites)
-    shared = evaluate_whole_arm(robot, evaluation, BOX, grasp, motion, sites, terms=terms)
+    (shared,) = evaluate_whole_arm_on_terms(
+        robot, [evaluation], [motion], [grasp], sites, select_regions(None), *one_grasp(terms)
+    )
     assert reference.stationary.any() and not reference.stationary.all()  # both branches
     np.testing.assert_array_equal(shared.stationary, reference.stationary)
     kinematic, dynamic = kinematics_tolerance(robot), dynamics_tolerance(robot, terms)

@@ -19,11 +19,17 @@ from grasp_safety_ros.core import (
     RobotModel,
     solid_box,
 )
-from grasp_safety_ros.core.analyses.iso15066 import BODY_REGIONS, BodyRegion, assess_motion
+from grasp_safety_ros.core.analyses.iso15066 import (
+    BODY_REGIONS,
+    BodyRegion,
+    assess_motion,
+    select_regions,
+)
 from grasp_safety_ros.core.analyses.whole_arm import (
     ArmTerms,
     assess_sites,
     evaluate_whole_arm,
+    evaluate_whole_arm_on_terms,
     order_by_whole_arm,
     pinocchio_kinematic_terms,
     resolve_arm_sites,
@@ -307,7 +313,7 @@ def test_every_regions_where_fields_reproduce_its_peak_force(
     peak force, and that is the largest force over every site and sample (the compiled and
     the Pinocchio paths; the tip's own assessment likewise)."""
     from grasp_safety_ros.core.method.ik import compiled_available
-    from grasp_safety_ros.core.method.terms import grasp_terms
+    from grasp_safety_ros.core.method.terms import SampleTerms, grasp_terms
 
     trajectory, evaluations, sites, whole = book
     forbidden = {r.name for r in BODY_REGIONS.values() if not r.transient_contact_permitted}
@@ -318,8 +324,17 @@ def test_every_regions_where_fields_reproduce_its_peak_force(
         for evaluation, grasp in zip(evaluations, GRASPS, strict=True):
             pose = grasp.transform_tip_to_object
             terms = grasp_terms(baxter, chain, BOOK, pose, evaluation.joint_positions)
-            results.append(
-                evaluate_whole_arm(baxter, evaluation, BOOK, grasp, trajectory, sites, terms=terms)
+            batch = SampleTerms(*(array[None] for array in terms))
+            counts = np.array([len(evaluation.times_s)])
+            results += evaluate_whole_arm_on_terms(
+                baxter,
+                [evaluation],
+                [trajectory],
+                [grasp],
+                sites,
+                select_regions(None),
+                batch,
+                counts,
             )
     for result in results:
         assert {r.region for r in result.regions} >= forbidden

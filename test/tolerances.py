@@ -70,7 +70,7 @@ def terms_condition(terms: SampleTerms) -> float:
     the samples: the consumers apply M⁻¹ (masses, mobilities) or J⁺ (rates)."""
     return max(
         condition_number(terms.mass_matrix_inverses),
-        condition_number(terms.tip_jacobians, PSEUDO_INVERSE_RCOND),
+        condition_number(terms.jacobians_tip_in_world, PSEUDO_INVERSE_RCOND),
     )
 
 

@@ -205,7 +205,7 @@ class ArmatureRangeStage:
             bounds.lower_kgm2,
             bounds.upper_kgm2,
             ranking.metric,
-            compiled=evaluator.ik.compiled,
+            compiled=evaluator.backend.compiled,
         )
         return replace(report, armature_range=spread)
 

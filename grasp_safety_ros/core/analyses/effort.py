@@ -31,10 +31,9 @@ import pinocchio as pin
 
 from ..exceptions import InvalidInputError
 from ..input_checks import read_only
-from ..method.compiled import augmented_bodies, chain_arrays, pose_arrays
+from ..method.compiled import augmented_bodies, pose_arrays
 from ..method.dynamics import joint_dynamics
 from ..method.effective_mass import augmented_model
-from ..method.ik import compiled_available
 from ..method.packed import ChainArrays
 from ..method.ranking import Grasp, GraspEvaluation
 from ..method.terms import SampleTerms, configurations
@@ -135,30 +134,22 @@ def evaluate_effort(
     trajectory: Trajectory,
     joint_positions: np.ndarray | None = None,
     model: pin.Model | None = None,
-    terms: SampleTerms | None = None,
 ) -> EffortEvaluation:
-    """Joint velocities, accelerations and torques with the object, per sample, and summaries.
+    """Joint velocities, accelerations and torques with the object, per sample, and summaries,
+    by Pinocchio per sample: the reference of ``evaluate_efforts``' compiled path (equal to
+    rounding, test_terms, test_effort_batch).
 
     Args:
         joint_positions: (N, n) positions to use instead of the evaluation's (e.g.
             RedundancyResolution.joint_positions); same samples and tip poses.
         model: The ``augmented_model`` of robot, object and grasp, when already built
             (shared across analyses).
-        terms: The grasp's ``method.terms.SampleTerms`` at these joint positions: then
-            the compiled path (``evaluate_efforts``) runs on them; None: Pinocchio per
-            sample (the reference; equal to rounding, test_terms).
     """
     limits = effort_limits(robot)
     if not evaluation.feasible:
         return _infeasible(evaluation, limits)
     times = np.asarray(evaluation.times_s, dtype=float)
     positions = _checked_positions(robot, evaluation, joint_positions)
-    chain = chain_arrays(robot) if terms is not None and compiled_available() else None
-    if chain is not None and terms is not None:
-        batched = SampleTerms(*(array[None] for array in terms))
-        return evaluate_efforts(
-            robot, [evaluation], object_inertia, [grasp], trajectory, [positions], batched, chain
-        )[0]
     kinematic_model = robot.model
     n = robot.num_joints
     # The IK makes q a function of the path parameter s only: null-space rates from

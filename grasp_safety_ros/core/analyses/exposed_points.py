@@ -239,16 +239,13 @@ def evaluate_exposed_points(
     trajectory: Trajectory,
     points_in_object_m: Any,
     model: pin.Model | None = None,
-    terms: SampleTerms | None = None,
 ) -> ExposedPointsEvaluation:
     """Effective mass, speed and direction of motion at each object point, per sample.
 
     Reuses the evaluation's joint positions (no IK). ``grasp`` and ``trajectory`` must be the
     ones the evaluation was computed with; ``model``: their ``augmented_model``, when already
-    built (shared across analyses); ``terms``: the grasp's ``method.terms.SampleTerms`` at
-    the evaluation's joint positions (then the compiled path,
-    ``evaluate_exposed_points_on_terms`` of this grasp alone; None: Pinocchio per sample, the
-    reference, equal to rounding).
+    built (shared across analyses). Pinocchio per sample: the reference of the compiled
+    path, ``evaluate_exposed_points_on_terms`` (equal to rounding, test_terms).
     """
     points = check_points_in_object(points_in_object_m)
     count_points = len(points)
@@ -271,12 +268,6 @@ def evaluate_exposed_points(
     times = np.asarray(evaluation.times_s, dtype=float)
     if len(times) != evaluation.joint_positions.shape[0]:
         raise InvalidInputError("evaluation.times_s", "must have one entry per joint sample")
-    if terms is not None:
-        batch = SampleTerms(*(array[None] for array in terms))
-        counts = np.array([len(times)])
-        return evaluate_exposed_points_on_terms(
-            robot, [evaluation], [grasp], [trajectory], points, batch, counts
-        )[0]
     count = len(times)
     positions, tangents, speeds = _point_motion(trajectory, times, points)
     if model is None:
@@ -343,7 +334,7 @@ def evaluate_exposed_points_on_terms(
             motion_keys[key] = len(motions)
             motions.append((times, *_point_motion(trajectory, times, points)))
         motion_of[g] = motion_keys[key]
-    samples = terms.tip_jacobians.shape[1]
+    samples = terms.jacobians_tip_in_world.shape[1]
     directions = np.zeros((len(motions), samples, count_points, 3))
     stationary = np.zeros((len(motions), samples, count_points), dtype=bool)
     leading_moving = np.zeros((len(motions), samples), dtype=np.int64)

@@ -38,7 +38,7 @@ import pinocchio as pin
 
 from ..exceptions import InvalidInputError
 from ..input_checks import finite_array, finite_float
-from ..method.compiled import chain_arrays
+from ..method.backend import Backend
 from ..method.packed import ChainArrays
 from ..method.perturbed import perturbed_effective_masses
 from ..method.ranking import Grasp, GraspEvaluation, aggregate, check_metric
@@ -513,7 +513,7 @@ def analyse_armature_range(
     for end, chain_robot in enumerate(ends):
         masses = _masses_for_inertias(
             chain_robot,
-            chain_arrays(chain_robot) if compiled else None,
+            Backend.for_robot(chain_robot).chain if compiled else None,
             [evaluations[g] for g in feasible_indices],
             [grasps[g] for g in feasible_indices],
             [object_inertia],

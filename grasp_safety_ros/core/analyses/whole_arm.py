@@ -39,11 +39,12 @@ import pinocchio as pin
 
 from ..exceptions import InvalidInputError
 from ..input_checks import read_only
+from ..method.backend import Backend
 from ..method.effective_mass import augmented_model
 from ..method.executable import joint_velocities_accelerations
 from ..method.points import PSEUDO_INVERSE_RCOND, site_masses, tip_following_rates, valid_rows
 from ..method.ranking import Grasp, GraspEvaluation
-from ..method.terms import SampleTerms, grasps_terms
+from ..method.terms import SampleTerms
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
 from ..model.trajectory import ObjectMotion, ObjectPath, Trajectory
@@ -73,9 +74,9 @@ class ArmTerms(NamedTuple):
     The shared per-(grasp, sample) computation can fill these directly.
     """
 
-    joint_rotations: np.ndarray  # (N, n, 3, 3) joint frames in the world frame
-    joint_translations: np.ndarray  # (N, n, 3) [m] joint origins in the world frame
-    joint_jacobians: np.ndarray  # (N, 6, n) columns (v_O [m/s], ω [rad/s]) per unit rate
+    rotations_joint_to_world: np.ndarray  # (N, n, 3, 3) joint frames in the world frame
+    translations_joint_in_world: np.ndarray  # (N, n, 3) [m] joint origins in the world frame
+    jacobians_in_world: np.ndarray  # (N, 6, n) columns (v_O [m/s], ω [rad/s]) per unit rate
     minv: np.ndarray  # (N, n, n) M⁻¹ of the augmented model, armature included [1/(kg m²)]
     joint_velocities: np.ndarray  # (N, n) q̇ [rad/s or m/s]
 
@@ -108,10 +109,12 @@ def site_jacobians(sites: ArmSites, terms: ArmTerms) -> tuple[np.ndarray, np.nda
     """World positions (N, K, 3) [m] and translational Jacobians (N, K, 3, n) of the sites."""
     index = sites.joint_ids - 1
     positions = (
-        np.einsum("nkab,kb->nka", terms.joint_rotations[:, index], sites.points_in_joint_m)
-        + terms.joint_translations[:, index]
+        np.einsum(
+            "nkab,kb->nka", terms.rotations_joint_to_world[:, index], sites.points_in_joint_m
+        )
+        + terms.translations_joint_in_world[:, index]
     )
-    linear, angular = terms.joint_jacobians[:, :3], terms.joint_jacobians[:, 3:]
+    linear, angular = terms.jacobians_in_world[:, :3], terms.jacobians_in_world[:, 3:]
     # ω_i × p for every column i: (N, 1, n, 3) x (N, K, 1, 3)
     cross = np.cross(np.swapaxes(angular, 1, 2)[:, None], positions[:, :, None])
     jacobians = (linear[:, None] + np.swapaxes(cross, 2, 3)) * sites.support[None, :, None, :]
@@ -223,7 +226,7 @@ def tip_following_joint_velocities(
     spline_rates = _spline_rates(robot, times_s, [joint_positions])[0]
     pseudo_inverse = np.linalg.pinv(tip_jacobians, rcond=PSEUDO_INVERSE_RCOND)  # (N, n, 6)
     residual = tip_twists_in_world - (tip_jacobians @ spline_rates[..., None])[..., 0]
-    return spline_rates + (pseudo_inverse @ residual[..., None])[..., 0]
+    return np.asarray(spline_rates + (pseudo_inverse @ residual[..., None])[..., 0])
 
 
 @dataclass(frozen=True)
@@ -298,16 +301,13 @@ def _whole_arm_result(
 ) -> WholeArmEvaluation:
     """The evaluation from a grasp's exposure; ``assessed``: its ``assess_sites`` when already
     computed (with the grasp's fellows in a batch)."""
+    speeds, masses = exposure.speed_m_s, exposure.effective_mass_kg
     if assessed is None:
-        assessed = assess_sites(
-            exposure.speed_m_s, exposure.effective_mass_kg, duration_s, regions
-        )
+        assessed = assess_sites(speeds, masses, duration_s, regions)
     permitted = [a for a in assessed if a.transient_contact_permitted]
     limiting = max(permitted, key=lambda a: a.worst_force_ratio) if permitted else None
     feasible = evaluation.feasible
-    energy = np.where(
-        exposure.stationary, 0.0, 0.5 * exposure.effective_mass_kg * exposure.speed_m_s**2
-    )
+    energy = np.where(exposure.stationary, 0.0, 0.5 * masses * speeds**2)
     return WholeArmEvaluation(
         index=evaluation.index,
         name=evaluation.name,
@@ -339,7 +339,6 @@ def evaluate_whole_arm(
     regions: Sequence[str | BodyRegion] | None = None,
     model: pin.Model | None = None,
     joint_positions: np.ndarray | None = None,
-    terms: SampleTerms | None = None,
 ) -> WholeArmEvaluation:
     """Effective mass, speed, energy and ISO/TS 15066 ratios at every site, per sample.
 
@@ -347,9 +346,8 @@ def evaluate_whole_arm(
     same samples and tip poses (e.g. RedundancyResolution.joint_positions). ``grasp`` and
     ``trajectory`` must be the ones the evaluation was computed with; ``model``: their
     ``augmented_model`` when already built (its ``armature`` is used, as everywhere M
-    appears); ``regions``: None for all; ``terms``: the grasp's ``method.terms.SampleTerms``
-    at those joint positions (then the compiled path, ``evaluate_whole_arm_on_terms`` of this
-    grasp alone; None: Pinocchio per sample, the reference, equal to rounding).
+    appears); ``regions``: None for all. Pinocchio per sample: the reference of the compiled
+    path, ``evaluate_whole_arm_on_terms`` (equal to rounding, test_terms).
     """
     selected = select_regions(None if regions is None else list(regions))
     count_sites = len(sites)
@@ -369,19 +367,6 @@ def evaluate_whole_arm(
     )
     if positions.shape != (len(times), robot.num_joints):
         raise InvalidInputError("evaluation.joint_positions", "must have one row per sample")
-    if terms is not None:
-        batch = SampleTerms(*(array[None] for array in terms))
-        return evaluate_whole_arm_on_terms(
-            robot,
-            [evaluation],
-            [trajectory],
-            [grasp],
-            sites,
-            selected,
-            batch,
-            np.array([len(times)]),
-            [positions],
-        )[0]
     if model is None:
         model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
     q_all = np.array([robot.q_from_positions(p) for p in positions]).reshape(len(times), -1)
@@ -435,7 +420,7 @@ def evaluate_whole_arm_on_terms(
     compiled call over (grasp, sample, site) (``method.points.site_masses``), ISO/TS 15066 in
     one array pass per region.
     Equal to the Pinocchio path to rounding; each grasp's result is the one it gets alone."""
-    grasp_count, samples = len(evaluations), terms.tip_jacobians.shape[1]
+    grasp_count, samples = len(evaluations), terms.jacobians_tip_in_world.shape[1]
     paths = (
         [e.joint_positions for e in evaluations] if joint_positions is None else joint_positions
     )
@@ -457,7 +442,7 @@ def evaluate_whole_arm_on_terms(
     for group in by_times.values():
         times, count = np.asarray(evaluations[group[0]].times_s, dtype=float), counts[group[0]]
         spline_rates[group, :count] = _spline_rates(robot, times, [paths[g] for g in group])
-    rates = tip_following_rates(terms.tip_jacobians, counts, twists, spline_rates)
+    rates = tip_following_rates(terms.jacobians_tip_in_world, counts, twists, spline_rates)
     site_joints = sites.joint_ids - 1
     positions, velocities, speeds, masses = site_masses(
         terms,
@@ -472,13 +457,13 @@ def evaluate_whole_arm_on_terms(
     stationary = (speeds < STATIONARY_SPEED_M_S) & valid[..., None]
     directions = velocities / np.where(stationary | ~valid[..., None], 1.0, speeds)[..., None]
     if stationary.any():  # the rest ends: A from the terms on arrays, then its eigenvectors
-        grasp, sample, site = np.nonzero(stationary)
-        motions = terms.joint_motions[grasp, sample]  # (S, n, 6)
+        at_grasp, at_sample, at_site = np.nonzero(stationary)
+        motions = terms.motions_joint_in_world[at_grasp, at_sample]  # (S, n, 6)
         columns = motions[..., :3] + np.cross(
-            motions[..., 3:], positions[grasp, sample, site, None]
+            motions[..., 3:], positions[at_grasp, at_sample, at_site, None]
         )
-        jacobian = np.swapaxes(columns * sites.support[site, :, None], 1, 2)  # (S, 3, n)
-        minv = terms.mass_matrix_inverses[grasp, sample]
+        jacobian = np.swapaxes(columns * sites.support[at_site, :, None], 1, 2)  # (S, 3, n)
+        minv = terms.mass_matrix_inverses[at_grasp, at_sample]
         mobilities = jacobian @ minv @ np.swapaxes(jacobian, -1, -2)
         directions[stationary], masses[stationary] = _largest_mass_directions(mobilities)
     speeds[stationary] = 0.0
@@ -574,10 +559,11 @@ class WholeArmPostureCriterion:
         """The force [N] of each feasible evaluation of ``grasp``: on their terms, in one
         kernel call, with a compiled evaluator; else by Pinocchio (one augmented model)."""
         robot, count, region = evaluator.robot, len(evaluations), [self.region]
-        if evaluator.ik.compiled and evaluations:
+        backend = Backend.of(evaluator.ik)
+        if backend.compiled and evaluations:
             paths = [evaluation.joint_positions for evaluation in evaluations]
             transforms = [grasp.transform_tip_to_object] * count
-            terms = grasps_terms(robot, evaluator.ik.chain, object_inertia, transforms, paths)
+            terms = backend.grasps_terms(robot, object_inertia, transforms, paths)
             assessed = evaluate_whole_arm_on_terms(
                 robot,
                 evaluations,

@@ -145,9 +145,10 @@ def _share_the_cache() -> bool:
     caching_impl = getattr(_numba_caching, "CacheImpl", None) or getattr(
         _numba_caching, "_CacheImpl", None
     )  # CacheImpl since numba 0.62
-    folder = cache_folder()
-    if caching_impl is None or folder is None:
+    found = cache_folder()
+    if caching_impl is None or found is None:
         return False
+    folder: Path = found  # narrowed for the locator's closure
 
     class KernelCacheLocator(
         _numba_caching._SourceFileBackedLocatorMixin, _numba_caching._CacheLocator

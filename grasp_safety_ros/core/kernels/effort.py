@@ -374,9 +374,15 @@ def joint_dynamics(
                 world[1, a] = b0 * tip_twist[3] + b1 * tip_twist[4] + b2 * tip_twist[5]
                 world[1, 3 + a] = b0 * e0 + b1 * e1 + b2 * e2
             if use_terms:
-                motions, jacobian = terms.joint_motions[g, i], terms.tip_jacobians[g, i]
-                rotations, origins = terms.joint_rotations[g, i], terms.joint_origins[g, i]
-                tip = terms.tip_translations[g, i]
+                motions, jacobian = (
+                    terms.motions_joint_in_world[g, i],
+                    terms.jacobians_tip_in_world[g, i],
+                )
+                rotations, origins = (
+                    terms.rotations_joint_to_world[g, i],
+                    terms.translations_joint_in_world[g, i],
+                )
+                tip = terms.translations_tip_in_world[g, i]
             else:
                 _forward_kinematics(chain, q_all[g, i], kinematics)
                 rotations, origins, tip = kinematics[0], kinematics[1], kinematics[3]

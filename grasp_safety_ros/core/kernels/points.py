@@ -151,7 +151,7 @@ def site_masses(
     effective mass along the velocity, 1 / (u^T J_p M^-1 J_p^T u) [kg] (else left as it is).
 
     J_p's column c is v_c + w_c x p for the supporting joints (S_c = (v_c, w_c) at the world
-    origin: SampleTerms.joint_motions), 0 for the others.
+    origin: SampleTerms.motions_joint_in_world), 0 for the others.
     jacobian (3, n), weights (n,): scratch."""
     n = minv.shape[2]
     for g in range(joint_motions.shape[0]):

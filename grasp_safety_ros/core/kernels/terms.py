@@ -43,14 +43,17 @@ def sample_terms(chain, bodies, q_all, counts, out, lower_inverse, ws):
     for g in range(q_all.shape[0]):
         for i in range(counts[g]):
             _forward_kinematics(chain, q_all[g, i], ws)
-            _mobility_from_frames(chain, bodies, g, ws, out.tip_mobilities[g, i])
-            joint_rotations, joint_origins = out.joint_rotations[g, i], out.joint_origins[g, i]
-            joint_axes, jacobian = out.joint_axes[g, i], out.tip_jacobians[g, i]
-            motions = out.joint_motions[g, i]
+            _mobility_from_frames(chain, bodies, g, ws, out.mobilities_tip_in_base[g, i])
+            joint_rotations, joint_origins = (
+                out.rotations_joint_to_world[g, i],
+                out.translations_joint_in_world[g, i],
+            )
+            joint_axes, jacobian = out.axes_joint_in_world[g, i], out.jacobians_tip_in_world[g, i]
+            motions = out.motions_joint_in_world[g, i]
             for a in range(3):
-                out.tip_translations[g, i, a] = ft[a]
+                out.translations_tip_in_world[g, i, a] = ft[a]
                 for b in range(3):
-                    out.tip_rotations[g, i, a, b] = fr[a, b]
+                    out.rotations_tip_to_world[g, i, a, b] = fr[a, b]
             _motions_and_jacobian(axes, prismatic, jr, jp, ft, joint_axes, motions, jacobian)
             for k in range(n):
                 for a in range(3):

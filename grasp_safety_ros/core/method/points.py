@@ -47,7 +47,7 @@ def tip_point_masses(
     """
     from ..kernels.points import tip_point_masses as kernel
 
-    grasps, samples = terms.tip_jacobians.shape[:2]
+    grasps, samples = terms.jacobians_tip_in_world.shape[:2]
     motion_of = np.ascontiguousarray(motion_of, dtype=np.int64)
     still = np.ascontiguousarray(stationary, dtype=bool)
     mask = still[motion_of, :samples] & valid_rows(counts, samples)[..., None]
@@ -56,8 +56,8 @@ def tip_point_masses(
     n = terms.mass_matrix_inverses.shape[-1]
     call_kernel(
         kernel,
-        plain_array(terms.tip_jacobians),
-        plain_array(terms.tip_rotations),
+        plain_array(terms.jacobians_tip_in_world),
+        plain_array(terms.rotations_tip_to_world),
         plain_array(terms.mass_matrix_inverses),
         np.ascontiguousarray(counts, dtype=np.int64),
         plain_array(base_rotation),
@@ -99,7 +99,7 @@ def site_masses(
     """
     from ..kernels.points import site_masses as kernel
 
-    grasps, samples = terms.tip_jacobians.shape[:2]
+    grasps, samples = terms.jacobians_tip_in_world.shape[:2]
     count, n = len(site_joints), terms.mass_matrix_inverses.shape[-1]
     positions = np.empty((grasps, samples, count, 3))
     velocities = np.empty((grasps, samples, count, 3))
@@ -107,9 +107,9 @@ def site_masses(
     masses = np.empty((grasps, samples, count))
     call_kernel(
         kernel,
-        plain_array(terms.joint_rotations),
-        plain_array(terms.joint_origins),
-        plain_array(terms.joint_motions),
+        plain_array(terms.rotations_joint_to_world),
+        plain_array(terms.translations_joint_in_world),
+        plain_array(terms.motions_joint_in_world),
         plain_array(terms.mass_matrix_inverses),
         np.ascontiguousarray(counts, dtype=np.int64),
         np.ascontiguousarray(site_joints, dtype=np.int64),
@@ -148,7 +148,7 @@ def tip_following_rates(
     pseudo-inverse (``PSEUDO_INVERSE_RCOND``) elsewhere.
 
     Args:
-        tip_jacobians: (G, N, 6, n) SampleTerms.tip_jacobians (world axes at the tip).
+        tip_jacobians: (G, N, 6, n) SampleTerms.jacobians_tip_in_world (world axes at the tip).
         counts: (G,) samples per grasp.
         twists_in_world: (G, N, 6) tip twists ξ (linear [m/s], angular [rad/s]), world axes.
         spline_rates: (G, N, n) q̇_s, the self-motion's rates.

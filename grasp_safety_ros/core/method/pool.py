@@ -3,7 +3,7 @@
 Threads when the compiled kernels are in use (they run without the GIL), else processes; the
 results come back in input order and each grasp is computed by the same code as in the serial
 path, so they equal the serial ones bit for bit. The pool knows the evaluator only by its
-type PooledEvaluator (``config``, ``robot``, ``ik.compiled``: what GraspSafetyEvaluator has,
+type PooledEvaluator (``config``, ``robot``, ``backend``: what GraspSafetyEvaluator has,
 which imports this module; a process worker rebuilds it as ``type(evaluator)(robot, config)``)
 and runs the callable it is given on each job.
 """
@@ -24,6 +24,7 @@ from itertools import islice
 from typing import Any, ClassVar, Protocol, TypeVar
 
 from ..model.robot import RobotModel
+from .backend import Backend
 
 Job = tuple[Any, ...]
 """Arguments of one call of the ``evaluate`` callable given to ``evaluate_jobs``."""
@@ -44,13 +45,6 @@ class PoolConfig(Protocol):
     def parallel_min_samples(self) -> int: ...
 
 
-class CompiledFlag(Protocol):
-    """Whether an evaluator's IK runs the compiled kernels (ik.IKSolver)."""
-
-    @property
-    def compiled(self) -> bool: ...
-
-
 class PooledEvaluator(Protocol):
     """What the pool needs of an evaluator (ranking.GraspSafetyEvaluator)."""
 
@@ -61,7 +55,7 @@ class PooledEvaluator(Protocol):
     def robot(self) -> RobotModel: ...
 
     @property
-    def ik(self) -> CompiledFlag: ...
+    def backend(self) -> Backend: ...
 
 
 def default_workers() -> int:
@@ -89,7 +83,7 @@ def executor_for(evaluator: PooledEvaluator, total_samples: int) -> Executor | N
         return None
     pool: Executor | None = getattr(evaluator, "_grasp_pool", None)
     if pool is None:
-        if evaluator.ik.compiled:
+        if evaluator.backend.compiled:
             pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="grasp_safety")
         else:
             pool = ProcessPoolExecutor(

@@ -11,6 +11,7 @@ from ..exceptions import InvalidInputError
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
 from ..model.trajectory import ObjectMotion, ObjectPath, TipMotion, Trajectory
+from .backend import Backend
 from .batch import evaluate_grasps_compiled, follow_postures_compiled
 from .effective_mass import (
     STATIONARY_TANGENT_M,
@@ -118,6 +119,8 @@ class GraspSafetyEvaluator:
         self.robot = robot
         self.config = config or EvaluationConfig()
         self.ik = IKSolver(robot, self.config.ik, self.config.backend)
+        self.backend = Backend.of(self.ik)
+        """Compiled or Pinocchio, decided once: the ranking's and every analysis's."""
 
     def seed(
         self, seed_positions: Sequence[float] | np.ndarray | None
@@ -187,7 +190,7 @@ class GraspSafetyEvaluator:
         fused_rows = [
             k
             for k, grasp in enumerate(grasps)
-            if self.ik.compiled and motion is not None and grasp.joint_trajectory is None
+            if self.backend.compiled and motion is not None and grasp.joint_trajectory is None
         ]
         evaluations: dict[int, GraspEvaluation] = {}
         if fused_rows and motion is not None:
@@ -240,7 +243,7 @@ class GraspSafetyEvaluator:
         (Python backend, a trajectory without an ObjectMotion) no row is stopped.
         """
         motion = sampled_trajectory.object_motion
-        if not self.ik.compiled or motion is None:
+        if not self.backend.compiled or motion is None:
             return list(
                 self.evaluate_batch(
                     indices, grasps, object_inertia, sampled_trajectory, metric, seeds_q
@@ -342,7 +345,7 @@ class GraspSafetyEvaluator:
             tip = object_motion.tip_motion(grasp.transform_tip_to_object)
         else:
             tip = trajectory.tip_motion(grasp.transform_tip_to_object, times)
-            if self.ik.compiled:  # the tip's own motion, composed with the identity
+            if self.backend.compiled:  # the tip's own motion, composed with the identity
                 motion = _tip_as_object_motion(tip)
                 (result,) = evaluate_grasps_compiled(
                     self.ik,
@@ -437,11 +440,9 @@ class GraspSafetyEvaluator:
         """Effective masses [kg] of the chain without its armature, along ``directions`` (at
         the ``worst`` samples, along its own worst direction), as a run without armature."""
         links = self.robot.links_only()
-        chain = self.ik.chain
-        if self.ik.compiled and chain is not None:
+        chain = self.backend.chain
+        if chain is not None:
             chain = chain._replace(armature=np.zeros(links.num_joints))
-        else:
-            chain = None
         mobilities = translational_mobilities_in_base(
             links, object_inertia, grasp.transform_tip_to_object, q_all, chain
         )

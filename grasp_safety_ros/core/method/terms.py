@@ -37,14 +37,14 @@ class SampleTerms(NamedTuple):
     a revolute joint and 0 for a prismatic one, slide = 1 - |w|).
     """
 
-    joint_rotations: np.ndarray  # (G, N, n, 3, 3) joint frames
-    joint_origins: np.ndarray  # (G, N, n, 3) [m]
-    joint_axes: np.ndarray  # (G, N, n, 3) unit joint axes
-    joint_motions: np.ndarray  # (G, N, n, 6) motion subspaces at the world origin [m; 1]
-    tip_rotations: np.ndarray  # (G, N, 3, 3) tip frame
-    tip_translations: np.ndarray  # (G, N, 3) [m]
-    tip_jacobians: np.ndarray  # (G, N, 6, n) [m/rad or 1; rad/rad or rad/m]
-    tip_mobilities: np.ndarray  # (G, N, 3, 3) [1/kg] J_v M^-1 J_v^T, base axes
+    rotations_joint_to_world: np.ndarray  # (G, N, n, 3, 3) joint frames
+    translations_joint_in_world: np.ndarray  # (G, N, n, 3) [m]
+    axes_joint_in_world: np.ndarray  # (G, N, n, 3) unit joint axes
+    motions_joint_in_world: np.ndarray  # (G, N, n, 6) motion subspaces at the world origin [m; 1]
+    rotations_tip_to_world: np.ndarray  # (G, N, 3, 3) tip frame
+    translations_tip_in_world: np.ndarray  # (G, N, 3) [m]
+    jacobians_tip_in_world: np.ndarray  # (G, N, 6, n) [m/rad or 1; rad/rad or rad/m]
+    mobilities_tip_in_base: np.ndarray  # (G, N, 3, 3) [1/kg] J_v M^-1 J_v^T, base axes
     mass_matrix_inverses: np.ndarray  # (G, N, n, n) M^-1 of the augmented chain [1/kg, ...]
 
     def of_grasp(self, g: int, count: int | None = None) -> SampleTerms:
@@ -146,7 +146,7 @@ def batch_terms(
 
     q_all = plain_array(q_all)
     n = chain.axes.shape[0]
-    if out is None or out.tip_jacobians.shape[:2] != q_all.shape[:2]:
+    if out is None or out.jacobians_tip_in_world.shape[:2] != q_all.shape[:2]:
         out = sample_terms_buffers(q_all.shape[0], q_all.shape[1], n)
     if q_all.shape[0]:
         lower_inverse = np.empty((n, n))
@@ -165,7 +165,7 @@ def point_jacobians(terms: SampleTerms, joint: int, points_in_world_m: np.ndarra
     world origin); the columns of the joints after ``joint`` are zero. For the whole-arm
     analysis: a link site's Jacobian, then J M⁻¹ Jᵀ with ``mass_matrix_inverses``.
     """
-    motions = terms.joint_motions[..., None, :, :]  # (..., 1, n, 6)
+    motions = terms.motions_joint_in_world[..., None, :, :]  # (..., 1, n, 6)
     points = np.asarray(points_in_world_m, dtype=float)[..., :, None, :]  # (..., K, 1, 3)
     linear, angular = motions[..., :3], motions[..., 3:]
     columns = np.empty(np.broadcast_shapes(linear.shape, points.shape))  # (..., K, n, 3)

@@ -93,7 +93,7 @@ def warm_up(evaluator: GraspSafetyEvaluator | None = None) -> float:
         n = robot.model.nv
         support, rates = np.ones((1, n), dtype=bool), np.zeros((1, 1, n))
         site_masses(terms, counts, np.zeros(1, np.int64), np.zeros((1, 3)), support, rates, 1e-9)
-        tip_following_rates(terms.tip_jacobians, counts, np.zeros((1, 1, 6)), rates)
+        tip_following_rates(terms.jacobians_tip_in_world, counts, np.zeros((1, 1, 6)), rates)
         perturbed_effective_masses(  # the inertia-uncertainty kernel
             robot,
             chain,

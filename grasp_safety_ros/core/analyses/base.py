@@ -1,0 +1,221 @@
+"""The analyses of ``safety_report.analyse``: one protocol, and the values they share.
+
+An ``Analysis`` has a ``name``, says whether the options want it (``wanted``) and how many
+units of progress it reports (``units``), and ``run``s on the request's ``Shared`` values (the
+grasps, their evaluations and motions, the backend, the per-sample terms chunk by chunk, the
+augmented models) and the ``Parts`` earlier analyses set, returning the parts with its own
+set. ``analyse`` loops over the registered tuple (``registry.ANALYSES``) in order, as mink's
+``solve_ik`` loops over its tasks; it never learns an analysis's name.
+
+An analysis per grasp combines its chunks with ``per_grasp``: its chunk call on each chunk of
+feasible grasps (compiled backend: on the chunk's shared terms), its grasp call on every
+other grasp (infeasible, or the Pinocchio backend), one result per grasp in candidate order.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Protocol, TypeVar
+
+import numpy as np
+import pinocchio as pin
+
+from ..method.backend import Backend
+from ..method.effective_mass import augmented_model
+from ..method.ranking import Grasp, GraspEvaluation, GraspSafetyEvaluator
+from ..method.terms import SampleTerms
+from ..model.inertia import ObjectInertia
+from ..model.robot import RobotModel
+from ..model.trajectory import Trajectory
+from .analysis_options import AnalysisOptions
+from .effort import EffortEvaluation
+from .exposed_points import ExposedPointsEvaluation
+from .iso15066 import PowerForceLimitAssessment
+from .redundancy import RedundancyResolution
+from .uncertainty import UncertaintyAnalysis
+from .whole_arm import ArmSites, WholeArmEvaluation
+
+TERMS_CHUNK_SAMPLES = 25_000
+"""The shared terms are computed for consecutive chunks of feasible grasps of at most this
+many samples in all (about 50 MB for a 7-joint arm), so that a request's progress is reported
+(and it can be abandoned) chunk by chunk."""
+
+TERMS_CACHE_SAMPLES = 250_000
+"""Chunks of terms are kept for the next analysis while those kept hold at most this many
+samples (about 500 MB for a 7-joint arm); beyond it the oldest is dropped (then computed
+again if an analysis needs it)."""
+
+Result = TypeVar("Result")
+
+
+@dataclass(frozen=True)
+class Parts:
+    """The analyses' results so far, per grasp in candidate order (``SafetyReport``'s fields
+    of the same names; each analysis sets its own).
+
+    Attributes:
+        scores: Safety score per grasp (the metric point's, with redundancy when on); NaN
+            for infeasible grasps.
+        series: Per feasible grasp, the metric point's (speeds [m/s], effective masses [kg])
+            per sample, which the scores aggregate and ISO/TS 15066 assesses.
+        safety_order: Feasible grasps by ``scores``, safest first.
+    """
+
+    exposed: tuple[ExposedPointsEvaluation, ...] = ()
+    redundancy: tuple[RedundancyResolution, ...] = ()
+    scores: np.ndarray = field(default_factory=lambda: np.empty(0))
+    series: Mapping[int, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    safety_order: tuple[int, ...] = ()
+    iso: tuple[PowerForceLimitAssessment, ...] = ()
+    uncertainty: UncertaintyAnalysis | None = None
+    effort: tuple[EffortEvaluation, ...] = ()
+    whole_arm: tuple[WholeArmEvaluation, ...] = ()
+    arm_sites: ArmSites | None = None
+
+    def resolved_paths(self) -> list[np.ndarray | None] | None:
+        """Per grasp, the redundancy resolution's joint path where it applied (else None);
+        None when redundancy did not run (every analysis then reads the evaluated paths)."""
+        if not self.redundancy:
+            return None
+        return [r.joint_positions if r.applied else None for r in self.redundancy]
+
+
+class Analysis(Protocol):
+    """One analysis of ``analyse``: adding one is its module in core/analyses, a class like
+    those of ``registry`` and its place in ``registry.ANALYSES`` (docs/development.md,
+    "Adding an analysis")."""
+
+    @property
+    def name(self) -> str:
+        """What it computes (the ``Parts`` field it sets)."""
+        ...
+
+    @property
+    def keeps_terms(self) -> bool:
+        """Whether it reads the shared terms of chunks an earlier analysis read (they are
+        then kept, within TERMS_CACHE_SAMPLES, instead of overwritten chunk by chunk)."""
+        ...
+
+    def wanted(self, options: AnalysisOptions) -> bool:
+        """Whether ``options`` ask for it."""
+        ...
+
+    def units(self, grasps: int) -> int:
+        """The units of progress it reports (``Shared.step``) for ``grasps`` candidates."""
+        ...
+
+    def run(self, shared: Shared, parts: Parts) -> Parts:
+        """``parts`` with its own result set."""
+        ...
+
+
+class Shared:
+    """What every analysis of one request shares (computed once, on first use).
+
+    Attributes:
+        evaluator, robot, grasps, object_inertia, options: The request's.
+        evaluations: The ranking's evaluations (one per grasp, candidate order).
+        metric: The ranking's score aggregate.
+        motions: Each grasp's motion (``GraspSafetyEvaluator.trajectory_for``).
+        backend: Compiled or Pinocchio, the evaluator's.
+        chunks: The feasible grasps in consecutive chunks of at most TERMS_CHUNK_SAMPLES
+            samples (compiled backend; none on the Pinocchio one).
+    """
+
+    def __init__(
+        self,
+        evaluator: GraspSafetyEvaluator,
+        grasps: Sequence[Grasp],
+        object_inertia: ObjectInertia,
+        motions: Sequence[Trajectory],
+        options: AnalysisOptions,
+        evaluations: Sequence[GraspEvaluation],
+        metric: str,
+        keep_terms: bool,
+        step: Callable[[], None],
+    ) -> None:
+        self.evaluator = evaluator
+        self.robot: RobotModel = evaluator.robot
+        self.grasps, self.object_inertia, self.options = grasps, object_inertia, options
+        self.evaluations, self.metric, self.motions = evaluations, metric, motions
+        self.backend: Backend = evaluator.backend
+        self.step = step
+        feasible = [k for k, e in enumerate(evaluations) if e.feasible]
+        samples = [len(evaluations[k].times_s) for k in feasible]
+        self.chunks = chunks(feasible, samples) if self.backend.compiled else []
+        self._keep = keep_terms
+        self._cached: dict[int, tuple[SampleTerms, np.ndarray]] = {}
+        self._models: dict[int, pin.Model] = {}
+
+    def terms(self, c: int) -> tuple[SampleTerms, np.ndarray]:
+        """The terms of the grasps of ``chunks[c]`` (axis 0 in its order) and their counts,
+        kept while the kept chunks stay within TERMS_CACHE_SAMPLES samples when a later
+        analysis reads them again (``keep_terms``; else the last chunk's buffers are reused)."""
+        cached, evaluations, chunk = self._cached, self.evaluations, self.chunks[c]
+        if c not in cached:
+            recycled = None
+            while cached and (
+                not self._keep
+                or sum(int(n.sum()) for _, n in cached.values())
+                + sum(len(evaluations[k].times_s) for k in chunk)
+                > TERMS_CACHE_SAMPLES
+            ):
+                recycled = cached.pop(next(iter(cached)))[0]  # the oldest
+            cached[c] = self.path_terms(
+                chunk,
+                [evaluations[k].joint_positions for k in chunk],
+                None if self._keep else recycled,
+            )
+        return cached[c]
+
+    def path_terms(
+        self, indices: Sequence[int], paths: Sequence[np.ndarray], out: SampleTerms | None = None
+    ) -> tuple[SampleTerms, np.ndarray]:
+        """The terms of grasps ``indices`` along joint ``paths`` ((N, n) each), uncached
+        (compiled backend)."""
+        transforms = [self.grasps[k].transform_tip_to_object for k in indices]
+        return self.backend.grasps_terms(self.robot, self.object_inertia, transforms, paths, out)
+
+    def model_of(self, k: int) -> pin.Model | None:
+        """Grasp k's ``augmented_model`` (built once), None when infeasible."""
+        if not self.evaluations[k].feasible:
+            return None
+        if k not in self._models:
+            transform = self.grasps[k].transform_tip_to_object
+            self._models[k] = augmented_model(self.robot, self.object_inertia, transform)
+        return self._models[k]
+
+
+def per_grasp(
+    shared: Shared,
+    on_chunk: Callable[[int, Sequence[int]], Sequence[tuple[int, Result]]],
+    on_grasp: Callable[[int], Result],
+) -> tuple[Result, ...]:
+    """One result per grasp in candidate order, ``shared.step()`` after each: ``on_chunk(c,
+    chunk)`` gives (grasp, result) pairs for the grasps of each chunk (compiled backend),
+    ``on_grasp(k)`` the result of every grasp left (infeasible, or the Pinocchio backend)."""
+    results: dict[int, Result] = {}
+    for c, chunk in enumerate(shared.chunks):
+        for k, result in on_chunk(c, chunk):
+            results[k] = result
+            shared.step()
+    for k in range(len(shared.grasps)):
+        if k not in results:
+            results[k] = on_grasp(k)
+            shared.step()
+    return tuple(results[k] for k in range(len(shared.grasps)))
+
+
+def chunks(grasps: Sequence[int], samples: Sequence[int]) -> list[list[int]]:
+    """``grasps`` in consecutive chunks of at most TERMS_CHUNK_SAMPLES samples (``samples``
+    per grasp; a longer grasp alone)."""
+    out: list[list[int]] = []
+    total = 0
+    for k, count in zip(grasps, samples, strict=True):
+        if not out or total + count > TERMS_CHUNK_SAMPLES:
+            out.append([])
+            total = 0
+        out[-1].append(k)
+        total += count
+    return out
