@@ -6,11 +6,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from fast_paths import needs_numba
 from scipy.interpolate import CubicSpline
 
 from grasp_safety_ros.core.exceptions import InvalidInputError
 from grasp_safety_ros.core.method.executable import (
     ROW_SOLVE_COLUMNS,
+    clamped_spline_velocities,
     joint_velocities_accelerations,
     rates_for_execution_many,
 )
@@ -49,6 +51,24 @@ def test_rates_equal_scipys_clamped_spline_bit_for_bit(columns: int) -> None:
         assert same_bits(velocities, expected_velocities)
         assert same_bits(accelerations, expected_accelerations)
     assert interchanged > 10  # the pivoting branch ran
+
+
+@needs_numba
+@pytest.mark.parametrize("columns", [0, 1, 7, 70])
+def test_compiled_velocities_equal_scipys_bit_for_bit(columns: int) -> None:
+    """The whole arm's kernel (no fused multiply-adds) rounds as scipy: same bits, the
+    pivoting branch and two samples included."""
+    rng = np.random.default_rng(100 + columns)
+    interchanged = two_samples = 0
+    for _ in range(150):
+        times, positions = random_case(rng, columns)
+        interchanged += bool(np.any(np.diff(times)[1:] > 1.0))
+        two_samples += len(times) == 2
+        velocities = clamped_spline_velocities(times, positions)
+        assert same_bits(velocities, scipy_rates(times, positions)[0])
+    assert interchanged > 10 and two_samples
+    one = clamped_spline_velocities(np.array([0.5]), np.ones((1, 3)))
+    assert one.shape == (1, 3) and not np.any(one)
 
 
 def test_batched_rates_equal_one_at_a_time_and_keep_planned_rates() -> None:

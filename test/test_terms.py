@@ -16,11 +16,12 @@ from tolerances import (
 )
 
 from grasp_safety_ros.core import RobotModel
+from grasp_safety_ros.core.method.backend import Backend
 from grasp_safety_ros.core.method.effective_mass import (
     augmented_model,
     translational_mobility_in_base,
 )
-from grasp_safety_ros.core.method.terms import SampleTerms
+from grasp_safety_ros.core.method.terms import SampleTerms, grasps_terms
 
 
 @needs_numba
@@ -219,3 +220,35 @@ def test_whole_arm_from_shared_terms_equals_pinocchio(
         )
         assert a.peak_contact_force_n == pytest.approx(b.peak_contact_force_n, rel=dynamic)
         assert a.worst_force_ratio == pytest.approx(b.worst_force_ratio, rel=dynamic)
+
+
+@needs_numba
+def test_terms_memory_is_reused_only_once_nothing_refers_to_it(arm7: RobotModel) -> None:
+    """Released terms' memory comes back (no fresh pages) with the same numbers as new
+    memory; terms still referenced, even by a slice, are never overwritten."""
+    grasp, evaluation, _, _ = terms_case(arm7, 5)
+    chain = Backend.for_robot(arm7).chain
+    assert chain is not None
+
+    def compute() -> SampleTerms:
+        return grasps_terms(
+            arm7, chain, BOX, [grasp.transform_tip_to_object], [evaluation.joint_positions]
+        )[0]
+
+    def address(terms: SampleTerms) -> int:
+        return int(terms.rotations_joint_to_world.__array_interface__["data"][0])
+
+    first = compute()
+    expected = [array.copy() for array in first]
+    kept_slice, released = first.of_grasp(0, 3), [address(first)]
+    del first
+    second = compute()  # the first's block is still referred to by kept_slice
+    assert not np.shares_memory(second.mass_matrix_inverses, kept_slice.mass_matrix_inverses)
+    for array, fresh in zip(kept_slice, expected, strict=True):
+        assert np.array_equal(array, fresh[0, :3])
+    released.append(address(second))
+    del second, kept_slice
+    third = compute()  # one of the two blocks, now unreferenced, comes back
+    assert address(third) in released
+    for array, fresh in zip(third, expected, strict=True):
+        assert np.array_equal(array, fresh)

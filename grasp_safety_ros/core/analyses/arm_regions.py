@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .iso15066 import ADMISSIBLE_RATIO_TOLERANCE, BodyRegion, transient_contact_force_n
+from .iso15066 import ADMISSIBLE_RATIO_TOLERANCE, BodyRegion
 
 
 @dataclass(frozen=True)
@@ -63,20 +63,28 @@ def assess_sites_batch(
     grasps, _, count_sites = speed_m_s.shape
     speeds = speed_m_s.reshape(grasps, -1)
     masses = effective_mass_kg.reshape(grasps, -1)
-    moving = speeds > 0.0
+    still = ~(speeds > 0.0)
+    rows = np.arange(grasps)
+    with np.errstate(divide="ignore"):
+        inverse_masses = 1.0 / masses
+    force = np.empty_like(speeds)  # one buffer for every region (no temporaries per region)
     columns = []
     for region in regions:
+        # transient_contact_force_n's operations in place: F = v sqrt(k / (1/m_h + 1/m_r))
         with np.errstate(divide="ignore", invalid="ignore"):  # m_h = m_r = inf: μ = inf
-            force = transient_contact_force_n(speeds, masses, region)
-        force = np.where(moving, force, 0.0)  # a site at rest: no force (not 0·inf)
-        if region.max_transient_force_n is None:
-            ratio = np.where(moving, np.inf, 0.0)
-        else:
-            ratio = force / region.max_transient_force_n
-        if ratio.shape[1]:  # at the peak force: F/F_tr's maximum, or inf wherever moving
+            np.add(1.0 / region.effective_mass_kg, inverse_masses, out=force)
+            np.divide(1.0, force, out=force)
+            np.multiply(force, region.spring_constant_n_per_m, out=force)
+            np.sqrt(force, out=force)
+            np.multiply(speeds, force, out=force)
+        np.copyto(force, 0.0, where=still)  # a site at rest: no force (not 0·inf)
+        if force.shape[1]:  # at the peak force: F/F_tr's maximum, or inf wherever moving
             where = np.argmax(force, axis=1)
-            rows = np.arange(grasps)
-            worst, peak = ratio[rows, where], force[rows, where]
+            peak = force[rows, where]
+            if region.max_transient_force_n is None:
+                worst = np.where(still[rows, where], 0.0, np.inf)
+            else:
+                worst = peak / region.max_transient_force_n
         else:
             where, worst, peak = np.zeros(grasps, dtype=int), np.zeros(grasps), np.zeros(grasps)
         columns.append((where.tolist(), worst.tolist(), peak.tolist()))

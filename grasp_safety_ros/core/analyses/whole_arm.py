@@ -41,7 +41,7 @@ from ..exceptions import InvalidInputError
 from ..input_checks import read_only
 from ..method.backend import Backend
 from ..method.effective_mass import augmented_model
-from ..method.executable import joint_velocities_accelerations
+from ..method.executable import clamped_spline_velocities, joint_velocities_accelerations
 from ..method.points import PSEUDO_INVERSE_RCOND, site_masses, tip_following_rates, valid_rows
 from ..method.ranking import Grasp, GraspEvaluation
 from ..method.terms import SampleTerms
@@ -182,7 +182,7 @@ def tip_twists_in_base(
     """Tip twists (N, 6) (linear [m/s], angular [rad/s]), base axes: from the object motion
     sampled once (ObjectMotion: tangent times speed per tangent; ``object_motion`` when
     already sampled at ``times_s``) for an object path, else the trajectory's ``tip_twists``."""
-    if not isinstance(trajectory, ObjectPath):
+    if object_motion is None and not isinstance(trajectory, ObjectPath):
         return trajectory.tip_twists(transform_tip_to_object, times_s)[0]
     motion = trajectory.object_motion(times_s) if object_motion is None else object_motion
     rate = motion.speed_per_tangent[:, None]
@@ -429,19 +429,24 @@ def evaluate_whole_arm_on_terms(
     spline_rates = np.zeros((grasp_count, samples, robot.num_joints))
     by_times: dict[bytes, list[int]] = {}
     sampled: dict[tuple[int, bytes], ObjectMotion] = {}  # each object path sampled once
+    is_path: dict[int, bool] = {}  # a runtime Protocol's isinstance costs ~10 µs: once each
     for g, (evaluation, trajectory, grasp) in enumerate(
         zip(evaluations, trajectories, grasps, strict=True)
     ):
         times = np.asarray(evaluation.times_s, dtype=float)
         key = (id(trajectory), times.tobytes())
-        if isinstance(trajectory, ObjectPath) and key not in sampled:
+        if key[0] not in is_path:
+            is_path[key[0]] = isinstance(trajectory, ObjectPath)
+        if is_path[key[0]] and key not in sampled:
             sampled[key] = trajectory.object_motion(times)
         motion = sampled.get(key)
         twists[g, : counts[g]] = _tip_twists_in_world(robot, trajectory, grasp, times, motion)
         by_times.setdefault(key[1], []).append(g)
     for group in by_times.values():
         times, count = np.asarray(evaluations[group[0]].times_s, dtype=float), counts[group[0]]
-        spline_rates[group, :count] = _spline_rates(robot, times, [paths[g] for g in group])
+        spline_rates[group, :count] = _spline_rates(
+            robot, times, [paths[g] for g in group], compiled=True
+        )
     rates = tip_following_rates(terms.jacobians_tip_in_world, counts, twists, spline_rates)
     site_joints = sites.joint_ids - 1
     positions, velocities, speeds, masses = site_masses(
@@ -491,11 +496,15 @@ def evaluate_whole_arm_on_terms(
 
 
 def _spline_rates(
-    robot: RobotModel, times: np.ndarray, joint_positions: Sequence[np.ndarray]
+    robot: RobotModel,
+    times: np.ndarray,
+    joint_positions: Sequence[np.ndarray],
+    compiled: bool = False,
 ) -> np.ndarray:
     """q̇_s (G, N, n) of G joint paths (N, n) sampled at the same ``times``: the clamped
     spline's rates through the samples, continuous joints unwrapped, all paths in one spline
-    (its columns are independent: each path's rates are those of a spline through it alone).
+    (its columns are independent: each path's rates are those of a spline through it alone);
+    ``compiled``: by the kernel (``executable.clamped_spline_velocities``, the same bits).
     """
     positions = np.array(joint_positions, dtype=float)  # (G, N, n)
     continuous = ~np.isfinite(robot.lower_limits)
@@ -503,7 +512,10 @@ def _spline_rates(
         positions[..., continuous] = np.unwrap(positions[..., continuous], axis=1)
     grasps, count, n = positions.shape
     columns = np.moveaxis(positions, 0, 1).reshape(count, grasps * n)
-    rates = joint_velocities_accelerations(times, columns)[0]
+    if compiled:
+        rates = clamped_spline_velocities(times, columns)
+    else:
+        rates = joint_velocities_accelerations(times, columns)[0]
     return np.moveaxis(rates.reshape(count, grasps, n), 1, 0)
 
 

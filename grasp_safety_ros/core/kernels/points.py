@@ -5,9 +5,11 @@ joint velocities that make the tip follow its twist (``tip_following_rates``).
 
 A point's translational mobility is A = J_p M^-1 J_p^T [1/kg] and its effective mass along a
 unit direction u is 1 / (u^T A u); a point that does not move has no direction, so its A is
-handed back (``method.points`` takes its smallest eigenvalue, as the Pinocchio path does)."""
+handed back (``method.points`` takes its smallest eigenvalue, as the Pinocchio path does).
+The self-motion's joint rates come from the clamped cubic spline through the samples
+(``clamped_spline_velocities``, ``method.executable``'s numbers bit for bit)."""
 
-from ._jit import _jit, _jit_inline
+from ._jit import _jit, _jit_exact, _jit_inline
 
 
 @_jit_inline
@@ -151,7 +153,8 @@ def site_masses(
     effective mass along the velocity, 1 / (u^T J_p M^-1 J_p^T u) [kg] (else left as it is).
 
     J_p's column c is v_c + w_c x p for the supporting joints (S_c = (v_c, w_c) at the world
-    origin: SampleTerms.motions_joint_in_world), 0 for the others.
+    origin: SampleTerms.motions_joint_in_world), 0 for the others: their terms (exact zeros)
+    are skipped, so a site near the base costs a fraction of one at the tip.
     jacobian (3, n), weights (n,): scratch."""
     n = minv.shape[2]
     for g in range(joint_motions.shape[0]):
@@ -172,17 +175,15 @@ def site_masses(
                 p2 += rotation[2, 2] * point[2]
                 positions[g, i, k, 0], positions[g, i, k, 1], positions[g, i, k, 2] = p0, p1, p2
                 v0 = v1 = v2 = 0.0
-                for c in range(n):
+                for c in range(n):  # J_p's zero columns (and their zero terms) skipped
                     if support[k, c]:
                         s = motions[c]
                         jacobian[0, c] = s[0] + (s[4] * p2 - s[5] * p1)
                         jacobian[1, c] = s[1] + (s[5] * p0 - s[3] * p2)
                         jacobian[2, c] = s[2] + (s[3] * p1 - s[4] * p0)
-                    else:
-                        jacobian[0, c] = jacobian[1, c] = jacobian[2, c] = 0.0
-                    v0 += jacobian[0, c] * rates[c]
-                    v1 += jacobian[1, c] * rates[c]
-                    v2 += jacobian[2, c] * rates[c]
+                        v0 += jacobian[0, c] * rates[c]
+                        v1 += jacobian[1, c] * rates[c]
+                        v2 += jacobian[2, c] * rates[c]
                 velocities[g, i, k, 0], velocities[g, i, k, 1], velocities[g, i, k, 2] = v0, v1, v2
                 speed = (v0 * v0 + v1 * v1 + v2 * v2) ** 0.5
                 speeds[g, i, k] = speed
@@ -190,13 +191,18 @@ def site_masses(
                     continue
                 u0, u1, u2 = v0 / speed, v1 / speed, v2 / speed
                 for c in range(n):
-                    weights[c] = jacobian[0, c] * u0 + jacobian[1, c] * u1 + jacobian[2, c] * u2
+                    if support[k, c]:
+                        weights[c] = (
+                            jacobian[0, c] * u0 + jacobian[1, c] * u1 + jacobian[2, c] * u2
+                        )
                 total = 0.0
                 for a in range(n):
-                    inner = 0.0
-                    for c in range(n):
-                        inner += inverse[a, c] * weights[c]
-                    total += weights[a] * inner
+                    if support[k, a]:
+                        inner = 0.0
+                        for c in range(n):
+                            if support[k, c]:
+                                inner += inverse[a, c] * weights[c]
+                        total += weights[a] * inner
                 masses[g, i, k] = 1.0 / total
 
 
@@ -277,3 +283,56 @@ def tip_following_rates(
                     solution[r] -= dot * transposed[r, j]
             for c in range(n):
                 rates[g, i, c] = base[c] + solution[c]
+
+
+@_jit_exact
+def clamped_spline_velocities(
+    times, positions, interchanged, factors, diagonal, upper, lower, out
+):
+    """``method.executable._clamped_spline_rates``' velocities, operation for operation (no
+    fused multiply-adds: its numbers bit for bit): the knots' first derivatives out (N, m) of
+    the clamped cubic spline through positions (N, m) at times (N,), N >= 2, columns apart.
+
+    interchanged (N-1,), factors (N-1,): each elimination step's row interchange and factor;
+    diagonal, upper, lower (N,): the U factor's diagonals (``_tridiagonal_elimination``)."""
+    count, columns = positions.shape
+    for c in range(columns):
+        out[0, c] = 0.0  # the right-hand side: q̇ = 0 at both ends
+        out[count - 1, c] = 0.0
+        for i in range(1, count - 1):
+            before = (positions[i, c] - positions[i - 1, c]) / (times[i] - times[i - 1])
+            after = (positions[i + 1, c] - positions[i, c]) / (times[i + 1] - times[i])
+            out[i, c] = 3.0 * (
+                (times[i + 1] - times[i]) * before + (times[i] - times[i - 1]) * after
+            )
+        for i in range(count - 1):  # dgtsv's forward elimination
+            if interchanged[i]:
+                swapped = out[i + 1, c]
+                out[i + 1, c] = out[i, c] - factors[i] * swapped
+                out[i, c] = swapped
+            else:
+                out[i + 1, c] = out[i + 1, c] - factors[i] * out[i, c]
+        out[count - 1, c] = out[count - 1, c] / diagonal[count - 1]
+        out[count - 2, c] = (out[count - 2, c] - upper[count - 2] * out[count - 1, c]) / diagonal[
+            count - 2
+        ]
+        for i in range(count - 3, -1, -1):
+            out[i, c] = (
+                out[i, c] - upper[i] * out[i + 1, c] - lower[i] * out[i + 2, c]
+            ) / diagonal[i]
+        # the knots' derivatives of the piecewise polynomial: offset 0 into interval i < N-1,
+        # the last interval's length at the last knot (computed first: it reads out[N-2])
+        i = count - 2
+        dx = times[i + 1] - times[i]
+        slope = (positions[i + 1, c] - positions[i, c]) / dx
+        t = (out[i, c] + out[i + 1, c] - 2.0 * slope) / dx
+        c0, c1, c2 = t / dx, (slope - out[i, c]) / dx - t, out[i, c]
+        z1 = 1.0 * dx
+        last = 0.0 + c2 * 1.0 * 1.0 + c1 * z1 * 2.0 + c0 * (z1 * dx) * 3.0
+        for i in range(count - 1):
+            dx = times[i + 1] - times[i]
+            slope = (positions[i + 1, c] - positions[i, c]) / dx
+            t = (out[i, c] + out[i + 1, c] - 2.0 * slope) / dx
+            c0, c1, c2 = t / dx, (slope - out[i, c]) / dx - t, out[i, c]
+            out[i, c] = 0.0 + c2 * 1.0 * 1.0 + c1 * 0.0 * 2.0 + c0 * (0.0 * 0.0) * 3.0
+        out[count - 1, c] = last

@@ -129,6 +129,42 @@ def _clamped_spline_rates(
     return velocities, accelerations
 
 
+def clamped_spline_velocities(times_s: np.ndarray, joint_positions: np.ndarray) -> np.ndarray:
+    """``joint_velocities_accelerations``' velocities alone, bit for bit, by the compiled
+    kernel ``kernels.points.clamped_spline_velocities`` (numba must be installed): for the
+    whole arm's many columns (a report's grasps x joints), where the elimination row by row
+    in numpy costs more than the rest of the whole arm's q̇.
+
+    Args:
+        times_s: (N,) strictly increasing sample times [s] (not checked).
+        joint_positions: (N, m) positions [rad or m], columns apart (continuous unwrapped).
+    """
+    from ..kernels.points import clamped_spline_velocities as kernel
+    from .compiled import call_kernel, plain_array
+
+    times, positions = plain_array(times_s), plain_array(joint_positions)
+    velocities = np.zeros_like(positions)
+    if len(times) < 2 or not positions.shape[1]:
+        return velocities
+    dx = np.diff(times)
+    lower = [*dx[1:].tolist(), 0.0]
+    diagonal = [1.0, *(2 * (dx[:-1] + dx[1:])).tolist(), 1.0]
+    upper = [0.0, *dx[:-1].tolist()]
+    steps, d, du, dl = _tridiagonal_elimination(lower, diagonal, upper)
+    call_kernel(
+        kernel,
+        times,
+        positions,
+        np.array([interchanged for interchanged, _ in steps], dtype=bool),
+        np.array([fact for _, fact in steps]),
+        np.array(d),
+        np.array(du),
+        np.array(dl),
+        velocities,
+    )
+    return velocities
+
+
 ROW_SOLVE_COLUMNS = 24
 """Above this many joint columns the elimination runs by numpy rows over all columns at once,
 at or below it by Python floats column by column (fewer calls; the same operations)."""

@@ -15,6 +15,9 @@ reference path (``test_performance_paths`` holds both equal).
 
 from __future__ import annotations
 
+import math
+import sys
+import threading
 from collections.abc import Sequence
 from typing import NamedTuple
 
@@ -52,19 +55,55 @@ class SampleTerms(NamedTuple):
         return SampleTerms(*(array[g, :count] for array in self))
 
 
+KEPT_TERMS_BYTES = 64 << 20
+"""Memory of released terms each thread keeps for the next ``sample_terms_buffers`` (bytes):
+returned to the allocator, freed terms come back as fresh pages whose first touch cost as much
+as the kernel that fills them (whole arm of 10 grasps x 201 samples: 0.5 µs per sample of 1.0,
+measured); a chunk of TERMS_CHUNK_SAMPLES of a 7-joint arm fits."""
+
+
+class _Blocks(threading.local):
+    """Per thread, the memory blocks of earlier terms (one flat float64 array each)."""
+
+    def __init__(self) -> None:
+        self.blocks: list[np.ndarray] = []
+
+
+_BLOCKS = _Blocks()
+
+
+def _block(size: int) -> np.ndarray:
+    """A float64 block of at least ``size`` elements: a kept one no array refers to any longer
+    (only this list holds it: every view of a block, SampleTerms' fields and their slices,
+    holds a reference to it), else a new one, kept while the kept stay within
+    KEPT_TERMS_BYTES (the oldest unreferenced ones dropped first)."""
+    blocks = _BLOCKS.blocks
+    for k in range(len(blocks)):
+        if blocks[k].size >= size and sys.getrefcount(blocks[k]) == 2:  # the list's, the call's
+            return blocks[k]
+    block = np.empty(size)
+    limit = KEPT_TERMS_BYTES - block.nbytes
+    for k in range(len(blocks) - 1, -1, -1):
+        if sum(b.nbytes for b in blocks) <= limit:
+            break
+        if sys.getrefcount(blocks[k]) == 2:
+            del blocks[k]
+    if limit >= 0 and sum(b.nbytes for b in blocks) <= limit:
+        blocks.insert(0, block)
+    return block
+
+
 def sample_terms_buffers(grasps: int, count: int, n: int) -> SampleTerms:
-    """Uninitialised SampleTerms for ``grasps`` grasps of ``count`` samples, n joints."""
-    return SampleTerms(
-        np.empty((grasps, count, n, 3, 3)),
-        np.empty((grasps, count, n, 3)),
-        np.empty((grasps, count, n, 3)),
-        np.empty((grasps, count, n, 6)),
-        np.empty((grasps, count, 3, 3)),
-        np.empty((grasps, count, 3)),
-        np.empty((grasps, count, 6, n)),
-        np.empty((grasps, count, 3, 3)),
-        np.empty((grasps, count, n, n)),
-    )
+    """Uninitialised SampleTerms for ``grasps`` grasps of ``count`` samples, n joints: views of
+    one block, the memory of earlier terms no longer referenced when there is (``_block``)."""
+    shapes = ((n, 3, 3), (n, 3), (n, 3), (n, 6), (3, 3), (3,), (6, n), (3, 3), (n, n))
+    sizes = [grasps * count * math.prod(shape) for shape in shapes]
+    block = _block(sum(sizes))
+    fields, start = [], 0
+    for shape, size in zip(shapes, sizes, strict=True):
+        fields.append(block[start : start + size].reshape(grasps, count, *shape))
+        start += size
+    return SampleTerms(*fields)
 
 
 def configurations(robot: RobotModel, joint_positions: np.ndarray) -> np.ndarray:
