@@ -182,9 +182,11 @@ def tip_twists_in_base(
     """Tip twists (N, 6) (linear [m/s], angular [rad/s]), base axes: from the object motion
     sampled once (ObjectMotion: tangent times speed per tangent; ``object_motion`` when
     already sampled at ``times_s``) for an object path, else the trajectory's ``tip_twists``."""
-    if object_motion is None and not isinstance(trajectory, ObjectPath):
-        return trajectory.tip_twists(transform_tip_to_object, times_s)[0]
-    motion = trajectory.object_motion(times_s) if object_motion is None else object_motion
+    motion = object_motion
+    if motion is None:
+        if not isinstance(trajectory, ObjectPath):
+            return trajectory.tip_twists(transform_tip_to_object, times_s)[0]
+        motion = trajectory.object_motion(times_s)
     rate = motion.speed_per_tangent[:, None]
     tip = motion.tip_motion(transform_tip_to_object)
     return np.concatenate([tip.tangents * rate, motion.angular_tangents * rate], axis=1)
@@ -429,16 +431,17 @@ def evaluate_whole_arm_on_terms(
     spline_rates = np.zeros((grasp_count, samples, robot.num_joints))
     by_times: dict[bytes, list[int]] = {}
     sampled: dict[tuple[int, bytes], ObjectMotion] = {}  # each object path sampled once
-    is_path: dict[int, bool] = {}  # a runtime Protocol's isinstance costs ~10 µs: once each
+    as_path: dict[int, ObjectPath | None] = {}  # a runtime Protocol's isinstance: ~10 µs
     for g, (evaluation, trajectory, grasp) in enumerate(
         zip(evaluations, trajectories, grasps, strict=True)
     ):
         times = np.asarray(evaluation.times_s, dtype=float)
         key = (id(trajectory), times.tobytes())
-        if key[0] not in is_path:
-            is_path[key[0]] = isinstance(trajectory, ObjectPath)
-        if is_path[key[0]] and key not in sampled:
-            sampled[key] = trajectory.object_motion(times)
+        if key[0] not in as_path:
+            as_path[key[0]] = trajectory if isinstance(trajectory, ObjectPath) else None
+        path = as_path[key[0]]
+        if path is not None and key not in sampled:
+            sampled[key] = path.object_motion(times)
         motion = sampled.get(key)
         twists[g, : counts[g]] = _tip_twists_in_world(robot, trajectory, grasp, times, motion)
         by_times.setdefault(key[1], []).append(g)

@@ -330,7 +330,7 @@ def joint_dynamics(
     vl, va, cl, ca, al, aa, force, moment = ws[3], ws[4], ws[5], ws[6], ws[7], ws[8], ws[9], ws[10]
     world = ws[11]  # rows: twist, twist rate (world axes), drift-corrected rate
     fd = ws[12]  # rows: q̇_fd, q̈_fd
-    own_motions, own_jacobian, own_axes = ws[13], ws[14], ws[15]
+    own_motions, own_jacobian = ws[13], ws[14]
     for g in range(counts.shape[0]):
         count = counts[g]
         if count == 0:
@@ -387,9 +387,7 @@ def joint_dynamics(
                 _forward_kinematics(chain, q_all[g, i], kinematics)
                 rotations, origins, tip = kinematics[0], kinematics[1], kinematics[3]
                 motions, jacobian = own_motions, own_jacobian
-                _motions_and_jacobian(
-                    axes, prismatic, rotations, origins, tip, own_axes, motions, jacobian
-                )
+                _motions_and_jacobian(axes, prismatic, rotations, origins, tip, motions, jacobian)
             certified = _factorise(jacobian, wide, factors[0], factors[1], factors[2], factors[3])
             if not certified:
                 _jacobi_svd(factors[0], factors[2], min(n, 6), factors[4], factors[5], factors[6])

@@ -10,13 +10,12 @@ from .kinematics import _forward_kinematics, _joint_axis_in_world
 
 
 @_jit_inline
-def _motions_and_jacobian(axes, prismatic, jr, jp, ft, joint_axes, motions, jacobian):
-    """Every joint's unit axis (joint_axes (n, 3)) and motion subspace at the world origin
-    (motions (n, 6)), and the tip Jacobian (6 x n, LOCAL_WORLD_ALIGNED), from the joint
-    rotations jr, origins jp and tip origin ft (world frame; the chain's axes, prismatic)."""
+def _motions_and_jacobian(axes, prismatic, jr, jp, ft, motions, jacobian):
+    """Every joint's motion subspace at the world origin (motions (n, 6)) and the tip
+    Jacobian (6 x n, LOCAL_WORLD_ALIGNED), from the joint rotations jr, origins jp and tip
+    origin ft (world frame; the chain's axes, prismatic)."""
     for k in range(axes.shape[0]):
         u0, u1, u2, w0, w1, w2, slide = _joint_axis_in_world(axes, prismatic, jr, k)
-        joint_axes[k, 0], joint_axes[k, 1], joint_axes[k, 2] = u0, u1, u2
         p0, p1, p2 = jp[k, 0], jp[k, 1], jp[k, 2]
         motions[k, 0] = (p1 * w2 - p2 * w1) + slide * u0
         motions[k, 1] = (p2 * w0 - p0 * w2) + slide * u1
@@ -32,7 +31,7 @@ def _motions_and_jacobian(axes, prismatic, jr, jp, ft, joint_axes, motions, jaco
 @_jit
 def sample_terms(chain, bodies, q_all, counts, out, lower_inverse, ws):
     """For each grasp g (axis 0 of q_all (G, N, nq), of ``bodies`` and of ``out``) and its
-    samples i < counts[g]: joint poses, axes and motion subspaces, tip pose, tip Jacobian,
+    samples i < counts[g]: joint poses and motion subspaces, tip pose, tip Jacobian,
     tip mobility and M^-1 into ``out`` (``method.terms.SampleTerms``); rows from counts[g]
     on are left untouched.
     lower_inverse: (n, n) scratch; ws: ``ik.workspace(n)``."""
@@ -48,13 +47,12 @@ def sample_terms(chain, bodies, q_all, counts, out, lower_inverse, ws):
                 out.rotations_joint_to_world[g, i],
                 out.translations_joint_in_world[g, i],
             )
-            joint_axes, jacobian = out.axes_joint_in_world[g, i], out.jacobians_tip_in_world[g, i]
-            motions = out.motions_joint_in_world[g, i]
+            jacobian, motions = out.jacobians_tip_in_world[g, i], out.motions_joint_in_world[g, i]
             for a in range(3):
                 out.translations_tip_in_world[g, i, a] = ft[a]
                 for b in range(3):
                     out.rotations_tip_to_world[g, i, a, b] = fr[a, b]
-            _motions_and_jacobian(axes, prismatic, jr, jp, ft, joint_axes, motions, jacobian)
+            _motions_and_jacobian(axes, prismatic, jr, jp, ft, motions, jacobian)
             for k in range(n):
                 for a in range(3):
                     joint_origins[k, a] = jp[k, a]

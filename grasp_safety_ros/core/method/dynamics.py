@@ -93,7 +93,6 @@ def joint_dynamics(
         np.empty((2, n)),
         np.empty((n, 6)),
         np.empty((6, n)),
-        np.empty((n, 3)),
     )
     call_kernel(
         kernel,

@@ -42,7 +42,6 @@ class SampleTerms(NamedTuple):
 
     rotations_joint_to_world: np.ndarray  # (G, N, n, 3, 3) joint frames
     translations_joint_in_world: np.ndarray  # (G, N, n, 3) [m]
-    axes_joint_in_world: np.ndarray  # (G, N, n, 3) unit joint axes
     motions_joint_in_world: np.ndarray  # (G, N, n, 6) motion subspaces at the world origin [m; 1]
     rotations_tip_to_world: np.ndarray  # (G, N, 3, 3) tip frame
     translations_tip_in_world: np.ndarray  # (G, N, 3) [m]
@@ -96,7 +95,7 @@ def _block(size: int) -> np.ndarray:
 def sample_terms_buffers(grasps: int, count: int, n: int) -> SampleTerms:
     """Uninitialised SampleTerms for ``grasps`` grasps of ``count`` samples, n joints: views of
     one block, the memory of earlier terms no longer referenced when there is (``_block``)."""
-    shapes = ((n, 3, 3), (n, 3), (n, 3), (n, 6), (3, 3), (3,), (6, n), (3, 3), (n, n))
+    shapes = ((n, 3, 3), (n, 3), (n, 6), (3, 3), (3,), (6, n), (3, 3), (n, n))
     sizes = [grasps * count * math.prod(shape) for shape in shapes]
     block = _block(sum(sizes))
     fields, start = [], 0
