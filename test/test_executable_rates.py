@@ -66,6 +66,8 @@ def test_compiled_velocities_equal_scipys_bit_for_bit(columns: int) -> None:
         two_samples += len(times) == 2
         velocities = clamped_spline_velocities(times, positions)
         assert same_bits(velocities, scipy_rates(times, positions)[0])
+        again = clamped_spline_velocities(times, positions[::-1].copy())  # kept elimination
+        assert same_bits(again, scipy_rates(times, positions[::-1])[0])
     assert interchanged > 10 and two_samples
     one = clamped_spline_velocities(np.array([0.5]), np.ones((1, 3)))
     assert one.shape == (1, 3) and not np.any(one)

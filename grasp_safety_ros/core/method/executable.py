@@ -146,23 +146,32 @@ def clamped_spline_velocities(times_s: np.ndarray, joint_positions: np.ndarray) 
     velocities = np.zeros_like(positions)
     if len(times) < 2 or not positions.shape[1]:
         return velocities
-    dx = np.diff(times)
-    lower = [*dx[1:].tolist(), 0.0]
-    diagonal = [1.0, *(2 * (dx[:-1] + dx[1:])).tolist(), 1.0]
-    upper = [0.0, *dx[:-1].tolist()]
-    steps, d, du, dl = _tridiagonal_elimination(lower, diagonal, upper)
-    call_kernel(
-        kernel,
-        times,
-        positions,
-        np.array([interchanged for interchanged, _ in steps], dtype=bool),
-        np.array([fact for _, fact in steps]),
-        np.array(d),
-        np.array(du),
-        np.array(dl),
-        velocities,
-    )
+    key = times.tobytes()
+    elimination = _ELIMINATIONS.get(key)
+    if elimination is None:
+        dx = np.diff(times)
+        lower = [*dx[1:].tolist(), 0.0]
+        diagonal = [1.0, *(2 * (dx[:-1] + dx[1:])).tolist(), 1.0]
+        upper = [0.0, *dx[:-1].tolist()]
+        steps, d, du, dl = _tridiagonal_elimination(lower, diagonal, upper)
+        elimination = (
+            np.array([interchanged for interchanged, _ in steps], dtype=bool),
+            np.array([fact for _, fact in steps]),
+            np.array(d),
+            np.array(du),
+            np.array(dl),
+        )
+        if len(_ELIMINATIONS) >= KEPT_ELIMINATIONS:
+            _ELIMINATIONS.pop(next(iter(_ELIMINATIONS)), None)  # the oldest
+        _ELIMINATIONS[key] = elimination
+    call_kernel(kernel, times, positions, *elimination, velocities)
     return velocities
+
+
+KEPT_ELIMINATIONS = 16
+"""Sample times whose spline elimination (``clamped_spline_velocities``) is kept for the next
+call with the same times: its Python loop costs as much as the kernel on 10 grasps' joints."""
+_ELIMINATIONS: dict[bytes, tuple[np.ndarray, ...]] = {}
 
 
 ROW_SOLVE_COLUMNS = 24
