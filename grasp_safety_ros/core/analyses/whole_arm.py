@@ -188,8 +188,8 @@ def tip_twists_in_base(
             return trajectory.tip_twists(transform_tip_to_object, times_s)[0]
         motion = trajectory.object_motion(times_s)
     rate = motion.speed_per_tangent[:, None]
-    tip = motion.tip_motion(transform_tip_to_object)
-    return np.concatenate([tip.tangents * rate, motion.angular_tangents * rate], axis=1)
+    tangents = motion.tip_tangents(transform_tip_to_object)
+    return np.concatenate([tangents * rate, motion.angular_tangents * rate], axis=1)
 
 
 def jacobians_tip_in_world(

@@ -54,13 +54,7 @@ class ObjectMotion(NamedTuple):
         grasp = pin.SE3(transform_tip_to_object)
         count = len(self.positions)
         stacked = self.rotations.reshape(3 * count, 3)  # one matrix product per quantity
-        lever = (stacked @ grasp.translation).reshape(count, 3)  # object origin -> tip, base
-        w, r = self.angular_tangents, lever
-        tangents = np.empty_like(r)  # w x r (np.cross is slower on short rows)
-        tangents[:, 0] = w[:, 1] * r[:, 2] - w[:, 2] * r[:, 1]
-        tangents[:, 1] = w[:, 2] * r[:, 0] - w[:, 0] * r[:, 2]
-        tangents[:, 2] = w[:, 0] * r[:, 1] - w[:, 1] * r[:, 0]
-        tangents += self.linear_tangents
+        lever, tangents = self._lever_and_tangents(grasp.translation)
         norms = np.sqrt(np.einsum("ij,ij->i", tangents, tangents))
         return TipMotion(
             rotations=(stacked @ grasp.rotation).reshape(count, 3, 3),
@@ -68,6 +62,24 @@ class ObjectMotion(NamedTuple):
             tangents=tangents,
             speeds=norms * self.speed_per_tangent,
         )
+
+    def tip_tangents(self, transform_tip_to_object: pin.SE3) -> np.ndarray:
+        """``tip_motion(transform_tip_to_object).tangents`` (N, 3) [m] alone."""
+        return self._lever_and_tangents(pin.SE3(transform_tip_to_object).translation)[1]
+
+    def _lever_and_tangents(self, tip_in_object_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(N, 3) the object origin -> tip lever [m] and the tip's tangents [m], base axes, of
+        the tip origin at ``tip_in_object_m`` (object frame)."""
+        count = len(self.positions)
+        stacked = self.rotations.reshape(3 * count, 3)
+        lever = (stacked @ tip_in_object_m).reshape(count, 3)
+        w, r = self.angular_tangents, lever
+        tangents = np.empty_like(r)  # w x r (np.cross is slower on short rows)
+        tangents[:, 0] = w[:, 1] * r[:, 2] - w[:, 2] * r[:, 1]
+        tangents[:, 1] = w[:, 2] * r[:, 0] - w[:, 0] * r[:, 2]
+        tangents[:, 2] = w[:, 0] * r[:, 1] - w[:, 1] * r[:, 0]
+        tangents += self.linear_tangents
+        return lever, tangents
 
 
 class Trajectory(Protocol):
