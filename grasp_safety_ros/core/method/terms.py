@@ -71,33 +71,36 @@ class _Blocks(threading.local):
 _BLOCKS = _Blocks()
 
 
-def _block(size: int) -> np.ndarray:
+def _block(size: int) -> np.ndarray | None:
     """A float64 block of at least ``size`` elements: a kept one no array refers to any longer
     (only this list holds it: every view of a block, SampleTerms' fields and their slices,
-    holds a reference to it), else a new one, kept while the kept stay within
-    KEPT_TERMS_BYTES (the oldest unreferenced ones dropped first)."""
+    holds a reference to it), else a new one when the kept stay within KEPT_TERMS_BYTES with
+    it (the oldest unreferenced ones dropped first), else None."""
     blocks = _BLOCKS.blocks
     for k in range(len(blocks)):
         if blocks[k].size >= size and sys.getrefcount(blocks[k]) == 2:  # the list's, the call's
             return blocks[k]
-    block = np.empty(size)
-    limit = KEPT_TERMS_BYTES - block.nbytes
+    limit = KEPT_TERMS_BYTES - 8 * size
     for k in range(len(blocks) - 1, -1, -1):
         if sum(b.nbytes for b in blocks) <= limit:
             break
         if sys.getrefcount(blocks[k]) == 2:
             del blocks[k]
-    if limit >= 0 and sum(b.nbytes for b in blocks) <= limit:
-        blocks.insert(0, block)
-    return block
+    if limit < 0 or sum(b.nbytes for b in blocks) > limit:
+        return None
+    blocks.insert(0, np.empty(size))
+    return blocks[0]
 
 
 def sample_terms_buffers(grasps: int, count: int, n: int) -> SampleTerms:
     """Uninitialised SampleTerms for ``grasps`` grasps of ``count`` samples, n joints: views of
-    one block, the memory of earlier terms no longer referenced when there is (``_block``)."""
+    one kept block (``_block``; the memory of earlier terms no longer referenced when there is
+    one), else an array per field (terms beyond what the threads keep)."""
     shapes = ((n, 3, 3), (n, 3), (n, 6), (3, 3), (3,), (6, n), (3, 3), (n, n))
     sizes = [grasps * count * math.prod(shape) for shape in shapes]
     block = _block(sum(sizes))
+    if block is None:
+        return SampleTerms(*(np.empty((grasps, count, *shape)) for shape in shapes))
     fields, start = [], 0
     for shape, size in zip(shapes, sizes, strict=True):
         fields.append(block[start : start + size].reshape(grasps, count, *shape))
