@@ -13,9 +13,9 @@ solutions, and the effective mass depends on which one the arm is in. The paper 
 3. each distinct start posture followed along the whole trajectory with the evaluator's own
    warm start (seeded with it: sample 0 converges at once, in 0 iterations, to that
    posture), and scored; the postures of all grasps of a batch in one kernel call
-   (``GraspSafetyEvaluator.follow_postures``). With ``early_stop`` (selecting by the
-   score), the j-th new postures of all grasps are followed together, j = 1, 2, ..., and a
-   posture is stopped as soon as a lower bound of its score (the running max, or the running
+   (``GraspSafetyEvaluator.follow_postures``). With ``early_stop`` (the default; selecting
+   by the score), the j-th new postures of all grasps are followed together, j = 1, 2, ...,
+   and a posture is stopped as soon as a lower bound of its score (the running max, or the running
    weighted sum, of its effective masses, all > 0, widened by the sums' rounding) exceeds the
    lowest score of its grasp's feasible postures so far (the single IK's and earlier ones'):
    it could only lose;
@@ -26,10 +26,11 @@ feasible it is candidate 0, so the minimum over the candidates is at most its sc
 equal scores argmin keeps the earliest, the single IK itself. The early stop changes no
 choice: a stopped posture scores strictly above a feasible posture already found, so it is
 neither the minimum nor the first of equal minima, and a posture that is not stopped is the
-one the full evaluation gives, bit for bit (``test_posture.py``: a property test over random
-arms, grasps and metrics, with and without it). It changes the record: a stopped posture
-counts as tried and as stopped (``PostureSelection.postures_stopped``), not as feasible, and
-is not in the score range.
+one the full evaluation gives, bit for bit (``test_posture.py``: a property test of
+``_choose`` over arbitrary candidates, and one over random arms, grasps and metrics, with and
+without the stop). It changes the record only: a stopped posture counts as tried and as
+stopped (``PostureSelection.postures_stopped``, in every output that shows the counts), not
+as feasible, and is not in the score range (the range of the postures followed to the end).
 
 A ``PostureCriterion`` may replace the score in step 4 (core.analyses.whole_arm's, with
 ``rank_by: whole_arm``: the worst predicted force over the arm's points); the single IK is
@@ -92,11 +93,14 @@ class PostureConfig:
         duplicate_tolerance_rad: Start postures closer than this (largest joint difference)
             [rad or m] to one already found are not followed again.
         early_stop: Stop following a start posture as soon as its score certainly exceeds
-            that of a posture of the same grasp already found (module docstring; the same
-            choice, a shorter record). Off by default: it saved 6-10 % of posture selection's
-            time (``bench/postures.py``, 8 restarts, Panda, Baxter), as the postures' scores
+            that of a posture of the same grasp already found (module docstring): the same
+            kept posture bit for bit, a record that counts it as stopped
+            (``PostureSelection.postures_stopped``) instead of feasible or not. On by
+            default; off: every posture followed to the end (the full ``score_range``, as
+            the MuJoCo validation's study of the range uses). It saves little (a few % of
+            posture selection's time, docs/performance_pipeline.md), as the postures' scores
             differ by a few percent, so a lower bound of a worse one exceeds the best only
-            near the end; and the node's and the dataset's records have no stopped count yet.
+            near the end.
         restart_iterations: Largest Gauss-Newton iterations of each restart's IK at the
             start pose, in [1, MAX_RESTART_ITERATIONS]; None (default): the IK's own
             ``ik.max_iterations`` (100), the selection as before. Fewer drop the seeds that
@@ -112,7 +116,7 @@ class PostureConfig:
     restarts: int = DEFAULT_RESTARTS
     seed: int = 0
     duplicate_tolerance_rad: float = 1e-3
-    early_stop: bool = False
+    early_stop: bool = True
     restart_iterations: int | None = None
     restart_stall_iterations: int | None = None
 
