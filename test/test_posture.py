@@ -583,6 +583,8 @@ def test_batched_selection_keeps_the_reference_posture_bit_for_bit(baxter, metri
             assert np.array_equal(kept.ik_iterations, expected.ik_iterations)
         assert early.postures[k].postures_feasible <= full.postures[k].postures_feasible
     assert early.order == full.order
+    assert not any(p.postures_stopped for p in full.postures)
+    assert any(p.postures_stopped for p in early.postures)  # the default stops some here
 
 
 def test_early_stop_stops_only_postures_that_score_higher(baxter_book) -> None:
