@@ -12,8 +12,8 @@ from typing import Any
 
 import pyarrow as pa
 
-SCHEMA_VERSION = 1
-"""Bumped when a column changes (part of every chunk's content hash)."""
+SCHEMA_VERSION = 2
+"""Bumped when a column changes (part of every chunk's content hash); 2: postures_stopped."""
 
 _TEXT = pa.dictionary(pa.int32(), pa.string())
 _FLOATS = pa.list_(pa.float64())
