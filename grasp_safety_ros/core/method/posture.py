@@ -26,9 +26,9 @@ feasible it is candidate 0, so the minimum over the candidates is at most its sc
 equal scores argmin keeps the earliest, the single IK itself. The early stop changes no
 choice: a stopped posture scores strictly above a feasible posture already found, so it is
 neither the minimum nor the first of equal minima, and a posture that is not stopped is the
-one the full evaluation gives, bit for bit (``test_posture.py``: a property test of
-``_choose`` over arbitrary candidates, and one over random arms, grasps and metrics, with and
-without the stop). It changes the record only: a stopped posture counts as tried and as
+one the full evaluation gives, bit for bit (property tests: of ``_choose`` over arbitrary
+candidates, ``test_posture_choice.py``; over random arms, grasps and metrics with the stop on
+and off, ``test_posture.py``). It changes the record only: a stopped posture counts as tried and as
 stopped (``PostureSelection.postures_stopped``, in every output that shows the counts), not
 as feasible, and is not in the score range (the range of the postures followed to the end).
 
@@ -84,9 +84,10 @@ per posture and sample)."""
 FIRST_WAVE = 2
 """With the early stop, each grasp's first FIRST_WAVE new postures are followed first (against
 the single IK's score), then the rest together (against the best so far): two kernel calls
-per batch whatever the restarts. Measured on bench/postures.py's workloads, one wave per
-posture rank (up to ``restarts`` kernel calls) would follow 0.15 % fewer samples (simulated
-from every posture's per-sample masses, 20 grasps, Panda and Baxter, 8 restarts)."""
+per batch whatever the restarts. One wave per posture rank (up to ``restarts`` kernel calls)
+would follow 0.15 % fewer samples (simulated from every posture's per-sample masses on
+bench/postures.py's Panda and Baxter workloads, 20 grasps, 8 restarts), less than the
+calls cost."""
 
 
 @dataclass(frozen=True)
