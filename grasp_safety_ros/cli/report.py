@@ -74,6 +74,7 @@ def posture_to_dict(posture: PostureSelection) -> dict[str, Any]:
         "start_positions": posture.start_positions.tolist(),
         "postures_tried": posture.postures_tried,
         "postures_feasible": posture.postures_feasible,
+        "postures_stopped": posture.postures_stopped,
     }
     if posture.criterion != SCORE_CRITERION:
         result["criterion"] = posture.criterion
@@ -355,9 +356,9 @@ def _posture_summary(p: PostureSelection) -> str:
             f"no feasible posture from {p.restarts + 1} IK seeds ({followed} distinct start "
             f"posture{'s' if followed != 1 else ''} followed)"
         )
-    by = ""
+    by = f", {p.postures_stopped} stopped early" if p.postures_stopped else ""
     if p.criterion != SCORE_CRITERION:
-        by = f", chosen by {p.criterion} {p.criterion_single_ik:.4g} -> {p.criterion_value:.4g}"
+        by += f", chosen by {p.criterion} {p.criterion_single_ik:.4g} -> {p.criterion_value:.4g}"
     return (
         f"single IK {p.score_single_ik:.4f} -> {p.score:.4f} "
         f"(range {p.score_range[0]:.4f}..{p.score_range[1]:.4f}, "
