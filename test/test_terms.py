@@ -20,7 +20,6 @@ from grasp_safety_ros.core.method.effective_mass import (
     augmented_model,
     translational_mobility_in_base,
 )
-from grasp_safety_ros.core.method.terms import SampleTerms
 
 
 @needs_numba
@@ -105,7 +104,7 @@ def test_effort_from_shared_terms_equals_pinocchio(
     robot: RobotModel = request.getfixturevalue(name)
     grasp, evaluation, terms, motion = terms_case(robot, 13)
     reference = evaluate_effort(robot, evaluation, BOX, grasp, motion)
-    batched = SampleTerms(*(array[None] for array in terms))
+    batched, _ = one_grasp(terms)
     chain = Backend.for_robot(robot).chain
     (shared,) = evaluate_efforts(robot, [evaluation], BOX, [grasp], motion, None, batched, chain)
     tolerances = effort_tolerances(robot, evaluation, BOX, grasp, reference)

@@ -26,7 +26,10 @@ SCORE_UNITS = {"mean": "kg", "max": "kg", "integral": "kg*s"}
 
 SCHEMA_VERSION = 2
 """Version of the JSON layout: 2 holds each grasp's ``samples`` as one array per field
-(columnar; 1, before it, held one object per sample)."""
+(columnar; 1, before it, held one object per sample). Bumped when a key moves, changes type
+or goes; keys added beside the others do not bump it (as the whole arm's, the retiming's and
+``posture.postures_stopped``, whose presence says that ``postures_feasible`` and
+``score_range`` leave out the postures stopped early)."""
 
 
 def evaluation_to_dict(

@@ -13,7 +13,9 @@ from typing import Any
 import pyarrow as pa
 
 SCHEMA_VERSION = 2
-"""Bumped when a column changes (part of every chunk's content hash); 2: postures_stopped."""
+"""Bumped when a column changes (part of every chunk's content hash); 2: the columns
+postures_stopped, retime_binding and retime_reason, and postures_feasible and
+score_range_low/high no longer counting postures stopped early."""
 
 _TEXT = pa.dictionary(pa.int32(), pa.string())
 _FLOATS = pa.list_(pa.float64())
