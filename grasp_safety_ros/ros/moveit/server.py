@@ -52,8 +52,11 @@ from .grasps import (
 
 SOURCE = "grasp_safety"
 """``error_code.source`` of the answers this server makes itself."""
-WAIT_STEP_S = 0.05
-"""How often the server looks whether a request's wait for the planner is over [s]."""
+WAIT_STEP_S = 0.1
+"""How often the server looks whether a request's wait for the planner is over [s]. rclpy's
+executor resumes every suspended coroutine at each of its wake-ups, a tick among them: the
+step trades the node's CPU while many requests wait against how late a timeout, the service's
+appearance or the shut-down is seen (the planner's answer is seen at once)."""
 
 
 class PlannerError(Exception):
