@@ -2,8 +2,9 @@
 the server alone, its planner absent or silent, no robot (no request reaches the ranking).
 
 The oracles are the documented answers (docs/ros/moveit.md): COMMUNICATION_FAILURE when the
-planner's service does not appear, TIMED_OUT when it does not answer, FAILURE naming an
-internal error; each within moveit.planner_timeout_s also on sim time without /clock."""
+planner's service does not appear, TIMED_OUT when it does not answer (both after
+moveit.planner_timeout_s, also on sim time without /clock), FAILURE naming an internal
+error."""
 
 from __future__ import annotations
 
@@ -22,6 +23,7 @@ from rclpy.parameter import Parameter
 pytest.importorskip("moveit_msgs.msg", reason="moveit_msgs not built (make setup)")
 from moveit_msgs.msg import MoveItErrorCodes
 from moveit_msgs.srv import GraspPlanning
+from test_ros_moveit import assert_refused
 
 from grasp_safety_ros.ros.moveit.server import GraspPlanningServer
 from grasp_safety_ros.ros.runtime.rclpy_private import NodeExecutor, join_callbacks
@@ -100,13 +102,6 @@ def bare_wall(context: Context) -> Iterator[Bare]:
     harness = Bare(context, sim_time=False)
     yield harness
     harness.close()
-
-
-def assert_refused(answer: GraspPlanning.Response, code: int, *parts: str) -> None:
-    assert answer.error_code.val == code, answer.error_code
-    assert not answer.grasps
-    for part in parts:
-        assert part in answer.error_code.message, answer.error_code.message
 
 
 def test_on_sim_time_without_clock_a_silent_planner_times_out(bare: Bare) -> None:

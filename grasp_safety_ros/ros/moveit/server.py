@@ -256,6 +256,7 @@ class GraspPlanningServer:
                 self._end_if_over(wait)
 
     def _look_at(self, wait: _Wait) -> None:
+        """Ends ``wait`` if it is over: the planner's answer came (a done callback)."""
         with self._waits_lock:
             self._end_if_over(wait)
 
