@@ -83,7 +83,7 @@ def _whole_arm_row(whole_arm: dict[str, Any] | None, absent: str) -> dict[str, A
     """The whole arm's cost against the compiled ranking of the same grasps in the same
     section (both CPU time per (grasp, sample): wall time of one and CPU time of the other
     would not compare under load)."""
-    measure = "whole arm per (grasp, sample), Panda, default sites"
+    measure = "whole arm per (grasp, sample), Panda, default sites + 8 points"
     if not whole_arm or "panda" not in whole_arm:
         return _row(measure, absent, "<= x2 the core's", None)
     panda = whole_arm["panda"]

@@ -8,8 +8,10 @@ process (less inflated than wall-clock time when other processes share the cores
 - ``us_per_sample``: the whole arm as the report runs it with a compiled evaluator: the shared
   terms of all feasible grasps in one kernel call (``method.terms.grasps_terms``), then
   ``evaluate_whole_arm_on_terms`` (q̇, the site kernel over (grasp, sample, site), ISO/TS 15066
-  over every body region in one array pass), default sites (joint origins from the third, the
-  tip);
+  over every body region in one array pass), the default sites (joint origins from the third,
+  the tip) + 8 points: the box's corners as user points on the tip's link (``arm_points_m``,
+  placed by the first candidate grasp; what a user declares for a held box), as issue 30's
+  row "default sites + 8 points" and bench/retime.py's 14 Panda sites;
 - ``us_per_sample_pinocchio``: ``evaluate_whole_arm`` per grasp on the Pinocchio reference path
   (per-sample placements, Jacobians, M⁻¹ of the augmented model; q̇; vectorised site arrays);
 - ``us_per_sample_given_terms``: the reference's vectorised part alone (``site_exposure`` +
@@ -32,9 +34,10 @@ import time
 from typing import Any
 
 import numpy as np
-from workload import ARMS, ArmWorkload, box_object, grasps_around_box
+from workload import ARMS, BOX_SIZE_M, ArmWorkload, box_object, grasps_around_box
 
 from grasp_safety_ros.core import EvaluationConfig, GraspSafetyEvaluator
+from grasp_safety_ros.core.analyses.exposed_points import box_corners_in_object
 from grasp_safety_ros.core.analyses.iso15066 import select_regions
 from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions
 from grasp_safety_ros.core.analyses.whole_arm import (
@@ -67,7 +70,10 @@ def bench_whole_arm(arm: ArmWorkload, grasps: int = 10, repeats: int = 5) -> dic
     ranking = evaluator.rank(candidates, obj, trajectory, seed_positions=arm.seed_positions)
     pairs = [(g, e) for g, e in zip(candidates, ranking.evaluations, strict=True) if e.feasible]
     samples = sum(len(e.times_s) for _, e in pairs)
-    sites = resolve_arm_sites(robot)
+    tip_to_object = candidates[0].transform_tip_to_object
+    corners_in_tip = [tip_to_object.actInv(c) for c in box_corners_in_object(BOX_SIZE_M)]
+    arm_points = {arm.tip_frame: np.array(corners_in_tip)}
+    sites = resolve_arm_sites(robot, arm_points)
     regions = select_regions(None)
     terms = []
     for grasp, evaluation in pairs:
@@ -134,7 +140,9 @@ def bench_whole_arm(arm: ArmWorkload, grasps: int = 10, repeats: int = 5) -> dic
         return postures(AnalysisOptions(iso_regions=(), effort=False))
 
     def postures_by_whole_arm() -> float:
-        return postures(AnalysisOptions(rank_by="whole_arm", effort=False))
+        return postures(
+            AnalysisOptions(rank_by="whole_arm", arm_points_m=arm_points, effort=False)
+        )
 
     timings: dict[str, list[float]] = {
         "compiled": [],
@@ -162,6 +170,7 @@ def bench_whole_arm(arm: ArmWorkload, grasps: int = 10, repeats: int = 5) -> dic
     return {
         "robot": f"{arm.urdf} {arm.base_frame} -> {arm.tip_frame}",
         "sites": len(sites),
+        "arm_points": len(corners_in_tip),
         "feasible_grasps": len(pairs),
         "samples": samples,
         "us_per_sample": statistics.median(timings["compiled"]),

@@ -1,11 +1,12 @@
 """The analyses' protocol (core.analyses.base, registry) and the backend decision
 (core.method.backend): an analysis added to the registered tuple runs in ``analyse`` on the
-shared terms, its progress counted, the other parts unchanged; the backend is decided once."""
+shared terms, its progress counted, its result in the report, the other parts unchanged;
+every analysis runs on the evaluator's backend."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass, field
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, fields, is_dataclass, replace
 
 import numpy as np
 import pinocchio as pin
@@ -18,15 +19,31 @@ from grasp_safety_ros.core.analyses import safety_report
 from grasp_safety_ros.core.analyses.analysis_options import AnalysisOptions
 from grasp_safety_ros.core.analyses.base import Parts, Shared, per_grasp
 from grasp_safety_ros.core.analyses.registry import ANALYSES
+from grasp_safety_ros.core.analyses.uncertainty import InertiaUncertainty
 from grasp_safety_ros.core.method.backend import Backend
 from grasp_safety_ros.core.method.ranking import Grasp
+
+
+@dataclass(frozen=True)
+class CountingParts(Parts):
+    """``Parts`` with the new analysis's result field."""
+
+    sample_counts: tuple[int, ...] = ()
+
+
+@dataclass(frozen=True)
+class CountingReport(safety_report.SafetyReport):
+    """``SafetyReport`` with the new analysis's result field."""
+
+    sample_counts: tuple[int, ...] = ()
 
 
 @dataclass(frozen=True)
 class SampleCounts:
     """A new analysis as docs/development.md describes it: per grasp, the samples it was
     given (the terms' count on a chunk, the evaluation's times on the grasp path), recorded
-    in ``seen`` with the path that gave it and whether the scores before it scored it."""
+    in ``seen`` with the path that gave it and whether the scores before it scored it, and
+    set as its result (``sample_counts``)."""
 
     seen: dict[int, tuple[str, int, bool]] = field(default_factory=dict)
     name: str = "sample_counts"
@@ -50,8 +67,7 @@ class SampleCounts:
             self.seen[k] = ("grasp", count, bool(np.isfinite(parts.scores[k])))
             return count
 
-        per_grasp(shared, on_chunk, on_grasp)
-        return parts
+        return replace(parts, sample_counts=per_grasp(shared, on_chunk, on_grasp))
 
 
 @pytest.mark.parametrize("backend", ["auto", "python"])
@@ -61,8 +77,9 @@ def test_a_registered_analysis_runs_on_the_shared_terms_with_its_progress(
     """Registered after the others, the new analysis gets every grasp once, in candidate
     order of results: the feasible ones from their chunk's terms on the compiled backend
     (as many samples as their evaluation), every grasp by itself on the Pinocchio one and
-    for the infeasible grasp; the scores before it are set; the progress total grows by its
-    units and the rest of the report is unchanged bit for bit."""
+    for the infeasible grasp; the scores before it are set; its result reaches the report
+    through its fields alone (``analyse`` unchanged); the progress total grows by its units
+    and the rest of the report is unchanged bit for bit."""
     if backend == "auto" and not Backend.for_robot(arm7).compiled:
         pytest.skip("numba is not installed")
     seed = random_positions(arm7, np.random.default_rng(18))
@@ -84,6 +101,8 @@ def test_a_registered_analysis_runs_on_the_shared_terms_with_its_progress(
     )
     counting = SampleCounts()
     monkeypatch.setattr(safety_report, "ANALYSES", (*ANALYSES, counting))
+    monkeypatch.setattr(safety_report, "Parts", CountingParts)
+    monkeypatch.setattr(safety_report, "SafetyReport", CountingReport)
     extended: list[tuple[int, int]] = []
     report = safety_report.analyse(
         evaluator,
@@ -105,6 +124,8 @@ def test_a_registered_analysis_runs_on_the_shared_terms_with_its_progress(
         )
         for k, e in enumerate(ranking.evaluations)
     }
+    assert isinstance(report, CountingReport)
+    assert report.sample_counts == tuple(len(e.times_s) for e in ranking.evaluations)
     total = len(calls) + len(grasps)
     assert extended == [(k, total) for k in range(1, total + 1)]
     np.testing.assert_array_equal(report.scores, plain.scores)
@@ -112,16 +133,60 @@ def test_a_registered_analysis_runs_on_the_shared_terms_with_its_progress(
         np.testing.assert_array_equal(ours.joint_torques, theirs.joint_torques)
 
 
-def test_the_backend_is_decided_once_per_evaluator(arm7: RobotModel) -> None:
-    """The Pinocchio backend (asked for) has no chain and no shared terms; the evaluator's
-    backend is its IK's decision, which the analyses read."""
+def test_the_pinocchio_backend_has_no_shared_terms(arm7: RobotModel) -> None:
+    """The Pinocchio backend (asked for) has no chain and no shared terms."""
     python = GraspSafetyEvaluator(arm7, EvaluationConfig(backend="python"))
     assert python.backend == Backend(None) and not python.backend.compiled
     with pytest.raises(ValueError, match="no shared terms"):
         python.backend.grasps_terms(arm7, BOX, [pin.SE3.Identity()], [np.zeros((1, 7))])
-    auto = GraspSafetyEvaluator(arm7)
-    assert auto.backend.compiled == auto.ik.compiled
-    assert auto.backend.chain is (auto.ik.chain if auto.ik.compiled else None)
+
+
+def _same(a: object, b: object) -> bool:
+    """Whether two reports (or parts of them) are equal bit for bit, NaN equal to NaN."""
+    if is_dataclass(a) and is_dataclass(b) and type(a) is type(b):
+        return all(_same(getattr(a, f.name), getattr(b, f.name)) for f in fields(a))
+    if isinstance(a, (tuple, list)) and isinstance(b, (tuple, list)):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
+    if isinstance(a, Mapping) and isinstance(b, Mapping):
+        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, (np.ndarray, float)) or isinstance(b, (np.ndarray, float)):
+        x, y = np.asarray(a), np.asarray(b)
+        numeric = x.dtype.kind in "fc" and y.dtype.kind in "fc"
+        return x.shape == y.shape and bool(np.array_equal(x, y, equal_nan=numeric))
+    return bool(a == b)
+
+
+@needs_numba
+def test_every_analysis_runs_on_the_evaluators_backend(
+    arm7: RobotModel, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The analyses take their backend from the evaluator alone: a compiled evaluator whose
+    backend is set to Pinocchio's gives, on one ranking, the report of an evaluator asked
+    for the python backend bit for bit, every analysis on; with its own (compiled) backend
+    some result differs in its rounding, which an analysis deciding for itself would show."""
+    seed = random_positions(arm7, np.random.default_rng(18))
+    trajectory = reach_trajectory(arm7, seed)
+    grasps = grasps_near_identity(3, 19)
+    compiled = GraspSafetyEvaluator(arm7, EvaluationConfig(workers=1))
+    python = GraspSafetyEvaluator(arm7, EvaluationConfig(workers=1, backend="python"))
+    assert compiled.backend.compiled
+    ranking = python.rank(grasps, BOX, trajectory, seed_positions=seed)
+    assert any(e.feasible for e in ranking.evaluations)
+    options = AnalysisOptions(
+        points_in_object_m=np.array([[0.04, 0.06, 0.1], [-0.04, -0.06, -0.1]]),
+        uncertainty=InertiaUncertainty(mass_fraction=0.2, num_random_samples=2),
+        redundancy=True,
+        effort=True,
+        whole_arm=True,
+    )
+
+    def report(evaluator: GraspSafetyEvaluator) -> safety_report.SafetyReport:
+        return safety_report.analyse(evaluator, grasps, BOX, trajectory, options, ranking=ranking)
+
+    reference = report(python)
+    assert not _same(report(compiled), reference)
+    monkeypatch.setattr(compiled, "backend", Backend(None))
+    assert _same(report(compiled), reference)
 
 
 @needs_numba

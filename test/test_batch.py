@@ -12,6 +12,7 @@ import socket
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +33,7 @@ pa = pytest.importorskip("pyarrow")
 pytest.importorskip("distributed")
 
 from grasp_safety_ros.dataset.batch import PARTS, read_batch, run_batch  # noqa: E402
+from grasp_safety_ros.dataset.rows import report_columns  # noqa: E402
 from grasp_safety_ros.dataset.spec import parse_spec  # noqa: E402
 
 GRIPPER_TO_TIP = pin.SE3(pin.exp3(np.array([0.1, -0.2, 0.05])), np.array([0.0, 0.01, 0.03]))
@@ -234,9 +236,10 @@ def test_every_row_equals_rank_of_the_equivalent_scenario(
                 ("iso_ts_15066_min_duration_s", iso[k].min_duration_s),
             ):
                 assert _close(row[column], expected), (source, k, column, row[column], expected)
-            assert (row["postures_tried"], row["postures_feasible"]) == (
+            assert (row["postures_tried"], row["postures_feasible"], row["postures_stopped"]) == (
                 p.postures_tried,
                 p.postures_feasible,
+                p.postures_stopped,
             )
             assert row["backend"] == report.ranking.backend and row["metric"] == "mean"
             if e.feasible:
@@ -265,6 +268,19 @@ def test_every_row_equals_rank_of_the_equivalent_scenario(
     assert summary["grasps"] == 17 and summary["chunks"] == 2 + 2 + 2 + 2
     assert summary["feasible"] + summary["infeasible"] == 17 and summary["files_refused"] == 0
     assert sum(summary["failures_by_reason"].values()) == summary["infeasible"]
+
+
+def test_rows_carry_every_posture_count(dataset: Dataset) -> None:
+    """The posture counts reach the rows as the record has them (the dataset's 2 restarts
+    stop no posture, so the stopped counts are set here)."""
+    report = rank_scenario(load_scenario(dataset.root / "scenarios/d.yaml"))
+    postures = tuple(
+        replace(p, postures_stopped=k + 1) for k, p in enumerate(report.ranking.postures)
+    )
+    columns = report_columns(replace(report, ranking=replace(report.ranking, postures=postures)))
+    for name in ("postures_tried", "postures_feasible", "postures_stopped"):
+        assert columns[name] == [getattr(p, name) for p in postures], name
+    assert columns["postures_stopped"] == list(range(1, len(postures) + 1))
 
 
 def test_local_cluster_and_serial_give_identical_parts(

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import copy
+import math
 import pickle
 
 import numpy as np
@@ -201,8 +203,8 @@ def test_never_worse_than_the_single_ik_on_random_arms(
         assert p.postures_stopped == 0
         assert (q.selected, q.postures_tried) == (p.selected, p.postures_tried)
         assert np.array_equal([q.score], [p.score], equal_nan=True)
-        assert np.array_equal(early.evaluations[k].joint_positions, kept.joint_positions)
-        assert np.array_equal(early.evaluations[k].effective_mass_kg, kept.effective_mass_kg)
+        assert pickle.dumps(early.evaluations[k]) == pickle.dumps(kept)  # bit for bit
+        assert np.array_equal([q.score_range[0]], [p.score_range[0]], equal_nan=True)
         assert (
             q.postures_feasible <= p.postures_feasible <= q.postures_feasible + q.postures_stopped
         )
@@ -567,12 +569,10 @@ def test_batched_selection_keeps_the_reference_posture_bit_for_bit(baxter, metri
     trajectory = book_trajectory(dt_s=0.05)
     grasps = book_grasps()
     ranking = evaluator.rank(grasps, BOOK, trajectory, seed_positions=BAXTER_SEED)
-    config = PostureConfig(restarts=8)
+    config = PostureConfig(restarts=8, early_stop=False)
     seeds = restart_seeds(evaluator, config)
     full = select_postures(evaluator, grasps, BOOK, trajectory, ranking, config)
-    early = select_postures(
-        evaluator, grasps, BOOK, trajectory, ranking, PostureConfig(restarts=8, early_stop=True)
-    )
+    early = select_postures(evaluator, grasps, BOOK, trajectory, ranking, PostureConfig(8))
     for k, (grasp, single) in enumerate(zip(grasps, ranking.evaluations, strict=True)):
         expected, tried = _reference_choice(evaluator, grasp, trajectory, single, seeds, metric)
         assert expected is not None
@@ -585,6 +585,8 @@ def test_batched_selection_keeps_the_reference_posture_bit_for_bit(baxter, metri
             assert np.array_equal(kept.ik_iterations, expected.ik_iterations)
         assert early.postures[k].postures_feasible <= full.postures[k].postures_feasible
     assert early.order == full.order
+    assert not any(p.postures_stopped for p in full.postures)
+    assert any(p.postures_stopped for p in early.postures)  # the default stops some here
 
 
 def test_early_stop_stops_only_postures_that_score_higher(baxter_book) -> None:
@@ -609,6 +611,49 @@ def test_early_stop_stops_only_postures_that_score_higher(baxter_book) -> None:
             assert np.array_equal(a.joint_positions, b.joint_positions)
         halves = evaluator.follow_postures(rows, grasps, BOOK, sampled, metric, seeds, scores / 2)
         assert halves == [None] * len(grasps), metric
+
+
+def _unchecked_mass(mass_kg: float):
+    """BOOK with a mass ObjectInertia rejects (NaN, negative): effective masses that are
+    NaN or not > 0, as an indefinite or broken mass matrix would give."""
+    book = copy.copy(BOOK)
+    object.__setattr__(book, "mass_kg", mass_kg)
+    return book
+
+
+@pytest.mark.parametrize("mass_kg", [-1000.0, math.nan])
+def test_early_stop_never_stops_a_posture_whose_masses_bound_nothing(baxter_book, mass_kg) -> None:
+    """Masses that are NaN or not > 0 make the running max or sum no lower bound of the
+    score: the kernel then never stops the row. The bound here lies above each row's score
+    (negative masses: half the negative score) or is -1 (NaN scores), so a stop would be
+    wrong; every row equals evaluate_batch bit for bit, and the kept posture is the one
+    without the stop."""
+    evaluator, grasps, trajectory, ranking = baxter_book
+    sampled = sample_trajectory(trajectory)
+    rows = list(range(len(grasps)))
+    seeds = np.array(
+        [evaluator.robot.q_from_positions(e.joint_positions[0]) for e in ranking.evaluations]
+    )
+    book = _unchecked_mass(mass_kg)
+    for metric in METRICS:
+        full = evaluator.evaluate_batch(rows, grasps, book, sampled, metric, seeds)
+        masses = np.concatenate([e.effective_mass_kg for e in full])
+        assert all(e.feasible for e in full) and not np.all(masses > 0.0)
+        scores = np.array([e.score for e in full])
+        bounds = np.where(np.isnan(scores), -1.0, scores / 2)
+        assert not np.any(scores > bounds)  # no row scores above its bound
+        followed = evaluator.follow_postures(rows, grasps, book, sampled, metric, seeds, bounds)
+        for a, b in zip(followed, full, strict=True):
+            assert a is not None, metric
+            assert np.array_equal(a.effective_mass_kg, b.effective_mass_kg, equal_nan=True)
+            assert np.array_equal(a.joint_positions, b.joint_positions)
+    if mass_kg < 0.0:
+        config = PostureConfig(restarts=8, early_stop=False)
+        ranked = evaluator.rank(grasps, book, trajectory, seed_positions=BAXTER_SEED)
+        full_choice = select_postures(evaluator, grasps, book, trajectory, ranked, config)
+        early = select_postures(evaluator, grasps, book, trajectory, ranked, PostureConfig(8))
+        for ours, theirs in zip(early.evaluations, full_choice.evaluations, strict=True):
+            assert np.array_equal(ours.joint_positions, theirs.joint_positions)
 
 
 def test_selection_is_deterministic_and_independent_of_the_workers(baxter) -> None:

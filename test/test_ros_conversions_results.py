@@ -146,6 +146,7 @@ def test_joint_trajectory_and_posture_fields_round_trip(arm6: RobotModel) -> Non
         np.testing.assert_allclose(times, want.times_s, rtol=0, atol=1e-9)
         assert got.postures_tried == posture.postures_tried
         assert got.postures_feasible == posture.postures_feasible
+        assert got.postures_stopped == posture.postures_stopped
         np.testing.assert_array_equal(got.start_positions, posture.start_positions)
         for field, value in (
             ("score_single_ik", posture.score_single_ik),

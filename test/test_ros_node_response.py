@@ -85,9 +85,10 @@ def test_posture_selection_by_parameter_equals_the_core(
         assert got.score_range_min == pytest.approx(posture.score_range[0], rel=1e-12)
         assert got.score_range_max == pytest.approx(posture.score_range[1], rel=1e-12)
         assert got.score <= got.score_single_ik
-        assert (got.postures_tried, got.postures_feasible) == (
+        assert (got.postures_tried, got.postures_feasible, got.postures_stopped) == (
             posture.postures_tried,
             posture.postures_feasible,
+            posture.postures_stopped,
         )
         np.testing.assert_allclose(got.start_positions, posture.start_positions, atol=1e-12)
         assert_joint_trajectory(

@@ -14,9 +14,11 @@ pytest.importorskip("rclpy")
 
 from rcl_interfaces.msg import ParameterValue
 from rcl_interfaces.srv import GetParameters
+from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.context import Context
 from rclpy.executors import Executor, MultiThreadedExecutor
 from rclpy.node import Node
+from rclpy.task import Future
 
 from grasp_safety_ros.ros.runtime.rclpy_private import (
     NodeExecutor,
@@ -84,3 +86,46 @@ def test_join_callbacks_waits_for_the_pool_rclpy_keeps(context: Context) -> None
     join_callbacks(executor)
     assert pool._shutdown, POOL_CHANGED
     executor.shutdown()
+
+
+def test_a_coroutine_service_callback_leaves_no_header_to_its_thread(context: Context) -> None:
+    """One executor thread: the coroutine callback suspends, a timer runs on that thread
+    meanwhile and must not read the suspended request's header (nor may the coroutine, which
+    could resume on another thread); the callback then answers."""
+    node = Node("rclpy_private_async_server", context=context)
+    client_node = Node("rclpy_private_async_client", context=context)
+    executor = NodeExecutor(num_threads=1, context=context)
+    release = Future()
+    seen: dict[str, Any] = {}
+
+    async def echo(
+        request: GetParameters.Request, response: GetParameters.Response
+    ) -> GetParameters.Response:
+        seen["coroutine"] = request_header()
+        await release
+        response.values = [ParameterValue(string_value=n) for n in request.names]
+        return response
+
+    def tick() -> None:
+        if "coroutine" in seen and not release.done():  # the callback is suspended
+            seen["timer"] = request_header()
+            release.set_result(None)
+
+    group = ReentrantCallbackGroup()  # the timer runs while the callback is suspended
+    node.create_service(GetParameters, "echo_async", echo, callback_group=group)
+    node.create_timer(0.01, tick, callback_group=group)
+    client = client_node.create_client(GetParameters, "echo_async")
+    executor.add_node(node)
+    executor.add_node(client_node)
+    try:
+        assert client.wait_for_service(timeout_sec=10.0)
+        future = client.call_async(GetParameters.Request(names=["a"]))
+        executor.spin_until_future_complete(future, timeout_sec=10.0)
+        assert future.done(), TAKE_SERVICE_CHANGED
+        assert [v.string_value for v in future.result().values] == ["a"], TAKE_SERVICE_CHANGED
+        assert seen == {"coroutine": None, "timer": None}
+    finally:
+        executor.shutdown()
+        join_callbacks(executor)
+        client_node.destroy_node()
+        node.destroy_node()

@@ -26,6 +26,9 @@ from geometry_msgs.msg import (
 from grasp_safety_msgs.msg import GraspEvaluation, GraspRanking
 from grasp_safety_msgs.srv import RankGrasps
 from nav_msgs.msg import Path
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray, Header
 from trajectory_msgs.msg import (
     JointTrajectory,
@@ -46,7 +49,7 @@ from grasp_safety_ros.ros.conversions import (
 )
 from grasp_safety_ros.ros.parameters import check_parameter, parameter_constraints
 from grasp_safety_ros.ros.robot.bundle import build_robot
-from grasp_safety_ros.ros.runtime.process import join_started
+from grasp_safety_ros.ros.runtime.process import join_started, settle
 from grasp_safety_ros.ros.service.message_checks import (
     INT_AS_FLOAT_HINT,
     NonFiniteResultError,
@@ -281,6 +284,33 @@ def test_join_started_waits_for_a_thread_whose_start_was_cut_short() -> None:
     started = time.monotonic()
     join_started(threading.Thread(), 0.05)  # never launched: given up after the timeout
     assert time.monotonic() - started < 5.0
+
+
+class _Suspended:
+    """A node's suspended request, resumed (answered) only by a callback of its executor."""
+
+    def __init__(self) -> None:
+        self.answered = threading.Event()
+
+    @property
+    def requests_waiting(self) -> int:
+        return 0 if self.answered.is_set() else 1
+
+
+def test_settle_spins_the_executor_when_no_spin_thread_does(context: Context) -> None:
+    """A signal during start-up (wait_for_robot spins in the main thread, no spin thread yet):
+    settle spins the executor itself, or a suspended request is never answered."""
+    node = Node("settle_probe", context=context)
+    waiting = _Suspended()
+    node.create_timer(0.01, waiting.answered.set)  # a callback only a spinning executor runs
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    try:
+        settle(waiting, 30.0, executor)  # type: ignore[arg-type]  (only requests_waiting)
+        assert waiting.answered.is_set()
+    finally:
+        executor.shutdown()
+        node.destroy_node()
 
 
 def test_fair_lock_times_out_and_stops() -> None:

@@ -106,7 +106,7 @@ def test_effort_from_shared_terms_equals_pinocchio(
     robot: RobotModel = request.getfixturevalue(name)
     grasp, evaluation, terms, motion = terms_case(robot, 13)
     reference = evaluate_effort(robot, evaluation, BOX, grasp, motion)
-    batched = SampleTerms(*(array[None] for array in terms))
+    batched, _ = one_grasp(terms)
     chain = Backend.for_robot(robot).chain
     (shared,) = evaluate_efforts(robot, [evaluation], BOX, [grasp], motion, None, batched, chain)
     tolerances = effort_tolerances(robot, evaluation, BOX, grasp, reference)

@@ -26,7 +26,10 @@ SCORE_UNITS = {"mean": "kg", "max": "kg", "integral": "kg*s"}
 
 SCHEMA_VERSION = 2
 """Version of the JSON layout: 2 holds each grasp's ``samples`` as one array per field
-(columnar; 1, before it, held one object per sample)."""
+(columnar; 1, before it, held one object per sample). Bumped when a key moves, changes type
+or goes; keys added beside the others do not bump it (as the whole arm's, the retiming's and
+``posture.postures_stopped``, whose presence says that ``postures_feasible`` and
+``score_range`` leave out the postures stopped early)."""
 
 
 def evaluation_to_dict(
@@ -74,6 +77,7 @@ def posture_to_dict(posture: PostureSelection) -> dict[str, Any]:
         "start_positions": posture.start_positions.tolist(),
         "postures_tried": posture.postures_tried,
         "postures_feasible": posture.postures_feasible,
+        "postures_stopped": posture.postures_stopped,
     }
     if posture.criterion != SCORE_CRITERION:
         result["criterion"] = posture.criterion
@@ -355,9 +359,9 @@ def _posture_summary(p: PostureSelection) -> str:
             f"no feasible posture from {p.restarts + 1} IK seeds ({followed} distinct start "
             f"posture{'s' if followed != 1 else ''} followed)"
         )
-    by = ""
+    by = f", {p.postures_stopped} stopped early" if p.postures_stopped else ""
     if p.criterion != SCORE_CRITERION:
-        by = f", chosen by {p.criterion} {p.criterion_single_ik:.4g} -> {p.criterion_value:.4g}"
+        by += f", chosen by {p.criterion} {p.criterion_single_ik:.4g} -> {p.criterion_value:.4g}"
     return (
         f"single IK {p.score_single_ik:.4f} -> {p.score:.4f} "
         f"(range {p.score_range[0]:.4f}..{p.score_range[1]:.4f}, "

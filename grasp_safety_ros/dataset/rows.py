@@ -46,6 +46,7 @@ def report_columns(report: SafetyReport, per_sample: bool = False) -> dict[str, 
         put("start_positions", starts.tolist() if starts is not None and len(starts) else None)
         put("postures_tried", None if p is None else p.postures_tried)
         put("postures_feasible", None if p is None else p.postures_feasible)
+        put("postures_stopped", None if p is None else p.postures_stopped)
         put("iso_ts_15066_worst_force_ratio", _worst_ratio(a))
         put("iso_ts_15066_min_duration_s", None if a is None else a.min_duration_s)
         put("iso_ts_15066_limiting_region", (a.limiting_region or None) if a else None)

@@ -12,8 +12,10 @@ from typing import Any
 
 import pyarrow as pa
 
-SCHEMA_VERSION = 1
-"""Bumped when a column changes (part of every chunk's content hash)."""
+SCHEMA_VERSION = 2
+"""Bumped when a column changes (part of every chunk's content hash); 2: the columns
+postures_stopped, retime_binding and retime_reason, and postures_feasible and
+score_range_low/high no longer counting postures stopped early."""
 
 _TEXT = pa.dictionary(pa.int32(), pa.string())
 _FLOATS = pa.list_(pa.float64())
@@ -46,6 +48,7 @@ GRASP_SCHEMA = pa.schema(
         pa.field("start_positions", _FLOATS),  # rad or m, chain order
         pa.field("postures_tried", pa.int32()),
         pa.field("postures_feasible", pa.int32()),
+        pa.field("postures_stopped", pa.int32()),  # stopped early: certainly scored higher
         pa.field("iso_ts_15066_worst_force_ratio", pa.float64()),  # max F/F_max, permitted
         pa.field("iso_ts_15066_min_duration_s", pa.float64()),  # T_min
         pa.field("iso_ts_15066_limiting_region", pa.string()),

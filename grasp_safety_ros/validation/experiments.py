@@ -353,7 +353,7 @@ def posture_comparison(
         and the change of the peak force a spring sensor predicts, sqrt(M_sel / M_single) - 1.
     """
     evaluator = GraspSafetyEvaluator(robot)
-    config = PostureConfig(restarts=restarts)
+    config = PostureConfig(restarts=restarts, early_stop=False)  # every posture's score range
     grasps = []
     for run in runs:
         candidate = run.grasp

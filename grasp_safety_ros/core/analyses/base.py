@@ -15,8 +15,8 @@ other grasp (infeasible, or the Pinocchio backend), one result per grasp in cand
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
-from typing import Protocol, TypeVar
+from dataclasses import dataclass, field, fields
+from typing import Any, Protocol, TypeVar
 
 import numpy as np
 import pinocchio as pin
@@ -51,8 +51,9 @@ Result = TypeVar("Result")
 
 @dataclass(frozen=True)
 class Parts:
-    """The analyses' results so far, per grasp in candidate order (``SafetyReport``'s fields
-    of the same names; each analysis sets its own).
+    """The analyses' results so far, per grasp in candidate order; each analysis sets its
+    own. ``analyse`` copies every field into ``SafetyReport``'s field of the same name, all
+    but those marked ``metadata={"report": False}`` (``report_fields``).
 
     Attributes:
         scores: Safety score per grasp (the metric point's, with redundancy when on); NaN
@@ -65,13 +66,21 @@ class Parts:
     exposed: tuple[ExposedPointsEvaluation, ...] = ()
     redundancy: tuple[RedundancyResolution, ...] = ()
     scores: np.ndarray = field(default_factory=lambda: np.empty(0))
-    series: Mapping[int, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    series: Mapping[int, tuple[np.ndarray, np.ndarray]] = field(
+        default_factory=dict, metadata={"report": False}
+    )
     safety_order: tuple[int, ...] = ()
     iso: tuple[PowerForceLimitAssessment, ...] = ()
     uncertainty: UncertaintyAnalysis | None = None
     effort: tuple[EffortEvaluation, ...] = ()
     whole_arm: tuple[WholeArmEvaluation, ...] = ()
     arm_sites: ArmSites | None = None
+
+    def report_fields(self) -> dict[str, Any]:
+        """The fields ``analyse`` copies into the ``SafetyReport``, by name."""
+        return {
+            f.name: getattr(self, f.name) for f in fields(self) if f.metadata.get("report", True)
+        }
 
     def resolved_paths(self) -> list[np.ndarray | None] | None:
         """Per grasp, the redundancy resolution's joint path where it applied (else None);
@@ -83,8 +92,8 @@ class Parts:
 
 class Analysis(Protocol):
     """One analysis of ``analyse``: adding one is its module in core/analyses, a class like
-    those of ``registry`` and its place in ``registry.ANALYSES`` (docs/development.md,
-    "Adding an analysis")."""
+    those of ``registry``, its place in ``registry.ANALYSES`` and its result field in
+    ``Parts`` and ``SafetyReport`` (docs/development.md, "Adding an analysis")."""
 
     @property
     def name(self) -> str:

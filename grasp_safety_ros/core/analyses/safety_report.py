@@ -167,20 +167,12 @@ def analyse(
     return SafetyReport(
         ranking=ranking,
         options=options,
-        scores=parts.scores,
-        safety_order=parts.safety_order,
         order=_final_order(options, parts, quality),
         quality=quality,
-        iso=parts.iso,
-        exposed=parts.exposed,
-        uncertainty=parts.uncertainty,
-        redundancy=parts.redundancy,
-        effort=parts.effort,
-        whole_arm=parts.whole_arm,
-        arm_sites=parts.arm_sites,
         standard_mass_estimate_kg=standard_mass_estimate_kg(
             evaluator.robot, object_inertia.mass_kg
         ),
+        **parts.report_fields(),  # scores, safety_order and each analysis's result, by name
     )
 
 

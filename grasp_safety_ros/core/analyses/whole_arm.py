@@ -39,7 +39,6 @@ import pinocchio as pin
 
 from ..exceptions import InvalidInputError
 from ..input_checks import read_only
-from ..method.backend import Backend
 from ..method.effective_mass import augmented_model
 from ..method.executable import clamped_spline_velocities, joint_velocities_accelerations
 from ..method.points import PSEUDO_INVERSE_RCOND, site_masses, tip_following_rates, valid_rows
@@ -574,7 +573,7 @@ class WholeArmPostureCriterion:
         """The force [N] of each feasible evaluation of ``grasp``: on their terms, in one
         kernel call, with a compiled evaluator; else by Pinocchio (one augmented model)."""
         robot, count, region = evaluator.robot, len(evaluations), [self.region]
-        backend = Backend.of(evaluator.ik)
+        backend = evaluator.backend
         if backend.compiled and evaluations:
             paths = [evaluation.joint_positions for evaluation in evaluations]
             transforms = [grasp.transform_tip_to_object] * count

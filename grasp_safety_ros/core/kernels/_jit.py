@@ -33,7 +33,7 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -234,10 +234,18 @@ def _jit_inline(function: Callable[..., Any]) -> Callable[..., Any]:
     return _njit(function, inline="always")
 
 
-_announcing: list[TextIO] = []
+class TextSink(Protocol):
+    """Where ``announce_compiles`` writes: a text stream's ``write`` and ``flush``."""
+
+    def write(self, text: str, /) -> object: ...
+
+    def flush(self) -> object: ...
 
 
-def announce_compiles(stream: TextIO | None = None) -> None:
+_announcing: list[TextSink] = []
+
+
+def announce_compiles(stream: TextSink | None = None) -> None:
     """From now on, write a line to ``stream`` (default stderr) for each kernel this process
     compiles, with its time; kernels loaded from the cache and the helpers compiled inside a
     kernel's compilation are not listed. Calling again changes the stream only."""

@@ -78,7 +78,9 @@ def follow_postures(
     The bound, from the effective masses m_i > 0 computed so far (samples where the tip does
     not translate count as 0): their running max (``bound_is_max``), else their running sum
     weighted by score_weights (N,) (1/N for the mean, the trapezoid weights [s] for the
-    integral). The caller widens bounds[g] by the rounding of both sums.
+    integral). The caller widens bounds[g] by the rounding of both sums. A mass that is NaN or
+    not > 0 (an indefinite or broken mass matrix) bounds nothing: row g is then never stopped,
+    so it scores as without the stop.
     """
     _relative_twists(motion.rotations, motion.positions, object_twists, ws)
     for g in range(grasp_rotations.shape[0]):
@@ -239,6 +241,8 @@ def _evaluate_grasp(
             quadratic += ua * (mobility[a, 0] * u0 + mobility[a, 1] * u1 + mobility[a, 2] * u2)
         mass = 1.0 / quadratic
         effective_masses[i] = mass
+        if not mass > 0.0:  # NaN or not positive: the running sum bounds nothing; never stop
+            bound = math.inf
         if bound < math.inf:
             running = max(running, mass) if bound_is_max else running + score_weights[i] * mass
             if running > bound:

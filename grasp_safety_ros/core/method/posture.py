@@ -13,12 +13,12 @@ solutions, and the effective mass depends on which one the arm is in. The paper 
 3. each distinct start posture followed along the whole trajectory with the evaluator's own
    warm start (seeded with it: sample 0 converges at once, in 0 iterations, to that
    posture), and scored; the postures of all grasps of a batch in one kernel call
-   (``GraspSafetyEvaluator.follow_postures``). With ``early_stop`` (selecting by the
-   score), the j-th new postures of all grasps are followed together, j = 1, 2, ..., and a
-   posture is stopped as soon as a lower bound of its score (the running max, or the running
-   weighted sum, of its effective masses, all > 0, widened by the sums' rounding) exceeds the
-   lowest score of its grasp's feasible postures so far (the single IK's and earlier ones'):
-   it could only lose;
+   (``GraspSafetyEvaluator.follow_postures``). With ``early_stop`` (the default; selecting
+   by the score), the first FIRST_WAVE new postures of all grasps are followed together,
+   then the rest, and a posture is stopped as soon as a lower bound of its score (the
+   running max, or the running weighted sum, of its effective masses, all > 0, widened by
+   the sums' rounding) exceeds the lowest score of its grasp's feasible postures so far (the
+   single IK's and the first wave's): it could only lose;
 4. the feasible one with the lowest score is kept (ties: the earliest, so the single IK).
 
 Never worse than the single IK, with or without the early stop: when the single IK is
@@ -26,10 +26,11 @@ feasible it is candidate 0, so the minimum over the candidates is at most its sc
 equal scores argmin keeps the earliest, the single IK itself. The early stop changes no
 choice: a stopped posture scores strictly above a feasible posture already found, so it is
 neither the minimum nor the first of equal minima, and a posture that is not stopped is the
-one the full evaluation gives, bit for bit (``test_posture.py``: a property test over random
-arms, grasps and metrics, with and without it). It changes the record: a stopped posture
-counts as tried and as stopped (``PostureSelection.postures_stopped``), not as feasible, and
-is not in the score range.
+one the full evaluation gives, bit for bit (property tests: of ``_choose`` over arbitrary
+candidates, ``test_posture_choice.py``; over random arms, grasps and metrics with the stop on
+and off, ``test_posture.py``). It changes the record only: a stopped posture counts as tried and as
+stopped (``PostureSelection.postures_stopped``, in every output that shows the counts), not
+as feasible, and is not in the score range (the range of the postures followed to the end).
 
 A ``PostureCriterion`` may replace the score in step 4 (core.analyses.whole_arm's, with
 ``rank_by: whole_arm``: the worst predicted force over the arm's points); the single IK is
@@ -44,6 +45,7 @@ posture. A grasp is infeasible only when no start posture gives a feasible traje
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
@@ -79,6 +81,14 @@ FOLLOW_ROWS = 64
 """Start postures per kernel call in ``select_posture_batch`` (bounds its buffers: ~45 floats
 per posture and sample)."""
 
+FIRST_WAVE = 2
+"""With the early stop, each grasp's first FIRST_WAVE new postures are followed first (against
+the single IK's score), then the rest together (against the best so far): two kernel calls
+per batch whatever the restarts. One wave per posture rank (up to ``restarts`` kernel calls)
+would follow 0.15 % fewer samples (simulated from every posture's per-sample masses on
+bench/postures.py's Panda and Baxter workloads, 20 grasps, 8 restarts), less than the
+calls cost."""
+
 
 @dataclass(frozen=True)
 class PostureConfig:
@@ -92,11 +102,14 @@ class PostureConfig:
         duplicate_tolerance_rad: Start postures closer than this (largest joint difference)
             [rad or m] to one already found are not followed again.
         early_stop: Stop following a start posture as soon as its score certainly exceeds
-            that of a posture of the same grasp already found (module docstring; the same
-            choice, a shorter record). Off by default: it saved 6-10 % of posture selection's
-            time (``bench/postures.py``, 8 restarts, Panda, Baxter), as the postures' scores
+            that of a posture of the same grasp already found (module docstring): the same
+            kept posture bit for bit, a record that counts it as stopped
+            (``PostureSelection.postures_stopped``) instead of feasible or not. On by
+            default; off: every posture followed to the end (the full ``score_range``, as
+            the MuJoCo validation's study of the range uses). It saves little (a few % of
+            posture selection's time, docs/performance_pipeline.md), as the postures' scores
             differ by a few percent, so a lower bound of a worse one exceeds the best only
-            near the end; and the node's and the dataset's records have no stopped count yet.
+            near the end.
         restart_iterations: Largest Gauss-Newton iterations of each restart's IK at the
             start pose, in [1, MAX_RESTART_ITERATIONS]; None (default): the IK's own
             ``ik.max_iterations`` (100), the selection as before. Fewer drop the seeds that
@@ -112,7 +125,7 @@ class PostureConfig:
     restarts: int = DEFAULT_RESTARTS
     seed: int = 0
     duplicate_tolerance_rad: float = 1e-3
-    early_stop: bool = False
+    early_stop: bool = True
     restart_iterations: int | None = None
     restart_stall_iterations: int | None = None
 
@@ -384,11 +397,12 @@ def _follow(
     """Each grasp k's new start postures followed (None: stopped early), in kernel calls of
     up to FOLLOW_ROWS postures.
 
-    With the early stop (selecting by the score) the j-th postures of all grasps go in one
-    wave, and a posture is stopped once its score certainly exceeds the lowest score of its
-    grasp's feasible postures so far (the single IK's and earlier waves'), not just the
-    single IK's: a stopped posture scores above one already found, so it is never the argmin
-    (nor the first of equal ones), and the kept posture is the one without the stop.
+    With the early stop (selecting by the score) the first FIRST_WAVE postures of all grasps
+    go in one wave, the rest in a second, and a posture is stopped once its score certainly
+    exceeds the lowest score of its grasp's feasible postures so far (the single IK's and the
+    first wave's), not just the single IK's: a stopped posture scores above one already
+    found, so it is never the argmin (nor the first of equal ones), and the kept posture is
+    the one without the stop.
     """
     robot = evaluator.robot
     nq = robot.model.nq
@@ -397,12 +411,10 @@ def _follow(
         k: single_iks[k].score if stopping and single_iks[k].feasible else math.inf
         for k, _ in starts
     }
-    waves = max((len(found) for _, found in starts), default=0) if stopping else 1
+    cuts = (0, FIRST_WAVE, None) if stopping else (0, None)
     rows = [
-        [(k, positions) for k, found in starts for positions in found[j : j + 1]]
-        if stopping
-        else [(k, positions) for k, found in starts for positions in found]
-        for j in range(waves)
+        [(k, positions) for k, found in starts for positions in found[first:last]]
+        for first, last in itertools.pairwise(cuts)
     ]
     followed: dict[int, list[GraspEvaluation | None]] = {k: [] for k, _ in starts}
     for wave in rows:

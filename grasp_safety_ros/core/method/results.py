@@ -132,7 +132,8 @@ class PostureSelection:
         score_single_ik: Score of the paper's single IK from the configured seed; NaN when
             that one is infeasible.
         score_range: (lowest, highest) score over the feasible postures found (with
-            ``PostureConfig.early_stop``: followed to the end); NaN if none.
+            ``PostureConfig.early_stop``, the default: those followed to the end); NaN if
+            none.
         start_positions: (n,) joint positions at t = 0 of the kept posture [rad or m], chain
             order; empty if infeasible.
         postures_tried: Distinct start postures followed along the trajectory (the single
@@ -140,7 +141,8 @@ class PostureSelection:
         postures_feasible: Of those, the ones whose whole trajectory is feasible (with
             ``PostureConfig.early_stop``: not counting those stopped early).
         postures_stopped: Of those, the ones stopped early (``PostureConfig.early_stop``):
-            certainly scoring above a posture already found, neither feasible nor not.
+            their score's lower bound already exceeded that of a feasible posture found, so
+            they could only lose; neither feasible nor infeasible.
         selected: Which of the tried postures was kept (0: the single IK's); -1 if none.
         criterion: What chose the posture: SCORE_CRITERION or a posture criterion's name
             (core.method.posture.PostureCriterion).

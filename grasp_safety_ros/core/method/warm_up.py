@@ -51,8 +51,8 @@ def warm_up(evaluator: GraspSafetyEvaluator | None = None) -> float:
     start = time.perf_counter()
     if evaluator is None:
         evaluator = GraspSafetyEvaluator(RobotModel.from_urdf(_WARM_UP_URDF, "base", "b"))
-    chain = evaluator.ik.chain
-    if not evaluator.ik.compiled or chain is None:  # compiled implies a chain
+    chain = evaluator.backend.chain
+    if chain is None:  # the Pinocchio backend: nothing to compile
         return 0.0
     robot = evaluator.robot
     pose = robot.transform_tip_to_base(robot.default_seed_positions())
@@ -127,9 +127,7 @@ def announce_compiles(stream: TextIO | None = None) -> None:
     in between is not written to); a stream that cannot be written is skipped."""
     from ..kernels._jit import announce_compiles as announce
 
-    # _jit's parameter says TextIO (a kernel file: fixed with the next kernel change); it
-    # only writes and flushes, as _Announcements does
-    announce(_Announcements(stream))  # type: ignore[arg-type]
+    announce(_Announcements(stream))
 
 
 class _Announcements:

@@ -179,6 +179,7 @@ def _set_posture(message: GraspEvaluationMsg, posture: PostureSelection) -> None
     message.start_positions = float64_array(posture.start_positions)
     message.postures_tried = int(posture.postures_tried)
     message.postures_feasible = int(posture.postures_feasible)
+    message.postures_stopped = int(posture.postures_stopped)
 
 
 def ranked_pose_array(grasps: PoseArray, order: Sequence[int]) -> PoseArray:

@@ -9,8 +9,10 @@ are ranked by the node's ranking (its robot, object and settings; the object mov
 (moveit.grasps). Threads: the service callback is a coroutine; while it waits for the planner
 (at most ``moveit.planner_timeout_s``) it is suspended and holds no executor thread, so any
 number of requests can wait while the planner's answers are taken (a request that slept on its
-thread left none for them once EXECUTOR_THREADS requests waited). A timer of the request
-(every WAIT_STEP_S) ends the wait: planner answered, deadline passed or node shutting down.
+thread left none for them once EXECUTOR_THREADS requests waited). One timer of the server, on
+the steady clock (so also with use_sim_time and no /clock) and running only while a request
+waits, ends each wait every WAIT_STEP_S: service appeared, deadline passed, node shutting down
+or a look that raised; the planner's answer ends its wait at once.
 """
 
 from __future__ import annotations
@@ -19,13 +21,15 @@ import threading
 import time
 import traceback
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 from geometry_msgs.msg import Pose
 from moveit_msgs.msg import MoveItErrorCodes
 from moveit_msgs.srv import GraspPlanning
 from nav_msgs.msg import Path
-from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.task import Future
 from trajectory_msgs.msg import MultiDOFJointTrajectory
@@ -48,8 +52,11 @@ from .grasps import (
 
 SOURCE = "grasp_safety"
 """``error_code.source`` of the answers this server makes itself."""
-WAIT_STEP_S = 0.05
-"""How often a request waiting for the planner looks whether its wait is over [s]."""
+WAIT_STEP_S = 0.1
+"""How often the server looks whether a request's wait for the planner is over [s]. rclpy's
+executor resumes every suspended coroutine at each of its wake-ups, a tick among them: the
+step trades the node's CPU while many requests wait against how late a timeout, the service's
+appearance or the shut-down is seen (the planner's answer is seen at once)."""
 
 
 class PlannerError(Exception):
@@ -58,6 +65,16 @@ class PlannerError(Exception):
     def __init__(self, code: int, message: str) -> None:
         super().__init__(message)
         self.code = code
+
+
+@dataclass(frozen=True, eq=False)  # each wait its own (hashed by identity)
+class _Wait:
+    """A request suspended until ``condition()`` (True) or ``deadline_s`` (time.monotonic,
+    False); ``over`` holds the outcome."""
+
+    over: Future
+    condition: Callable[[], bool]
+    deadline_s: float
 
 
 class GraspPlanningServer:
@@ -91,8 +108,17 @@ class GraspPlanningServer:
         self._stopping = stopping
         self._group = ReentrantCallbackGroup()
         self._clients: dict[str, Any] = {}
-        self._clients_lock = threading.Lock()  # the clients and the waiting count
-        self._waiting = 0
+        self._clients_lock = threading.Lock()
+        self._waits: set[_Wait] = set()  # the suspended requests, left by their coroutine
+        self._waits_lock = threading.Lock()  # the waits, their outcomes and the timer's state
+        self._steady_clock = Clock(clock_type=ClockType.STEADY_TIME)  # lives with the timer
+        self._timer = node.create_timer(  # reset by a new wait, cancelled by a look at none
+            WAIT_STEP_S,
+            self._look,
+            callback_group=MutuallyExclusiveCallbackGroup(),  # no take while a look cancels
+            clock=self._steady_clock,
+            autostart=False,
+        )
         self.service = node.create_service(
             GraspPlanning,
             "~/plan_grasps",
@@ -107,8 +133,8 @@ class GraspPlanningServer:
     @property
     def waiting(self) -> int:
         """Requests suspended while they wait for the planner."""
-        with self._clients_lock:
-            return self._waiting
+        with self._waits_lock:
+            return len(self._waits)
 
     async def _on_plan_grasps(
         self, request: GraspPlanning.Request, response: GraspPlanning.Response
@@ -184,7 +210,7 @@ class GraspPlanningServer:
             )
         future = client.call_async(request)
         try:
-            answered = await self._wait(future.done, deadline)
+            answered = await self._wait(future.done, deadline, answer=future)
         finally:
             if not future.done():  # timed out or shutting down: the answer is not awaited
                 client.remove_pending_request(future)
@@ -197,38 +223,57 @@ class GraspPlanningServer:
             )
         return future.result()
 
-    async def _wait(self, condition: Callable[[], bool], deadline: float) -> bool:
+    async def _wait(
+        self, condition: Callable[[], bool], deadline: float, answer: Future | None = None
+    ) -> bool:
         """Wait, suspended, until ``condition()`` (True) or ``deadline`` (time.monotonic,
-        False), looked at every WAIT_STEP_S by a timer; raises ShuttingDownError once the
-        node shuts down."""
-        over: Future = Future()
-        lock = threading.Lock()
-
-        def look() -> None:
-            with lock:
-                if over.done():
-                    return
-                if self._stopping.is_set():
-                    over.set_exception(
-                        ShuttingDownError("plan_grasps abandoned: the node is shutting down")
-                    )
-                elif condition():
-                    over.set_result(True)
-                elif time.monotonic() > deadline:
-                    over.set_result(False)
-
-        look()
-        if over.done():
-            return bool(over.result())
-        timer = self._node.create_timer(WAIT_STEP_S, look, callback_group=self._group)
-        with self._clients_lock:
-            self._waiting += 1
+        False), looked at now, every WAIT_STEP_S by the server's timer and when ``answer`` is
+        done; raises ShuttingDownError once the node shuts down, and what ``condition``
+        raised."""
+        wait = _Wait(Future(), condition, deadline)
+        with self._waits_lock:
+            self._end_if_over(wait)
+            if wait.over.done():
+                return bool(wait.over.result())
+            self._waits.add(wait)
+            if self._timer.is_canceled():
+                self._timer.reset()
+        if answer is not None:
+            answer.add_done_callback(lambda _: self._look_at(wait))
         try:
-            return bool(await over)
+            return bool(await wait.over)
         finally:
-            with self._clients_lock:
-                self._waiting -= 1
-            self._node.destroy_timer(timer)
+            with self._waits_lock:
+                self._waits.discard(wait)
+
+    def _look(self) -> None:
+        """The timer's callback: ends the waits that are over; cancels the timer when no
+        request waits (reset by the next one)."""
+        with self._waits_lock:
+            if not self._waits:
+                self._timer.cancel()
+            for wait in self._waits:
+                self._end_if_over(wait)
+
+    def _look_at(self, wait: _Wait) -> None:
+        """Ends ``wait`` if it is over: the planner's answer came (a done callback)."""
+        with self._waits_lock:
+            self._end_if_over(wait)
+
+    def _end_if_over(self, wait: _Wait) -> None:
+        """Complete ``wait.over`` if its wait is over (caller holds the waits' lock): an
+        exception of ``condition`` is its outcome, so the request is answered, not lost."""
+        if wait.over.done():  # its coroutine has not resumed yet
+            return
+        try:
+            if self._stopping.is_set():
+                raise ShuttingDownError("plan_grasps abandoned: the node is shutting down")
+            if wait.condition():
+                wait.over.set_result(True)
+            elif time.monotonic() > wait.deadline_s:
+                wait.over.set_result(False)
+        except Exception as error:
+            wait.over.set_exception(error)
 
     def _rerank(self, request: GraspPlanning.Request, grasps: list[Any], field: str) -> list[Any]:
         """The grasps in the node's order, with their safety qualities (moveit.grasps)."""

@@ -23,6 +23,8 @@ SPIN_PERIOD_S = 0.1
 SETTLE_S = 2.0
 """At shut-down, how long the executor keeps spinning for the suspended requests to be
 answered [s] (each sees the shut-down within its wait's step, moveit/server.py)."""
+SETTLE_STEP_S = 0.01
+"""How often settle looks whether the suspended requests are answered [s]."""
 
 
 def spin_until(executor: Executor, spinning: threading.Event) -> None:
@@ -69,12 +71,20 @@ class ServedNode(Protocol):
     def destroy_node(self) -> None: ...
 
 
-def settle(node: ServedNode, timeout_s: float) -> None:
+def settle(node: ServedNode, timeout_s: float, executor: Executor | None = None) -> None:
     """Wait (at most ``timeout_s``) until none of ``node``'s requests is suspended: a service
-    callback that awaits another node is resumed only by a spinning executor."""
+    callback that awaits another node is resumed only by a spinning executor. ``executor``:
+    spin it here (no spin thread spins it: a signal during start-up); None: another thread
+    spins it."""
     deadline = time.monotonic() + timeout_s
-    while node.requests_waiting and time.monotonic() < deadline:
-        time.sleep(0.01)
+    try:
+        while node.requests_waiting and time.monotonic() < deadline:
+            if executor is not None and executor.context.ok():
+                executor.spin_once(timeout_sec=SETTLE_STEP_S)
+            else:
+                time.sleep(SETTLE_STEP_S)
+    except ExternalShutdownException:  # rclpy.shutdown() elsewhere: nothing resumes them
+        pass
 
 
 class _Stop(Exception):  # noqa: N818  (a signal, not an error)
@@ -134,7 +144,7 @@ def run_node(
             signal.signal(number, signal.SIG_IGN if handler is _raise_stop else handler)
         if node is not None:
             node.abandon_rankings()
-            settle(node, SETTLE_S)  # a waiting request came through the spin thread: it spins
+            settle(node, SETTLE_S, executor if spinner is None else None)  # spun here or there
         if executor is not None:
             spinning.clear()  # the spin thread leaves its wait before the executor goes
             if spinner is not None:  # its start may have been cut short by the signal

@@ -1,8 +1,8 @@
 """Every use of private rclpy API in the node, in one place; each fails loudly in a test if
 rclpy changes under it.
 
-- NodeExecutor overrides ``Executor._take_service`` so a service callback can read its
-  request's header (request_header: sequence number, reception time); with it the node finds
+- NodeExecutor overrides ``Executor._take_service`` so a synchronous service callback can read
+  its request's header (request_header: sequence number, reception time); with it the node finds
   the client that sent the request among its service's introspection events, to stop the
   ranking when that client leaves (service.ranking_job.ClientWatch). Public replacement: a
   service callback that receives the request header (rclpy hands it the request only).
@@ -19,9 +19,10 @@ rclpy changes under it.
 
 from __future__ import annotations
 
+import inspect
 import threading
 from collections.abc import Callable
-from typing import Any
+from typing import Any, cast
 
 from rclpy.exceptions import InvalidHandle
 from rclpy.executors import MultiThreadedExecutor, await_or_execute
@@ -39,11 +40,15 @@ class NodeExecutor(MultiThreadedExecutor):
     rclpy hands a service callback the request only; with the header the node finds the
     client that sent it among its service's introspection events, to stop the ranking when
     that client leaves (ClientWatch). In another executor the node falls back to the clients
-    present at the request's arrival. The header is for synchronous callbacks: a coroutine
-    callback (~/plan_grasps) may resume on another thread.
+    present at the request's arrival. The header is for synchronous callbacks only: a
+    coroutine callback (~/plan_grasps) may suspend, leaving its header to the next callback of
+    its thread, and resume on another thread, so it is taken by rclpy's own code (no header).
     """
 
     def _take_service(self, srv: Any) -> Callable[[], Any] | None:
+        if inspect.iscoroutinefunction(srv.callback):  # rclpy's own, no header (see above)
+            take = super()._take_service(srv)  # type: ignore[no-untyped-call]
+            return cast(Callable[[], Any] | None, take)
         try:
             with srv.handle:
                 request, header = srv.handle.service_take_request(srv.srv_type.Request)
