@@ -150,6 +150,39 @@ def evaluate_effort(
         return _infeasible(evaluation, limits)
     times = np.asarray(evaluation.times_s, dtype=float)
     positions = _checked_positions(robot, evaluation, joint_positions)
+    velocity_fd, acceleration_fd = _self_motion_rates(robot, positions, times, trajectory)
+    twists_tip_in_base, twist_rates_tip_in_base = tip_twist_and_derivative(
+        trajectory, grasp.transform_tip_to_object, times
+    )
+    rotation_base_to_world = robot.transform_base_to_world.rotation
+    kinematics = robot.model.createData()
+    if model is None:
+        model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
+    data = model.createData()
+    q_all = [robot.q_from_positions(p) for p in positions]
+    velocities = np.empty_like(positions)
+    accelerations = np.empty_like(positions)
+    torques = np.empty_like(positions)
+    for i, q in enumerate(q_all):
+        v, a = _joint_rates(
+            robot,
+            kinematics,
+            q,
+            _in_world(rotation_base_to_world, twists_tip_in_base[i]),
+            _in_world(rotation_base_to_world, twist_rates_tip_in_base[i]),
+            velocity_fd[i],
+            acceleration_fd[i],
+        )
+        velocities[i], accelerations[i] = v, a
+        torques[i] = pin.rnea(model, data, q, v, a)
+    return _summary(evaluation, limits, times, velocities, accelerations, torques)
+
+
+def _self_motion_rates(
+    robot: RobotModel, positions: np.ndarray, times: np.ndarray, trajectory: Trajectory
+) -> tuple[np.ndarray, np.ndarray]:
+    """(N, n) joint velocities and accelerations of the path ``positions`` by finite
+    differences over the path parameter s and the chain rule in time (the null-space part)."""
     kinematic_model = robot.model
     n = robot.num_joints
     # The IK makes q a function of the path parameter s only: null-space rates from
@@ -172,53 +205,49 @@ def evaluate_effort(
         dq_ds = d2q_ds2 = np.zeros_like(positions)
     velocity_fd = dq_ds * s_rate[:, None]
     acceleration_fd = d2q_ds2 * s_rate[:, None] ** 2 + dq_ds * s_accel[:, None]
-    twists_tip_in_base, twist_rates_tip_in_base = tip_twist_and_derivative(
-        trajectory, grasp.transform_tip_to_object, times
+    return velocity_fd, acceleration_fd
+
+
+def _in_world(rotation_base_to_world: np.ndarray, twist_in_base: np.ndarray) -> np.ndarray:
+    """A (6,) twist (or twist rate) in base axes rotated to world axes."""
+    return np.concatenate(
+        [rotation_base_to_world @ twist_in_base[:3], rotation_base_to_world @ twist_in_base[3:]]
     )
-    rotation_base_to_world = robot.transform_base_to_world.rotation
-    kinematics = kinematic_model.createData()
-    if model is None:
-        model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
-    data = model.createData()
-    q_all = [robot.q_from_positions(p) for p in positions]
-    velocities = np.empty_like(positions)
-    accelerations = np.empty_like(positions)
-    torques = np.empty_like(positions)
+
+
+def _joint_rates(
+    robot: RobotModel,
+    kinematics: pin.Data,
+    q: np.ndarray,
+    twist: np.ndarray,
+    twist_rate: np.ndarray,
+    velocity_fd: np.ndarray,
+    acceleration_fd: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Joint velocity and acceleration at ``q`` giving the tip ``twist`` and ``twist_rate``
+    (world axes): the Jacobian pseudo-inverse's, plus the null-space part of the self-motion
+    rates ``velocity_fd`` and ``acceleration_fd``."""
+    kinematic_model = robot.model
     zero = np.zeros(kinematic_model.nv)
-    for i, q in enumerate(q_all):
-        pin.computeJointJacobians(kinematic_model, kinematics, q)
-        jacobian = pin.getFrameJacobian(
-            kinematic_model,
-            kinematics,
-            robot.tip_frame_id,
-            pin.ReferenceFrame.LOCAL_WORLD_ALIGNED,
-        ).reshape(6, kinematic_model.nv)
-        pseudo_inverse = np.linalg.pinv(jacobian, rcond=1e-10)
-        null = np.eye(kinematic_model.nv) - pseudo_inverse @ jacobian
-        twist = np.concatenate(
-            [
-                rotation_base_to_world @ twists_tip_in_base[i, :3],
-                rotation_base_to_world @ twists_tip_in_base[i, 3:],
-            ]
-        )
-        twist_rate = np.concatenate(
-            [
-                rotation_base_to_world @ twist_rates_tip_in_base[i, :3],
-                rotation_base_to_world @ twist_rates_tip_in_base[i, 3:],
-            ]
-        )
-        v = pseudo_inverse @ twist + null @ velocity_fd[i]
-        pin.forwardKinematics(kinematic_model, kinematics, q, v, zero)
-        drift = pin.getFrameClassicalAcceleration(
-            kinematic_model,
-            kinematics,
-            robot.tip_frame_id,
-            pin.ReferenceFrame.LOCAL_WORLD_ALIGNED,
-        ).vector
-        a = pseudo_inverse @ (twist_rate - drift) + null @ acceleration_fd[i]
-        velocities[i], accelerations[i] = v, a
-        torques[i] = pin.rnea(model, data, q, v, a)
-    return _summary(evaluation, limits, times, velocities, accelerations, torques)
+    pin.computeJointJacobians(kinematic_model, kinematics, q)
+    jacobian = pin.getFrameJacobian(
+        kinematic_model,
+        kinematics,
+        robot.tip_frame_id,
+        pin.ReferenceFrame.LOCAL_WORLD_ALIGNED,
+    ).reshape(6, kinematic_model.nv)
+    pseudo_inverse = np.linalg.pinv(jacobian, rcond=1e-10)
+    null = np.eye(kinematic_model.nv) - pseudo_inverse @ jacobian
+    v = pseudo_inverse @ twist + null @ velocity_fd
+    pin.forwardKinematics(kinematic_model, kinematics, q, v, zero)
+    drift = pin.getFrameClassicalAcceleration(
+        kinematic_model,
+        kinematics,
+        robot.tip_frame_id,
+        pin.ReferenceFrame.LOCAL_WORLD_ALIGNED,
+    ).vector
+    a = pseudo_inverse @ (twist_rate - drift) + null @ acceleration_fd
+    return v, a
 
 
 def _infeasible(evaluation: GraspEvaluation, limits: np.ndarray) -> EffortEvaluation:
