@@ -32,7 +32,7 @@ import pinocchio as pin
 from ..exceptions import InvalidInputError
 from ..input_checks import read_only
 from ..method.compiled import augmented_bodies, pose_arrays
-from ..method.dynamics import joint_dynamics
+from ..method.dynamics import JointDynamics, joint_dynamics
 from ..method.effective_mass import augmented_model
 from ..method.packed import ChainArrays
 from ..method.ranking import Grasp, GraspEvaluation
@@ -333,7 +333,46 @@ def evaluate_efforts(
             )
         )
     limits = effort_limits(robot)
-    n = robot.num_joints
+    positions, counts, motion_of, first_of_group = _packed_paths(
+        robot, evaluations, motions, overrides
+    )
+    paths, object_rotations, object_twists = _object_motions(
+        evaluations, motions, first_of_group, positions.shape[1]
+    )
+    rotations, translations = pose_arrays([grasp.transform_tip_to_object for grasp in grasps])
+    bodies = augmented_bodies(robot, object_inertia, rotations, translations)
+    model = robot.model
+    q_all = positions if model.nq == model.nv else configurations(robot, positions)
+    gravity = np.asarray(model.gravity.linear, dtype=float)
+    dynamics = joint_dynamics(
+        chain,
+        bodies,
+        positions,
+        q_all,
+        counts,
+        motion_of,
+        paths,
+        object_rotations,
+        object_twists,
+        translations,
+        gravity,
+        terms,
+    )
+    return _compiled_efforts(evaluations, limits, counts, dynamics)
+
+
+def _packed_paths(
+    robot: RobotModel,
+    evaluations: Sequence[GraspEvaluation],
+    motions: Sequence[Trajectory],
+    overrides: Sequence[np.ndarray | None],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[int]]:
+    """The feasible grasps' joint paths packed for the kernel, checked as ``_checked_positions``.
+
+    Returns (positions (G, N, n) zero-padded, sample counts (G,), each grasp's motion group
+    (G,): one per (motion, sample times), the first grasp of each group).
+    """
+    count, n = len(evaluations), robot.num_joints
     feasible = [k for k, evaluation in enumerate(evaluations) if evaluation.feasible]
     samples = max((len(evaluations[k].times_s) for k in feasible), default=0)
     positions = np.zeros((count, samples, n))
@@ -358,11 +397,23 @@ def evaluate_efforts(
     if not finite.all():
         k = int(np.flatnonzero(~finite)[0])
         _checked_positions(robot, evaluations[k], positions[k, : counts[k]])  # raises
+    return positions, counts, motion_of, first_of_group
+
+
+def _object_motions(
+    evaluations: Sequence[GraspEvaluation],
+    motions: Sequence[Trajectory],
+    first_of_group: list[int],
+    samples: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per motion group, zero-padded to ``samples``: the path parameter (3, N) (s, ṡ, s̈),
+    the object's rotations (N, 3, 3) and its origin's twist and twist rate (2, N, 6)."""
     # Each motion's path parameter and the object's own motion (its origin's twist: the
     # identity grasp's); the kernel moves them to each grasp's tip.
-    paths = np.zeros((len(groups), 3, samples))
-    object_rotations = np.zeros((len(groups), samples, 3, 3))
-    object_twists = np.zeros((len(groups), 2, samples, 6))
+    groups = len(first_of_group)
+    paths = np.zeros((groups, 3, samples))
+    object_rotations = np.zeros((groups, samples, 3, 3))
+    object_twists = np.zeros((groups, 2, samples, 6))
     for index, k in enumerate(first_of_group):
         motion, times = motions[k], np.asarray(evaluations[k].times_s, dtype=float)
         paths[index, :, : len(times)] = motion.path_parameter(times)
@@ -370,25 +421,16 @@ def evaluate_efforts(
         twist, rate = motion.tip_twists(pin.SE3.Identity(), times)
         object_twists[index, 0, : len(times)] = twist
         object_twists[index, 1, : len(times)] = rate
-    rotations, translations = pose_arrays([grasp.transform_tip_to_object for grasp in grasps])
-    bodies = augmented_bodies(robot, object_inertia, rotations, translations)
-    model = robot.model
-    q_all = positions if model.nq == model.nv else configurations(robot, positions)
-    gravity = np.asarray(model.gravity.linear, dtype=float)
-    dynamics = joint_dynamics(
-        chain,
-        bodies,
-        positions,
-        q_all,
-        counts,
-        motion_of,
-        paths,
-        object_rotations,
-        object_twists,
-        translations,
-        gravity,
-        terms,
-    )
+    return paths, object_rotations, object_twists
+
+
+def _compiled_efforts(
+    evaluations: Sequence[GraspEvaluation],
+    limits: np.ndarray,
+    counts: np.ndarray,
+    dynamics: JointDynamics,
+) -> tuple[EffortEvaluation, ...]:
+    """The EffortEvaluations of the kernel's ``dynamics`` (read-only views of its arrays)."""
     shared_limits = read_only(limits, copy=True)
     peak_fractions = read_only(dynamics.peak_abs_torques / limits)
     rms_fractions = read_only(dynamics.rms_torques / limits)
