@@ -32,7 +32,7 @@ import pinocchio as pin
 from ..exceptions import InvalidInputError
 from ..input_checks import read_only
 from ..method.compiled import augmented_bodies, pose_arrays
-from ..method.dynamics import joint_dynamics
+from ..method.dynamics import JointDynamics, joint_dynamics
 from ..method.effective_mass import augmented_model
 from ..method.packed import ChainArrays
 from ..method.ranking import Grasp, GraspEvaluation
@@ -150,6 +150,39 @@ def evaluate_effort(
         return _infeasible(evaluation, limits)
     times = np.asarray(evaluation.times_s, dtype=float)
     positions = _checked_positions(robot, evaluation, joint_positions)
+    velocity_fd, acceleration_fd = _self_motion_rates(robot, positions, times, trajectory)
+    twists_tip_in_base, twist_rates_tip_in_base = tip_twist_and_derivative(
+        trajectory, grasp.transform_tip_to_object, times
+    )
+    rotation_base_to_world = robot.transform_base_to_world.rotation
+    kinematics = robot.model.createData()
+    if model is None:
+        model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
+    data = model.createData()
+    q_all = [robot.q_from_positions(p) for p in positions]
+    velocities = np.empty_like(positions)
+    accelerations = np.empty_like(positions)
+    torques = np.empty_like(positions)
+    for i, q in enumerate(q_all):
+        v, a = _joint_rates(
+            robot,
+            kinematics,
+            q,
+            _in_world(rotation_base_to_world, twists_tip_in_base[i]),
+            _in_world(rotation_base_to_world, twist_rates_tip_in_base[i]),
+            velocity_fd[i],
+            acceleration_fd[i],
+        )
+        velocities[i], accelerations[i] = v, a
+        torques[i] = pin.rnea(model, data, q, v, a)
+    return _summary(evaluation, limits, times, velocities, accelerations, torques)
+
+
+def _self_motion_rates(
+    robot: RobotModel, positions: np.ndarray, times: np.ndarray, trajectory: Trajectory
+) -> tuple[np.ndarray, np.ndarray]:
+    """(N, n) joint velocities and accelerations of the path ``positions`` by finite
+    differences over the path parameter s and the chain rule in time (the null-space part)."""
     kinematic_model = robot.model
     n = robot.num_joints
     # The IK makes q a function of the path parameter s only: null-space rates from
@@ -172,53 +205,49 @@ def evaluate_effort(
         dq_ds = d2q_ds2 = np.zeros_like(positions)
     velocity_fd = dq_ds * s_rate[:, None]
     acceleration_fd = d2q_ds2 * s_rate[:, None] ** 2 + dq_ds * s_accel[:, None]
-    twists_tip_in_base, twist_rates_tip_in_base = tip_twist_and_derivative(
-        trajectory, grasp.transform_tip_to_object, times
+    return velocity_fd, acceleration_fd
+
+
+def _in_world(rotation_base_to_world: np.ndarray, twist_in_base: np.ndarray) -> np.ndarray:
+    """A (6,) twist (or twist rate) in base axes rotated to world axes."""
+    return np.concatenate(
+        [rotation_base_to_world @ twist_in_base[:3], rotation_base_to_world @ twist_in_base[3:]]
     )
-    rotation_base_to_world = robot.transform_base_to_world.rotation
-    kinematics = kinematic_model.createData()
-    if model is None:
-        model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
-    data = model.createData()
-    q_all = [robot.q_from_positions(p) for p in positions]
-    velocities = np.empty_like(positions)
-    accelerations = np.empty_like(positions)
-    torques = np.empty_like(positions)
+
+
+def _joint_rates(
+    robot: RobotModel,
+    kinematics: pin.Data,
+    q: np.ndarray,
+    twist: np.ndarray,
+    twist_rate: np.ndarray,
+    velocity_fd: np.ndarray,
+    acceleration_fd: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Joint velocity and acceleration at ``q`` giving the tip ``twist`` and ``twist_rate``
+    (world axes): the Jacobian pseudo-inverse's, plus the null-space part of the self-motion
+    rates ``velocity_fd`` and ``acceleration_fd``."""
+    kinematic_model = robot.model
     zero = np.zeros(kinematic_model.nv)
-    for i, q in enumerate(q_all):
-        pin.computeJointJacobians(kinematic_model, kinematics, q)
-        jacobian = pin.getFrameJacobian(
-            kinematic_model,
-            kinematics,
-            robot.tip_frame_id,
-            pin.ReferenceFrame.LOCAL_WORLD_ALIGNED,
-        ).reshape(6, kinematic_model.nv)
-        pseudo_inverse = np.linalg.pinv(jacobian, rcond=1e-10)
-        null = np.eye(kinematic_model.nv) - pseudo_inverse @ jacobian
-        twist = np.concatenate(
-            [
-                rotation_base_to_world @ twists_tip_in_base[i, :3],
-                rotation_base_to_world @ twists_tip_in_base[i, 3:],
-            ]
-        )
-        twist_rate = np.concatenate(
-            [
-                rotation_base_to_world @ twist_rates_tip_in_base[i, :3],
-                rotation_base_to_world @ twist_rates_tip_in_base[i, 3:],
-            ]
-        )
-        v = pseudo_inverse @ twist + null @ velocity_fd[i]
-        pin.forwardKinematics(kinematic_model, kinematics, q, v, zero)
-        drift = pin.getFrameClassicalAcceleration(
-            kinematic_model,
-            kinematics,
-            robot.tip_frame_id,
-            pin.ReferenceFrame.LOCAL_WORLD_ALIGNED,
-        ).vector
-        a = pseudo_inverse @ (twist_rate - drift) + null @ acceleration_fd[i]
-        velocities[i], accelerations[i] = v, a
-        torques[i] = pin.rnea(model, data, q, v, a)
-    return _summary(evaluation, limits, times, velocities, accelerations, torques)
+    pin.computeJointJacobians(kinematic_model, kinematics, q)
+    jacobian = pin.getFrameJacobian(
+        kinematic_model,
+        kinematics,
+        robot.tip_frame_id,
+        pin.ReferenceFrame.LOCAL_WORLD_ALIGNED,
+    ).reshape(6, kinematic_model.nv)
+    pseudo_inverse = np.linalg.pinv(jacobian, rcond=1e-10)
+    null = np.eye(kinematic_model.nv) - pseudo_inverse @ jacobian
+    v = pseudo_inverse @ twist + null @ velocity_fd
+    pin.forwardKinematics(kinematic_model, kinematics, q, v, zero)
+    drift = pin.getFrameClassicalAcceleration(
+        kinematic_model,
+        kinematics,
+        robot.tip_frame_id,
+        pin.ReferenceFrame.LOCAL_WORLD_ALIGNED,
+    ).vector
+    a = pseudo_inverse @ (twist_rate - drift) + null @ acceleration_fd
+    return v, a
 
 
 def _infeasible(evaluation: GraspEvaluation, limits: np.ndarray) -> EffortEvaluation:
@@ -304,7 +333,46 @@ def evaluate_efforts(
             )
         )
     limits = effort_limits(robot)
-    n = robot.num_joints
+    positions, counts, motion_of, first_of_group = _packed_paths(
+        robot, evaluations, motions, overrides
+    )
+    paths, object_rotations, object_twists = _object_motions(
+        evaluations, motions, first_of_group, positions.shape[1]
+    )
+    rotations, translations = pose_arrays([grasp.transform_tip_to_object for grasp in grasps])
+    bodies = augmented_bodies(robot, object_inertia, rotations, translations)
+    model = robot.model
+    q_all = positions if model.nq == model.nv else configurations(robot, positions)
+    gravity = np.asarray(model.gravity.linear, dtype=float)
+    dynamics = joint_dynamics(
+        chain,
+        bodies,
+        positions,
+        q_all,
+        counts,
+        motion_of,
+        paths,
+        object_rotations,
+        object_twists,
+        translations,
+        gravity,
+        terms,
+    )
+    return _compiled_efforts(evaluations, limits, counts, dynamics)
+
+
+def _packed_paths(
+    robot: RobotModel,
+    evaluations: Sequence[GraspEvaluation],
+    motions: Sequence[Trajectory],
+    overrides: Sequence[np.ndarray | None],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[int]]:
+    """The feasible grasps' joint paths packed for the kernel, checked as ``_checked_positions``.
+
+    Returns (positions (G, N, n) zero-padded, sample counts (G,), each grasp's motion group
+    (G,): one per (motion, sample times), the first grasp of each group).
+    """
+    count, n = len(evaluations), robot.num_joints
     feasible = [k for k, evaluation in enumerate(evaluations) if evaluation.feasible]
     samples = max((len(evaluations[k].times_s) for k in feasible), default=0)
     positions = np.zeros((count, samples, n))
@@ -329,11 +397,23 @@ def evaluate_efforts(
     if not finite.all():
         k = int(np.flatnonzero(~finite)[0])
         _checked_positions(robot, evaluations[k], positions[k, : counts[k]])  # raises
+    return positions, counts, motion_of, first_of_group
+
+
+def _object_motions(
+    evaluations: Sequence[GraspEvaluation],
+    motions: Sequence[Trajectory],
+    first_of_group: list[int],
+    samples: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per motion group, zero-padded to ``samples``: the path parameter (3, N) (s, ṡ, s̈),
+    the object's rotations (N, 3, 3) and its origin's twist and twist rate (2, N, 6)."""
     # Each motion's path parameter and the object's own motion (its origin's twist: the
     # identity grasp's); the kernel moves them to each grasp's tip.
-    paths = np.zeros((len(groups), 3, samples))
-    object_rotations = np.zeros((len(groups), samples, 3, 3))
-    object_twists = np.zeros((len(groups), 2, samples, 6))
+    groups = len(first_of_group)
+    paths = np.zeros((groups, 3, samples))
+    object_rotations = np.zeros((groups, samples, 3, 3))
+    object_twists = np.zeros((groups, 2, samples, 6))
     for index, k in enumerate(first_of_group):
         motion, times = motions[k], np.asarray(evaluations[k].times_s, dtype=float)
         paths[index, :, : len(times)] = motion.path_parameter(times)
@@ -341,25 +421,16 @@ def evaluate_efforts(
         twist, rate = motion.tip_twists(pin.SE3.Identity(), times)
         object_twists[index, 0, : len(times)] = twist
         object_twists[index, 1, : len(times)] = rate
-    rotations, translations = pose_arrays([grasp.transform_tip_to_object for grasp in grasps])
-    bodies = augmented_bodies(robot, object_inertia, rotations, translations)
-    model = robot.model
-    q_all = positions if model.nq == model.nv else configurations(robot, positions)
-    gravity = np.asarray(model.gravity.linear, dtype=float)
-    dynamics = joint_dynamics(
-        chain,
-        bodies,
-        positions,
-        q_all,
-        counts,
-        motion_of,
-        paths,
-        object_rotations,
-        object_twists,
-        translations,
-        gravity,
-        terms,
-    )
+    return paths, object_rotations, object_twists
+
+
+def _compiled_efforts(
+    evaluations: Sequence[GraspEvaluation],
+    limits: np.ndarray,
+    counts: np.ndarray,
+    dynamics: JointDynamics,
+) -> tuple[EffortEvaluation, ...]:
+    """The EffortEvaluations of the kernel's ``dynamics`` (read-only views of its arrays)."""
     shared_limits = read_only(limits, copy=True)
     peak_fractions = read_only(dynamics.peak_abs_torques / limits)
     rms_fractions = read_only(dynamics.rms_torques / limits)

@@ -276,16 +276,9 @@ def resolve_redundancy(
     config = config or RedundancyConfig()
     original = np.asarray(evaluation.joint_positions, dtype=float)
     masses = np.asarray(evaluation.effective_mass_kg, dtype=float)
-    if not evaluation.feasible:
-        return _unchanged(evaluation, config, "grasp is infeasible")
-    if not config.enabled:
-        return _unchanged(evaluation, config, "redundancy resolution is switched off")
-    if robot.model.nv <= TASK_DIMENSION:
-        return _unchanged(
-            evaluation,
-            config,
-            f"no redundancy: {robot.model.nv} joints for a {TASK_DIMENSION}-D tip pose",
-        )
+    reason = _skip_reason(robot, evaluation, config)
+    if reason:
+        return _unchanged(evaluation, config, reason)
     if model is None:
         model = augmented_model(robot, object_inertia, grasp.transform_tip_to_object)
     problem = SampleProblem(robot, model, config.finite_difference_step_rad)
@@ -296,68 +289,134 @@ def resolve_redundancy(
         robot.transform_base_to_world * pin.SE3(rotation, position)
         for rotation, position in zip(tip.rotations, tip.positions, strict=True)
     ]
-    directions = np.asarray(evaluation.directions_in_base, dtype=float)
-    worst = np.asarray(evaluation.direction_is_worst_case, dtype=bool)
     q_original = [robot.q_from_positions(p) for p in original]
-    motion = MotionBounds(
-        robot,
-        model,
-        q_original,
-        s_values,
-        s_rate,
-        s_accel,
-        config.max_rate_ratio,
-        config.max_effort_fraction,
+    checks = _TrialChecks(
+        robot=robot,
+        problem=problem,
+        targets=targets,
+        bounds=[_step_bound(robot, config, times[i] - times[i - 1]) for i in range(1, len(times))],
+        motion=MotionBounds(
+            robot,
+            model,
+            q_original,
+            s_values,
+            s_rate,
+            s_accel,
+            config.max_rate_ratio,
+            config.max_effort_fraction,
+        ),
+        object_inertia=object_inertia,
+        transform_tip_to_object=grasp.transform_tip_to_object,
+        chain=chain,
+        directions=np.asarray(evaluation.directions_in_base, dtype=float),
+        worst=np.asarray(evaluation.direction_is_worst_case, dtype=bool),
+        ceiling=masses * (1.0 + config.max_sample_increase),
+        times=times,
+        metric=config.metric,
     )
-    bounds = [_step_bound(robot, config, times[i] - times[i - 1]) for i in range(1, len(times))]
+    initial = _Trajectory(q_original, masses, aggregate(masses, times, config.metric))
+    best = _descend(checks, initial, s_values, config)
+    return _resolution(checks, evaluation, initial, best, config.metric)
 
-    def candidate(current: _Trajectory, offsets: np.ndarray) -> _Trajectory | _Rejection:
+
+def _skip_reason(robot: RobotModel, evaluation: GraspEvaluation, config: RedundancyConfig) -> str:
+    """Why the optimisation does not run for this grasp; empty when it runs."""
+    if not evaluation.feasible:
+        return "grasp is infeasible"
+    if not config.enabled:
+        return "redundancy resolution is switched off"
+    if robot.model.nv <= TASK_DIMENSION:
+        return f"no redundancy: {robot.model.nv} joints for a {TASK_DIMENSION}-D tip pose"
+    return ""
+
+
+@dataclass(frozen=True)
+class _TrialChecks:
+    """One grasp's fixed data a trial trajectory is built from and checked against.
+
+    ``targets``: each sample's tip pose in the world; ``bounds``: the largest joint step into
+    each sample after the first; ``ceiling``: the largest U allowed per sample [kg];
+    ``chain``: compiled chain arrays for the effective masses (None: Pinocchio's).
+    """
+
+    robot: RobotModel
+    problem: SampleProblem
+    targets: list[pin.SE3]
+    bounds: list[np.ndarray]
+    motion: MotionBounds
+    object_inertia: ObjectInertia
+    transform_tip_to_object: pin.SE3
+    chain: ChainArrays | None
+    directions: np.ndarray
+    worst: np.ndarray
+    ceiling: np.ndarray
+    times: np.ndarray
+    metric: str
+
+    def candidate(self, current: _Trajectory, offsets: np.ndarray) -> _Trajectory | _Rejection:
         """Shift every sample by its offset and re-project; the trajectory if all checks pass."""
         q_new: list[np.ndarray] = []
         for i, (q, offset) in enumerate(zip(current.q, offsets, strict=True)):
-            projected = problem.project(pin.integrate(robot.model, q, offset), targets[i])
+            projected = self.problem.project(
+                pin.integrate(self.robot.model, q, offset), self.targets[i]
+            )
             if (
                 projected is None
-                or not problem.within_limits(projected)
-                or (i and not _step_ok(robot, q_new[-1], projected, bounds[i - 1]))
+                or not self.problem.within_limits(projected)
+                or (i and not _step_ok(self.robot, q_new[-1], projected, self.bounds[i - 1]))
             ):
                 return _Rejection("path")
             q_new.append(projected)
-        if not motion.ok(q_new):
+        if not self.motion.ok(q_new):
             return _Rejection("motion")
-        if chain is not None:
-            u = _objectives(
-                translational_mobilities_in_base(
-                    robot, object_inertia, grasp.transform_tip_to_object, np.array(q_new), chain
-                ),
-                directions,
-                worst,
-            )
-        else:
-            u = np.array(
-                [
-                    problem.objective(q, d, bool(w))
-                    for q, d, w in zip(q_new, directions, worst, strict=True)
-                ]
-            )
-        above = u > ceiling
+        u = self.objectives(q_new)
+        above = u > self.ceiling
         if np.any(above):
             return _Rejection("mass", above)
-        trial = _Trajectory(q_new, u, aggregate(u, times, config.metric))
+        trial = _Trajectory(q_new, u, aggregate(u, self.times, self.metric))
         return trial if trial.score < current.score else _Rejection("score")
 
-    ceiling = masses * (1.0 + config.max_sample_increase)
-    best = _Trajectory(q_original, masses, aggregate(masses, times, config.metric))
+    def objectives(self, q: list[np.ndarray]) -> np.ndarray:
+        """(N,) U of configurations ``q`` [kg]: compiled kernel if ``chain``, else Pinocchio."""
+        if self.chain is not None:
+            return _objectives(
+                translational_mobilities_in_base(
+                    self.robot,
+                    self.object_inertia,
+                    self.transform_tip_to_object,
+                    np.array(q),
+                    self.chain,
+                ),
+                self.directions,
+                self.worst,
+            )
+        return np.array(
+            [
+                self.problem.objective(qi, d, bool(w))
+                for qi, d, w in zip(q, self.directions, self.worst, strict=True)
+            ]
+        )
+
+    def gradients(self, q: list[np.ndarray]) -> np.ndarray:
+        """(N, n) null-space gradients of U at configurations ``q``."""
+        return np.array(
+            [
+                self.problem.null_space_gradient(qi, d, bool(w))
+                for qi, d, w in zip(q, self.directions, self.worst, strict=True)
+            ]
+        )
+
+
+def _descend(
+    checks: _TrialChecks, best: _Trajectory, s_values: np.ndarray, config: RedundancyConfig
+) -> _Trajectory:
+    """Steepest descent on the profile's control offsets from ``best``; the best trajectory."""
+    times = checks.times
     bases = [bernstein_basis(degree, s_values) for degree in range(config.profile_degree + 1)]
     degree, step = config.profile_degree, config.initial_step_rad
     penalty = np.zeros(len(times))  # extra weight of samples whose U rose in a trial
     for _ in range(config.iterations):
-        gradients = np.array(
-            [
-                problem.null_space_gradient(q, d, bool(w))
-                for q, d, w in zip(best.q, directions, worst, strict=True)
-            ]
-        )
+        gradients = checks.gradients(best.q)
         weights = metric_weights(best.masses, times, config.metric)
         previous_score, reweightings = best.score, 0
         while step >= config.min_step_rad:
@@ -367,7 +426,7 @@ def resolve_redundancy(
             norm = float(np.linalg.norm(descent, axis=1).max())
             if norm < 1e-12:
                 break
-            trial = candidate(best, step / norm * descent)
+            trial = checks.candidate(best, step / norm * descent)
             if isinstance(trial, _Trajectory):
                 best = trial
                 step = min(2.0 * step, config.initial_step_rad)
@@ -382,13 +441,30 @@ def resolve_redundancy(
                 step *= 0.5
         if best.score >= previous_score * (1.0 - config.relative_tolerance):
             break
-    if best.q is q_original:
+    return best
+
+
+def _resolution(
+    checks: _TrialChecks,
+    evaluation: GraspEvaluation,
+    initial: _Trajectory,
+    best: _Trajectory,
+    metric: str,
+) -> RedundancyResolution:
+    """The applied resolution of ``best`` against the evaluation's ``initial`` trajectory."""
+    times = checks.times
+    original = np.asarray(evaluation.joint_positions, dtype=float)
+    masses = initial.masses
+    if best.q is initial.q:
         positions, result_masses = original, masses
     else:
-        positions = positions_along(robot, np.asarray(best.q), original[0])  # unwrapped
+        positions = positions_along(checks.robot, np.asarray(best.q), original[0])  # unwrapped
         result_masses = best.masses
     errors = np.array(
-        [problem.pose_error(q, target)[1:] for q, target in zip(best.q, targets, strict=True)]
+        [
+            checks.problem.pose_error(q, target)[1:]
+            for q, target in zip(best.q, checks.targets, strict=True)
+        ]
     )
     return RedundancyResolution(
         index=evaluation.index,
@@ -401,9 +477,9 @@ def resolve_redundancy(
         effective_mass_kg=read_only(result_masses, copy=True),
         original_joint_positions=read_only(original, copy=True),
         original_effective_mass_kg=read_only(masses, copy=True),
-        score=aggregate(result_masses, times, config.metric),
-        original_score=aggregate(masses, times, config.metric),
-        metric=config.metric,
+        score=aggregate(result_masses, times, metric),
+        original_score=aggregate(masses, times, metric),
+        metric=metric,
         samples_improved=int(np.sum(result_masses < masses)),
         max_position_error_m=float(errors[:, 0].max()),
         max_orientation_error_rad=float(errors[:, 1].max()),

@@ -300,21 +300,7 @@ def retime_path(
     at ``times_s`` (N,) [s] (module docstring). ``speed_model`` None: joint limits only
     (what a user has without this package). Raises GraspSafetyError where TOPP-RA finds no
     timing (a numerically uncontrollable path)."""
-    import toppra
-    import toppra.algorithm
-    import toppra.constraint
-
-    times = np.asarray(times_s, dtype=float)
-    positions = np.asarray(joint_positions, dtype=float)
-    n = robot.num_joints
-    if len(times) < MIN_SAMPLES or positions.shape != (len(times), n):
-        raise InvalidInputError(
-            "retime.path", f"needs >= {MIN_SAMPLES} samples of {n} joint positions"
-        )
-    if not (np.all(np.isfinite(times)) and np.all(np.isfinite(positions))):
-        raise InvalidInputError("retime.path", "samples must be finite")
-    if not np.all(np.diff(times) > 0.0):
-        raise InvalidInputError("retime.path", "sample times must increase")
+    times, positions = _checked_path(robot, times_s, joint_positions)
     path = joint_path(times, positions, robot)
     grid = times - times[0]
     tangents = path(grid, 1)
@@ -325,34 +311,12 @@ def retime_path(
             speed_model, robot, path(grid), tangents, limits.safety_factor
         )
     vlim, alim = limits.joint_velocity_limits, limits.joint_acceleration_limits
-    constraints = [
-        toppra.constraint.JointVelocityConstraint(np.stack([-vlim, vlim], axis=1)),
-        toppra.constraint.JointAccelerationConstraint(
-            np.stack([-alim, alim], axis=1),
-            discretization_scheme=toppra.constraint.DiscretizationType.Interpolation,
-        ),
-    ]
-    constraints.append(_site_constraint(ratios))
-    solver = toppra.algorithm.TOPPRA(
-        constraints,
-        path,
-        gridpoints=grid,
-        solver_wrapper="seidel",
-        parametrizer="ParametrizeConstAccel",
-    )
-    path_accelerations, path_velocities, _ = solver.compute_parameterization(0.0, 0.0)
-    if path_velocities is None or not np.all(np.isfinite(path_velocities)):
-        raise GraspSafetyError(
-            "retime: TOPP-RA found no timing of this path within the limits (uncontrollable "
-            "or badly conditioned path)"
-        )
+    path_accelerations, path_velocities = _time_optimal_rates(path, grid, ratios, vlim, alim)
     rates = np.maximum(path_velocities, 0.0)
     steps = 2.0 * np.diff(grid) / (rates[:-1] + rates[1:])
     grid_times = np.concatenate([[0.0], np.cumsum(steps)])
     duration = float(grid_times[-1])
-    samples = _output_samples(
-        path, grid, grid_times, rates, np.asarray(path_accelerations), output_dt_s
-    )
+    samples = _output_samples(path, grid, grid_times, rates, path_accelerations, output_dt_s)
     binding, binding_ratio, output_speeds = _binding(robot, speed_model, limits, samples)
     planned = ratios.max() if ratios.size else 0.0
     planned_duration = float(grid[-1])
@@ -381,6 +345,59 @@ def retime_path(
         planned_times_s=read_only(grid),
         **series,
     )
+
+
+def _checked_path(
+    robot: RobotModel, times_s: np.ndarray, joint_positions: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """``times_s`` (N,) and ``joint_positions`` (N, n) as float arrays; InvalidInputError
+    unless finite, with at least MIN_SAMPLES increasing times and n joints."""
+    times = np.asarray(times_s, dtype=float)
+    positions = np.asarray(joint_positions, dtype=float)
+    n = robot.num_joints
+    if len(times) < MIN_SAMPLES or positions.shape != (len(times), n):
+        raise InvalidInputError(
+            "retime.path", f"needs >= {MIN_SAMPLES} samples of {n} joint positions"
+        )
+    if not (np.all(np.isfinite(times)) and np.all(np.isfinite(positions))):
+        raise InvalidInputError("retime.path", "samples must be finite")
+    if not np.all(np.diff(times) > 0.0):
+        raise InvalidInputError("retime.path", "sample times must increase")
+    return times, positions
+
+
+def _time_optimal_rates(
+    path: Any, grid: np.ndarray, ratios: np.ndarray, vlim: np.ndarray, alim: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """TOPP-RA's (s̈, ṡ) at the ``grid`` points of ``path`` from rest to rest within the joint
+    velocity and acceleration limits and the site speed ``ratios``; GraspSafetyError where it
+    finds none."""
+    import toppra
+    import toppra.algorithm
+    import toppra.constraint
+
+    constraints = [
+        toppra.constraint.JointVelocityConstraint(np.stack([-vlim, vlim], axis=1)),
+        toppra.constraint.JointAccelerationConstraint(
+            np.stack([-alim, alim], axis=1),
+            discretization_scheme=toppra.constraint.DiscretizationType.Interpolation,
+        ),
+    ]
+    constraints.append(_site_constraint(ratios))
+    solver = toppra.algorithm.TOPPRA(
+        constraints,
+        path,
+        gridpoints=grid,
+        solver_wrapper="seidel",
+        parametrizer="ParametrizeConstAccel",
+    )
+    path_accelerations, path_velocities, _ = solver.compute_parameterization(0.0, 0.0)
+    if path_velocities is None or not np.all(np.isfinite(path_velocities)):
+        raise GraspSafetyError(
+            "retime: TOPP-RA found no timing of this path within the limits (uncontrollable "
+            "or badly conditioned path)"
+        )
+    return np.asarray(path_accelerations), path_velocities
 
 
 def _region_series_fields(

@@ -356,60 +356,13 @@ def analyse_inertia_uncertainty(
         )
     perturbations = sample_inertia_perturbations(object_inertia, uncertainty)
     count = len(perturbations)
-    scores = np.full((len(evaluations), count), np.nan)
-    feasible_indices = [g for g, evaluation in enumerate(evaluations) if evaluation.feasible]
-    masses = _masses_for_inertias(
-        robot,
-        chain,
-        [evaluations[g] for g in feasible_indices],
-        [grasps[g] for g in feasible_indices],
-        perturbations.inertias,
-        executor,
-    )
-    for g, rows in zip(feasible_indices, masses, strict=True):
-        scores[g] = _aggregate_rows(rows, evaluations[g].times_s, metric)
+    scores = _scores(robot, evaluations, grasps, perturbations, metric, chain, executor)
     feasible = np.array([e.feasible for e in evaluations], dtype=bool)
-    if feasible.any():
-        masked = np.where(feasible[:, None], scores, np.inf)
-        safest = np.argmin(masked, axis=0)  # ties: lowest index
-        nominal_order = np.argsort(masked[:, 0], kind="stable")[: int(feasible.sum())]
-        orders = np.argsort(masked, axis=0, kind="stable")[: int(feasible.sum())]
-        order_stability = float(np.mean(np.all(orders == nominal_order[:, None], axis=0)))
-    else:
-        safest = np.full(count, -1)
-        order_stability = float("nan")
-    results: list[GraspUncertainty] = []
-    for g, evaluation in enumerate(evaluations):
-        if not evaluation.feasible:
-            results.append(
-                GraspUncertainty(
-                    index=evaluation.index,
-                    name=evaluation.name,
-                    feasible=False,
-                    scores=np.empty(0),
-                    nominal_score=float("nan"),
-                    worst_case_score=float("nan"),
-                    percentile_score=float("nan"),
-                    probability_safest=0.0,
-                    worst_case_sample=-1,
-                )
-            )
-            continue
-        row = scores[g].copy()
-        row.setflags(write=False)
-        results.append(
-            GraspUncertainty(
-                index=evaluation.index,
-                name=evaluation.name,
-                feasible=True,
-                scores=row,
-                nominal_score=float(row[0]),
-                worst_case_score=float(row.max()),
-                percentile_score=float(np.percentile(row, uncertainty.percentile)),
-                probability_safest=float(np.mean(safest == g)),
-                worst_case_sample=int(np.argmax(row)),
-            )
-        )
+    safest, order_stability = _safest_per_sample(scores, feasible)
+    results = [
+        _grasp_uncertainty(evaluation, scores[g], safest == g, uncertainty.percentile)
+        for g, evaluation in enumerate(evaluations)
+    ]
     nominal_safest = int(safest[0]) if count and feasible.any() else -1
     flips = bool(feasible.any() and np.any(safest != nominal_safest))
     feasible_results = [r for r in results if r.feasible]
@@ -430,6 +383,75 @@ def analyse_inertia_uncertainty(
         order_stability=order_stability,
         worst_case_order=worst_case_order,
         message=_message(results, nominal_safest, flips, count, perturbations.num_invalid),
+    )
+
+
+def _scores(
+    robot: RobotModel,
+    evaluations: Sequence[GraspEvaluation],
+    grasps: Sequence[Grasp],
+    perturbations: PerturbationSet,
+    metric: str,
+    chain: ChainArrays | None,
+    executor: Executor | None,
+) -> np.ndarray:
+    """(G, S) score of every grasp for every inertia sample; NaN rows for infeasible grasps."""
+    scores = np.full((len(evaluations), len(perturbations)), np.nan)
+    feasible_indices = [g for g, evaluation in enumerate(evaluations) if evaluation.feasible]
+    masses = _masses_for_inertias(
+        robot,
+        chain,
+        [evaluations[g] for g in feasible_indices],
+        [grasps[g] for g in feasible_indices],
+        perturbations.inertias,
+        executor,
+    )
+    for g, rows in zip(feasible_indices, masses, strict=True):
+        scores[g] = _aggregate_rows(rows, evaluations[g].times_s, metric)
+    return scores
+
+
+def _safest_per_sample(scores: np.ndarray, feasible: np.ndarray) -> tuple[np.ndarray, float]:
+    """(S,) index of the lowest-scoring feasible grasp per sample (ties: lowest index; -1
+    when none is feasible) and the fraction of samples ranking the feasible grasps as the
+    nominal sample does (NaN when none is feasible)."""
+    if not feasible.any():
+        return np.full(scores.shape[1], -1), float("nan")
+    masked = np.where(feasible[:, None], scores, np.inf)
+    safest = np.argmin(masked, axis=0)  # ties: lowest index
+    nominal_order = np.argsort(masked[:, 0], kind="stable")[: int(feasible.sum())]
+    orders = np.argsort(masked, axis=0, kind="stable")[: int(feasible.sum())]
+    return safest, float(np.mean(np.all(orders == nominal_order[:, None], axis=0)))
+
+
+def _grasp_uncertainty(
+    evaluation: GraspEvaluation, scores: np.ndarray, is_safest: np.ndarray, percentile: float
+) -> GraspUncertainty:
+    """One grasp's summary over its (S,) ``scores``; ``is_safest``: (S,) where it is safest."""
+    if not evaluation.feasible:
+        return GraspUncertainty(
+            index=evaluation.index,
+            name=evaluation.name,
+            feasible=False,
+            scores=np.empty(0),
+            nominal_score=float("nan"),
+            worst_case_score=float("nan"),
+            percentile_score=float("nan"),
+            probability_safest=0.0,
+            worst_case_sample=-1,
+        )
+    row = scores.copy()
+    row.setflags(write=False)
+    return GraspUncertainty(
+        index=evaluation.index,
+        name=evaluation.name,
+        feasible=True,
+        scores=row,
+        nominal_score=float(row[0]),
+        worst_case_score=float(row.max()),
+        percentile_score=float(np.percentile(row, percentile)),
+        probability_safest=float(np.mean(is_safest)),
+        worst_case_sample=int(np.argmax(row)),
     )
 
 

@@ -9,6 +9,13 @@ import time
 from typing import TYPE_CHECKING, TextIO
 
 if TYPE_CHECKING:
+    import numpy as np
+    import pinocchio as pin
+
+    from ..model.inertia import ObjectInertia
+    from ..model.robot import RobotModel
+    from ..model.trajectory import ObjectTrajectory
+    from .packed import ChainArrays
     from .ranking import GraspSafetyEvaluator
 
 _WARM_UP_URDF = """<robot name="warm_up"><link name="base"/>
@@ -35,18 +42,11 @@ def warm_up(evaluator: GraspSafetyEvaluator | None = None) -> float:
         The time taken [s]; 0 when the compiled backend is not in use.
     """
     import numpy as np
-    import pinocchio as pin
 
     from ..model.inertia import solid_box
     from ..model.robot import RobotModel
     from ..model.trajectory import ObjectTrajectory
-    from .compiled import augmented_bodies
-    from .dynamics import joint_dynamics
-    from .effective_mass import translational_mobilities_in_base
-    from .perturbed import perturbed_effective_masses
-    from .points import site_masses, tip_following_rates, tip_point_masses
-    from .ranking import Grasp, GraspSafetyEvaluator, sample_trajectory
-    from .terms import configurations, grasps_terms
+    from .ranking import GraspSafetyEvaluator
 
     start = time.perf_counter()
     if evaluator is None:
@@ -59,65 +59,101 @@ def warm_up(evaluator: GraspSafetyEvaluator | None = None) -> float:
     trajectory = ObjectTrajectory(pose, pose, 0.02, 0.01)
     with np.errstate(all="ignore"):  # the pose may be singular: only the compiling matters
         box = solid_box(1.0, (0.1, 0.1, 0.1))
-        evaluator.evaluate(Grasp(pin.SE3.Identity()), box, trajectory)
-        seed_q = robot.q_from_positions(robot.default_seed_positions())
-        evaluator.ik.solve(pose, seed_q)
-        evaluator.ik.solve_poses([pose], seed_q[None])  # posture selection's kernels
-        evaluator.follow_postures(
-            [0],
-            [Grasp(pin.SE3.Identity())],
-            box,
-            sample_trajectory(trajectory),
-            "mean",
-            seed_q[None],
-            np.array([np.inf]),
-        )
-        rotations = np.array([pose.rotation, pose.rotation])
-        translations = np.array([pose.translation, pose.translation])
-        evaluator.ik.solve_trajectory_arrays(  # the analyses' IK and mobility kernels
-            rotations, translations, np.array([0.0, 0.01]), np.array([0.0, 1.0]), seed_q
-        )
-        translational_mobilities_in_base(robot, box, pin.SE3.Identity(), np.array([seed_q]), chain)
-        positions = np.array([robot.default_seed_positions()])
-        terms, counts = grasps_terms(robot, chain, box, [pin.SE3.Identity()], [positions])
-        still = np.ones((1, 1, 1), dtype=bool)  # the point kernels of the analyses
-        tip_point_masses(
-            terms,
-            counts,
-            np.eye(3),
-            np.zeros((1, 1, 3)),
-            np.zeros((1, 1, 1, 3)),
-            still,
-            np.zeros(1, np.int64),
-        )
-        n = robot.model.nv
-        support, rates = np.ones((1, n), dtype=bool), np.zeros((1, 1, n))
-        site_masses(terms, counts, np.zeros(1, np.int64), np.zeros((1, 3)), support, rates, 1e-9)
-        tip_following_rates(terms.jacobians_tip_in_world, counts, np.zeros((1, 1, 6)), rates)
-        perturbed_effective_masses(  # the inertia-uncertainty kernel
-            robot,
-            chain,
-            [box],
-            [pin.SE3.Identity()],
-            [positions],
-            [np.array([[1.0, 0.0, 0.0]])],
-            [np.array([False])],
-        )
-        bodies = augmented_bodies(robot, box, np.eye(3)[None], np.zeros((1, 3)))
-        joint_dynamics(  # the effort analysis's kernel
-            chain,
-            bodies,
-            positions[None],
-            configurations(robot, positions)[None],
-            np.ones(1, dtype=np.int64),
-            np.zeros(1, dtype=np.int64),
-            np.zeros((1, 3, 1)),
-            np.eye(3)[None, None],
-            np.zeros((1, 2, 1, 6)),
-            np.zeros((1, 3)),
-            np.zeros(3),
-        )
+        seed_q = _warm_up_evaluator(evaluator, box, pose, trajectory)
+        _warm_up_analysis_kernels(robot, chain, box, seed_q)
     return time.perf_counter() - start
+
+
+def _warm_up_evaluator(
+    evaluator: GraspSafetyEvaluator,
+    box: ObjectInertia,
+    pose: pin.SE3,
+    trajectory: ObjectTrajectory,
+) -> np.ndarray:
+    """Run the evaluator's kernels (ranking, IK, posture selection, the analyses' IK) once
+    on ``box`` held still at ``pose`` (``trajectory``); the seed configuration."""
+    import numpy as np
+    import pinocchio as pin
+
+    from .ranking import Grasp, sample_trajectory
+
+    robot = evaluator.robot
+    evaluator.evaluate(Grasp(pin.SE3.Identity()), box, trajectory)
+    seed_q = robot.q_from_positions(robot.default_seed_positions())
+    evaluator.ik.solve(pose, seed_q)
+    evaluator.ik.solve_poses([pose], seed_q[None])  # posture selection's kernels
+    evaluator.follow_postures(
+        [0],
+        [Grasp(pin.SE3.Identity())],
+        box,
+        sample_trajectory(trajectory),
+        "mean",
+        seed_q[None],
+        np.array([np.inf]),
+    )
+    rotations = np.array([pose.rotation, pose.rotation])
+    translations = np.array([pose.translation, pose.translation])
+    evaluator.ik.solve_trajectory_arrays(  # the analyses' IK and mobility kernels
+        rotations, translations, np.array([0.0, 0.01]), np.array([0.0, 1.0]), seed_q
+    )
+    return seed_q
+
+
+def _warm_up_analysis_kernels(
+    robot: RobotModel, chain: ChainArrays, box: ObjectInertia, seed_q: np.ndarray
+) -> None:
+    """Run the analyses' kernels (mobility, terms, points, inertia uncertainty, effort) once
+    at ``seed_q``."""
+    import numpy as np
+    import pinocchio as pin
+
+    from .compiled import augmented_bodies
+    from .dynamics import joint_dynamics
+    from .effective_mass import translational_mobilities_in_base
+    from .perturbed import perturbed_effective_masses
+    from .points import site_masses, tip_following_rates, tip_point_masses
+    from .terms import configurations, grasps_terms
+
+    translational_mobilities_in_base(robot, box, pin.SE3.Identity(), np.array([seed_q]), chain)
+    positions = np.array([robot.default_seed_positions()])
+    terms, counts = grasps_terms(robot, chain, box, [pin.SE3.Identity()], [positions])
+    still = np.ones((1, 1, 1), dtype=bool)  # the point kernels of the analyses
+    tip_point_masses(
+        terms,
+        counts,
+        np.eye(3),
+        np.zeros((1, 1, 3)),
+        np.zeros((1, 1, 1, 3)),
+        still,
+        np.zeros(1, np.int64),
+    )
+    n = robot.model.nv
+    support, rates = np.ones((1, n), dtype=bool), np.zeros((1, 1, n))
+    site_masses(terms, counts, np.zeros(1, np.int64), np.zeros((1, 3)), support, rates, 1e-9)
+    tip_following_rates(terms.jacobians_tip_in_world, counts, np.zeros((1, 1, 6)), rates)
+    perturbed_effective_masses(  # the inertia-uncertainty kernel
+        robot,
+        chain,
+        [box],
+        [pin.SE3.Identity()],
+        [positions],
+        [np.array([[1.0, 0.0, 0.0]])],
+        [np.array([False])],
+    )
+    bodies = augmented_bodies(robot, box, np.eye(3)[None], np.zeros((1, 3)))
+    joint_dynamics(  # the effort analysis's kernel
+        chain,
+        bodies,
+        positions[None],
+        configurations(robot, positions)[None],
+        np.ones(1, dtype=np.int64),
+        np.zeros(1, dtype=np.int64),
+        np.zeros((1, 3, 1)),
+        np.eye(3)[None, None],
+        np.zeros((1, 2, 1, 6)),
+        np.zeros((1, 3)),
+        np.zeros(3),
+    )
 
 
 def announce_compiles(stream: TextIO | None = None) -> None:

@@ -209,6 +209,62 @@ def _reduced_model(
     return model, ids
 
 
+def _chain_joints(full_model: pin.Model, base_id: int, tip_id: int) -> list[int]:
+    """Ids of the joints between frames ``base_id`` and ``tip_id``, base to tip;
+    InvalidInputError unless the base is upstream of the tip and they are 1-DOF joints."""
+    base_frame, tip_frame = full_model.frames[base_id].name, full_model.frames[tip_id].name
+    base_joint = full_model.frames[base_id].parentJoint
+    tip_joint = full_model.frames[tip_id].parentJoint
+    upstream_of_base = set(full_model.supports[base_joint])
+    chain = [j for j in full_model.supports[tip_joint] if j not in upstream_of_base]
+    if base_joint not in full_model.supports[tip_joint]:
+        raise InvalidInputError(
+            "robot.base_frame",
+            f"'{base_frame}' is not upstream of tip frame '{tip_frame}' in the kinematic tree",
+        )
+    if not chain:
+        raise InvalidInputError(
+            "robot.tip_frame", f"no joint between '{base_frame}' and '{tip_frame}'"
+        )
+    for joint_id in chain:
+        joint = full_model.joints[joint_id]
+        if joint.nv != 1:
+            raise InvalidInputError(
+                "robot.tip_frame",
+                f"joint '{full_model.names[joint_id]}' ({joint.shortname()}) on the chain "
+                f"'{base_frame}' -> '{tip_frame}' has {joint.nv} DOF; only 1-DOF joints "
+                "(revolute, continuous, prismatic) are supported",
+            )
+    return chain
+
+
+def _set_locked_positions(
+    full_model: pin.Model, locked_positions: Mapping[str, float], reference: np.ndarray
+) -> None:
+    """Write each locked joint's position into the configuration ``reference`` (in place);
+    InvalidInputError for an unknown joint, one with nq != 1 or a position outside its
+    limits."""
+    for name, value in locked_positions.items():
+        if not full_model.existJointName(name):
+            raise InvalidInputError(
+                "robot.locked_joints",
+                f"unknown joint '{name}'; joints: {', '.join(full_model.names[1:])}",
+            )
+        joint = full_model.joints[full_model.getJointId(name)]
+        if joint.nq != 1:
+            raise InvalidInputError(
+                "robot.locked_joints", f"joint '{name}' has nq={joint.nq}; only nq=1 joints"
+            )
+        lower = full_model.lowerPositionLimit[joint.idx_q]
+        upper = full_model.upperPositionLimit[joint.idx_q]
+        if not lower - 1e-9 <= float(value) <= upper + 1e-9:
+            raise InvalidInputError(
+                f"robot.locked_joints.{name}",
+                f"{float(value):g} is outside the joint's limits [{lower:g}, {upper:g}]",
+            )
+        reference[joint.idx_q] = float(value)
+
+
 def _apply_mimic_joints(
     full_model: pin.Model,
     chain: Sequence[int],
@@ -283,49 +339,10 @@ class RobotModel:
         base_id = find_frame(full_model, base_frame, "robot.base_frame")
         tip_id = find_frame(full_model, tip_frame, "robot.tip_frame")
         base_frame, tip_frame = full_model.frames[base_id].name, full_model.frames[tip_id].name
-        base_joint = full_model.frames[base_id].parentJoint
-        tip_joint = full_model.frames[tip_id].parentJoint
-        upstream_of_base = set(full_model.supports[base_joint])
-        chain = [j for j in full_model.supports[tip_joint] if j not in upstream_of_base]
-        if base_joint not in full_model.supports[tip_joint]:
-            raise InvalidInputError(
-                "robot.base_frame",
-                f"'{base_frame}' is not upstream of tip frame '{tip_frame}' in the kinematic tree",
-            )
-        if not chain:
-            raise InvalidInputError(
-                "robot.tip_frame", f"no joint between '{base_frame}' and '{tip_frame}'"
-            )
-        for joint_id in chain:
-            joint = full_model.joints[joint_id]
-            if joint.nv != 1:
-                raise InvalidInputError(
-                    "robot.tip_frame",
-                    f"joint '{full_model.names[joint_id]}' ({joint.shortname()}) on the chain "
-                    f"'{base_frame}' -> '{tip_frame}' has {joint.nv} DOF; only 1-DOF joints "
-                    "(revolute, continuous, prismatic) are supported",
-                )
+        chain = _chain_joints(full_model, base_id, tip_id)
         reference = pin.neutral(full_model)
         locked_positions = dict(locked_positions or {})
-        for name, value in locked_positions.items():
-            if not full_model.existJointName(name):
-                raise InvalidInputError(
-                    "robot.locked_joints",
-                    f"unknown joint '{name}'; joints: {', '.join(full_model.names[1:])}",
-                )
-            joint = full_model.joints[full_model.getJointId(name)]
-            if joint.nq != 1:
-                raise InvalidInputError(
-                    "robot.locked_joints", f"joint '{name}' has nq={joint.nq}; only nq=1 joints"
-                )
-            lower = full_model.lowerPositionLimit[joint.idx_q]
-            upper = full_model.upperPositionLimit[joint.idx_q]
-            if not lower - 1e-9 <= float(value) <= upper + 1e-9:
-                raise InvalidInputError(
-                    f"robot.locked_joints.{name}",
-                    f"{float(value):g} is outside the joint's limits [{lower:g}, {upper:g}]",
-                )
-            reference[joint.idx_q] = float(value)
+        _set_locked_positions(full_model, locked_positions, reference)
         _apply_mimic_joints(
             full_model, chain, mimic_joints or {}, reference, locked_positions, tip_frame
         )
