@@ -232,22 +232,67 @@ def _elbow_markdown(result: dict[str, Any] | None) -> str:
     )
 
 
-def results_markdown(results: dict[str, Any]) -> str:
-    """The markdown report of a validation run."""
+def _simulated_section(results: dict[str, Any]) -> str:
+    """results.md's "What is simulated": the models, the sensor, the controller, the check."""
     setup = results["setup"]
-    pillar = setup["pillar"]
-    tensor, book, impulse = results["tensor_object"], results["book"], results["impulse_check"]
-    tensor_peaks = [g["peak_force_n"] for g in tensor["grasps"]]
+    pillar, impulse = setup["pillar"], results["impulse_check"]
     sensor, contact, gains = pillar["sensor"], pillar["contact"], pillar["controller"]
-    kind = "quick (reduced)" if setup["quick"] else "full"
     control = (
         "updated at every physics step"
         if gains["period_s"] is None
         else f"updated every {1e3 * gains['period_s']:g} ms (zero-order hold)"
     )
+    samples = ", ".join(f"{t:g}" for t in setup["impulse_sample_times_s"])
+    return f"""## What is simulated
+
+- **Robot**: the Baxter URDF of example-robot-data loaded by MuJoCo with its meshes stripped;
+  every joint except `right_s0..right_w2` fixed at 0 (as the core locks them); no joint
+  damping, friction or armature. MuJoCo's joint-space inertia equals `pinocchio.crba` of the
+  core's model (with the object merged) to ~1e-15 (`test/test_validation.py`).
+- **Object**: a body fixed to `right_gripper` at the grasp with the exact mass, centre of mass
+  and inertia tensor the core uses; its shapes do not collide.
+- **Contact**: a sphere of radius {pillar["tip_sphere_radius_m"]:g} m centred on the tip frame
+  is the only colliding robot geometry (the paper's impacts are end-effector on sensor). The
+  sensor face is perpendicular to the tip's direction of motion u at
+  t = {pillar["planned_impact_time_s"]:g} s and placed where the sphere reaches it on the
+  reference. As the sphere is centred on the tip, the normal velocity of the contact point is
+  the tip's velocity along u: the contact sees the effective mass the core computes. Friction
+  {contact["friction"]:g}, elliptic cone, solref ({contact["timeconst_s"]:g} s,
+  {contact["dampratio"]:g}), solimp {contact["impedance"]:g}.
+- **Force sensor**: a {sensor["plate_mass_kg"]:g} kg plate on a spring of
+  {sensor["stiffness_n_m"]:.3g} N/m and a damper of {sensor["damping_n_s_m"]:g} N s/m along its
+  normal, i.e. a load cell on a rigid pillar; the force is the spring + damper force. A
+  physical stiffness matters: MuJoCo's contact forces alone scale with the contact's effective
+  mass by construction (ablation "rigid plate"), while a sensor of stiffness k gives the
+  textbook peak F ≈ v·sqrt(k·M_eff).
+- **Controller**: joint-space computed torque with MuJoCo's M(q) and bias forces of robot +
+  object (inertia and gravity compensation), K_p = {gains["kp_per_s2"]:g} 1/s²,
+  K_d = {gains["kd_per_s"]:g} 1/s, {control}, torques clipped to the URDF effort limits,
+  tracking the core's IK joint trajectory (cubic spline through its
+  {setup["tip_or_object_trajectory"]["dt_s"]:g} s samples). The reference goes on past the
+  sensor, so the arm keeps pushing after the impact, as in the paper. Simulated from
+  {pillar["simulated_from_s"]:g} s to {pillar["simulated_to_s"]:g} s with a
+  {pillar["timestep_s"]:g} s step, {pillar["impact_timestep_s"]:g} s around the impact.
+- **Peak impact force**: the largest sensor force within {1e3 * pillar["peak_window_s"]:g} ms
+  of first contact. **Impulse**: the contact normal impulse from first contact until the
+  sensor force first returns to zero.
+- **Impulse check**: for each grasp at t = {samples} s of its trajectory, the arm is put at the
+  core's q with the tip moving at {impulse["speed_m_s"]:g} m/s along u (minimum-norm joint
+  velocities); gravity, actuators and damping off; a frictionless rigid wall perpendicular to
+  u touches the tip sphere; step {impulse["timestep_s"]:g} s, contact solref
+  {impulse["contact_solref"]}. The impulse is the integral of the contact force; e is measured
+  from the tip's velocity along u when the contact ends.
+"""
+
+
+def results_markdown(results: dict[str, Any]) -> str:
+    """The markdown report of a validation run."""
+    setup = results["setup"]
+    tensor, book, impulse = results["tensor_object"], results["book"], results["impulse_check"]
+    tensor_peaks = [g["peak_force_n"] for g in tensor["grasps"]]
+    kind = "quick (reduced)" if setup["quick"] else "full"
     figures = "\n\n".join(f"![{name}]({name})" for name in results.get("figures", []))
     versions = ", ".join(f"{k} {v}" for k, v in setup["versions"].items())
-    samples = ", ".join(f"{t:g}" for t in setup["impulse_sample_times_s"])
     return f"""# Validation of the effective mass with MuJoCo (issue #4)
 
 The {kind} run, made by
@@ -299,46 +344,7 @@ starting on the reference; compare it with "main from 1.3 s".
 
 {_variant_table(results)}
 
-## What is simulated
-
-- **Robot**: the Baxter URDF of example-robot-data loaded by MuJoCo with its meshes stripped;
-  every joint except `right_s0..right_w2` fixed at 0 (as the core locks them); no joint
-  damping, friction or armature. MuJoCo's joint-space inertia equals `pinocchio.crba` of the
-  core's model (with the object merged) to ~1e-15 (`test/test_validation.py`).
-- **Object**: a body fixed to `right_gripper` at the grasp with the exact mass, centre of mass
-  and inertia tensor the core uses; its shapes do not collide.
-- **Contact**: a sphere of radius {pillar["tip_sphere_radius_m"]:g} m centred on the tip frame
-  is the only colliding robot geometry (the paper's impacts are end-effector on sensor). The
-  sensor face is perpendicular to the tip's direction of motion u at
-  t = {pillar["planned_impact_time_s"]:g} s and placed where the sphere reaches it on the
-  reference. As the sphere is centred on the tip, the normal velocity of the contact point is
-  the tip's velocity along u: the contact sees the effective mass the core computes. Friction
-  {contact["friction"]:g}, elliptic cone, solref ({contact["timeconst_s"]:g} s,
-  {contact["dampratio"]:g}), solimp {contact["impedance"]:g}.
-- **Force sensor**: a {sensor["plate_mass_kg"]:g} kg plate on a spring of
-  {sensor["stiffness_n_m"]:.3g} N/m and a damper of {sensor["damping_n_s_m"]:g} N s/m along its
-  normal, i.e. a load cell on a rigid pillar; the force is the spring + damper force. A
-  physical stiffness matters: MuJoCo's contact forces alone scale with the contact's effective
-  mass by construction (ablation "rigid plate"), while a sensor of stiffness k gives the
-  textbook peak F ≈ v·sqrt(k·M_eff).
-- **Controller**: joint-space computed torque with MuJoCo's M(q) and bias forces of robot +
-  object (inertia and gravity compensation), K_p = {gains["kp_per_s2"]:g} 1/s²,
-  K_d = {gains["kd_per_s"]:g} 1/s, {control}, torques clipped to the URDF effort limits,
-  tracking the core's IK joint trajectory (cubic spline through its
-  {setup["tip_or_object_trajectory"]["dt_s"]:g} s samples). The reference goes on past the
-  sensor, so the arm keeps pushing after the impact, as in the paper. Simulated from
-  {pillar["simulated_from_s"]:g} s to {pillar["simulated_to_s"]:g} s with a
-  {pillar["timestep_s"]:g} s step, {pillar["impact_timestep_s"]:g} s around the impact.
-- **Peak impact force**: the largest sensor force within {1e3 * pillar["peak_window_s"]:g} ms
-  of first contact. **Impulse**: the contact normal impulse from first contact until the
-  sensor force first returns to zero.
-- **Impulse check**: for each grasp at t = {samples} s of its trajectory, the arm is put at the
-  core's q with the tip moving at {impulse["speed_m_s"]:g} m/s along u (minimum-norm joint
-  velocities); gravity, actuators and damping off; a frictionless rigid wall perpendicular to
-  u touches the tip sphere; step {impulse["timestep_s"]:g} s, contact solref
-  {impulse["contact_solref"]}. The impulse is the integral of the contact force; e is measured
-  from the tip's velocity along u when the contact ends.
-
+{_simulated_section(results)}
 ## Figures
 
 {figures}
