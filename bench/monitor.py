@@ -120,74 +120,108 @@ def compute_times(scaling: SpeedScaling, q: np.ndarray, qd: np.ndarray) -> dict:
 
 
 def end_to_end(scaling: SpeedScaling, seconds: float) -> dict:
-    import rclpy
-    from control_msgs.msg import SpeedScalingFactor
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-    from sensor_msgs.msg import JointState
-
     count = int(seconds * RATE_HZ)
     q, qd = states(count)
     expected = np.array([scaling.assess(q[k], qd[k]).factor for k in range(count)])
     order = np.argsort(expected)
     order = order[expected[order] < 1.0]  # a factor of 1 says nothing about which state
     with claim_ros_domain() as claim:
-        env = {
-            **os.environ,
-            "ROS_DOMAIN_ID": str(claim.domain_id),
-            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
-        }
-        command = [str(Path(sys.executable).parent / "grasp_safety_monitor"), "--ros-args"]
-        command += ["--params-file", str(PARAMS), "-r", f"~/speed_scaling:={TOPIC}"]
-        command += ["-p", "speed_scaling.max_increase_per_s:=1000000000.0"]
-        command += ["-p", "speed_scaling.closed_loop:=false"]  # the replay's own factors
-        process = subprocess.Popen(command, env=env, stderr=subprocess.DEVNULL)
-        context = rclpy.context.Context()
-        rclpy.init(context=context, domain_id=claim.domain_id)
-        node = rclpy.create_node("monitor_bench", context=context)
-        arrivals: list[tuple[float, float]] = []
-        latched = QoSProfile(
-            depth=1,
-            reliability=ReliabilityPolicy.RELIABLE,
-            durability=DurabilityPolicy.TRANSIENT_LOCAL,
-        )
-        node.create_subscription(
-            SpeedScalingFactor,
-            TOPIC,
-            lambda m: arrivals.append((time.monotonic(), m.factor)),
-            latched,
-        )
-        publisher = node.create_publisher(JointState, "/joint_states", 10)
-        executor = SingleThreadedExecutor(context=context)
-        executor.add_node(node)
-        spinning = threading.Event()
-        spinning.set()
-
-        def spin() -> None:
-            while spinning.is_set():
-                executor.spin_once(timeout_sec=0.05)
-
-        spinner = threading.Thread(target=spin, daemon=True)
-        spinner.start()
-        deadline = time.monotonic() + 120.0
-        while not arrivals and time.monotonic() < deadline:  # the monitor is up
-            time.sleep(0.1)
-        published = np.zeros(count)
-        start = time.monotonic()
-        for k in range(count):
-            msg = JointState(name=JOINTS, position=q[k].tolist(), velocity=qd[k].tolist())
-            published[k] = time.monotonic()
-            publisher.publish(msg)
-            wait = start + (k + 1) / RATE_HZ - time.monotonic()
-            if wait > 0:
-                time.sleep(wait)
-        time.sleep(0.5)
-        spinning.clear()
-        spinner.join()
-        node.destroy_node()
-        rclpy.shutdown(context=context)
+        process = _start_monitor(claim.domain_id)
+        arrivals, published = _replay(claim.domain_id, q, qd)
         process.terminate()
         process.wait(timeout=20)
+    latencies, matched = _match_arrivals(arrivals, published, expected, order)
+    return {
+        "published_states": count,
+        "publish_rate_hz": count / (published[-1] - published[0]),
+        "states_below_1": len(order),
+        "states_below_1_with_a_factor": len(matched),
+        "latency": percentiles_ms(latencies),
+    }
+
+
+def _start_monitor(domain_id: int) -> subprocess.Popen:
+    """The monitor node in its own process on ``domain_id``, publishing the replay's own
+    factors (open loop, no increase limit) on TOPIC."""
+    env = {
+        **os.environ,
+        "ROS_DOMAIN_ID": str(domain_id),
+        "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+    }
+    command = [str(Path(sys.executable).parent / "grasp_safety_monitor"), "--ros-args"]
+    command += ["--params-file", str(PARAMS), "-r", f"~/speed_scaling:={TOPIC}"]
+    command += ["-p", "speed_scaling.max_increase_per_s:=1000000000.0"]
+    command += ["-p", "speed_scaling.closed_loop:=false"]  # the replay's own factors
+    return subprocess.Popen(command, env=env, stderr=subprocess.DEVNULL)
+
+
+def _replay(
+    domain_id: int, q: np.ndarray, qd: np.ndarray
+) -> tuple[list[tuple[float, float]], np.ndarray]:
+    """Publishes the states on /joint_states at RATE_HZ once the monitor is up; returns the
+    factors received (monotonic arrival time [s], factor) and each state's publication time."""
+    import rclpy
+    from control_msgs.msg import SpeedScalingFactor
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import JointState
+
+    count = len(q)
+    context = rclpy.context.Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    node = rclpy.create_node("monitor_bench", context=context)
+    arrivals: list[tuple[float, float]] = []
+    latched = QoSProfile(
+        depth=1,
+        reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL,
+    )
+    node.create_subscription(
+        SpeedScalingFactor,
+        TOPIC,
+        lambda m: arrivals.append((time.monotonic(), m.factor)),
+        latched,
+    )
+    publisher = node.create_publisher(JointState, "/joint_states", 10)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    spinning = threading.Event()
+    spinning.set()
+
+    def spin() -> None:
+        while spinning.is_set():
+            executor.spin_once(timeout_sec=0.05)
+
+    spinner = threading.Thread(target=spin, daemon=True)
+    spinner.start()
+    deadline = time.monotonic() + 120.0
+    while not arrivals and time.monotonic() < deadline:  # the monitor is up
+        time.sleep(0.1)
+    published = np.zeros(count)
+    start = time.monotonic()
+    for k in range(count):
+        msg = JointState(name=JOINTS, position=q[k].tolist(), velocity=qd[k].tolist())
+        published[k] = time.monotonic()
+        publisher.publish(msg)
+        wait = start + (k + 1) / RATE_HZ - time.monotonic()
+        if wait > 0:
+            time.sleep(wait)
+    time.sleep(0.5)
+    spinning.clear()
+    spinner.join()
+    node.destroy_node()
+    rclpy.shutdown(context=context)
+    return arrivals, published
+
+
+def _match_arrivals(
+    arrivals: list[tuple[float, float]],
+    published: np.ndarray,
+    expected: np.ndarray,
+    order: np.ndarray,
+) -> tuple[list[float], set[int]]:
+    """Pairs each factor below 1 received with the first unmatched state expected to give it
+    (``order``: those states by expected factor); returns the latencies [s] and the states."""
     latencies, matched = [], set()
     for arrival, factor in arrivals:
         if factor >= 1.0:
@@ -198,13 +232,7 @@ def end_to_end(scaling: SpeedScaling, seconds: float) -> dict:
                 matched.add(int(candidate))
                 latencies.append(arrival - published[candidate])
                 break
-    return {
-        "published_states": count,
-        "publish_rate_hz": count / (published[-1] - published[0]),
-        "states_below_1": len(order),
-        "states_below_1_with_a_factor": len(matched),
-        "latency": percentiles_ms(latencies),
-    }
+    return latencies, matched
 
 
 def main() -> None:

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import argparse
 import statistics
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from typing import Any
 
@@ -109,67 +109,80 @@ def bench_postures(
         ranking_ms = 1e3 * statistics.median(ranking_cpu) / len(candidates)
         rows = []
         for restarts in restart_counts:
-            config = PostureConfig(restarts=restarts)
-            times, cpu_times = [], []
-            variant_cpu: dict[str, list[float]] = {name: [] for name in VARIANTS}
-            variants: dict[str, Any] = {}
-            for _ in range(repeats):
-                selected, stages = run(config)
-                times.append(stages["postures"])
-                cpu_times.append(stages["postures_process_cpu"])
-                if restarts == 8:
-                    for variant, changes in VARIANTS.items():
-                        variants[variant], stages = run(replace(config, **changes))
-                        variant_cpu[variant].append(stages["postures_process_cpu"])
-            gains = [
-                1.0 - p.score / p.score_single_ik
-                for p in selected.postures
-                if np.isfinite(p.score_single_ik)
-            ]
-            rescued = sum(
-                1
-                for p in selected.postures
-                if np.isfinite(p.score) and np.isnan(p.score_single_ik)
-            )
             rows.append(
-                {
-                    "restarts": restarts,
-                    "ms_per_grasp": 1e3 * statistics.median(times) / len(candidates),
-                    "cpu_ms_per_grasp": 1e3 * statistics.median(cpu_times) / len(candidates),
-                    "ranking_cpu_ms_per_grasp": ranking_ms,
-                    "cpu_vs_ranking": statistics.median(cpu_times)
-                    / statistics.median(ranking_cpu),
-                    "mean_gain_percent": 100.0 * float(np.mean(gains)) if gains else None,
-                    "max_gain_percent": 100.0 * float(np.max(gains)) if gains else None,
-                    "feasible": sum(1 for e in selected.evaluations if e.feasible),
-                    "rescued_by_selection": rescued,
-                    "postures_tried_mean": float(
-                        np.mean([p.postures_tried for p in selected.postures])
-                    ),
-                }
+                _restart_row(run, restarts, repeats, len(candidates), ranking_cpu, ranking_ms)
             )
-            for variant, other in variants.items():  # at 8 restarts
-                rows[-1][f"{variant}_cpu_vs_ranking"] = statistics.median(
-                    variant_cpu[variant]
-                ) / statistics.median(ranking_cpu)
-                rows[-1][f"{variant}_changed_grasps"] = sum(
-                    1
-                    for a, b in zip(selected.postures, other.postures, strict=True)
-                    if not np.array_equal([a.score], [b.score], equal_nan=True)
-                    or not np.array_equal(a.start_positions, b.start_positions)
-                )
-            print(
-                f"[postures] {name}: restarts {restarts:>2}: "
-                f"{rows[-1]['ms_per_grasp']:7.2f} ms/grasp "
-                f"(CPU {rows[-1]['cpu_ms_per_grasp']:7.2f} = x{rows[-1]['cpu_vs_ranking']:.2f} "
-                f"the ranking's {ranking_ms:.2f}), gain "
-                f"{rows[-1]['mean_gain_percent'] or 0.0:5.2f} % mean, "
-                f"{rows[-1]['max_gain_percent'] or 0.0:5.2f} % max, feasible "
-                f"{rows[-1]['feasible']}/{len(candidates)}",
-                flush=True,
-            )
+            _print_row(name, rows[-1], ranking_ms, len(candidates))
         results[name] = rows
     return results
+
+
+def _restart_row(
+    run: Callable[[PostureConfig], tuple[Any, Any]],
+    restarts: int,
+    repeats: int,
+    grasps: int,
+    ranking_cpu: list[float],
+    ranking_ms: float,
+) -> dict[str, Any]:
+    """One restart count's figures (at 8 restarts also the VARIANTS' cost and changes)."""
+    config = PostureConfig(restarts=restarts)
+    times, cpu_times = [], []
+    variant_cpu: dict[str, list[float]] = {name: [] for name in VARIANTS}
+    variants: dict[str, Any] = {}
+    for _ in range(repeats):
+        selected, stages = run(config)
+        times.append(stages["postures"])
+        cpu_times.append(stages["postures_process_cpu"])
+        if restarts == 8:
+            for variant, changes in VARIANTS.items():
+                variants[variant], stages = run(replace(config, **changes))
+                variant_cpu[variant].append(stages["postures_process_cpu"])
+    gains = [
+        1.0 - p.score / p.score_single_ik
+        for p in selected.postures
+        if np.isfinite(p.score_single_ik)
+    ]
+    rescued = sum(
+        1 for p in selected.postures if np.isfinite(p.score) and np.isnan(p.score_single_ik)
+    )
+    row = {
+        "restarts": restarts,
+        "ms_per_grasp": 1e3 * statistics.median(times) / grasps,
+        "cpu_ms_per_grasp": 1e3 * statistics.median(cpu_times) / grasps,
+        "ranking_cpu_ms_per_grasp": ranking_ms,
+        "cpu_vs_ranking": statistics.median(cpu_times) / statistics.median(ranking_cpu),
+        "mean_gain_percent": 100.0 * float(np.mean(gains)) if gains else None,
+        "max_gain_percent": 100.0 * float(np.max(gains)) if gains else None,
+        "feasible": sum(1 for e in selected.evaluations if e.feasible),
+        "rescued_by_selection": rescued,
+        "postures_tried_mean": float(np.mean([p.postures_tried for p in selected.postures])),
+    }
+    for variant, other in variants.items():  # at 8 restarts
+        row[f"{variant}_cpu_vs_ranking"] = statistics.median(
+            variant_cpu[variant]
+        ) / statistics.median(ranking_cpu)
+        row[f"{variant}_changed_grasps"] = sum(
+            1
+            for a, b in zip(selected.postures, other.postures, strict=True)
+            if not np.array_equal([a.score], [b.score], equal_nan=True)
+            or not np.array_equal(a.start_positions, b.start_positions)
+        )
+    return row
+
+
+def _print_row(name: str, row: dict[str, Any], ranking_ms: float, grasps: int) -> None:
+    """The progress line of one restart count."""
+    print(
+        f"[postures] {name}: restarts {row['restarts']:>2}: "
+        f"{row['ms_per_grasp']:7.2f} ms/grasp "
+        f"(CPU {row['cpu_ms_per_grasp']:7.2f} = x{row['cpu_vs_ranking']:.2f} "
+        f"the ranking's {ranking_ms:.2f}), gain "
+        f"{row['mean_gain_percent'] or 0.0:5.2f} % mean, "
+        f"{row['max_gain_percent'] or 0.0:5.2f} % max, feasible "
+        f"{row['feasible']}/{grasps}",
+        flush=True,
+    )
 
 
 def print_postures(results: dict[str, Any]) -> None:

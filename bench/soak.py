@@ -331,7 +331,8 @@ def start_node(domain_id: int, log_dir: Path, dt_s: float) -> subprocess.Popen[s
         )
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def _arguments(argv: Sequence[str] | None) -> argparse.Namespace:
+    """The command line (module docstring)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
         "--requests", type=int, default=10_000, help="requests after the warm-up (all phases)"
@@ -352,7 +353,41 @@ def main(argv: Sequence[str] | None = None) -> int:
         default=["10x101", "100x201", "1000x201", "1000x481"],
         help="grasps x samples of the memory-per-request figures (none: skip)",
     )
-    args = parser.parse_args(argv)
+    return parser.parse_args(argv)
+
+
+def _run_phases(
+    clients: Clients,
+    memory: NodeMemory,
+    pid: int,
+    args: argparse.Namespace,
+    warm_up: int,
+    reference: list[int],
+) -> tuple[Tally, int]:
+    """The warm-up, then one phase per client count sharing ``args.requests``, a table row
+    each; returns the phases' tally and the node's RSS [KiB] after the warm-up."""
+    total = Tally()
+    print(HEADER)
+    warm = run_phase(clients, min(4, max(args.clients)), warm_up, args.seed, reference)
+    print(warm.row("warm-up"))
+    print(memory.row("warm-up"))
+    rss_warm = rss_kib(pid)
+    reset_peak(pid)
+    phases = len(args.clients)
+    shares = [
+        args.requests // phases + (1 if k < args.requests % phases else 0) for k in range(phases)
+    ]
+    for phase, (count, share) in enumerate(zip(args.clients, shares, strict=True)):
+        tally = run_phase(clients, count, share, args.seed + 1 + phase, reference)
+        print(tally.row(f"{count} client{'s' if count > 1 else ''}"))
+        print(memory.row(f"{count} client{'s' if count > 1 else ''}"))
+        total.add(tally)
+    print(total.row("total"))
+    return total, rss_warm
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = _arguments(argv)
     sizes = [tuple(int(v) for v in size.split("x")) for size in args.sizes]
     warm_up = args.warm_up if args.warm_up is not None else max(20, args.requests // 10)
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
@@ -371,24 +406,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             if first is None or not first.success:
                 raise RuntimeError(f"the good request failed: {first}")
             reference = list(first.ranking.order)
-            total = Tally()
-            print(HEADER)
-            warm = run_phase(clients, min(4, max(args.clients)), warm_up, args.seed, reference)
-            print(warm.row("warm-up"))
-            print(memory.row("warm-up"))
-            rss_warm = rss_kib(node.pid)
-            reset_peak(node.pid)
-            phases = len(args.clients)
-            shares = [
-                args.requests // phases + (1 if k < args.requests % phases else 0)
-                for k in range(phases)
-            ]
-            for phase, (count, share) in enumerate(zip(args.clients, shares, strict=True)):
-                tally = run_phase(clients, count, share, args.seed + 1 + phase, reference)
-                print(tally.row(f"{count} client{'s' if count > 1 else ''}"))
-                print(memory.row(f"{count} client{'s' if count > 1 else ''}"))
-                total.add(tally)
-            print(total.row("total"))
+            total, rss_warm = _run_phases(clients, memory, node.pid, args, warm_up, reference)
             rss_end = rss_kib(node.pid)
             rss_peak = rss_kib(node.pid, "VmHWM")
             if sizes:

@@ -31,6 +31,8 @@ import argparse
 import statistics
 import sys
 import time
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -60,8 +62,32 @@ from grasp_safety_ros.core.pipeline import PipelineRequest, run_pipeline
 POSTURE_RESTARTS = 8
 
 
-def bench_whole_arm(arm: ArmWorkload, grasps: int = 10, repeats: int = 5) -> dict[str, Any]:
-    """The section's figures for one arm (module docstring)."""
+@dataclass(frozen=True)
+class _Case:
+    """One arm's workload: the candidates, the compiled ranking's feasible (grasp, evaluation)
+    pairs, the sites (default + the box's corners on the tip's link) and their Pinocchio
+    terms."""
+
+    arm: ArmWorkload
+    robot: Any
+    obj: Any
+    trajectory: Any
+    candidates: list[Any]
+    evaluator: GraspSafetyEvaluator
+    pairs: list[tuple[Any, Any]]
+    arm_points: dict[str, np.ndarray]
+    sites: Any
+    regions: Any
+    terms: list[ArmTerms]
+
+    @property
+    def samples(self) -> int:
+        """The (grasp, sample) pairs of the feasible grasps."""
+        return sum(len(e.times_s) for _, e in self.pairs)
+
+
+def _prepare(arm: ArmWorkload, grasps: int) -> _Case:
+    """The workload of ``arm`` with ``grasps`` candidates, ranked once."""
     robot = arm.robot()
     trajectory = arm.trajectory(2.0, 0.01)
     obj = box_object()
@@ -69,12 +95,28 @@ def bench_whole_arm(arm: ArmWorkload, grasps: int = 10, repeats: int = 5) -> dic
     evaluator = GraspSafetyEvaluator(robot, EvaluationConfig(workers=1))
     ranking = evaluator.rank(candidates, obj, trajectory, seed_positions=arm.seed_positions)
     pairs = [(g, e) for g, e in zip(candidates, ranking.evaluations, strict=True) if e.feasible]
-    samples = sum(len(e.times_s) for _, e in pairs)
     tip_to_object = candidates[0].transform_tip_to_object
     corners_in_tip = [tip_to_object.actInv(c) for c in box_corners_in_object(BOX_SIZE_M)]
     arm_points = {arm.tip_frame: np.array(corners_in_tip)}
-    sites = resolve_arm_sites(robot, arm_points)
-    regions = select_regions(None)
+    return _Case(
+        arm,
+        robot,
+        obj,
+        trajectory,
+        candidates,
+        evaluator,
+        pairs,
+        arm_points,
+        resolve_arm_sites(robot, arm_points),
+        select_regions(None),
+        _pinocchio_terms(robot, obj, trajectory, pairs),
+    )
+
+
+def _pinocchio_terms(
+    robot: Any, obj: Any, trajectory: Any, pairs: list[tuple[Any, Any]]
+) -> list[ArmTerms]:
+    """The reference path's per-grasp terms (placements, Jacobians, M⁻¹, q̇), precomputed."""
     terms = []
     for grasp, evaluation in pairs:
         model = augmented_model(robot, obj, grasp.transform_tip_to_object)
@@ -91,6 +133,19 @@ def bench_whole_arm(arm: ArmWorkload, grasps: int = 10, repeats: int = 5) -> dic
             evaluation.joint_positions,
         )
         terms.append(ArmTerms(*kinematics, rates))
+    return terms
+
+
+def _timed_functions(case: _Case) -> dict[str, tuple[Callable[[], float | None], float]]:
+    """Each figure's function (None: time it here; a float: its own CPU time [s]) and the
+    count its time is divided by (times 1e6: µs per sample, or ms per grasp)."""
+    robot, obj, trajectory, pairs, sites = (
+        case.robot,
+        case.obj,
+        case.trajectory,
+        case.pairs,
+        case.sites,
+    )
 
     def full() -> None:
         for grasp, evaluation in pairs:
@@ -99,7 +154,7 @@ def bench_whole_arm(arm: ArmWorkload, grasps: int = 10, repeats: int = 5) -> dic
     def compiled() -> None:
         shared = grasps_terms(
             robot,
-            evaluator.ik.chain,
+            case.evaluator.ik.chain,
             obj,
             [grasp.transform_tip_to_object for grasp, _ in pairs],
             [evaluation.joint_positions for _, evaluation in pairs],
@@ -110,30 +165,32 @@ def bench_whole_arm(arm: ArmWorkload, grasps: int = 10, repeats: int = 5) -> dic
             [trajectory] * len(pairs),
             [grasp for grasp, _ in pairs],
             sites,
-            regions,
+            case.regions,
             *shared,
         )
 
     def given_terms() -> None:
-        for term in terms:
+        for term in case.terms:
             exposure = site_exposure(sites, term, robot.transform_base_to_world)
-            assess_sites(exposure.speed_m_s, exposure.effective_mass_kg, 2.0, regions)
+            assess_sites(exposure.speed_m_s, exposure.effective_mass_kg, 2.0, case.regions)
 
     def rank() -> None:
-        evaluator.rank(candidates, obj, trajectory, seed_positions=arm.seed_positions)
+        case.evaluator.rank(
+            case.candidates, obj, trajectory, seed_positions=case.arm.seed_positions
+        )
 
     def postures(options: AnalysisOptions) -> float:
         """The process CPU time [s] of the pipeline's posture stage."""
         request = PipelineRequest(
-            tuple(candidates),
+            tuple(case.candidates),
             obj,
             trajectory,
             options=options,
             posture=PostureConfig(restarts=POSTURE_RESTARTS),
-            seed_positions=arm.seed_positions,
+            seed_positions=case.arm.seed_positions,
         )
         stages: dict[str, float] = {}
-        run_pipeline(evaluator, request, timings=stages)
+        run_pipeline(case.evaluator, request, timings=stages)
         return stages["postures_process_cpu"]
 
     def postures_by_score() -> float:
@@ -141,27 +198,28 @@ def bench_whole_arm(arm: ArmWorkload, grasps: int = 10, repeats: int = 5) -> dic
 
     def postures_by_whole_arm() -> float:
         return postures(
-            AnalysisOptions(rank_by="whole_arm", arm_points_m=arm_points, effort=False)
+            AnalysisOptions(rank_by="whole_arm", arm_points_m=case.arm_points, effort=False)
         )
 
-    timings: dict[str, list[float]] = {
-        "compiled": [],
-        "full": [],
-        "given_terms": [],
-        "rank": [],
-        "postures_by_score": [],
-        "postures_by_whole_arm": [],
+    samples = case.samples
+    per_grasp_ms = 1e3 * len(case.candidates)  # seconds / (1e3 grasps) * 1e6 = ms per grasp
+    return {
+        "compiled": (compiled, samples),
+        "full": (full, samples),
+        "given_terms": (given_terms, samples),
+        "rank": (rank, len(case.candidates) * trajectory.num_samples),
+        "postures_by_score": (postures_by_score, per_grasp_ms),
+        "postures_by_whole_arm": (postures_by_whole_arm, per_grasp_ms),
     }
-    per_grasp_ms = 1e3 * len(candidates)  # seconds / (1e3 grasps) * 1e6 = ms per grasp
+
+
+def bench_whole_arm(arm: ArmWorkload, grasps: int = 10, repeats: int = 5) -> dict[str, Any]:
+    """The section's figures for one arm (module docstring)."""
+    case = _prepare(arm, grasps)
+    functions = _timed_functions(case)
+    timings: dict[str, list[float]] = {key: [] for key in functions}
     for _ in range(repeats):
-        for key, function, count in (
-            ("compiled", compiled, samples),
-            ("full", full, samples),
-            ("given_terms", given_terms, samples),
-            ("rank", rank, len(candidates) * trajectory.num_samples),
-            ("postures_by_score", postures_by_score, per_grasp_ms),
-            ("postures_by_whole_arm", postures_by_whole_arm, per_grasp_ms),
-        ):
+        for key, (function, count) in functions.items():
             start = time.process_time()
             seconds = function()  # the functions of a pipeline stage time it themselves
             if seconds is None:
@@ -169,10 +227,10 @@ def bench_whole_arm(arm: ArmWorkload, grasps: int = 10, repeats: int = 5) -> dic
             timings[key].append(seconds / max(count, 1) * 1e6)
     return {
         "robot": f"{arm.urdf} {arm.base_frame} -> {arm.tip_frame}",
-        "sites": len(sites),
-        "arm_points": len(corners_in_tip),
-        "feasible_grasps": len(pairs),
-        "samples": samples,
+        "sites": len(case.sites),
+        "arm_points": len(case.arm_points[arm.tip_frame]),
+        "feasible_grasps": len(case.pairs),
+        "samples": case.samples,
         "us_per_sample": statistics.median(timings["compiled"]),
         "us_per_sample_pinocchio": statistics.median(timings["full"]),
         "us_per_sample_given_terms": statistics.median(timings["given_terms"]),

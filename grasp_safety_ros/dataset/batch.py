@@ -435,6 +435,47 @@ def run_batch(
     payload = SpecPayload(data, str(spec.base_dir), spec.content_hash, per_sample)
     progress = _Progress(len(chunks), len(chunks) - len(todo))
     started = time.perf_counter()
+    samples, seconds, rss = _compute_parts(
+        out_dir, chunks, todo, payload, progress, workers, scheduler, client
+    )
+    wall = time.perf_counter() - started
+    _remove_stale_parts(out_dir, chunks)
+    _write_json(out_dir / MANIFEST, _manifest(spec, chunks, per_sample))
+    summary = summarise(out_dir, failures)
+    summary.update(
+        {
+            "chunks": len(chunks),
+            "chunks_computed": len(todo),
+            "chunks_resumed": len(chunks) - len(todo),
+            "scheduler": scheduler or ("dask client" if client is not None else "local"),
+            "throughput": {
+                "wall_s": wall,
+                "grasp_samples": int(samples),
+                "grasp_samples_per_s": samples / wall if wall > 0 else None,
+                "chunk_seconds_total": seconds,
+                "peak_memory_per_worker_mib": {
+                    str(pid): kb / 1024 for pid, kb in sorted(rss.items())
+                },
+            },
+        }
+    )
+    _write_json(out_dir / "summary.json", summary)
+    return summary
+
+
+def _compute_parts(
+    out_dir: Path,
+    chunks: Sequence[Chunk],
+    todo: Sequence[Chunk],
+    payload: SpecPayload,
+    progress: _Progress,
+    workers: int,
+    scheduler: str | None,
+    client: Client | None,
+) -> tuple[float, float, dict[int, int]]:
+    """Computes the ``todo`` chunks (on Dask with a scheduler or a client, else in the local
+    pool) and writes each part as it arrives; returns the grasp samples, the chunks' total
+    compute time [s] and each worker's peak resident memory [KiB]."""
     samples = seconds = 0.0
     rss: dict[int, int] = {}
     own_client = None
@@ -456,12 +497,20 @@ def run_batch(
         progress.close()
         if own_client is not None:
             own_client.close()
-    wall = time.perf_counter() - started
+    return samples, seconds, rss
+
+
+def _remove_stale_parts(out_dir: Path, chunks: Sequence[Chunk]) -> None:
+    """Deletes the part files of ``out_dir`` this plan does not have (an earlier run's)."""
     planned = {c.part_name for c in chunks}
     for stale in (out_dir / PARTS).glob("*part-*"):
         if stale.name not in planned:
             stale.unlink()
-    manifest = {
+
+
+def _manifest(spec: BatchSpec, chunks: Sequence[Chunk], per_sample: bool) -> dict[str, Any]:
+    """The manifest of a finished run: versions, the spec's hash and every part's chunk."""
+    return {
         "package_version": __version__,
         "schema_version": SCHEMA_VERSION,
         "pyarrow_version": pa.__version__,
@@ -478,24 +527,3 @@ def run_batch(
             for c in chunks
         ],
     }
-    _write_json(out_dir / MANIFEST, manifest)
-    summary = summarise(out_dir, failures)
-    summary.update(
-        {
-            "chunks": len(chunks),
-            "chunks_computed": len(todo),
-            "chunks_resumed": len(chunks) - len(todo),
-            "scheduler": scheduler or ("dask client" if client is not None else "local"),
-            "throughput": {
-                "wall_s": wall,
-                "grasp_samples": int(samples),
-                "grasp_samples_per_s": samples / wall if wall > 0 else None,
-                "chunk_seconds_total": seconds,
-                "peak_memory_per_worker_mib": {
-                    str(pid): kb / 1024 for pid, kb in sorted(rss.items())
-                },
-            },
-        }
-    )
-    _write_json(out_dir / "summary.json", summary)
-    return summary

@@ -138,6 +138,19 @@ class GraspSafetyNode(RobotSource):
         self._pending_robot = {}
         self._idle_trim = IdleTrim()
 
+        self._declare_parameters()
+        self._create_endpoints()
+        self._subscribe_inputs()
+        self._diagnostics_timer = self.create_timer(
+            self._settings.diagnostics_period_s, self._on_diagnostics_timer
+        )
+        self._started = True
+        if self._robot is not None:
+            self._log_robot(self._robot)
+
+    def _declare_parameters(self) -> None:
+        """Declares the parameters with their callbacks, then builds the settings and the robot
+        from them (StartupError: an invalid value or an unusable robot description)."""
         self.add_pre_set_parameters_callback(typed_parameters)
         answer_read_only_parameters(self)  # ros2 param load of a dump: not "failed"
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -155,8 +168,10 @@ class GraspSafetyNode(RobotSource):
             raise StartupError(str(error)) from None
         self._warn_unknown_overrides()
 
+    def _create_endpoints(self) -> None:
+        """Creates the output publishers, ~/rank_grasps and ~/plan_grasps."""
         self._service_group = ReentrantCallbackGroup()
-        self._topic_group = topics = MutuallyExclusiveCallbackGroup()
+        self._topic_group = MutuallyExclusiveCallbackGroup()
         self._ranking_pub = OnDemandPublisher(self, GraspRanking, "~/ranking")
         self._ranked_pub = self.create_publisher(PoseArray, "~/ranked_grasps", LATCHED)
         self._markers_pub = OnDemandPublisher(self, MarkerArray, "~/markers")
@@ -177,6 +192,11 @@ class GraspSafetyNode(RobotSource):
             latest_trajectory=self._topic_inputs.latest_trajectory,
             stopping=self._stopping,
         )
+
+    def _subscribe_inputs(self) -> None:
+        """Subscribes the input topics (the grasp inputs in one mutually exclusive group), each
+        callback guarded and its lost messages counted."""
+        topics = self._topic_group
         inputs = (
             (PoseArray, "~/candidate_grasps", self._on_candidates, topics),
             (Float64MultiArray, "~/candidate_grasp_quality", self._on_quality, topics),
@@ -205,12 +225,6 @@ class GraspSafetyNode(RobotSource):
                     message_lost=partial(self._on_message_lost, source)
                 ),
             )
-        self._diagnostics_timer = self.create_timer(
-            self._settings.diagnostics_period_s, self._on_diagnostics_timer
-        )
-        self._started = True
-        if self._robot is not None:
-            self._log_robot(self._robot)
 
     def _guarded(self, source: str, callback: Callable[..., None]) -> Callable[[Any, Any], None]:
         """``callback`` for a topic, after refusing a message with a subnormal float (an int

@@ -249,26 +249,58 @@ def simulate_collision(
         setup,
         object_shape=object_shape,
     )
-    model, data = scene.model, scene.data
-    dof = scene.arm_dof
-    effort = np.asarray(robot.model.effortLimit, dtype=float)
-    effort = np.where(np.isfinite(effort) & (effort > 0), effort, np.inf)
     q0, v0, _ = _reference_state(spline, duration, setup.start_time_s)
-    data.qpos[scene.arm_qpos] = q0
-    data.qvel[dof] = v0
-    data.time = setup.start_time_s
-    mujoco.mj_forward(model, data)
+    scene.data.qpos[scene.arm_qpos] = q0
+    scene.data.qvel[scene.arm_dof] = v0
+    scene.data.time = setup.start_time_s
+    mujoco.mj_forward(scene.model, scene.data)
+    return _track_into_sensor(robot, scene, evaluation, spline, direction, setup)
 
-    timesteps = setup.timesteps()
-    steps = len(timesteps)
-    times = setup.start_time_s + np.cumsum(timesteps)
-    starts = times - timesteps
-    # The reference at every step start, evaluated at once (held after the trajectory ends).
+
+def _effort_limits(robot: RobotModel) -> np.ndarray:
+    """The URDF effort limits [N·m or N], inf where a joint has none (or a non-positive one)."""
+    effort = np.asarray(robot.model.effortLimit, dtype=float)
+    return np.where(np.isfinite(effort) & (effort > 0), effort, np.inf)
+
+
+def _step_references(
+    spline: CubicSpline, duration: float, starts: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The reference position, velocity and acceleration at every step start, evaluated at
+    once (held, at rest, outside the trajectory)."""
     moving = (starts > 0.0) & (starts < duration)
     clipped = np.clip(starts, 0.0, duration)
     q_refs = spline(clipped)
     v_refs = np.where(moving[:, None], spline(clipped, 1), 0.0)
     a_refs = np.where(moving[:, None], spline(clipped, 2), 0.0)
+    return q_refs, v_refs, a_refs
+
+
+def _arm_block(dof: np.ndarray) -> tuple[slice, ...] | tuple[np.ndarray, ...]:
+    """The index of the arm's block in the engine's mass matrix (slices when contiguous)."""
+    if np.array_equal(dof, np.arange(dof[0], dof[0] + len(dof))):
+        return (slice(dof[0], dof[-1] + 1),) * 2
+    return np.ix_(dof, dof)
+
+
+def _track_into_sensor(
+    robot: RobotModel,
+    scene: Scene,
+    evaluation: GraspEvaluation,
+    spline: CubicSpline,
+    direction: np.ndarray,
+    setup: CollisionSetup,
+) -> CollisionResult:
+    """Steps the scene from its start state under computed torque, recording the sensor, the
+    contact force and the tip's approach speed along ``direction`` before the first touch."""
+    model, data = scene.model, scene.data
+    dof = scene.arm_dof
+    effort = _effort_limits(robot)
+    timesteps = setup.timesteps()
+    steps = len(timesteps)
+    times = setup.start_time_s + np.cumsum(timesteps)
+    starts = times - timesteps
+    q_refs, v_refs, a_refs = _step_references(spline, float(evaluation.times_s[-1]), starts)
     sensor = np.zeros(steps)
     contact_force = np.zeros(steps)
     approach = np.full(steps, np.nan)
@@ -276,11 +308,7 @@ def simulate_collision(
     stiffness = setup.sensor.stiffness_n_m
     full_inertia = np.zeros((model.nv, model.nv))
     jacobian = np.zeros((3, model.nv))
-    arm_block = (
-        (slice(dof[0], dof[-1] + 1),) * 2
-        if np.array_equal(dof, np.arange(dof[0], dof[0] + len(dof)))
-        else np.ix_(dof, dof)
-    )
+    arm_block = _arm_block(dof)
     torque = np.zeros(len(dof))
     tracking_error = 0.0
     saturation_time = float("nan")

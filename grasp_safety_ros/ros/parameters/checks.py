@@ -84,6 +84,25 @@ _COUNT_LIMITS: Mapping[str, tuple[int, int]] = {
 }
 """Bounds of the node's count parameters; the request budgets' tops are the scenario's limits
 (core.options.LIMITS): beyond them a request cannot finish in useful time or memory."""
+_LISTS = frozenset(
+    {
+        "ik_seed",
+        "robot.armature_kgm2",
+        "robot.armature_lower_kgm2",
+        "robot.armature_joint_names",
+        "object.com_in_object_m",
+        "object.inertia_about_com_kgm2",
+        "object.points_in_object_m",
+        "object.box_size_m",
+        "moveit.object_goal",
+        "iso_ts_15066.regions",
+        "whole_arm.point_links",
+        "whole_arm.points_m",
+        "retime.joint_acceleration_limits",
+        "retime.joint_velocity_limits",
+    }
+)
+"""The array-valued parameters check_parameter hands to _check_list."""
 
 
 def _string(name: str, value: Any) -> str:
@@ -122,28 +141,36 @@ def check_parameter(name: str, value: Any) -> Any:
     if name not in PARAMETERS:
         return value
     if name in _STRINGS:
-        text = _string(name, value)
-        if name == "robot_description" and text.strip() and not text.lstrip().startswith("<"):
-            raise InvalidInputError(
-                name, "must be URDF XML; give a file path or example-robot-data:<name> in urdf"
-            )
-        if name in _CHOICES and text not in _CHOICES[name]:
-            raise InvalidInputError(
-                name, f"must be one of {', '.join(_CHOICES[name])}, got {text!r}"
-            )
-        if name == "object_frame" and not text:
-            raise InvalidInputError(name, "must be a non-empty frame name")
-        if name == PUBLISHED_PARAMETER and text:
-            _check_published(text)
-        return text
+        return _check_string(name, value)
     if name in _FLAGS:
         if not isinstance(value, bool):
             raise InvalidInputError(name, f"must be true or false, got {show(value)}")
         return value
     if name in _COUNT_LIMITS:
         return _integer(name, value, *_COUNT_LIMITS[name])
-    if name == "ik_seed":
-        return _numbers(name, value, None)
+    if name in _LISTS:
+        return _check_list(name, value)
+    return _check_number(name, value)
+
+
+def _check_string(name: str, value: Any) -> str:
+    """A string parameter (one of _STRINGS): its type, its choices and its own format."""
+    text = _string(name, value)
+    if name == "robot_description" and text.strip() and not text.lstrip().startswith("<"):
+        raise InvalidInputError(
+            name, "must be URDF XML; give a file path or example-robot-data:<name> in urdf"
+        )
+    if name in _CHOICES and text not in _CHOICES[name]:
+        raise InvalidInputError(name, f"must be one of {', '.join(_CHOICES[name])}, got {text!r}")
+    if name == "object_frame" and not text:
+        raise InvalidInputError(name, "must be a non-empty frame name")
+    if name == PUBLISHED_PARAMETER and text:
+        _check_published(text)
+    return text
+
+
+def _check_list(name: str, value: Any) -> Any:
+    """An array parameter (one of _LISTS): its element type, length and range."""
     if name in ("robot.armature_kgm2", "robot.armature_lower_kgm2"):
         values = _numbers(name, value, None)
         negative = [k for k, x in enumerate(values) if x < 0.0]
@@ -182,8 +209,12 @@ def check_parameter(name: str, value: Any) -> Any:
         points = _points(name, value, MAX_SITES)
         check_within_reach(points, name)
         return points
-    if name in ("retime.joint_acceleration_limits", "retime.joint_velocity_limits"):
-        return _numbers(name, value, None)  # > 0 and one per joint: checked with the robot
+    # ik_seed; retime.joint_*_limits: > 0 and one per joint are checked with the robot
+    return _numbers(name, value, None)
+
+
+def _check_number(name: str, value: Any) -> float:
+    """A scalar float parameter: finite, in its range."""
     if name == "retime.safety_factor":
         return finite_float(value, name, 0.0, 1.0, strict_minimum=True)
     if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
