@@ -97,3 +97,13 @@ def test_bad_times_are_refused_with_the_field_name() -> None:
         joint_velocities_accelerations(np.array([0.0, 1.0]), np.zeros((3, 2)))
     zeros = joint_velocities_accelerations(np.array([0.0]), np.ones((1, 2)))
     assert not np.any(zeros[0]) and not np.any(zeros[1])
+
+
+@needs_numba
+@pytest.mark.parametrize("times", [[0.0, 0.5, 0.5, 1.0], [0.0, 1.0, 0.5, 2.0]])
+def test_both_paths_refuse_times_that_do_not_increase(times: list[float]) -> None:
+    """The compiled whole-arm path refuses what the numpy path refuses (it returned NaN)."""
+    positions = np.ones((len(times), 2))
+    for rates in (joint_velocities_accelerations, clamped_spline_velocities):
+        with pytest.raises(InvalidInputError, match="times_s: must be strictly increasing"):
+            rates(np.array(times), positions)

@@ -16,12 +16,18 @@ from tolerances import (
 )
 
 from grasp_safety_ros.core import RobotModel
+from grasp_safety_ros.core.method import terms as terms_module
 from grasp_safety_ros.core.method.backend import Backend
 from grasp_safety_ros.core.method.effective_mass import (
     augmented_model,
     translational_mobility_in_base,
 )
-from grasp_safety_ros.core.method.terms import SampleTerms, grasps_terms
+from grasp_safety_ros.core.method.terms import (
+    KEPT_TERMS_BYTES,
+    SampleTerms,
+    grasps_terms,
+    sample_terms_buffers,
+)
 
 
 @needs_numba
@@ -252,3 +258,22 @@ def test_terms_memory_is_reused_only_once_nothing_refers_to_it(arm7: RobotModel)
     assert address(third) in released
     for array, fresh in zip(third, expected, strict=True):
         assert np.array_equal(array, fresh)
+
+
+def test_kept_terms_memory_survives_requests_it_cannot_hold() -> None:
+    """A request larger than KEPT_TERMS_BYTES, or of no samples, neither evicts the kept
+    unreferenced blocks nor adds one: the next ordinary request still gets kept memory."""
+
+    def kept_blocks() -> list[int]:  # addresses, so that no reference is held
+        return [block.__array_interface__["data"][0] for block in terms_module._BLOCKS.blocks]
+
+    sample_terms_buffers(2, 10, 7)  # at least one kept block, unreferenced once dropped
+    before = kept_blocks()
+    n = 7
+    too_many = KEPT_TERMS_BYTES // (8 * n * n) + 1  # the (n, n) field alone is over the limit
+    large = sample_terms_buffers(1, too_many, n)
+    empty = sample_terms_buffers(0, 0, n)
+    assert kept_blocks() == before
+    del large, empty
+    again = sample_terms_buffers(2, 10, 7)
+    assert again.rotations_joint_to_world.__array_interface__["data"][0] in before

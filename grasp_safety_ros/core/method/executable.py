@@ -22,6 +22,7 @@ joints at once (``rates_for_execution_many``: a report's grasps in one pass).
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Sequence
 
 import numpy as np
@@ -136,7 +137,8 @@ def clamped_spline_velocities(times_s: np.ndarray, joint_positions: np.ndarray) 
     in numpy costs more than the rest of the whole arm's q̇.
 
     Args:
-        times_s: (N,) strictly increasing sample times [s] (not checked).
+        times_s: (N,) strictly increasing sample times [s] (else InvalidInputError, as
+            ``joint_velocities_accelerations``).
         joint_positions: (N, m) positions [rad or m], columns apart (continuous unwrapped).
     """
     from ..kernels.points import clamped_spline_velocities as kernel
@@ -146,8 +148,11 @@ def clamped_spline_velocities(times_s: np.ndarray, joint_positions: np.ndarray) 
     velocities = np.zeros_like(positions)
     if len(times) < 2 or not positions.shape[1]:
         return velocities
+    if not np.all(np.diff(times) > 0):
+        raise InvalidInputError("times_s", "must be strictly increasing")
     key = times.tobytes()
-    elimination = _ELIMINATIONS.get(key)
+    with _ELIMINATIONS_LOCK:  # a library may call from several threads
+        elimination = _ELIMINATIONS.get(key)
     if elimination is None:
         dx = np.diff(times)
         lower = [*dx[1:].tolist(), 0.0]
@@ -161,9 +166,10 @@ def clamped_spline_velocities(times_s: np.ndarray, joint_positions: np.ndarray) 
             np.array(du),
             np.array(dl),
         )
-        if len(_ELIMINATIONS) >= KEPT_ELIMINATIONS:
-            _ELIMINATIONS.pop(next(iter(_ELIMINATIONS)), None)  # the oldest
-        _ELIMINATIONS[key] = elimination
+        with _ELIMINATIONS_LOCK:
+            if len(_ELIMINATIONS) >= KEPT_ELIMINATIONS:
+                _ELIMINATIONS.pop(next(iter(_ELIMINATIONS)), None)  # the oldest
+            _ELIMINATIONS[key] = elimination
     call_kernel(kernel, times, positions, *elimination, velocities)
     return velocities
 
@@ -172,6 +178,7 @@ KEPT_ELIMINATIONS = 16
 """Sample times whose spline elimination (``clamped_spline_velocities``) is kept for the next
 call with the same times: its Python loop costs as much as the kernel on 10 grasps' joints."""
 _ELIMINATIONS: dict[bytes, tuple[np.ndarray, ...]] = {}
+_ELIMINATIONS_LOCK = threading.Lock()
 
 
 ROW_SOLVE_COLUMNS = 24

@@ -76,17 +76,19 @@ def _block(size: int) -> np.ndarray | None:
     (only this list holds it: every view of a block, SampleTerms' fields and their slices,
     holds a reference to it), else a new one when the kept stay within KEPT_TERMS_BYTES with
     it (the oldest unreferenced ones dropped first), else None."""
+    limit = KEPT_TERMS_BYTES - 8 * size
+    if size == 0 or limit < 0:  # nothing to keep, or more than is kept: the kept stay
+        return None
     blocks = _BLOCKS.blocks
     for k in range(len(blocks)):
         if blocks[k].size >= size and sys.getrefcount(blocks[k]) == 2:  # the list's, the call's
             return blocks[k]
-    limit = KEPT_TERMS_BYTES - 8 * size
     for k in range(len(blocks) - 1, -1, -1):
         if sum(b.nbytes for b in blocks) <= limit:
             break
         if sys.getrefcount(blocks[k]) == 2:
             del blocks[k]
-    if limit < 0 or sum(b.nbytes for b in blocks) > limit:
+    if sum(b.nbytes for b in blocks) > limit:
         return None
     blocks.insert(0, np.empty(size))
     return blocks[0]
