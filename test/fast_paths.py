@@ -22,6 +22,7 @@ from grasp_safety_ros.core import (
 )
 from grasp_safety_ros.core.method.ik import compiled_available
 from grasp_safety_ros.core.method.ranking import Ranking
+from grasp_safety_ros.core.method.results import SAMPLE_ARRAYS
 from grasp_safety_ros.core.method.terms import SampleTerms, grasp_terms
 
 needs_numba = pytest.mark.skipif(not compiled_available(), reason="numba is not installed")
@@ -86,15 +87,7 @@ def assert_identical_ranking(a: Ranking, b: Ranking) -> None:
     assert a.order == b.order
     for x, y in zip(a.evaluations, b.evaluations, strict=True):
         assert (x.index, x.name, x.feasible, x.reason) == (y.index, y.name, y.feasible, y.reason)
-        for field in (
-            "times_s",
-            "joint_positions",
-            "directions_in_base",
-            "effective_mass_kg",
-            "direction_is_worst_case",
-            "tip_speed_m_s",
-            "ik_iterations",
-        ):
+        for field in SAMPLE_ARRAYS:
             np.testing.assert_array_equal(getattr(x, field), getattr(y, field))
         assert x.score == y.score or (np.isnan(x.score) and np.isnan(y.score))
 

@@ -90,6 +90,19 @@ class GraspEvaluation:
         return float(self.effective_mass_kg.mean()) if self.feasible else float("nan")
 
 
+SAMPLE_ARRAYS = (
+    "times_s",
+    "joint_positions",
+    "directions_in_base",
+    "effective_mass_kg",
+    "direction_is_worst_case",
+    "tip_speed_m_s",
+    "ik_iterations",
+)
+"""The GraspEvaluation fields that are arrays over the samples (axis 0), as the ranking
+gives them (links_only_effective_mass_kg defaults to effective_mass_kg)."""
+
+
 @dataclass(frozen=True)
 class Ranking:
     """Grasps ranked by score, safest (lowest) first.

@@ -21,6 +21,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ...core.method.ranking import Ranking
+from ...core.method.results import SAMPLE_ARRAYS
 from ...core.model.inertia import ObjectInertia
 from ...core.pipeline import Progress
 from ..parameters import NodeSettings
@@ -170,19 +171,7 @@ class Snapshot:
 def labels_only(ranking: Ranking) -> Ranking:
     """``ranking`` without its per-sample arrays and postures: what the markers read (index,
     name, feasibility, score, order, metric)."""
-    empty = np.empty(0)
-    arrays = dict.fromkeys(
-        (
-            "times_s",
-            "joint_positions",
-            "directions_in_base",
-            "effective_mass_kg",
-            "direction_is_worst_case",
-            "tip_speed_m_s",
-            "ik_iterations",
-        ),
-        empty,
-    )
+    arrays = dict.fromkeys(SAMPLE_ARRAYS, np.empty(0))
     return replace(
         ranking,
         postures=(),
