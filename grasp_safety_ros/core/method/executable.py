@@ -61,6 +61,12 @@ GROUP_TRAJECTORIES = 64
 then stay in the processor's cache)."""
 
 
+def check_increasing(times_s: np.ndarray) -> None:
+    """InvalidInputError unless the sample times [s] strictly increase."""
+    if not np.all(np.diff(times_s) > 0):
+        raise InvalidInputError("times_s", "must be strictly increasing")
+
+
 def rates_for_execution_many(
     trajectories: Sequence[tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray] | None]],
 ) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -81,9 +87,8 @@ def rates_for_execution_many(
             results[k] = planned_rates
         elif len(times) < 2:
             results[k] = (np.zeros_like(positions), np.zeros_like(positions))
-        elif not np.all(np.diff(times) > 0):
-            raise InvalidInputError("times_s", "must be strictly increasing")
         else:
+            check_increasing(times)
             groups.setdefault(times.tobytes(), []).append(k)
     for group in groups.values():
         for first in range(0, len(group), GROUP_TRAJECTORIES):
@@ -148,8 +153,7 @@ def clamped_spline_velocities(times_s: np.ndarray, joint_positions: np.ndarray) 
     velocities = np.zeros_like(positions)
     if len(times) < 2 or not positions.shape[1]:
         return velocities
-    if not np.all(np.diff(times) > 0):
-        raise InvalidInputError("times_s", "must be strictly increasing")
+    check_increasing(times)
     key = times.tobytes()
     with _ELIMINATIONS_LOCK:  # a library may call from several threads
         elimination = _ELIMINATIONS.get(key)
