@@ -35,6 +35,8 @@ Sections (SECTIONS, each a key of the results, in run order; ``arms`` is bench/a
   analyses as multiples of the ranking's own time, the start-up of a one-grasp ranking against
   ``import pinocchio``; alone: ``bench/run.py --pipeline-only``;
 - the batch's throughput per worker (bench/batch.py's workload, one local worker);
+- a newcomer's first table (bench/fresh_demo.py): ``make demo`` in a fresh clone of HEAD with
+  empty pip and kernel caches, to the ranking table, with the longest silence on the way;
 - issue 21's and issue 30's target tables from the figures above (bench/targets.py; a row
   not measured says why), and issue 28's no-regression table: the core's µs per sample, the
   CLI and the service rows against the previous committed results (``previous``: the figures
@@ -70,6 +72,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from arm import bench_arm
 from continuous import bench_continuous
+from fresh_demo import bench_fresh_demo, print_fresh_demo
 from kdl_chain import load_pykdl
 from pipeline import bench_batch_per_worker, bench_pipeline, print_pipeline
 from postures import bench_postures, print_postures
@@ -137,6 +140,7 @@ SECTIONS = (
     "pipeline",
     "batch_per_worker",
     "service",
+    "fresh_demo",
 )
 """The measured sections, in run order; each is a key of the results."""
 
@@ -160,6 +164,7 @@ def section_runners(args: argparse.Namespace, kdl: Any) -> dict[str, Callable[[]
             if args.no_service
             else service_latency(args.service_repeats)
         ),
+        "fresh_demo": bench_fresh_demo,
     }
 
 
@@ -377,6 +382,8 @@ def print_results(results: dict[str, Any], chosen: Sequence[str]) -> None:
         print_postures(results["posture_selection"])
     if "whole_arm" in measured:
         print_whole_arm(results["whole_arm"])
+    if "fresh_demo" in measured:
+        print_fresh_demo(results["fresh_demo"])
     if "pipeline" in measured:
         print_pipeline(results["pipeline"])
         print_issue21(results["issue21_targets"])
