@@ -9,7 +9,8 @@ over the spine (y from -0.1 to +0.1 m), dt 0.01 s (201 samples), the scenario's 
   process, 100 and 1,000 grasps (and 1,000 with ``--no-per-sample``), with the JSON size;
   ``grasp-safety --help``;
 - start-up (issue 30): ``grasp-safety rank`` of 1 grasp, whole process, alternated with
-  ``python -c 'import pinocchio'`` (their ratio, pair by pair), the same command with numba
+  ``python -c 'import pinocchio'`` (their ratio, pair by pair; the package's bytecode written
+  first, as a first import does without PYTHONDONTWRITEBYTECODE), the same command with numba
   hidden (the Pinocchio path), and what the command imports (``python -X importtime``: the
   modules, and whether scipy.linalg or .interpolate and numba's lowering registries are in);
 - in one process, one core (workers=1), median over repeats: the paper's ranking (single IK),
@@ -111,10 +112,25 @@ WITHOUT_NUMBA = (
 """``grasp-safety`` with numba hidden: the evaluator falls back to the Pinocchio path."""
 
 
-def bench_rank_start_up(folder: Path, repeats: int = 5) -> dict[str, Any]:
+def compile_package_bytecode() -> bool:
+    """Write the package's bytecode (``__pycache__``) as Python's first import does, unless
+    PYTHONDONTWRITEBYTECODE is set: then every process compiled the package's 75 modules from
+    source (0.09 s of a 0.5 s ranking, where the libraries it is compared with load theirs from
+    site-packages' bytecode). Returns whether the variable is set (Python writes none then)."""
+    import compileall
+    import os
+
+    import grasp_safety_ros
+
+    compileall.compile_dir(Path(grasp_safety_ros.__file__).parent, quiet=1)
+    return bool(os.environ.get("PYTHONDONTWRITEBYTECODE"))
+
+
+def bench_rank_start_up(folder: Path, repeats: int = 7) -> dict[str, Any]:
     """``grasp-safety rank`` of 1 grasp x 201 samples (``--json``) as a whole process, each run
     paired with ``python -c 'import pinocchio'`` just before it: medians and [min, max] [s],
-    the ratio of each pair; the same with numba hidden; the command's imports."""
+    the ratio of each pair; the same with numba hidden; the command's imports. Warm caches:
+    numba's (the kernels) and Python's (the package's bytecode, written by ``bench_cli``)."""
     scenario = str(book_scenario(1, folder))
     out = str(folder / "out_start_up.json")
     rank = [str(CLI), "rank", scenario, "--json", out]
@@ -149,8 +165,10 @@ def bench_rank_start_up(folder: Path, repeats: int = 5) -> dict[str, Any]:
 
 
 def bench_cli(folder: Path, repeats: int = 3) -> dict[str, Any]:
-    """Median wall times [s] of the CLI in fresh processes, and the JSON sizes [bytes]."""
+    """Median wall times [s] of the CLI in fresh processes, and the JSON sizes [bytes]; the
+    package's bytecode written first (``compile_package_bytecode``)."""
     results: dict[str, Any] = {
+        "package_bytecode_written_by_bench": compile_package_bytecode(),
         "help_s": statistics.median(_wall([str(CLI), "--help"]) for _ in range(repeats)),
         "start_up": bench_start_up(repeats),
         "rank_start_up": bench_rank_start_up(folder),

@@ -126,3 +126,46 @@ def test_a_second_checkout_loads_the_first_ones_kernels(tmp_path: Path) -> None:
         counts.append(tuple(int(n) for n in completed.stdout.split()))
     assert counts[0] == (0, 1)  # compiled in the first checkout
     assert counts[1] == (1, 0)  # loaded in the second
+
+
+LINK_AFTER_LOAD = """
+import numba, numpy as np
+from llvmlite import binding
+from grasp_safety_ros.core.kernels.lie_group import _exp3 as exp3
+parsed = []
+real_parse = binding.parse_bitcode
+binding.parse_bitcode = lambda data: parsed.append(len(data)) or real_parse(data)
+direct = np.empty((3, 3))
+exp3(0.1, 0.2, 0.3, direct)
+on_load = len(parsed)
+
+@numba.njit
+def caller(out):
+    exp3(0.1, 0.2, 0.3, out)
+
+linked = np.empty((3, 3))
+caller(linked)
+print(sum(exp3.stats.cache_hits.values()), on_load, len(parsed) > on_load,
+      direct.tobytes() == linked.tobytes())
+"""
+
+
+@pytest.mark.skipif(not compiled_available(), reason="numba is not installed")
+def test_a_cached_kernel_loads_without_its_bitcode_and_still_links(tmp_path: Path) -> None:
+    """A kernel loaded from the cache parses no LLVM bitcode (its machine code is loaded); a
+    compilation in the same process that calls it parses its linking bitcode then, and the
+    kernel it links computes the same bits as the loaded one."""
+    env = {**os.environ, "GRASP_SAFETY_NUMBA_CACHE": str(tmp_path / "cache")}
+    runs = [
+        subprocess.run(
+            [sys.executable, "-c", LINK_AFTER_LOAD],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=300,
+            check=True,
+        ).stdout.split()
+        for _ in range(2)
+    ]
+    assert runs[0][0] == "0" and runs[0][3] == "True"  # compiled in the first process
+    assert runs[1] == ["1", "0", "True", "True"]  # loaded, no bitcode parsed until linked

@@ -53,6 +53,22 @@ def test_rank_with_cached_kernels_imports_no_scipy_and_no_lowering_registries(
     assert (tmp_path / "first.json").read_bytes() == (tmp_path / "second.json").read_bytes()
 
 
+def test_a_bundled_robot_name_resolves_without_listing_example_robot_data() -> None:
+    """``example-robot-data:baxter`` (a bundled name) is found without walking the installed
+    tree for every URDF; another name still is, and both resolve to the files they did."""
+    from grasp_safety_ros.core.model import description
+
+    if not description.example_robot_data_dirs():
+        pytest.skip("example-robot-data is not installed")
+    description._urdfs_in.cache_clear()
+    baxter = description.example_robot_data_urdf("baxter")
+    assert description._urdfs_in.cache_info().misses == 0
+    names = description.example_robot_data_names()
+    assert baxter.relative_to(baxter.parents[2]).as_posix() == names["baxter"]
+    other = next(name for name in names if name not in description.EXAMPLE_ROBOT_DATA_URDFS)
+    assert description.example_robot_data_urdf(other).as_posix().endswith(names[other])
+
+
 def test_demo_ranks_on_the_pinocchio_path(tmp_path: Path, monkeypatch) -> None:
     from grasp_safety_ros.cli import main as cli
 
@@ -157,3 +173,27 @@ def test_a_closed_announcement_stream_never_fails_a_compilation() -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=600
     )
     assert done.stdout == "3.0 5.0\n"
+
+
+def test_call_kernel_keeps_the_overload_its_first_call_ran(monkeypatch) -> None:
+    """``call_kernel`` keeps the overload the first call ran: the only one without typing the
+    arguments again, else the one of the arguments' types."""
+    numba = pytest.importorskip("numba")
+    from grasp_safety_ros.core.method import compiled
+
+    monkeypatch.setattr(compiled, "_ENTRY_POINTS", {})
+
+    @numba.njit
+    def single(x):
+        return 2 * x
+
+    @numba.njit
+    def double(x):
+        return 2 * x
+
+    assert double(3) == 6  # an integer overload first: two overloads after the next call
+    assert compiled.call_kernel(single, 1.5) == compiled.call_kernel(double, 1.5) == 3.0
+    float64 = (numba.float64,)
+    assert compiled._ENTRY_POINTS[single] is single.overloads[float64].entry_point
+    assert compiled._ENTRY_POINTS[double] is double.overloads[float64].entry_point
+    assert len(double.overloads) == 2

@@ -18,7 +18,10 @@ checkout of the same sources loads the first one's kernels. The most recently us
 ``KEPT_CACHES`` folders, and any used within a day, are kept; older digest folders are deleted.
 A kernel loaded from the cache skips numba's import of its lowering registries (every numpy
 and Python implementation it knows, with scipy.linalg: about 1 s of start-up; ``KernelCache``):
-only a kernel compiled in this process needs them, and numba's compiler loads them itself.
+only a kernel compiled in this process needs them, and numba's compiler loads them itself. Nor
+does it parse the LLVM bitcode numba keeps beside the machine code for linking the kernel into
+another compilation (7 ms per kernel, 50 ms of a ranking's start-up): that happens when such a
+compilation first asks for it (``LazyLinkingLibrary``).
 ``announce_compiles`` prints a line per kernel compiled (first use on a machine). numba is
 imported without its coverage support unless coverage is already running (``_import_numba``).
 """
@@ -185,13 +188,98 @@ def _kernel_cache_class() -> type | None:
     class KernelCache(base):  # type: ignore[misc, valid-type]
         """Loads a cached kernel without ``target_context.refresh()``: the object code needs
         numba's C helpers only, which its target context installs when created; compiling
-        (a cache miss) refreshes the context in numba's compiler as before."""
+        (a cache miss) refreshes the context in numba's compiler as before. The machine code
+        is loaded as numba does, its linking bitcode parsed on demand (``_lazy_overload``)."""
 
         def load_overload(self, sig: Any, target_context: Any) -> Any:
             with self._guard_against_spurious_io_errors():
-                return self._load_overload(sig, target_context)
+                if not self._enabled:
+                    return None
+                data = self._cache_file.load(self._index_key(sig, target_context.codegen()))
+                if data is None:
+                    return None
+                lazy = _lazy_overload(target_context, data)
+                return lazy if lazy is not None else self._impl.rebuild(target_context, data)
 
     return KernelCache
+
+
+REBUILT_FIELDS = 9
+"""The fields of a cached compile result (numba's ``CompileResult._reduce``): the library's
+data, fndesc, env, signature, objectmode, lifted, typeann, reload_init, referenced_envs."""
+
+
+def _lazy_overload(target_context: Any, data: tuple[Any, ...]) -> Any:
+    """numba's ``CompileResult._rebuild`` of a cached kernel, but its library a
+    ``LazyLinkingLibrary``; None where the cached data is not the machine code and linking
+    bitcode this knows (then numba's own rebuild loads it)."""
+    from numba.core import compiler
+
+    if len(data) != REBUILT_FIELDS:
+        return None
+    libdata, fndesc, env, signature, objectmode, lifted, typeann, reload_init, envs = data
+    name, kind, payload = libdata
+    codegen = target_context.codegen()
+    engine: Any = getattr(codegen, "_engine", None)
+    if kind != "object" or reload_init or not hasattr(engine, "_defined_symbols"):
+        return None  # not machine code, or numba's code generator moved
+    object_code, linking_bitcode = payload
+    library = _lazy_library_class(codegen._library_class)(codegen, name)
+    library.enable_object_caching()
+    library._set_compiled_object(object_code)
+    library.linking_bitcode = linking_bitcode
+    engine._defined_symbols.add(fndesc.llvm_cpython_wrapper_name)  # what numba looks up
+    library._finalize_final_module()  # the engine loads the machine code
+    compile_result: Any = compiler.CompileResult  # a NamedTuple with a classmethod __new__
+    result = compile_result(
+        target_context=target_context,
+        typing_context=target_context.typing_context,
+        library=library,
+        environment=env,
+        entry_point=target_context.get_executable(library, fndesc, env),
+        fndesc=fndesc,
+        type_annotation=typeann,
+        signature=signature,
+        objectmode=objectmode,
+        lifted=lifted,
+        typing_error=None,
+        call_helper=None,
+        metadata=None,
+        reload_init=reload_init,
+        referenced_envs=envs,
+    )
+    for referenced in envs:
+        codegen.set_env(referenced.env_name, referenced)
+    return result
+
+
+_LAZY_CLASSES: dict[Any, type] = {}
+
+
+def _lazy_library_class(base: Any) -> type:
+    """``base`` (numba's code library class) whose module for linking into another
+    compilation is parsed from the cached bitcode when first asked for."""
+    found = _LAZY_CLASSES.get(base)
+    if found is not None:
+        return found
+
+    class LazyLinkingLibrary(base):  # type: ignore[misc]
+        """A cached kernel's code library: the machine code loaded, the bitcode kept."""
+
+        linking_bitcode: bytes | None = None
+        _shared_module: Any  # numba's: the parsed module for linking, None until parsed
+
+        def _get_module_for_linking(self) -> Any:
+            if self._shared_module is None and self.linking_bitcode is not None:
+                from llvmlite import binding
+
+                self._shared_module = binding.parse_bitcode(self.linking_bitcode)
+                self._codegen._engine._load_defined_symbols(self._shared_module)
+                self.linking_bitcode = None
+            return super()._get_module_for_linking()
+
+    _LAZY_CLASSES[base] = LazyLinkingLibrary
+    return LazyLinkingLibrary
 
 
 _OPTIONS = {

@@ -116,9 +116,13 @@ def call_kernel(kernel: Any, *args: Any) -> Any:
     if entry is not None:
         return entry(*args)
     result = kernel(*args)
-    from numba import typeof
+    overloads = kernel.overloads
+    if len(overloads) == 1:  # the one this call ran: no second typing of the arguments
+        compiled = next(iter(overloads.values()))
+    else:
+        from numba import typeof
 
-    compiled = kernel.overloads.get(tuple(typeof(arg) for arg in args))
+        compiled = overloads.get(tuple(typeof(arg) for arg in args))
     if compiled is not None:
         _ENTRY_POINTS[kernel] = compiled.entry_point
     return result
