@@ -38,7 +38,7 @@ Each is measured for:
 - end to end, 100 and 1,000 grasps x 201 samples (dt 0.01 s), from the EventsExecutor
   client: wall time of the call (median of ``--mid-repeats``, ``--large-repeats`` calls)
   and the response's size in bytes (serialised RankGrasps response), with the same spans
-  measured between the calls.
+  measured between the calls and the legs of each call (LEGS).
 
 At the end, issue 21's three service targets (node defaults: 10 x 101 median, 100 x 201 and
 1,000 x 201 end to end) beside the core's own ranking time of the same run (the ``rank``
@@ -317,19 +317,23 @@ def end_to_end(
 ) -> dict[str, Any]:
     """End to end: ``num_grasps`` grasps x 201 samples through the service, from the
     EventsExecutor client (median of ``repeats`` calls); the response's size; the spans,
-    measured by hand between the calls (medians)."""
+    measured by hand between the calls, and the legs of the calls (LEGS) (medians)."""
     request = rank_request(arm, num_grasps)
     spans: dict[str, list[float]] = {}
+    legs: dict[str, list[float]] = {leg: [] for leg in LEGS}
     with (
         running_node(arm, 0.01, overrides) as (node, environment),
         clients(environment, "events") as (client,),
     ):
+        clock = CallbackClock(node)
         client.command("rank 10")  # warm-up
         walls, computes = [], []
         for _ in range(repeats):
             answer = client.command(f"rank {num_grasps}")
             walls.append(answer["round_trip_s"])
             computes.append(answer["compute_time_s"])
+            for leg, value in legs_s(answer, clock.calls[-1]).items():
+                legs[leg].append(value)
             for name, value in node_spans(node, request).items():
                 spans.setdefault(name, []).append(value)
         wait = client.wait
@@ -350,6 +354,7 @@ def end_to_end(
         "spans_ms": {name: 1e3 * median[name] for name in SPANS},
         "spans_cpu_ms": {name: 1e3 * median[f"{name}_cpu"] for name in SPANS},
         "markers_when_subscribed_ms": 1e3 * median["markers"],
+        "legs_ms": {leg: 1e3 * float(np.median(values)) for leg, values in legs.items()},
     }
     result["wall_over_ranking"] = result["wall_s"] * 1e3 / result["ranking_ms"]["median"]
     result["spans_ms"][REST] = 1e3 * result["wall_s"] - sum(result["spans_ms"].values())
@@ -472,6 +477,7 @@ def print_results(results: dict[str, Any]) -> None:
             )
             print(f"    spans (median ms): {spans(big['spans_ms'])}")
             print(f"    spans (median CPU ms): {spans(big['spans_cpu_ms'])}")
+            print(f"    legs of the round trip (median ms): {spans(big['legs_ms'])}")
     rows = results.get("targets") or target_rows(results)
     if rows:
         print("issue 21's service targets (node defaults), beside the core's ranking of this run:")
