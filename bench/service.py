@@ -38,7 +38,8 @@ Each is measured for:
 - end to end, 100 and 1,000 grasps x 201 samples (dt 0.01 s), from the EventsExecutor
   client: wall time of the call (median of ``--mid-repeats``, ``--large-repeats`` calls)
   and the response's size in bytes (serialised RankGrasps response), with the same spans
-  measured between the calls.
+  measured between the calls and the legs of each call (LEGS). For both, the rest is split
+  by leg (rest_split).
 
 At the end, issue 21's three service targets (node defaults: 10 x 101 median, 100 x 201 and
 1,000 x 201 end to end) beside the core's own ranking time of the same run (the ``rank``
@@ -136,6 +137,22 @@ def legs_s(answer: dict[str, Any], call: tuple[float, float]) -> dict[str, float
         LEGS[0]: call[0] - answer["sent_s"],
         LEGS[1]: call[1] - call[0],
         LEGS[2]: answer["received_s"] - call[1],
+    }
+
+
+def rest_split(spans_ms: dict[str, float], legs_ms: dict[str, float]) -> dict[str, float]:
+    """Where the rest of a round trip (REST: executors, middleware) sits, from the medians of
+    its legs and of the spans [ms]: the request leg; the callback beyond the node's spans
+    (publishing, diagnostics, the compute lock, the spans' own variation); the response leg
+    beyond the response's serialisation and deserialisation (the node's conversion of the
+    response for the middleware, the transport, the client's executor)."""
+    in_callback = ("convert", "rank", "posture", "analyse", "response")
+    return {
+        "request leg": legs_ms[LEGS[0]],
+        "callback beyond its spans": legs_ms[LEGS[1]] - sum(spans_ms[n] for n in in_callback),
+        "response leg beyond (de)serialisation": legs_ms[LEGS[2]]
+        - spans_ms["serialise"]
+        - spans_ms["deserialise"],
     }
 
 
@@ -309,6 +326,7 @@ def latency(arm: ArmWorkload, repeats: int, overrides: dict[str, Any]) -> dict[s
     result["median_ms"] = result["latency_ms"]["median"]
     result["latency_over_ranking"] = result["median_ms"] / result["ranking_ms"]["median"]
     result["spans_ms"][REST] = result["median_ms"] - sum(result["spans_ms"].values())
+    result["rest_split_ms"] = rest_split(result["spans_ms"], result["legs_ms"])
     return result
 
 
@@ -317,19 +335,23 @@ def end_to_end(
 ) -> dict[str, Any]:
     """End to end: ``num_grasps`` grasps x 201 samples through the service, from the
     EventsExecutor client (median of ``repeats`` calls); the response's size; the spans,
-    measured by hand between the calls (medians)."""
+    measured by hand between the calls, and the legs of the calls (LEGS) (medians)."""
     request = rank_request(arm, num_grasps)
     spans: dict[str, list[float]] = {}
+    legs: dict[str, list[float]] = {leg: [] for leg in LEGS}
     with (
         running_node(arm, 0.01, overrides) as (node, environment),
         clients(environment, "events") as (client,),
     ):
+        clock = CallbackClock(node)
         client.command("rank 10")  # warm-up
         walls, computes = [], []
         for _ in range(repeats):
             answer = client.command(f"rank {num_grasps}")
             walls.append(answer["round_trip_s"])
             computes.append(answer["compute_time_s"])
+            for leg, value in legs_s(answer, clock.calls[-1]).items():
+                legs[leg].append(value)
             for name, value in node_spans(node, request).items():
                 spans.setdefault(name, []).append(value)
         wait = client.wait
@@ -350,9 +372,11 @@ def end_to_end(
         "spans_ms": {name: 1e3 * median[name] for name in SPANS},
         "spans_cpu_ms": {name: 1e3 * median[f"{name}_cpu"] for name in SPANS},
         "markers_when_subscribed_ms": 1e3 * median["markers"],
+        "legs_ms": {leg: 1e3 * float(np.median(values)) for leg, values in legs.items()},
     }
     result["wall_over_ranking"] = result["wall_s"] * 1e3 / result["ranking_ms"]["median"]
     result["spans_ms"][REST] = 1e3 * result["wall_s"] - sum(result["spans_ms"].values())
+    result["rest_split_ms"] = rest_split(result["spans_ms"], result["legs_ms"])
     return result
 
 
@@ -445,6 +469,7 @@ def print_results(results: dict[str, Any]) -> None:
         print(f"    spans (median ms): {spans(small['spans_ms'])}")
         print(f"    spans (median CPU ms of the calling thread): {spans(small['spans_cpu_ms'])}")
         print(f"    legs of the round trip (median ms): {spans(small['legs_ms'])}")
+        print(f"    the rest, by leg (ms): {spans(small['rest_split_ms'])}")
         for wait in WAITS[1:]:
             other = small[f"latency_{wait}_ms"]
             print(
@@ -472,6 +497,8 @@ def print_results(results: dict[str, Any]) -> None:
             )
             print(f"    spans (median ms): {spans(big['spans_ms'])}")
             print(f"    spans (median CPU ms): {spans(big['spans_cpu_ms'])}")
+            print(f"    legs of the round trip (median ms): {spans(big['legs_ms'])}")
+            print(f"    the rest, by leg (ms): {spans(big['rest_split_ms'])}")
     rows = results.get("targets") or target_rows(results)
     if rows:
         print("issue 21's service targets (node defaults), beside the core's ranking of this run:")

@@ -1,7 +1,8 @@
 """Posture selection's choice (core.method.posture._choose) over arbitrary candidates: the
 structural half of "never worse than the single IK" and of "the early stop changes no
 choice", without any IK (the kernel's half, that a stopped posture really scores above one
-already found, is test_posture.py's)."""
+already found, is test_posture.py's); and which restarts' start postures are followed
+(``_new_start_postures``: the duplicates of postures already found are not)."""
 
 from __future__ import annotations
 
@@ -10,10 +11,11 @@ import pickle
 from dataclasses import replace
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from grasp_safety_ros.core.method.posture import PostureConfig, _choose
+from grasp_safety_ros.core.method.posture import PostureConfig, _choose, _new_start_postures
 from grasp_safety_ros.core.method.results import GraspEvaluation
 
 SCORES = st.one_of(
@@ -109,3 +111,64 @@ def test_stopping_postures_that_score_above_one_found_changes_no_choice(
     counts = ("postures_stopped", "postures_feasible", "score_range")
     unchanged = replace(record_early, **{name: getattr(record, name) for name in counts})
     assert pickle.dumps(unchanged) == pickle.dumps(record)
+
+
+def _followed_one_at_a_time(robot, single_iks, q, converged, tolerance):
+    """The rule of ``_new_start_postures``, one posture at a time: a converged restart's
+    posture is followed unless its largest joint difference to the single IK's (when
+    feasible) or to a posture followed before it is below ``tolerance``."""
+    starts = []
+    for g, single_ik in enumerate(single_iks):
+        found = [np.array(single_ik.joint_positions[0])] if single_ik.feasible else []
+        new = []
+        for r in range(q.shape[1]):
+            if not converged[g, r]:
+                continue
+            positions = robot.positions_from_q(q[g, r])
+            if any(np.max(np.abs(f - positions)) < tolerance for f in found):
+                continue
+            found.append(positions)
+            new.append(positions)
+        starts.append(new)
+    return starts
+
+
+@pytest.mark.parametrize("arm", ["arm7", "continuous_arm"])
+def test_the_restarts_followed_are_those_not_within_the_tolerance_of_one_found(
+    arm: str, request: pytest.FixtureRequest
+) -> None:
+    """Random restarts with exact and near duplicates (half the tolerance away: duplicates;
+    twice: not), unconverged rows holding garbage (inf, NaN) and infeasible single IKs: the
+    postures followed, bit for bit and in order, are those of the one-at-a-time rule; on an
+    arm with continuous joints (q holds cos and sin) too."""
+    robot = request.getfixturevalue(arm)
+    rng = np.random.default_rng(7)
+    tolerance = 1e-3
+    n = robot.num_joints
+    for _ in range(50):
+        grasps, restarts = int(rng.integers(1, 6)), int(rng.integers(0, 9))
+        positions = rng.uniform(-2.0, 2.0, (grasps, restarts + 1, n))
+        for g in range(grasps):  # restart r repeats an earlier posture, or the single IK's
+            for r in range(1, restarts + 1):
+                kind = rng.integers(0, 4)
+                if kind < 3:
+                    step = (0.0, 0.5 * tolerance, 2.0 * tolerance)[kind]
+                    positions[g, r] = positions[g, rng.integers(0, r)]
+                    positions[g, r, rng.integers(0, n)] += step * rng.choice([-1.0, 1.0])
+        q = np.array([[robot.q_from_positions(p) for p in row[1:]] for row in positions])
+        q = q.reshape(grasps, restarts, robot.model.nq)
+        converged = rng.uniform(size=(grasps, restarts)) < 0.8
+        q[~converged] = rng.choice([np.inf, np.nan, 1e300])
+        single_iks = [
+            _evaluation(0, 1.0 if rng.uniform() < 0.7 else math.nan) for _ in range(grasps)
+        ]
+        single_iks = [
+            replace(e, joint_positions=np.tile(positions[g, 0], (3, 1)))
+            for g, e in enumerate(single_iks)
+        ]
+        got = _new_start_postures(robot, single_iks, q, converged, tolerance)
+        expected = _followed_one_at_a_time(robot, single_iks, q, converged, tolerance)
+        assert [len(s) for s in got] == [len(s) for s in expected]
+        for kept, reference in zip(got, expected, strict=True):
+            for a, b in zip(kept, reference, strict=True):
+                assert a.tobytes() == b.tobytes()
