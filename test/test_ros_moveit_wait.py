@@ -19,6 +19,7 @@ from rclpy.exceptions import InvalidHandle
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.task import Future
 
 pytest.importorskip("moveit_msgs.msg", reason="moveit_msgs not built (make setup)")
 from moveit_msgs.msg import MoveItErrorCodes
@@ -52,6 +53,7 @@ class Bare:
         )
         self.node.declare_parameter("moveit.grasp_planner_service", "/silent_planner")
         self.node.declare_parameter("moveit.planner_timeout_s", TIMEOUT_S)
+        self.node.declare_parameter("moveit.max_waiting", 32)
         self.server = GraspPlanningServer(
             self.node,
             rank=not_reached,
@@ -75,7 +77,9 @@ class Bare:
         assert self.client.wait_for_service(timeout_sec=ANSWER_WITHIN_S)
 
     def call(self) -> GraspPlanning.Response:
-        future = self.client.call_async(GraspPlanning.Request(group_name="arm"))
+        return self.answer(self.client.call_async(GraspPlanning.Request(group_name="arm")))
+
+    def answer(self, future: Future) -> GraspPlanning.Response:
         self.client_executor.spin_until_future_complete(future, timeout_sec=ANSWER_WITHIN_S)
         assert future.done(), f"no answer within {ANSWER_WITHIN_S} s: the request hangs"
         return future.result()
@@ -144,3 +148,28 @@ def test_a_look_that_raises_answers_failure_and_the_node_keeps_serving(
     assert len(looks) == 2
     monkeypatch.setattr(bare_wall.server, "_client", real)
     assert_refused(bare_wall.call(), MoveItErrorCodes.TIMED_OUT, "/silent_planner")  # still served
+
+
+def test_a_request_beyond_max_waiting_is_refused_at_once_and_the_others_still_wait(
+    bare_wall: Bare,
+) -> None:
+    """moveit.max_waiting 2: with two requests waiting on the silent planner, a third is
+    answered FAILURE naming the parameter while the two wait; they still time out."""
+    bare_wall.node.set_parameters(
+        [
+            Parameter("moveit.max_waiting", value=2),
+            Parameter("moveit.planner_timeout_s", value=10 * TIMEOUT_S),  # they outlast it
+        ]
+    )
+    waiting = [
+        bare_wall.client.call_async(GraspPlanning.Request(group_name="arm")) for _ in range(2)
+    ]
+    deadline = time.monotonic() + ANSWER_WITHIN_S
+    while bare_wall.server.waiting < 2 and time.monotonic() < deadline:
+        bare_wall.client_executor.spin_once(timeout_sec=0.01)
+    assert bare_wall.server.waiting == 2
+    third = bare_wall.call()
+    assert_refused(third, MoveItErrorCodes.FAILURE, "moveit.max_waiting=2", "2 requests")
+    assert not any(future.done() for future in waiting)  # refused while the two still waited
+    for future in waiting:
+        assert_refused(bare_wall.answer(future), MoveItErrorCodes.TIMED_OUT, "/silent_planner")

@@ -12,7 +12,9 @@ number of requests can wait while the planner's answers are taken (a request tha
 thread left none for them once EXECUTOR_THREADS requests waited). One timer of the server, on
 the steady clock (so also with use_sim_time and no /clock) and running only while a request
 waits, ends each wait every WAIT_STEP_S: service appeared, deadline passed, node shutting down
-or a look that raised; the planner's answer ends its wait at once.
+or a look that raised; the planner's answer ends its wait at once. At most
+``moveit.max_waiting`` requests wait at once (each costs CPU at every executor wake-up); one
+more is answered FAILURE at once, naming the parameter.
 """
 
 from __future__ import annotations
@@ -60,7 +62,8 @@ appearance or the shut-down is seen (the planner's answer is seen at once)."""
 
 
 class PlannerError(Exception):
-    """No usable answer from the upstream planner: ``code`` (MoveItErrorCodes) and why."""
+    """No usable answer from the upstream planner (or none asked for: too many requests
+    waiting): ``code`` (MoveItErrorCodes) and why."""
 
     def __init__(self, code: int, message: str) -> None:
         super().__init__(message)
@@ -231,10 +234,17 @@ class GraspPlanningServer:
         done; raises ShuttingDownError once the node shuts down, and what ``condition``
         raised."""
         wait = _Wait(Future(), condition, deadline)
+        most = int(self._parameter("max_waiting"))
         with self._waits_lock:
             self._end_if_over(wait)
             if wait.over.done():
                 return bool(wait.over.result())
+            if len(self._waits) >= most:
+                raise PlannerError(
+                    MoveItErrorCodes.FAILURE,
+                    f"{len(self._waits)} requests already wait for the grasp planner "
+                    f"(moveit.max_waiting={most}): retry later, or raise moveit.max_waiting",
+                )
             self._waits.add(wait)
             if self._timer.is_canceled():
                 self._timer.reset()

@@ -72,6 +72,10 @@ _RANGES: Mapping[str, tuple[float, float]] = {
     key: bounds(key) for key in ("uncertainty.percentile", "safety_weight")
 }
 _MAX_POINTS = int(LIMITS["points"].value)
+MAX_WAITING = 1_000
+"""Top of ``moveit.max_waiting``: each request waiting for the planner costs the node CPU at
+each executor wake-up (21 % of a core with 40 waiting, docs/ros/moveit.md); a thousand would
+take the node's cores."""
 _COUNT_LIMITS: Mapping[str, tuple[int, int]] = {
     **{limit.node: (1, int(limit.value)) for limit in LIMITS.values() if limit.node},
     **{k: (0, MAX_COUNT) for k in IK_OPTIONS + REDUNDANCY_OPTIONS if OPTIONS[k].type is int},
@@ -81,6 +85,7 @@ _COUNT_LIMITS: Mapping[str, tuple[int, int]] = {
     },
     "uncertainty.seed": (0, MAX_COUNT),  # a seed, not a count
     "response.joint_trajectories": (0, MAX_COUNT),  # clipped to the number of grasps
+    "moveit.max_waiting": (1, MAX_WAITING),
 }
 """Bounds of the node's count parameters; the request budgets' tops are the scenario's limits
 (core.options.LIMITS): beyond them a request cannot finish in useful time or memory."""

@@ -185,6 +185,11 @@ PARAMETERS: Mapping[str, ParameterSpec] = {
     "moveit.planner_timeout_s": ParameterSpec(
         10.0, "how long ~/plan_grasps waits for the planner's service and answer [s]"
     ),
+    "moveit.max_waiting": ParameterSpec(
+        32,
+        "most requests ~/plan_grasps keeps waiting for the planner at once; one more is "
+        "answered FAILURE at once (each waiting request costs the node CPU at every wake-up)",
+    ),
     "moveit.infeasible": ParameterSpec(
         "append",
         f"{' | '.join(INFEASIBLE_CHOICES)}: grasps outside the order come last (quality 0) or "
