@@ -145,8 +145,9 @@ def caller(out):
 
 linked = np.empty((3, 3))
 caller(linked)
-print(sum(exp3.stats.cache_hits.values()), on_load, len(parsed) > on_load,
-      direct.tobytes() == linked.tobytes())
+(library,) = [result.library for result in exp3.overloads.values()]
+print(sum(exp3.stats.cache_hits.values()), on_load, getattr(library, "linking_bitcode", None)
+      is None and len(parsed) > on_load, direct.tobytes() == linked.tobytes())
 """
 
 
@@ -169,3 +170,124 @@ def test_a_cached_kernel_loads_without_its_bitcode_and_still_links(tmp_path: Pat
     ]
     assert runs[0][0] == "0" and runs[0][3] == "True"  # compiled in the first process
     assert runs[1] == ["1", "0", "True", "True"]  # loaded, no bitcode parsed until linked
+
+
+FIRST_CLASS_AFTER_LOAD = """
+import numba, numpy as np
+from numba import types
+from grasp_safety_ros.core.kernels.lie_group import _exp3 as exp3
+direct = np.empty((3, 3))
+exp3(0.4, 0.5, 0.6, direct)
+(sig,) = exp3.signatures
+result = exp3.overloads[sig]
+addresses = [result.library.get_pointer_to_function(name) for name in (
+    result.fndesc.llvm_cfunc_wrapper_name, result.fndesc.llvm_func_name)]
+
+@numba.njit(types.none(types.FunctionType(types.none(*sig)), types.float64[:, ::1]))
+def use(kernel, out):
+    kernel(0.4, 0.5, 0.6, out)
+
+passed = np.empty((3, 3))
+use(exp3, passed)
+print(sum(exp3.stats.cache_hits.values()), all(a > 0 for a in addresses),
+      direct.tobytes() == passed.tobytes())
+"""
+
+
+@pytest.mark.skipif(not compiled_available(), reason="numba is not installed")
+def test_a_cached_kernel_has_its_addresses_and_passes_as_a_first_class_function(
+    tmp_path: Path,
+) -> None:
+    """A kernel loaded lazily (its bitcode not parsed) still gives numba the address of its
+    C wrapper and of its own function (numba's load marks every symbol defined), so it can be
+    handed to another kernel as a first-class function and computes the same bits."""
+    env = {**os.environ, "GRASP_SAFETY_NUMBA_CACHE": str(tmp_path / "cache")}
+    runs = [
+        subprocess.run(
+            [sys.executable, "-c", FIRST_CLASS_AFTER_LOAD],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=300,
+            check=True,
+        ).stdout.split()
+        for _ in range(2)
+    ]
+    assert runs[0] == ["0", "True", "True"]  # compiled in the first process
+    assert runs[1] == ["1", "True", "True"]  # loaded from the cache in the second
+
+
+NUMBA_INTERNALS_SHA256 = {
+    "0.68.1": "e4e1b30d96fbf5aeba002e3d0f9a57e324470b17c506ef29a0901b9214ef58a8",
+}
+"""sha256 of the sources of the numba functions ``_jit._lazy_overload`` re-implements or
+extends, per numba version of ``_jit.LAZY_LOADING_NUMBA``: a change there needs a re-read."""
+
+
+def _numba_internals_digest() -> str:
+    import hashlib
+    import inspect
+
+    from numba.core import codegen, compiler
+
+    sources = [
+        inspect.getsource(function)
+        for function in (
+            compiler.CompileResult._rebuild,
+            codegen.CPUCodeLibrary._unserialize,
+            codegen.CPUCodeLibrary._get_module_for_linking,
+            codegen.JITCodeLibrary.get_pointer_to_function,
+            codegen.JitEngine._load_defined_symbols,
+        )
+    ]
+    return hashlib.sha256("".join(sources).encode()).hexdigest()
+
+
+@pytest.mark.skipif(not compiled_available(), reason="numba is not installed")
+def test_the_lazy_loading_runs_only_on_the_numba_it_was_checked_against() -> None:
+    """``_jit._lazy_overload`` copies numba's rebuild of a cached kernel: it runs only for
+    numba versions whose rebuild was read (their sources pinned here); any other version
+    gets numba's own rebuild (``_lazy_overload`` returns None before touching anything)."""
+    import numba
+
+    from grasp_safety_ros.core.kernels import _jit
+
+    assert set(_jit.LAZY_LOADING_NUMBA) == set(NUMBA_INTERNALS_SHA256)
+    if numba.__version__ in _jit.LAZY_LOADING_NUMBA:
+        assert _numba_internals_digest() == NUMBA_INTERNALS_SHA256[numba.__version__]
+
+
+OTHER_NUMBA = """
+from grasp_safety_ros.core.kernels import _jit
+_jit.LAZY_LOADING_NUMBA = ()  # as for a numba the lazy loading was not checked against
+import numpy as np
+from grasp_safety_ros.core.kernels.lie_group import _exp3 as exp3
+out = np.empty((3, 3))
+exp3(0.4, 0.5, 0.6, out)
+(result,) = exp3.overloads.values()
+print(sum(exp3.stats.cache_hits.values()), type(result.library).__name__, out.tobytes().hex())
+"""
+
+
+@pytest.mark.skipif(not compiled_available(), reason="numba is not installed")
+def test_another_numba_loads_cached_kernels_with_its_own_rebuild(tmp_path: Path) -> None:
+    """A numba version not in LAZY_LOADING_NUMBA: the cached kernel is loaded by numba's own
+    rebuild (its code library numba's class), the same machine code as the lazy load's.
+    (Faking numba.__version__ would not do: numba's cache index rejects another version.)"""
+    env = {**os.environ, "GRASP_SAFETY_NUMBA_CACHE": str(tmp_path / "cache")}
+
+    def run(code: str) -> list[str]:
+        return subprocess.run(
+            [sys.executable, "-c", code],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=300,
+            check=True,
+        ).stdout.split()
+
+    checked = OTHER_NUMBA.replace("_jit.LAZY_LOADING_NUMBA = ()", "")
+    compiled, lazy, other = run(checked), run(checked), run(OTHER_NUMBA)
+    assert compiled[0] == "0" and lazy[0] == other[0] == "1"  # loaded from the cache twice
+    assert lazy[1] == "LazyLinkingLibrary" and other[1] != "LazyLinkingLibrary"
+    assert compiled[2] == lazy[2] == other[2]  # the same machine code

@@ -192,7 +192,15 @@ def test_call_kernel_keeps_the_overload_its_first_call_ran(monkeypatch) -> None:
         return 2 * x
 
     assert double(3) == 6  # an integer overload first: two overloads after the next call
-    assert compiled.call_kernel(single, 1.5) == compiled.call_kernel(double, 1.5) == 3.0
+    real_typeof = numba.typeof
+
+    def no_second_typing(value):
+        raise AssertionError("call_kernel typed the arguments of a single-overload kernel")
+
+    monkeypatch.setattr(numba, "typeof", no_second_typing)
+    assert compiled.call_kernel(single, 1.5) == 3.0
+    monkeypatch.setattr(numba, "typeof", real_typeof)
+    assert compiled.call_kernel(double, 1.5) == 3.0
     float64 = (numba.float64,)
     assert compiled._ENTRY_POINTS[single] is single.overloads[float64].entry_point
     assert compiled._ENTRY_POINTS[double] is double.overloads[float64].entry_point

@@ -207,6 +207,22 @@ def _kernel_cache_class() -> type | None:
 REBUILT_FIELDS = 9
 """The fields of a cached compile result (numba's ``CompileResult._reduce``): the library's
 data, fndesc, env, signature, objectmode, lifted, typeann, reload_init, referenced_envs."""
+LAZY_LOADING_NUMBA = ("0.68.1",)
+"""numba versions whose ``CompileResult._rebuild`` and ``CPUCodeLibrary._unserialize`` this
+module's lazy loading was checked against (``test_kernel_cache.py`` pins their sources); any
+other version loads its kernels with numba's own rebuild (correct, 7 ms more per kernel)."""
+_COMPILE_RESULT_FIELDS = frozenset(
+    "typing_context target_context entry_point typing_error type_annotation signature "
+    "objectmode lifted fndesc library call_helper environment metadata reload_init "
+    "referenced_envs".split()
+)
+_LIBRARY_METHODS = (
+    "enable_object_caching",
+    "_set_compiled_object",
+    "_finalize_final_module",
+    "_get_module_for_linking",
+    "get_pointer_to_function",
+)
 
 
 def _lazy_overload(target_context: Any, data: tuple[Any, ...]) -> Any:
@@ -215,22 +231,33 @@ def _lazy_overload(target_context: Any, data: tuple[Any, ...]) -> Any:
     bitcode this knows (then numba's own rebuild loads it)."""
     from numba.core import compiler
 
-    if len(data) != REBUILT_FIELDS:
+    if numba is None or numba.__version__ not in LAZY_LOADING_NUMBA:
+        return None
+    if len(data) != REBUILT_FIELDS or len(data[0]) != 3:
         return None
     libdata, fndesc, env, signature, objectmode, lifted, typeann, reload_init, envs = data
     name, kind, payload = libdata
     codegen = target_context.codegen()
     engine: Any = getattr(codegen, "_engine", None)
-    if kind != "object" or reload_init or not hasattr(engine, "_defined_symbols"):
-        return None  # not machine code, or numba's code generator moved
+    base = getattr(codegen, "_library_class", None)
+    if (
+        kind != "object"
+        or reload_init
+        or not isinstance(payload, tuple)
+        or len(payload) != 2
+        or not hasattr(engine, "_defined_symbols")
+        or not all(hasattr(base, method) for method in _LIBRARY_METHODS)
+        or set(getattr(compiler.CompileResult, "_fields", ())) != _COMPILE_RESULT_FIELDS
+    ):
+        return None  # not machine code, or numba's code generator moved: nothing done yet
     object_code, linking_bitcode = payload
-    library = _lazy_library_class(codegen._library_class)(codegen, name)
+    library = _lazy_library_class(base)(codegen, name)
     library.enable_object_caching()
     library._set_compiled_object(object_code)
     library.linking_bitcode = linking_bitcode
     engine._defined_symbols.add(fndesc.llvm_cpython_wrapper_name)  # what numba looks up
     library._finalize_final_module()  # the engine loads the machine code
-    compile_result: Any = compiler.CompileResult  # a NamedTuple with a classmethod __new__
+    compile_result: Any = compiler.CompileResult  # a namedtuple subclass (mypy: untyped)
     result = compile_result(
         target_context=target_context,
         typing_context=target_context.typing_context,
@@ -277,6 +304,19 @@ def _lazy_library_class(base: Any) -> type:
                 self._codegen._engine._load_defined_symbols(self._shared_module)
                 self.linking_bitcode = None
             return super()._get_module_for_linking()
+
+        def get_pointer_to_function(self, name: str) -> Any:
+            """numba's, after marking the kernel's symbols defined as its own load does
+            (only the CPython wrapper's is marked at load): a cfunc or first-class use of a
+            loaded kernel gets its address, not 0."""
+            if self.linking_bitcode is not None and not self._codegen._engine.is_symbol_defined(
+                name
+            ):
+                from numba.core.compiler_lock import global_compiler_lock
+
+                with global_compiler_lock:
+                    self._get_module_for_linking()
+            return super().get_pointer_to_function(name)
 
     _LAZY_CLASSES[base] = LazyLinkingLibrary
     return LazyLinkingLibrary

@@ -83,8 +83,9 @@ def example_robot_data_urdf(name: str) -> Path:
         InvalidInputError: no such robot; the message says the closest names and the path form.
     """
     folders = example_robot_data_dirs()
-    # a bundled name wins over every other (example_robot_data_names): no need to list the
-    # installed URDFs (a walk of example-robot-data's tree, 5-25 ms of a command's start-up)
+    # a name of EXAMPLE_ROBOT_DATA_URDFS wins over every other (example_robot_data_names): no
+    # need to list the installed URDFs (a walk of example-robot-data's tree, 5-25 ms of a
+    # command's start-up); the other names (tiago, pr2, ...) still walk it
     relative = EXAMPLE_ROBOT_DATA_URDFS.get(name)
     names = {name: relative} if relative else example_robot_data_names()
     for folder in folders:
