@@ -10,6 +10,9 @@ set. ``analyse`` loops over the registered tuple (``registry.ANALYSES``) in orde
 An analysis per grasp combines its chunks with ``per_grasp``: its chunk call on each chunk of
 feasible grasps (compiled backend: on the chunk's shared terms), its grasp call on every
 other grasp (infeasible, or the Pinocchio backend), one result per grasp in candidate order.
+A chunk call that needs nothing from the analyses before it can run ahead (``prepare``,
+``Shared.run_ahead``): on each chunk's terms as soon as the first reader computes them, so the
+chunks are computed once, into one reused buffer, instead of kept for a later reader.
 """
 
 from __future__ import annotations
@@ -47,6 +50,8 @@ samples (about 500 MB for a 7-joint arm); beyond it the oldest is dropped (then 
 again if an analysis needs it)."""
 
 Result = TypeVar("Result")
+ChunkCall = Callable[[int, Sequence[int]], Sequence[tuple[int, Result]]]
+"""``per_grasp``'s call on chunk c (its grasps' indices): (grasp, result) pairs."""
 
 
 @dataclass(frozen=True)
@@ -114,6 +119,11 @@ class Analysis(Protocol):
         """The units of progress it reports (``Shared.step``) for ``grasps`` candidates."""
         ...
 
+    def prepare(self, shared: Shared) -> None:
+        """Before any analysis runs: register the chunk call it can run ahead
+        (``Shared.run_ahead``), if any."""
+        ...
+
     def run(self, shared: Shared, parts: Parts) -> Parts:
         """``parts`` with its own result set."""
         ...
@@ -156,27 +166,49 @@ class Shared:
         self._keep = keep_terms
         self._cached: dict[int, tuple[SampleTerms, np.ndarray]] = {}
         self._models: dict[int, pin.Model] = {}
+        self._ahead: dict[str, ChunkCall[Any]] = {}
+        self._ahead_results: dict[str, dict[int, Sequence[tuple[int, Any]]]] = {}  # by chunk
 
     def terms(self, c: int) -> tuple[SampleTerms, np.ndarray]:
         """The terms of the grasps of ``chunks[c]`` (axis 0 in its order) and their counts,
         kept while the kept chunks stay within TERMS_CACHE_SAMPLES samples when a later
-        analysis reads them again (``keep_terms``; else the last chunk's buffers are reused)."""
+        analysis reads them again (``keep_terms``; else only the last chunk is kept, and the
+        memory of the others is reused once no array refers to it, ``method.terms``). The
+        calls registered by ``run_ahead`` run on a chunk right after its terms."""
         cached, evaluations, chunk = self._cached, self.evaluations, self.chunks[c]
         if c not in cached:
-            recycled = None
             while cached and (
                 not self._keep
                 or sum(int(n.sum()) for _, n in cached.values())
                 + sum(len(evaluations[k].times_s) for k in chunk)
                 > TERMS_CACHE_SAMPLES
             ):
-                recycled = cached.pop(next(iter(cached)))[0]  # the oldest
-            cached[c] = self.path_terms(
-                chunk,
-                [evaluations[k].joint_positions for k in chunk],
-                None if self._keep else recycled,
-            )
+                del cached[next(iter(cached))]  # the oldest
+            cached[c] = self.path_terms(chunk, [evaluations[k].joint_positions for k in chunk])
+            for name, on_chunk in self._ahead.items():
+                results = self._ahead_results[name]
+                if c not in results:  # (a chunk computed again: its results stand)
+                    results[c] = on_chunk(c, chunk)
         return cached[c]
+
+    def run_ahead(self, name: str, on_chunk: ChunkCall[Any]) -> None:
+        """Run ``on_chunk(c, chunk)`` (``per_grasp``'s chunk call, reading ``terms(c)``) on
+        each chunk right after its terms are computed; ``ahead(name)`` gives its results."""
+        self._ahead[name] = on_chunk
+        self._ahead_results[name] = {}
+
+    def take_ahead(self, name: str) -> ChunkCall[Any] | None:
+        """Ends ``run_ahead(name, ...)``. If its call ran on a chunk: the chunk call of
+        ``per_grasp`` that returns its results (on a chunk no analysis read, computing the
+        terms first); else (no analysis read the terms, or nothing registered) None."""
+        on_chunk, results = self._ahead.pop(name, None), self._ahead_results.pop(name, {})
+        if on_chunk is None or not results:
+            return None
+
+        def ahead_results(c: int, chunk: Sequence[int]) -> Sequence[tuple[int, Any]]:
+            return results[c] if c in results else on_chunk(c, chunk)
+
+        return ahead_results
 
     def path_terms(
         self, indices: Sequence[int], paths: Sequence[np.ndarray], out: SampleTerms | None = None
@@ -198,7 +230,7 @@ class Shared:
 
 def per_grasp(
     shared: Shared,
-    on_chunk: Callable[[int, Sequence[int]], Sequence[tuple[int, Result]]],
+    on_chunk: ChunkCall[Result],
     on_grasp: Callable[[int], Result],
 ) -> tuple[Result, ...]:
     """One result per grasp in candidate order, ``shared.step()`` after each: ``on_chunk(c,

@@ -19,7 +19,7 @@ from ..method.ranking import aggregate
 from ..method.terms import SampleTerms
 from .analysis_options import AnalysisOptions
 from .base import Analysis, Parts, Shared, per_grasp
-from .effort import evaluate_efforts
+from .effort import EffortEvaluation, evaluate_effort, evaluate_efforts
 from .exposed_points import (
     ExposedPointsEvaluation,
     evaluate_exposed_points,
@@ -56,6 +56,9 @@ class ExposedPoints:
 
     def units(self, grasps: int) -> int:
         return grasps
+
+    def prepare(self, shared: Shared) -> None:
+        """Nothing runs ahead."""
 
     def run(self, shared: Shared, parts: Parts) -> Parts:
         points = shared.options.points_in_object_m
@@ -100,6 +103,9 @@ class Redundancy:
     def units(self, grasps: int) -> int:
         return grasps
 
+    def prepare(self, shared: Shared) -> None:
+        """Nothing runs ahead."""
+
     def run(self, shared: Shared, parts: Parts) -> Parts:
         config = replace(
             shared.options.redundancy_settings,
@@ -138,6 +144,9 @@ class SafetyScores:
     def units(self, grasps: int) -> int:
         return 0
 
+    def prepare(self, shared: Shared) -> None:
+        """Nothing runs ahead."""
+
     def run(self, shared: Shared, parts: Parts) -> Parts:
         evaluations, options = shared.evaluations, shared.options
         scores = np.full(len(evaluations), np.nan)
@@ -170,6 +179,9 @@ class Iso15066:
 
     def units(self, grasps: int) -> int:
         return 0
+
+    def prepare(self, shared: Shared) -> None:
+        """Nothing runs ahead."""
 
     def run(self, shared: Shared, parts: Parts) -> Parts:
         iso_regions, evaluations = shared.options.iso_regions, shared.evaluations
@@ -209,6 +221,9 @@ class Uncertainty:
     def units(self, grasps: int) -> int:
         return 1
 
+    def prepare(self, shared: Shared) -> None:
+        """Nothing runs ahead."""
+
     def run(self, shared: Shared, parts: Parts) -> Parts:
         chain = shared.backend.chain
         samples = sum(len(e.times_s) for e in shared.evaluations if e.feasible)
@@ -228,8 +243,10 @@ class Uncertainty:
 
 @dataclass(frozen=True)
 class Effort:
-    """Joint torques along each grasp's path (``effort``; redundancy's where it applied), all
-    grasps in one kernel call on the compiled backend."""
+    """Joint torques along each grasp's path (``effort``; redundancy's where it applied). On
+    the compiled backend along the evaluated paths, when an analysis before it reads the
+    shared terms: chunk by chunk on them, run ahead with that analysis; else all grasps in
+    one kernel call that computes its own kinematics (cheaper than terms for it alone)."""
 
     name: str = "effort"
     keeps_terms: bool = False
@@ -240,7 +257,33 @@ class Effort:
     def units(self, grasps: int) -> int:
         return grasps
 
+    def prepare(self, shared: Shared) -> None:
+        if shared.backend.compiled and not shared.options.redundancy:  # the evaluated paths
+
+            def on_chunk(c: int, chunk: Sequence[int]) -> list[tuple[int, EffortEvaluation]]:
+                terms, _ = shared.terms(c)
+                results = evaluate_efforts(
+                    shared.robot,
+                    [shared.evaluations[k] for k in chunk],
+                    shared.object_inertia,
+                    [shared.grasps[k] for k in chunk],
+                    [shared.motions[k] for k in chunk],
+                    terms=terms,
+                    chain=shared.backend.chain,
+                )
+                return list(zip(chunk, results, strict=True))
+
+            shared.run_ahead(self.name, on_chunk)
+
     def run(self, shared: Shared, parts: Parts) -> Parts:
+        ahead = shared.take_ahead(self.name)
+        if ahead is not None:
+
+            def on_grasp(k: int) -> EffortEvaluation:  # infeasible: no samples
+                args = (shared.evaluations[k], shared.object_inertia, shared.grasps[k])
+                return evaluate_effort(shared.robot, *args, shared.motions[k])
+
+            return replace(parts, effort=per_grasp(shared, ahead, on_grasp))
         effort = evaluate_efforts(
             shared.robot,
             shared.evaluations,
@@ -268,6 +311,9 @@ class WholeArm:
 
     def units(self, grasps: int) -> int:
         return grasps
+
+    def prepare(self, shared: Shared) -> None:
+        """Nothing runs ahead."""
 
     def run(self, shared: Shared, parts: Parts) -> Parts:
         sites = resolve_arm_sites(shared.robot, shared.options.arm_points_m)

@@ -156,6 +156,8 @@ def analyse(
         keep_terms=any(analysis.keeps_terms for analysis in wanted),
         step=step,
     )
+    for analysis in wanted:
+        analysis.prepare(shared)
     parts = Parts()
     for analysis in wanted:
         parts = analysis.run(shared, parts)
