@@ -234,7 +234,7 @@ def test_a_later_chunk_never_overwrites_terms_still_referenced(
     monkeypatch.setattr(base, "TERMS_CHUNK_SAMPLES", len(feasible[0].times_s))
     motions = [evaluator.trajectory_for(g, trajectory) for g in grasps]
     args = (evaluator, grasps, BOX, motions, AnalysisOptions(), ranking.evaluations)
-    shared = Shared(*args, ranking.metric, keep_terms=False, step=lambda: None)
+    shared = Shared(*args, ranking.metric, keepers=(), step=lambda: None)
     assert len(shared.chunks) >= 2
     held, _ = shared.terms(0)
     before = [array.copy() for array in held]
@@ -246,13 +246,13 @@ def test_a_later_chunk_never_overwrites_terms_still_referenced(
 
 @needs_numba
 @pytest.mark.parametrize("chunk_samples", (None, 1))
-def test_effort_on_the_shared_terms_is_its_own_kernel_call_bit_for_bit(
+def test_analyses_run_ahead_on_the_shared_terms_give_their_numbers_bit_for_bit(
     arm7: RobotModel, chunk_samples: int | None, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Run ahead on the exposed points' chunks of terms (all grasps in one chunk, or one
-    grasp per chunk), effort gives the numbers of its one kernel call without terms bit for
-    bit, as it does alone (no analysis before it reads the terms); its progress is counted
-    in order."""
+    grasp per chunk), effort gives the numbers of its one kernel call without terms and the
+    whole arm those it gives alone (its own pass over the chunks), bit for bit; so do both
+    when no analysis before them reads the terms; the progress is counted in order."""
     from grasp_safety_ros.core.analyses import base
     from grasp_safety_ros.core.analyses.effort import evaluate_efforts
 
@@ -260,17 +260,13 @@ def test_effort_on_the_shared_terms_is_its_own_kernel_call_bit_for_bit(
         monkeypatch.setattr(base, "TERMS_CHUNK_SAMPLES", chunk_samples)
     evaluator, grasps, (trajectory, ranking) = _ranked(arm7, 3)
     motions = [evaluator.trajectory_for(g, trajectory) for g in grasps]
-    alone = evaluate_efforts(
+    effort = evaluate_efforts(
         arm7, ranking.evaluations, BOX, grasps, motions, chain=evaluator.backend.chain
     )
-    corners = np.array([[0.04, 0.06, 0.1], [-0.04, -0.06, -0.1]])
-    calls: list[tuple[int, int]] = []
-    for options in (
-        AnalysisOptions(points_in_object_m=corners, effort=True),
-        AnalysisOptions(effort=True),
-    ):
+
+    def report(options: AnalysisOptions) -> safety_report.SafetyReport:
         calls.clear()
-        report = safety_report.analyse(
+        return safety_report.analyse(
             evaluator,
             grasps,
             BOX,
@@ -279,5 +275,11 @@ def test_effort_on_the_shared_terms_is_its_own_kernel_call_bit_for_bit(
             ranking=ranking,
             progress=lambda *a: calls.append(a),
         )
-        assert _same(report.effort, alone)
+
+    calls: list[tuple[int, int]] = []
+    whole_arm = report(AnalysisOptions(effort=False, whole_arm=True)).whole_arm
+    corners = np.array([[0.04, 0.06, 0.1], [-0.04, -0.06, -0.1]])
+    for points in (corners, None):
+        ours = report(AnalysisOptions(points_in_object_m=points, effort=True, whole_arm=True))
+        assert _same(ours.effort, effort) and _same(ours.whole_arm, whole_arm)
         assert calls == [(k, len(calls)) for k in range(1, len(calls) + 1)]

@@ -17,7 +17,7 @@ chunks are computed once, into one reused buffer, instead of kept for a later re
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field, fields
 from typing import Any, Protocol, TypeVar
 
@@ -108,7 +108,7 @@ class Analysis(Protocol):
     @property
     def keeps_terms(self) -> bool:
         """Whether it reads the shared terms of chunks an earlier analysis read (they are
-        then kept, within TERMS_CACHE_SAMPLES, instead of overwritten chunk by chunk)."""
+        then kept, within TERMS_CACHE_SAMPLES, unless it runs ahead on them)."""
         ...
 
     def wanted(self, options: AnalysisOptions) -> bool:
@@ -140,6 +140,9 @@ class Shared:
         backend: Compiled or Pinocchio, the evaluator's.
         chunks: The feasible grasps in consecutive chunks of at most TERMS_CHUNK_SAMPLES
             samples (compiled backend; none on the Pinocchio one).
+
+    ``keepers``: the names of the wanted analyses that read chunks an earlier one read
+    (``Analysis.keeps_terms``).
     """
 
     def __init__(
@@ -151,7 +154,7 @@ class Shared:
         options: AnalysisOptions,
         evaluations: Sequence[GraspEvaluation],
         metric: str,
-        keep_terms: bool,
+        keepers: Collection[str],
         step: Callable[[], None],
     ) -> None:
         self.evaluator = evaluator
@@ -163,22 +166,25 @@ class Shared:
         feasible = [k for k, e in enumerate(evaluations) if e.feasible]
         samples = [len(evaluations[k].times_s) for k in feasible]
         self.chunks = chunks(feasible, samples) if self.backend.compiled else []
-        self._keep = keep_terms
+        self._keepers = set(keepers)
         self._cached: dict[int, tuple[SampleTerms, np.ndarray]] = {}
         self._models: dict[int, pin.Model] = {}
-        self._ahead: dict[str, ChunkCall[Any]] = {}
+        self._ahead: dict[str, ChunkCall[Any]] = {}  # registered, not yet taken
+        self._ran_ahead: set[str] = set()  # every name registered
         self._ahead_results: dict[str, dict[int, Sequence[tuple[int, Any]]]] = {}  # by chunk
 
     def terms(self, c: int) -> tuple[SampleTerms, np.ndarray]:
         """The terms of the grasps of ``chunks[c]`` (axis 0 in its order) and their counts,
         kept while the kept chunks stay within TERMS_CACHE_SAMPLES samples when a later
-        analysis reads them again (``keep_terms``; else only the last chunk is kept, and the
-        memory of the others is reused once no array refers to it, ``method.terms``). The
-        calls registered by ``run_ahead`` run on a chunk right after its terms."""
+        analysis reads them again (one of ``keepers`` that does not run ahead; else only the
+        last chunk is kept, and the memory of the others is reused once no array refers to
+        it, ``method.terms``). The calls registered by ``run_ahead`` run on a chunk right
+        after its terms."""
+        keep = not self._keepers.issubset(self._ran_ahead)
         cached, evaluations, chunk = self._cached, self.evaluations, self.chunks[c]
         if c not in cached:
             while cached and (
-                not self._keep
+                not keep
                 or sum(int(n.sum()) for _, n in cached.values())
                 + sum(len(evaluations[k].times_s) for k in chunk)
                 > TERMS_CACHE_SAMPLES
@@ -195,6 +201,7 @@ class Shared:
         """Run ``on_chunk(c, chunk)`` (``per_grasp``'s chunk call, reading ``terms(c)``) on
         each chunk right after its terms are computed; ``ahead(name)`` gives its results."""
         self._ahead[name] = on_chunk
+        self._ran_ahead.add(name)
         self._ahead_results[name] = {}
 
     def take_ahead(self, name: str) -> ChunkCall[Any] | None:

@@ -301,10 +301,11 @@ class Effort:
 @dataclass(frozen=True)
 class WholeArm:
     """Exposure of the arm's sites (``whole_arm``): on the shared terms along the evaluated
-    paths, on terms of their own along redundancy's paths, the Pinocchio path without terms."""
+    paths (run ahead, with the first analysis that reads them), on terms of their own along
+    redundancy's paths, the Pinocchio path without terms."""
 
     name: str = "whole_arm"
-    keeps_terms: bool = True  # reads the chunks the exposed points read
+    keeps_terms: bool = True  # with redundancy, it reads the chunks the exposed points read
 
     def wanted(self, options: AnalysisOptions) -> bool:
         return options.whole_arm
@@ -313,13 +314,17 @@ class WholeArm:
         return grasps
 
     def prepare(self, shared: Shared) -> None:
-        """Nothing runs ahead."""
+        if shared.backend.compiled and not shared.options.redundancy:  # the evaluated paths
+            sites, regions = _sites_and_regions(shared)
+
+            def on_chunk(c: int, chunk: Sequence[int]) -> list[tuple[int, WholeArmEvaluation]]:
+                return _whole_arm_chunk(shared, sites, regions, None, c, chunk)
+
+            shared.run_ahead(self.name, on_chunk)
 
     def run(self, shared: Shared, parts: Parts) -> Parts:
-        sites = resolve_arm_sites(shared.robot, shared.options.arm_points_m)
+        sites, regions = _sites_and_regions(shared)
         resolved = parts.resolved_paths()
-        iso_regions = shared.options.iso_regions
-        regions = select_regions(None if iso_regions is None else list(iso_regions))
 
         def on_grasp(k: int) -> WholeArmEvaluation:
             return evaluate_whole_arm(
@@ -329,7 +334,7 @@ class WholeArm:
                 shared.grasps[k],
                 shared.motions[k],
                 sites,
-                iso_regions,
+                shared.options.iso_regions,
                 shared.model_of(k),
                 None if resolved is None else resolved[k],
             )
@@ -337,8 +342,15 @@ class WholeArm:
         def on_chunk(c: int, chunk: Sequence[int]) -> list[tuple[int, WholeArmEvaluation]]:
             return _whole_arm_chunk(shared, sites, regions, resolved, c, chunk)
 
-        whole_arm = per_grasp(shared, on_chunk, on_grasp)
+        whole_arm = per_grasp(shared, shared.take_ahead(self.name) or on_chunk, on_grasp)
         return replace(parts, whole_arm=whole_arm, arm_sites=sites)
+
+
+def _sites_and_regions(shared: Shared) -> tuple[ArmSites, tuple[BodyRegion, ...]]:
+    """The whole arm's sites and ISO/TS 15066 regions for the request's options."""
+    iso_regions = shared.options.iso_regions
+    sites = resolve_arm_sites(shared.robot, shared.options.arm_points_m)
+    return sites, select_regions(None if iso_regions is None else list(iso_regions))
 
 
 def _whole_arm_chunk(

@@ -153,7 +153,7 @@ def analyse(
         options,
         ranking.evaluations,
         ranking.metric,
-        keep_terms=any(analysis.keeps_terms for analysis in wanted),
+        keepers=[analysis.name for analysis in wanted if analysis.keeps_terms],
         step=step,
     )
     for analysis in wanted:
