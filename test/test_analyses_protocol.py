@@ -48,6 +48,7 @@ class SampleCounts:
     seen: dict[int, tuple[str, int, bool]] = field(default_factory=dict)
     name: str = "sample_counts"
     keeps_terms: bool = False
+    reads_inverses: bool = False
 
     def wanted(self, options: AnalysisOptions) -> bool:
         return True

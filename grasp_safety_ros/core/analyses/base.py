@@ -111,6 +111,12 @@ class Analysis(Protocol):
         then kept, within TERMS_CACHE_SAMPLES, unless it runs ahead on them)."""
         ...
 
+    @property
+    def reads_inverses(self) -> bool:
+        """Whether it reads the terms' M⁻¹ (``SampleTerms.mass_matrix_inverses``: computed
+        only when a wanted analysis does)."""
+        ...
+
     def wanted(self, options: AnalysisOptions) -> bool:
         """Whether ``options`` ask for it."""
         ...
@@ -142,7 +148,8 @@ class Shared:
             samples (compiled backend; none on the Pinocchio one).
 
     ``keepers``: the names of the wanted analyses that read chunks an earlier one read
-    (``Analysis.keeps_terms``).
+    (``Analysis.keeps_terms``); ``inverses``: whether the terms include M⁻¹ (a wanted
+    analysis ``reads_inverses``).
     """
 
     def __init__(
@@ -156,6 +163,7 @@ class Shared:
         metric: str,
         keepers: Collection[str],
         step: Callable[[], None],
+        inverses: bool = True,
     ) -> None:
         self.evaluator = evaluator
         self.robot: RobotModel = evaluator.robot
@@ -166,7 +174,7 @@ class Shared:
         feasible = [k for k, e in enumerate(evaluations) if e.feasible]
         samples = [len(evaluations[k].times_s) for k in feasible]
         self.chunks = chunks(feasible, samples) if self.backend.compiled else []
-        self._keepers = set(keepers)
+        self._keepers, self._inverses = set(keepers), inverses
         self._cached: dict[int, tuple[SampleTerms, np.ndarray]] = {}
         self._models: dict[int, pin.Model] = {}
         self._ahead: dict[str, ChunkCall[Any]] = {}  # registered, not yet taken
@@ -218,12 +226,14 @@ class Shared:
         return ahead_results
 
     def path_terms(
-        self, indices: Sequence[int], paths: Sequence[np.ndarray], out: SampleTerms | None = None
+        self, indices: Sequence[int], paths: Sequence[np.ndarray]
     ) -> tuple[SampleTerms, np.ndarray]:
         """The terms of grasps ``indices`` along joint ``paths`` ((N, n) each), uncached
         (compiled backend)."""
         transforms = [self.grasps[k].transform_tip_to_object for k in indices]
-        return self.backend.grasps_terms(self.robot, self.object_inertia, transforms, paths, out)
+        return self.backend.grasps_terms(
+            self.robot, self.object_inertia, transforms, paths, inverses=self._inverses
+        )
 
     def model_of(self, k: int) -> pin.Model | None:
         """Grasp k's ``augmented_model`` (built once), None when infeasible."""

@@ -50,6 +50,7 @@ class ExposedPoints:
 
     name: str = "exposed"
     keeps_terms: bool = False
+    reads_inverses: bool = False
 
     def wanted(self, options: AnalysisOptions) -> bool:
         return options.points_in_object_m is not None
@@ -96,6 +97,7 @@ class Redundancy:
 
     name: str = "redundancy"
     keeps_terms: bool = False
+    reads_inverses: bool = False
 
     def wanted(self, options: AnalysisOptions) -> bool:
         return options.redundancy
@@ -137,6 +139,7 @@ class SafetyScores:
 
     name: str = "scores"
     keeps_terms: bool = False
+    reads_inverses: bool = False
 
     def wanted(self, options: AnalysisOptions) -> bool:
         return True
@@ -173,6 +176,7 @@ class Iso15066:
 
     name: str = "iso"
     keeps_terms: bool = False
+    reads_inverses: bool = False
 
     def wanted(self, options: AnalysisOptions) -> bool:
         return options.iso_regions != ()
@@ -214,6 +218,7 @@ class Uncertainty:
 
     name: str = "uncertainty"
     keeps_terms: bool = False
+    reads_inverses: bool = False
 
     def wanted(self, options: AnalysisOptions) -> bool:
         return options.uncertainty is not None
@@ -250,6 +255,7 @@ class Effort:
 
     name: str = "effort"
     keeps_terms: bool = False
+    reads_inverses: bool = False
 
     def wanted(self, options: AnalysisOptions) -> bool:
         return options.effort
@@ -306,6 +312,7 @@ class WholeArm:
 
     name: str = "whole_arm"
     keeps_terms: bool = True  # with redundancy, it reads the chunks the exposed points read
+    reads_inverses: bool = True  # the sites' mobilities from M⁻¹
 
     def wanted(self, options: AnalysisOptions) -> bool:
         return options.whole_arm

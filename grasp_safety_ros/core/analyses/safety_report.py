@@ -155,6 +155,7 @@ def analyse(
         ranking.metric,
         keepers=[analysis.name for analysis in wanted if analysis.keeps_terms],
         step=step,
+        inverses=any(analysis.reads_inverses for analysis in wanted),
     )
     for analysis in wanted:
         analysis.prepare(shared)

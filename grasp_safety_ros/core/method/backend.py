@@ -55,11 +55,18 @@ class Backend:
         transforms_tip_to_object: Sequence[pin.SE3],
         joint_positions: Sequence[np.ndarray],
         out: SampleTerms | None = None,
+        inverses: bool = True,
     ) -> tuple[SampleTerms, np.ndarray]:
         """``terms.grasps_terms`` on this backend's chain (the per-sample terms of G grasps
         and their counts); only the compiled backend has them (ValueError otherwise)."""
         if self.chain is None:
             raise ValueError("the Pinocchio backend has no shared terms")
         return grasps_terms(
-            robot, self.chain, object_inertia, transforms_tip_to_object, joint_positions, out
+            robot,
+            self.chain,
+            object_inertia,
+            transforms_tip_to_object,
+            joint_positions,
+            out,
+            inverses,
         )
