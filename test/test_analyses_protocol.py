@@ -48,7 +48,7 @@ class SampleCounts:
     seen: dict[int, tuple[str, int, bool]] = field(default_factory=dict)
     name: str = "sample_counts"
     keeps_terms: bool = False
-    reads_inverses: bool = False
+    optional_terms: tuple[str, ...] = ()
 
     def wanted(self, options: AnalysisOptions) -> bool:
         return True

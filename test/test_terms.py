@@ -24,6 +24,7 @@ from grasp_safety_ros.core.method.effective_mass import (
 )
 from grasp_safety_ros.core.method.terms import (
     KEPT_TERMS_BYTES,
+    OPTIONAL_TERMS,
     SampleTerms,
     grasps_terms,
     sample_terms_buffers,
@@ -236,10 +237,11 @@ def test_whole_arm_from_shared_terms_equals_pinocchio(
 
 @needs_numba
 @pytest.mark.parametrize("name", TERM_ARMS)
-def test_terms_without_inverses_are_the_same_numbers(
+def test_terms_without_optional_fields_are_the_same_numbers(
     name: str, request: pytest.FixtureRequest
 ) -> None:
-    """Terms asked without M⁻¹ have every other field bit for bit as with it."""
+    """Terms asked without an optional field (or with none) have every other field bit for
+    bit as with all."""
     robot: RobotModel = request.getfixturevalue(name)
     grasp, evaluation, _, _ = terms_case(robot, 11)
     chain = Backend.for_robot(robot).chain
@@ -248,10 +250,11 @@ def test_terms_without_inverses_are_the_same_numbers(
     full, counts = grasps_terms(*args)
     held = [array.copy() for array in full]  # the kept memory comes back to the next call
     del full
-    lean, _ = grasps_terms(*args, inverses=False)
-    for field_name, ours, theirs in zip(SampleTerms._fields, lean, held, strict=True):
-        if field_name != "mass_matrix_inverses":
-            assert np.array_equal(ours[0, : counts[0]], theirs[0, : counts[0]]), field_name
+    for optional in (("mobilities_tip_in_base",), ("mass_matrix_inverses",), ()):
+        lean, _ = grasps_terms(*args, optional=optional)
+        for field_name, ours, theirs in zip(SampleTerms._fields, lean, held, strict=True):
+            if field_name in optional or field_name not in OPTIONAL_TERMS:
+                assert np.array_equal(ours[0, : counts[0]], theirs[0, : counts[0]]), field_name
 
 
 @needs_numba

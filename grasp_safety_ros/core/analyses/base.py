@@ -27,7 +27,7 @@ import pinocchio as pin
 from ..method.backend import Backend
 from ..method.effective_mass import augmented_model
 from ..method.ranking import Grasp, GraspEvaluation, GraspSafetyEvaluator
-from ..method.terms import SampleTerms
+from ..method.terms import OPTIONAL_TERMS, SampleTerms
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
 from ..model.trajectory import Trajectory
@@ -112,9 +112,9 @@ class Analysis(Protocol):
         ...
 
     @property
-    def reads_inverses(self) -> bool:
-        """Whether it reads the terms' M⁻¹ (``SampleTerms.mass_matrix_inverses``: computed
-        only when a wanted analysis does)."""
+    def optional_terms(self) -> tuple[str, ...]:
+        """The optional fields of the terms it reads (``method.terms.OPTIONAL_TERMS``:
+        computed only when a wanted analysis reads them)."""
         ...
 
     def wanted(self, options: AnalysisOptions) -> bool:
@@ -148,8 +148,8 @@ class Shared:
             samples (compiled backend; none on the Pinocchio one).
 
     ``keepers``: the names of the wanted analyses that read chunks an earlier one read
-    (``Analysis.keeps_terms``); ``inverses``: whether the terms include M⁻¹ (a wanted
-    analysis ``reads_inverses``).
+    (``Analysis.keeps_terms``); ``optional``: the optional fields of the terms to compute
+    (those the wanted analyses read).
     """
 
     def __init__(
@@ -163,7 +163,7 @@ class Shared:
         metric: str,
         keepers: Collection[str],
         step: Callable[[], None],
-        inverses: bool = True,
+        optional: Collection[str] = OPTIONAL_TERMS,
     ) -> None:
         self.evaluator = evaluator
         self.robot: RobotModel = evaluator.robot
@@ -174,7 +174,7 @@ class Shared:
         feasible = [k for k, e in enumerate(evaluations) if e.feasible]
         samples = [len(evaluations[k].times_s) for k in feasible]
         self.chunks = chunks(feasible, samples) if self.backend.compiled else []
-        self._keepers, self._inverses = set(keepers), inverses
+        self._keepers, self._optional = set(keepers), tuple(optional)
         self._cached: dict[int, tuple[SampleTerms, np.ndarray]] = {}
         self._models: dict[int, pin.Model] = {}
         self._ahead: dict[str, ChunkCall[Any]] = {}  # registered, not yet taken
@@ -232,7 +232,7 @@ class Shared:
         (compiled backend)."""
         transforms = [self.grasps[k].transform_tip_to_object for k in indices]
         return self.backend.grasps_terms(
-            self.robot, self.object_inertia, transforms, paths, inverses=self._inverses
+            self.robot, self.object_inertia, transforms, paths, optional=self._optional
         )
 
     def model_of(self, k: int) -> pin.Model | None:

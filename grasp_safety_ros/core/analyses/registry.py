@@ -50,7 +50,7 @@ class ExposedPoints:
 
     name: str = "exposed"
     keeps_terms: bool = False
-    reads_inverses: bool = False
+    optional_terms: tuple[str, ...] = ("mobilities_tip_in_base",)
 
     def wanted(self, options: AnalysisOptions) -> bool:
         return options.points_in_object_m is not None
@@ -97,7 +97,7 @@ class Redundancy:
 
     name: str = "redundancy"
     keeps_terms: bool = False
-    reads_inverses: bool = False
+    optional_terms: tuple[str, ...] = ()
 
     def wanted(self, options: AnalysisOptions) -> bool:
         return options.redundancy
@@ -139,7 +139,7 @@ class SafetyScores:
 
     name: str = "scores"
     keeps_terms: bool = False
-    reads_inverses: bool = False
+    optional_terms: tuple[str, ...] = ()
 
     def wanted(self, options: AnalysisOptions) -> bool:
         return True
@@ -176,7 +176,7 @@ class Iso15066:
 
     name: str = "iso"
     keeps_terms: bool = False
-    reads_inverses: bool = False
+    optional_terms: tuple[str, ...] = ()
 
     def wanted(self, options: AnalysisOptions) -> bool:
         return options.iso_regions != ()
@@ -218,7 +218,7 @@ class Uncertainty:
 
     name: str = "uncertainty"
     keeps_terms: bool = False
-    reads_inverses: bool = False
+    optional_terms: tuple[str, ...] = ()
 
     def wanted(self, options: AnalysisOptions) -> bool:
         return options.uncertainty is not None
@@ -255,7 +255,7 @@ class Effort:
 
     name: str = "effort"
     keeps_terms: bool = False
-    reads_inverses: bool = False
+    optional_terms: tuple[str, ...] = ()
 
     def wanted(self, options: AnalysisOptions) -> bool:
         return options.effort
@@ -312,7 +312,7 @@ class WholeArm:
 
     name: str = "whole_arm"
     keeps_terms: bool = True  # with redundancy, it reads the chunks the exposed points read
-    reads_inverses: bool = True  # the sites' mobilities from M⁻¹
+    optional_terms: tuple[str, ...] = ("mass_matrix_inverses",)  # the sites' mobilities
 
     def wanted(self, options: AnalysisOptions) -> bool:
         return options.whole_arm

@@ -155,7 +155,7 @@ def analyse(
         ranking.metric,
         keepers=[analysis.name for analysis in wanted if analysis.keeps_terms],
         step=step,
-        inverses=any(analysis.reads_inverses for analysis in wanted),
+        optional={name for analysis in wanted for name in analysis.optional_terms},
     )
     for analysis in wanted:
         analysis.prepare(shared)

@@ -30,20 +30,23 @@ def _motions_and_jacobian(axes, prismatic, jr, jp, ft, motions, jacobian):
 
 
 @_jit
-def sample_terms(chain, bodies, q_all, counts, inverses, out, lower_inverse, angular, ws):
+def sample_terms(chain, bodies, q_all, counts, optional, out, lower_inverse, angular, ws):
     """For each grasp g (axis 0 of q_all (G, N, nq), of ``bodies`` and of ``out``) and its
-    samples i < counts[g]: joint poses and motion subspaces, tip pose, tip Jacobian, the
-    tip's 6 x 6 mobility and, if ``inverses``, M^-1 into ``out`` (``method.terms.SampleTerms``;
-    without: M^-1 left untouched); rows from counts[g] on are left untouched.
+    samples i < counts[g]: joint poses and motion subspaces, tip pose and tip Jacobian, and
+    where ``optional`` (two flags) asks, the tip's 6 x 6 mobility and M^-1, into ``out``
+    (``method.terms.SampleTerms``; the fields not asked and the rows from counts[g] on are
+    left untouched).
     lower_inverse: (n, n) and angular: (n, 3) scratch; ws: ``ik.workspace(n)``."""
     axes, prismatic = chain.axes, chain.prismatic
     n = axes.shape[0]
     jr, jp, fr, ft = ws[0], ws[1], ws[2], ws[3]
     inverse_diagonal, factor, top = ws[14], ws[15], ws[19]
+    tip_mobilities, inverses = optional
     for g in range(q_all.shape[0]):
         for i in range(counts[g]):
             _forward_kinematics(chain, q_all[g, i], ws)
-            _mobility_from_frames(chain, bodies, g, ws, top)
+            if tip_mobilities or inverses:  # M and its Cholesky factor
+                _mobility_from_frames(chain, bodies, g, ws, top)
             joint_rotations, joint_origins = (
                 out.rotations_joint_to_world[g, i],
                 out.translations_joint_in_world[g, i],
@@ -59,9 +62,9 @@ def sample_terms(chain, bodies, q_all, counts, inverses, out, lower_inverse, ang
                     joint_origins[k, a] = jp[k, a]
                     for b in range(3):
                         joint_rotations[k, a, b] = jr[k, a, b]
-            _tip_mobility(
-                chain.base_rotation, ws, jacobian, angular, top, out.mobilities_tip_in_base[g, i]
-            )
+            if tip_mobilities:
+                mobility = out.mobilities_tip_in_base[g, i]
+                _tip_mobility(chain.base_rotation, ws, jacobian, angular, top, mobility)
             if inverses:
                 _mass_matrix_inverse(
                     factor, inverse_diagonal, lower_inverse, out.mass_matrix_inverses[g, i]

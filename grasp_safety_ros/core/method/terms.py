@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 import sys
 import threading
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -37,8 +37,8 @@ class SampleTerms(NamedTuple):
     The Jacobian is Pinocchio's LOCAL_WORLD_ALIGNED one at the tip: rows [linear; angular],
     world axes, linear part the velocity of the tip origin. The tip's mobility is J M⁻¹ Jᵀ
     with J's rows in base axes (its linear block: the ranking's translational mobility, to
-    rounding), computed from the Cholesky factor of M; M⁻¹ itself only when asked
-    (``inverses``; else undefined). A joint's motion subspace is its
+    rounding), computed from the Cholesky factor of M. It and M⁻¹ (OPTIONAL_TERMS) are
+    computed only when asked (else undefined). A joint's motion subspace is its
     unit twist at the world origin, [p × w + slide u; w] (u its axis, p its origin, w = u for
     a revolute joint and 0 for a prismatic one, slide = 1 - |w|).
     """
@@ -56,6 +56,10 @@ class SampleTerms(NamedTuple):
         """Grasp g's terms (axis 0 dropped), its first ``count`` samples (all: None)."""
         return SampleTerms(*(array[g, :count] for array in self))
 
+
+OPTIONAL_TERMS = ("mobilities_tip_in_base", "mass_matrix_inverses")
+"""The fields of SampleTerms computed only when asked (``batch_terms``' ``optional``): for a
+7-joint arm the tip's mobility costs a tenth of the kernel's time, M⁻¹ a quarter."""
 
 KEPT_TERMS_BYTES = 64 << 20
 """Memory of released terms each thread keeps for the next ``sample_terms_buffers`` (bytes):
@@ -151,18 +155,18 @@ def grasps_terms(
     transforms_tip_to_object: Sequence[pin.SE3],
     joint_positions: Sequence[np.ndarray],
     out: SampleTerms | None = None,
-    inverses: bool = True,
+    optional: Collection[str] = OPTIONAL_TERMS,
 ) -> tuple[SampleTerms, np.ndarray]:
     """The terms of G grasps along their joint paths ((N_g, n) positions each, chain order),
     in one kernel call, and the sample counts N_g (G,). Axis 1 has max N_g rows; grasp g's
     rows from N_g on are undefined (``SampleTerms.of_grasp(g, N_g)`` drops them). Each grasp's
     terms are those ``grasp_terms`` gives it alone, bit for bit (the same kernel code per
     grasp). ``chain``: ``compiled.chain_arrays(robot)`` (numba must be installed); ``out``:
-    terms no longer needed, overwritten when their shape is (G, max N_g); ``inverses``:
-    whether M⁻¹ is computed (``batch_terms``)."""
+    terms no longer needed, overwritten when their shape is (G, max N_g); ``optional``: the
+    OPTIONAL_TERMS computed (``batch_terms``)."""
     bodies = augmented_bodies(robot, object_inertia, *pose_arrays(transforms_tip_to_object))
     q_all, counts = padded_configurations(robot, joint_positions)
-    return batch_terms(chain, bodies, q_all, counts, out, inverses), counts
+    return batch_terms(chain, bodies, q_all, counts, out, optional), counts
 
 
 def padded_configurations(
@@ -183,15 +187,14 @@ def batch_terms(
     q_all: np.ndarray,
     counts: np.ndarray,
     out: SampleTerms | None = None,
-    inverses: bool = True,
+    optional: Collection[str] = OPTIONAL_TERMS,
 ) -> SampleTerms:
     """The terms of G grasps in one kernel call: grasp g's augmented ``bodies`` (axis 0 the
     grasp, ``compiled.augmented_bodies``) along its first counts[g] configurations of
     ``q_all`` (G, N, nq); its rows from counts[g] on are left uninitialised. ``out``: terms
     no longer needed, overwritten (no new allocation, whose first touch of fresh pages costs
     as much as the kernel) when their first two axes are (G, N); else new buffers.
-    ``inverses``: whether M⁻¹ is computed (a quarter of the kernel's time for a 7-joint arm;
-    without, ``mass_matrix_inverses`` is undefined)."""
+    ``optional``: the OPTIONAL_TERMS computed (the others undefined)."""
     from ..kernels.ik import thread_workspace
     from ..kernels.terms import sample_terms
 
@@ -208,7 +211,7 @@ def batch_terms(
             bodies,
             q_all,
             counts,
-            inverses,
+            tuple(name in optional for name in OPTIONAL_TERMS),
             out,
             *scratch,
             thread_workspace(n),
