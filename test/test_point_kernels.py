@@ -315,7 +315,7 @@ def test_exposed_points_on_recycled_terms_buffers_equal_one_chunk(
     """Without the whole arm no analysis reads the terms twice, so each chunk's terms are
     computed into the memory of the previous chunk's (released, nothing refers to it): the
     exposed points stay those of one chunk for all grasps, bit for bit (a reader holding a
-    view of reused memory would differ)."""
+    view of reused memory would differ), and read-only."""
     from grasp_safety_ros.core.analyses import base
     from grasp_safety_ros.core.method import backend
 
@@ -343,3 +343,4 @@ def test_exposed_points_on_recycled_terms_buffers_equal_one_chunk(
     for ours, theirs in zip(chunked.exposed, whole.exposed, strict=True):
         for field, value in _fields(ours).items():
             np.testing.assert_array_equal(value, getattr(theirs, field), err_msg=field)
+            assert not (ours.feasible and value.flags.writeable), field
