@@ -207,7 +207,8 @@ class Shared:
 
     def run_ahead(self, name: str, on_chunk: ChunkCall[Any]) -> None:
         """Run ``on_chunk(c, chunk)`` (``per_grasp``'s chunk call, reading ``terms(c)``) on
-        each chunk right after its terms are computed; ``ahead(name)`` gives its results."""
+        each chunk right after its terms are computed; ``take_ahead(name)`` gives the
+        results."""
         self._ahead[name] = on_chunk
         self._ran_ahead.add(name)
         self._ahead_results[name] = {}
