@@ -48,12 +48,16 @@ class SampleCounts:
     seen: dict[int, tuple[str, int, bool]] = field(default_factory=dict)
     name: str = "sample_counts"
     keeps_terms: bool = False
+    optional_terms: tuple[str, ...] = ()
 
     def wanted(self, options: AnalysisOptions) -> bool:
         return True
 
     def units(self, grasps: int) -> int:
         return grasps
+
+    def prepare(self, shared: Shared) -> None:
+        """Nothing runs ahead."""
 
     def run(self, shared: Shared, parts: Parts) -> Parts:
         def on_chunk(c: int, chunk: Sequence[int]) -> list[tuple[int, int]]:
@@ -202,3 +206,81 @@ def test_the_compiled_backend_gives_the_terms_of_its_chain(arm7: RobotModel) -> 
     assert list(counts) == [3]
     for a, b in zip(ours, theirs, strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def _ranked(arm7: RobotModel, grasps: int) -> tuple[GraspSafetyEvaluator, list[Grasp], object]:
+    """A compiled evaluator, ``grasps`` grasps near the identity (+ an unreachable one), and
+    their ranking along one reach (every reachable grasp: the same samples)."""
+    seed = random_positions(arm7, np.random.default_rng(18))
+    trajectory = reach_trajectory(arm7, seed)
+    far = Grasp(pin.SE3(np.eye(3), np.array([0.0, 0.0, 5.0])), "unreachable")
+    candidates = [*grasps_near_identity(grasps, 19), far]
+    evaluator = GraspSafetyEvaluator(arm7, EvaluationConfig(workers=1))
+    ranking = evaluator.rank(candidates, BOX, trajectory, seed_positions=seed)
+    return evaluator, candidates, (trajectory, ranking)
+
+
+@needs_numba
+def test_a_later_chunk_never_overwrites_terms_still_referenced(
+    arm7: RobotModel, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """With a chunk per grasp and no chunk kept, the terms of chunk 1 do not land in the
+    memory of chunk 0's while an analysis still holds those (the memory is reused only once
+    nothing refers to it): chunk 0's arrays keep their values."""
+    from grasp_safety_ros.core.analyses import base
+
+    evaluator, grasps, (trajectory, ranking) = _ranked(arm7, 3)
+    feasible = [e for e in ranking.evaluations if e.feasible]
+    assert len(feasible) >= 2 and len({len(e.times_s) for e in feasible}) == 1
+    monkeypatch.setattr(base, "TERMS_CHUNK_SAMPLES", len(feasible[0].times_s))
+    motions = [evaluator.trajectory_for(g, trajectory) for g in grasps]
+    args = (evaluator, grasps, BOX, motions, AnalysisOptions(), ranking.evaluations)
+    shared = Shared(*args, ranking.metric, keepers=(), step=lambda: None)
+    assert len(shared.chunks) >= 2
+    held, _ = shared.terms(0)
+    before = [array.copy() for array in held]
+    later, _ = shared.terms(1)
+    assert not any(np.shares_memory(a, b) for a, b in zip(held, later, strict=True))
+    for array, copy in zip(held, before, strict=True):
+        np.testing.assert_array_equal(array, copy)
+
+
+@needs_numba
+@pytest.mark.parametrize("chunk_samples", (None, 1))
+def test_analyses_run_ahead_on_the_shared_terms_give_their_numbers_bit_for_bit(
+    arm7: RobotModel, chunk_samples: int | None, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Run ahead on the exposed points' chunks of terms (all grasps in one chunk, or one
+    grasp per chunk), effort gives the numbers of its one kernel call without terms and the
+    whole arm those it gives alone (its own pass over the chunks), bit for bit; so do both
+    when no analysis before them reads the terms; the progress is counted in order."""
+    from grasp_safety_ros.core.analyses import base
+    from grasp_safety_ros.core.analyses.effort import evaluate_efforts
+
+    if chunk_samples is not None:
+        monkeypatch.setattr(base, "TERMS_CHUNK_SAMPLES", chunk_samples)
+    evaluator, grasps, (trajectory, ranking) = _ranked(arm7, 3)
+    motions = [evaluator.trajectory_for(g, trajectory) for g in grasps]
+    effort = evaluate_efforts(
+        arm7, ranking.evaluations, BOX, grasps, motions, chain=evaluator.backend.chain
+    )
+
+    def report(options: AnalysisOptions) -> safety_report.SafetyReport:
+        calls.clear()
+        return safety_report.analyse(
+            evaluator,
+            grasps,
+            BOX,
+            trajectory,
+            options,
+            ranking=ranking,
+            progress=lambda *a: calls.append(a),
+        )
+
+    calls: list[tuple[int, int]] = []
+    whole_arm = report(AnalysisOptions(effort=False, whole_arm=True)).whole_arm
+    corners = np.array([[0.04, 0.06, 0.1], [-0.04, -0.06, -0.1]])
+    for points in (corners, None):
+        ours = report(AnalysisOptions(points_in_object_m=points, effort=True, whole_arm=True))
+        assert _same(ours.effort, effort) and _same(ours.whole_arm, whole_arm)
+        assert calls == [(k, len(calls)) for k in range(1, len(calls) + 1)]

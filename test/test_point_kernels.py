@@ -5,6 +5,8 @@ Pinocchio reference path, infeasible grasps mixed in."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -311,8 +313,9 @@ def test_exposed_points_on_recycled_terms_buffers_equal_one_chunk(
     arm7: RobotModel, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Without the whole arm no analysis reads the terms twice, so each chunk's terms are
-    computed into the previous chunk's buffers: the exposed points stay those of one chunk for
-    all grasps, bit for bit (a reader holding a view of reused buffers would differ)."""
+    computed into the memory of the previous chunk's (released, nothing refers to it): the
+    exposed points stay those of one chunk for all grasps, bit for bit (a reader holding a
+    view of reused memory would differ), and read-only."""
     from grasp_safety_ros.core.analyses import base
     from grasp_safety_ros.core.method import backend
 
@@ -324,18 +327,20 @@ def test_exposed_points_on_recycled_terms_buffers_equal_one_chunk(
     evaluator = GraspSafetyEvaluator(arm7, EvaluationConfig(workers=1))
     ranking = evaluator.rank(grasps, BOX, trajectory, seed_positions=seed)
     whole = analyse(evaluator, grasps, BOX, trajectory, options, ranking=ranking)
-    recycled: list[bool] = []
+    addresses: list[int] = []  # of each chunk's memory (no reference to it held)
     computed = backend.grasps_terms
 
-    def spy(*args: object) -> object:
-        recycled.append(args[-1] is not None)
-        return computed(*args)
+    def spy(*args: Any) -> Any:
+        terms, counts = computed(*args)
+        addresses.append(terms.rotations_joint_to_world.__array_interface__["data"][0])
+        return terms, counts
 
     monkeypatch.setattr(backend, "grasps_terms", spy)
     monkeypatch.setattr(base, "TERMS_CHUNK_SAMPLES", 1)
     chunked = analyse(evaluator, grasps, BOX, trajectory, options, ranking=ranking)
     feasible = sum(e.feasible for e in ranking.evaluations)
-    assert feasible >= 2 and recycled == [False] + [True] * (feasible - 1)  # a chunk each
+    assert feasible >= 2 and len(addresses) == feasible and len(set(addresses)) == 1
     for ours, theirs in zip(chunked.exposed, whole.exposed, strict=True):
         for field, value in _fields(ours).items():
             np.testing.assert_array_equal(value, getattr(theirs, field), err_msg=field)
+            assert not (ours.feasible and value.flags.writeable), field

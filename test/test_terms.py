@@ -24,6 +24,7 @@ from grasp_safety_ros.core.method.effective_mass import (
 )
 from grasp_safety_ros.core.method.terms import (
     KEPT_TERMS_BYTES,
+    OPTIONAL_TERMS,
     SampleTerms,
     grasps_terms,
     sample_terms_buffers,
@@ -73,7 +74,13 @@ def test_shared_terms_equal_pinocchio(name: str, request: pytest.FixtureRequest)
                 terms.motions_joint_in_world[i, k], motion, "motion subspace", kinematic
             )
         mobility = translational_mobility_in_base(robot, model, data, q)
-        assert_close_to_scale(terms.mobilities_tip_in_base[i], mobility, "tip mobility", dynamic)
+        assert_close_to_scale(
+            terms.mobilities_tip_in_base[i, :3, :3], mobility, "tip mobility", dynamic
+        )
+        rotation = robot.transform_base_to_world.rotation  # J's rows into base axes
+        in_base = np.vstack([rotation.T @ jacobian[:3], rotation.T @ jacobian[3:]])
+        mobility6 = in_base @ (upper + np.triu(upper, 1).T) @ in_base.T
+        assert_close_to_scale(terms.mobilities_tip_in_base[i], mobility6, "6 x 6", dynamic)
 
 
 @needs_numba
@@ -226,6 +233,28 @@ def test_whole_arm_from_shared_terms_equals_pinocchio(
         )
         assert a.peak_contact_force_n == pytest.approx(b.peak_contact_force_n, rel=dynamic)
         assert a.worst_force_ratio == pytest.approx(b.worst_force_ratio, rel=dynamic)
+
+
+@needs_numba
+@pytest.mark.parametrize("name", TERM_ARMS)
+def test_terms_without_optional_fields_are_the_same_numbers(
+    name: str, request: pytest.FixtureRequest
+) -> None:
+    """Terms asked without an optional field (or with none) have every other field bit for
+    bit as with all."""
+    robot: RobotModel = request.getfixturevalue(name)
+    grasp, evaluation, _, _ = terms_case(robot, 11)
+    chain = Backend.for_robot(robot).chain
+    assert chain is not None
+    args = (robot, chain, BOX, [grasp.transform_tip_to_object], [evaluation.joint_positions])
+    full, counts = grasps_terms(*args)
+    held = [array.copy() for array in full]  # the kept memory comes back to the next call
+    del full
+    for optional in (("mobilities_tip_in_base",), ("mass_matrix_inverses",), ()):
+        lean, _ = grasps_terms(*args, optional=optional)
+        for field_name, ours, theirs in zip(SampleTerms._fields, lean, held, strict=True):
+            if field_name in optional or field_name not in OPTIONAL_TERMS:
+                assert np.array_equal(ours[0, : counts[0]], theirs[0, : counts[0]]), field_name
 
 
 @needs_numba

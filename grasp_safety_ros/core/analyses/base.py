@@ -10,11 +10,14 @@ set. ``analyse`` loops over the registered tuple (``registry.ANALYSES``) in orde
 An analysis per grasp combines its chunks with ``per_grasp``: its chunk call on each chunk of
 feasible grasps (compiled backend: on the chunk's shared terms), its grasp call on every
 other grasp (infeasible, or the Pinocchio backend), one result per grasp in candidate order.
+A chunk call that needs nothing from the analyses before it can run ahead (``prepare``,
+``Shared.run_ahead``): on each chunk's terms as soon as the first reader computes them, so the
+chunks are computed once, into one reused buffer, instead of kept for a later reader.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field, fields
 from typing import Any, Protocol, TypeVar
 
@@ -24,7 +27,7 @@ import pinocchio as pin
 from ..method.backend import Backend
 from ..method.effective_mass import augmented_model
 from ..method.ranking import Grasp, GraspEvaluation, GraspSafetyEvaluator
-from ..method.terms import SampleTerms
+from ..method.terms import OPTIONAL_TERMS, SampleTerms
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
 from ..model.trajectory import Trajectory
@@ -47,6 +50,8 @@ samples (about 500 MB for a 7-joint arm); beyond it the oldest is dropped (then 
 again if an analysis needs it)."""
 
 Result = TypeVar("Result")
+ChunkCall = Callable[[int, Sequence[int]], Sequence[tuple[int, Result]]]
+"""``per_grasp``'s call on chunk c (its grasps' indices): (grasp, result) pairs."""
 
 
 @dataclass(frozen=True)
@@ -103,7 +108,13 @@ class Analysis(Protocol):
     @property
     def keeps_terms(self) -> bool:
         """Whether it reads the shared terms of chunks an earlier analysis read (they are
-        then kept, within TERMS_CACHE_SAMPLES, instead of overwritten chunk by chunk)."""
+        then kept, within TERMS_CACHE_SAMPLES, unless it runs ahead on them)."""
+        ...
+
+    @property
+    def optional_terms(self) -> tuple[str, ...]:
+        """The optional fields of the terms it reads (``method.terms.OPTIONAL_TERMS``:
+        computed only when a wanted analysis reads them)."""
         ...
 
     def wanted(self, options: AnalysisOptions) -> bool:
@@ -112,6 +123,11 @@ class Analysis(Protocol):
 
     def units(self, grasps: int) -> int:
         """The units of progress it reports (``Shared.step``) for ``grasps`` candidates."""
+        ...
+
+    def prepare(self, shared: Shared) -> None:
+        """Before any analysis runs: register the chunk call it can run ahead
+        (``Shared.run_ahead``), if any."""
         ...
 
     def run(self, shared: Shared, parts: Parts) -> Parts:
@@ -130,6 +146,10 @@ class Shared:
         backend: Compiled or Pinocchio, the evaluator's.
         chunks: The feasible grasps in consecutive chunks of at most TERMS_CHUNK_SAMPLES
             samples (compiled backend; none on the Pinocchio one).
+
+    ``keepers``: the names of the wanted analyses that read chunks an earlier one read
+    (``Analysis.keeps_terms``); ``optional``: the optional fields of the terms to compute
+    (those the wanted analyses read).
     """
 
     def __init__(
@@ -141,8 +161,9 @@ class Shared:
         options: AnalysisOptions,
         evaluations: Sequence[GraspEvaluation],
         metric: str,
-        keep_terms: bool,
+        keepers: Collection[str],
         step: Callable[[], None],
+        optional: Collection[str] = OPTIONAL_TERMS,
     ) -> None:
         self.evaluator = evaluator
         self.robot: RobotModel = evaluator.robot
@@ -153,38 +174,67 @@ class Shared:
         feasible = [k for k, e in enumerate(evaluations) if e.feasible]
         samples = [len(evaluations[k].times_s) for k in feasible]
         self.chunks = chunks(feasible, samples) if self.backend.compiled else []
-        self._keep = keep_terms
+        self._keepers, self._optional = set(keepers), tuple(optional)
         self._cached: dict[int, tuple[SampleTerms, np.ndarray]] = {}
         self._models: dict[int, pin.Model] = {}
+        self._ahead: dict[str, ChunkCall[Any]] = {}  # registered, not yet taken
+        self._ran_ahead: set[str] = set()  # every name registered
+        self._ahead_results: dict[str, dict[int, Sequence[tuple[int, Any]]]] = {}  # by chunk
 
     def terms(self, c: int) -> tuple[SampleTerms, np.ndarray]:
         """The terms of the grasps of ``chunks[c]`` (axis 0 in its order) and their counts,
         kept while the kept chunks stay within TERMS_CACHE_SAMPLES samples when a later
-        analysis reads them again (``keep_terms``; else the last chunk's buffers are reused)."""
+        analysis reads them again (one of ``keepers`` that does not run ahead; else only the
+        last chunk is kept, and the memory of the others is reused once no array refers to
+        it, ``method.terms``). The calls registered by ``run_ahead`` run on a chunk right
+        after its terms."""
+        keep = not self._keepers.issubset(self._ran_ahead)
         cached, evaluations, chunk = self._cached, self.evaluations, self.chunks[c]
         if c not in cached:
-            recycled = None
             while cached and (
-                not self._keep
+                not keep
                 or sum(int(n.sum()) for _, n in cached.values())
                 + sum(len(evaluations[k].times_s) for k in chunk)
                 > TERMS_CACHE_SAMPLES
             ):
-                recycled = cached.pop(next(iter(cached)))[0]  # the oldest
-            cached[c] = self.path_terms(
-                chunk,
-                [evaluations[k].joint_positions for k in chunk],
-                None if self._keep else recycled,
-            )
+                del cached[next(iter(cached))]  # the oldest
+            cached[c] = self.path_terms(chunk, [evaluations[k].joint_positions for k in chunk])
+            for name, on_chunk in self._ahead.items():
+                results = self._ahead_results[name]
+                if c not in results:  # (a chunk computed again: its results stand)
+                    results[c] = on_chunk(c, chunk)
         return cached[c]
 
+    def run_ahead(self, name: str, on_chunk: ChunkCall[Any]) -> None:
+        """Run ``on_chunk(c, chunk)`` (``per_grasp``'s chunk call, reading ``terms(c)``) on
+        each chunk right after its terms are computed; ``take_ahead(name)`` gives the
+        results."""
+        self._ahead[name] = on_chunk
+        self._ran_ahead.add(name)
+        self._ahead_results[name] = {}
+
+    def take_ahead(self, name: str) -> ChunkCall[Any] | None:
+        """Ends ``run_ahead(name, ...)``. If its call ran on a chunk: the chunk call of
+        ``per_grasp`` that returns its results (on a chunk no analysis read, computing the
+        terms first); else (no analysis read the terms, or nothing registered) None."""
+        on_chunk, results = self._ahead.pop(name, None), self._ahead_results.pop(name, {})
+        if on_chunk is None or not results:
+            return None
+
+        def ahead_results(c: int, chunk: Sequence[int]) -> Sequence[tuple[int, Any]]:
+            return results[c] if c in results else on_chunk(c, chunk)
+
+        return ahead_results
+
     def path_terms(
-        self, indices: Sequence[int], paths: Sequence[np.ndarray], out: SampleTerms | None = None
+        self, indices: Sequence[int], paths: Sequence[np.ndarray]
     ) -> tuple[SampleTerms, np.ndarray]:
         """The terms of grasps ``indices`` along joint ``paths`` ((N, n) each), uncached
         (compiled backend)."""
         transforms = [self.grasps[k].transform_tip_to_object for k in indices]
-        return self.backend.grasps_terms(self.robot, self.object_inertia, transforms, paths, out)
+        return self.backend.grasps_terms(
+            self.robot, self.object_inertia, transforms, paths, optional=self._optional
+        )
 
     def model_of(self, k: int) -> pin.Model | None:
         """Grasp k's ``augmented_model`` (built once), None when infeasible."""
@@ -198,7 +248,7 @@ class Shared:
 
 def per_grasp(
     shared: Shared,
-    on_chunk: Callable[[int, Sequence[int]], Sequence[tuple[int, Result]]],
+    on_chunk: ChunkCall[Result],
     on_grasp: Callable[[int], Result],
 ) -> tuple[Result, ...]:
     """One result per grasp in candidate order, ``shared.step()`` after each: ``on_chunk(c,

@@ -357,28 +357,31 @@ def evaluate_exposed_points_on_terms(
     worst = np.argmax(masses, axis=2)
     all_still = stationary[motion_of].all(axis=2)
     leading = np.where(all_still, worst, leading_moving[motion_of])
+    per_grasp = directions if grasp_directions is None else grasp_directions
+    for array in (per_grasp, stationary, masses, leading, worst):  # their views are frozen too
+        read_only(array)
+    shared = [  # per motion: times (a copy), positions, speeds
+        (read_only(times, copy=True), read_only(positions), read_only(speeds))
+        for times, positions, _, speeds in motions
+    ]
     results = []
     for g, evaluation in enumerate(evaluations):
-        times, positions, _, speeds = motions[motion_of[g]]
-        count = len(times)
+        times, positions, speeds = shared[motion_of[g]]
+        count, m = len(times), motion_of[g]
         results.append(
             ExposedPointsEvaluation(
                 index=evaluation.index,
                 name=evaluation.name,
                 feasible=True,
-                times_s=read_only(times, copy=True),
+                times_s=times,
                 points_in_object_m=points,
-                positions_in_base_m=read_only(positions),
-                directions_in_base=read_only(
-                    directions[motion_of[g], :count]
-                    if grasp_directions is None
-                    else grasp_directions[g, :count]
-                ),
-                direction_is_worst_case=read_only(stationary[motion_of[g], :count]),
-                speed_m_s=read_only(speeds),
-                effective_mass_kg=read_only(masses[g, :count]),
-                leading_point_index=read_only(leading[g, :count]),
-                worst_point_index=read_only(worst[g, :count]),
+                positions_in_base_m=positions,
+                directions_in_base=per_grasp[m if grasp_directions is None else g, :count],
+                direction_is_worst_case=stationary[m, :count],
+                speed_m_s=speeds,
+                effective_mass_kg=masses[g, :count],
+                leading_point_index=leading[g, :count],
+                worst_point_index=worst[g, :count],
             )
         )
     return results

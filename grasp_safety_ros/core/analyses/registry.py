@@ -19,7 +19,7 @@ from ..method.ranking import aggregate
 from ..method.terms import SampleTerms
 from .analysis_options import AnalysisOptions
 from .base import Analysis, Parts, Shared, per_grasp
-from .effort import evaluate_efforts
+from .effort import EffortEvaluation, evaluate_effort, evaluate_efforts
 from .exposed_points import (
     ExposedPointsEvaluation,
     evaluate_exposed_points,
@@ -50,12 +50,16 @@ class ExposedPoints:
 
     name: str = "exposed"
     keeps_terms: bool = False
+    optional_terms: tuple[str, ...] = ("mobilities_tip_in_base",)
 
     def wanted(self, options: AnalysisOptions) -> bool:
         return options.points_in_object_m is not None
 
     def units(self, grasps: int) -> int:
         return grasps
+
+    def prepare(self, shared: Shared) -> None:
+        """Nothing runs ahead."""
 
     def run(self, shared: Shared, parts: Parts) -> Parts:
         points = shared.options.points_in_object_m
@@ -93,12 +97,16 @@ class Redundancy:
 
     name: str = "redundancy"
     keeps_terms: bool = False
+    optional_terms: tuple[str, ...] = ()
 
     def wanted(self, options: AnalysisOptions) -> bool:
         return options.redundancy
 
     def units(self, grasps: int) -> int:
         return grasps
+
+    def prepare(self, shared: Shared) -> None:
+        """Nothing runs ahead."""
 
     def run(self, shared: Shared, parts: Parts) -> Parts:
         config = replace(
@@ -131,12 +139,16 @@ class SafetyScores:
 
     name: str = "scores"
     keeps_terms: bool = False
+    optional_terms: tuple[str, ...] = ()
 
     def wanted(self, options: AnalysisOptions) -> bool:
         return True
 
     def units(self, grasps: int) -> int:
         return 0
+
+    def prepare(self, shared: Shared) -> None:
+        """Nothing runs ahead."""
 
     def run(self, shared: Shared, parts: Parts) -> Parts:
         evaluations, options = shared.evaluations, shared.options
@@ -164,12 +176,16 @@ class Iso15066:
 
     name: str = "iso"
     keeps_terms: bool = False
+    optional_terms: tuple[str, ...] = ()
 
     def wanted(self, options: AnalysisOptions) -> bool:
         return options.iso_regions != ()
 
     def units(self, grasps: int) -> int:
         return 0
+
+    def prepare(self, shared: Shared) -> None:
+        """Nothing runs ahead."""
 
     def run(self, shared: Shared, parts: Parts) -> Parts:
         iso_regions, evaluations = shared.options.iso_regions, shared.evaluations
@@ -202,12 +218,16 @@ class Uncertainty:
 
     name: str = "uncertainty"
     keeps_terms: bool = False
+    optional_terms: tuple[str, ...] = ()
 
     def wanted(self, options: AnalysisOptions) -> bool:
         return options.uncertainty is not None
 
     def units(self, grasps: int) -> int:
         return 1
+
+    def prepare(self, shared: Shared) -> None:
+        """Nothing runs ahead."""
 
     def run(self, shared: Shared, parts: Parts) -> Parts:
         chain = shared.backend.chain
@@ -228,11 +248,14 @@ class Uncertainty:
 
 @dataclass(frozen=True)
 class Effort:
-    """Joint torques along each grasp's path (``effort``; redundancy's where it applied), all
-    grasps in one kernel call on the compiled backend."""
+    """Joint torques along each grasp's path (``effort``; redundancy's where it applied). On
+    the compiled backend along the evaluated paths, when an analysis before it reads the
+    shared terms: chunk by chunk on them, run ahead with that analysis; else all grasps in
+    one kernel call that computes its own kinematics (cheaper than terms for it alone)."""
 
     name: str = "effort"
     keeps_terms: bool = False
+    optional_terms: tuple[str, ...] = ()
 
     def wanted(self, options: AnalysisOptions) -> bool:
         return options.effort
@@ -240,7 +263,33 @@ class Effort:
     def units(self, grasps: int) -> int:
         return grasps
 
+    def prepare(self, shared: Shared) -> None:
+        if shared.backend.compiled and not shared.options.redundancy:  # the evaluated paths
+
+            def on_chunk(c: int, chunk: Sequence[int]) -> list[tuple[int, EffortEvaluation]]:
+                terms, _ = shared.terms(c)
+                results = evaluate_efforts(
+                    shared.robot,
+                    [shared.evaluations[k] for k in chunk],
+                    shared.object_inertia,
+                    [shared.grasps[k] for k in chunk],
+                    [shared.motions[k] for k in chunk],
+                    terms=terms,
+                    chain=shared.backend.chain,
+                )
+                return list(zip(chunk, results, strict=True))
+
+            shared.run_ahead(self.name, on_chunk)
+
     def run(self, shared: Shared, parts: Parts) -> Parts:
+        ahead = shared.take_ahead(self.name)
+        if ahead is not None:
+
+            def on_grasp(k: int) -> EffortEvaluation:  # infeasible: no samples
+                args = (shared.evaluations[k], shared.object_inertia, shared.grasps[k])
+                return evaluate_effort(shared.robot, *args, shared.motions[k])
+
+            return replace(parts, effort=per_grasp(shared, ahead, on_grasp))
         effort = evaluate_efforts(
             shared.robot,
             shared.evaluations,
@@ -258,10 +307,12 @@ class Effort:
 @dataclass(frozen=True)
 class WholeArm:
     """Exposure of the arm's sites (``whole_arm``): on the shared terms along the evaluated
-    paths, on terms of their own along redundancy's paths, the Pinocchio path without terms."""
+    paths (run ahead, with the first analysis that reads them), on terms of their own along
+    redundancy's paths, the Pinocchio path without terms."""
 
     name: str = "whole_arm"
-    keeps_terms: bool = True  # reads the chunks the exposed points read
+    keeps_terms: bool = True  # with redundancy, it reads the chunks the exposed points read
+    optional_terms: tuple[str, ...] = ("mass_matrix_inverses",)  # the sites' mobilities
 
     def wanted(self, options: AnalysisOptions) -> bool:
         return options.whole_arm
@@ -269,11 +320,18 @@ class WholeArm:
     def units(self, grasps: int) -> int:
         return grasps
 
+    def prepare(self, shared: Shared) -> None:
+        if shared.backend.compiled and not shared.options.redundancy:  # the evaluated paths
+            sites, regions = _sites_and_regions(shared)
+
+            def on_chunk(c: int, chunk: Sequence[int]) -> list[tuple[int, WholeArmEvaluation]]:
+                return _whole_arm_chunk(shared, sites, regions, None, c, chunk)
+
+            shared.run_ahead(self.name, on_chunk)
+
     def run(self, shared: Shared, parts: Parts) -> Parts:
-        sites = resolve_arm_sites(shared.robot, shared.options.arm_points_m)
+        sites, regions = _sites_and_regions(shared)
         resolved = parts.resolved_paths()
-        iso_regions = shared.options.iso_regions
-        regions = select_regions(None if iso_regions is None else list(iso_regions))
 
         def on_grasp(k: int) -> WholeArmEvaluation:
             return evaluate_whole_arm(
@@ -283,7 +341,7 @@ class WholeArm:
                 shared.grasps[k],
                 shared.motions[k],
                 sites,
-                iso_regions,
+                shared.options.iso_regions,
                 shared.model_of(k),
                 None if resolved is None else resolved[k],
             )
@@ -291,8 +349,15 @@ class WholeArm:
         def on_chunk(c: int, chunk: Sequence[int]) -> list[tuple[int, WholeArmEvaluation]]:
             return _whole_arm_chunk(shared, sites, regions, resolved, c, chunk)
 
-        whole_arm = per_grasp(shared, on_chunk, on_grasp)
+        whole_arm = per_grasp(shared, shared.take_ahead(self.name) or on_chunk, on_grasp)
         return replace(parts, whole_arm=whole_arm, arm_sites=sites)
+
+
+def _sites_and_regions(shared: Shared) -> tuple[ArmSites, tuple[BodyRegion, ...]]:
+    """The whole arm's sites and ISO/TS 15066 regions for the request's options."""
+    iso_regions = shared.options.iso_regions
+    sites = resolve_arm_sites(shared.robot, shared.options.arm_points_m)
+    return sites, select_regions(None if iso_regions is None else list(iso_regions))
 
 
 def _whole_arm_chunk(

@@ -153,9 +153,12 @@ def analyse(
         options,
         ranking.evaluations,
         ranking.metric,
-        keep_terms=any(analysis.keeps_terms for analysis in wanted),
+        keepers=[analysis.name for analysis in wanted if analysis.keeps_terms],
         step=step,
+        optional={name for analysis in wanted for name in analysis.optional_terms},
     )
+    for analysis in wanted:
+        analysis.prepare(shared)
     parts = Parts()
     for analysis in wanted:
         parts = analysis.run(shared, parts)

@@ -26,9 +26,8 @@ def _quadratic(mobility, row, a, b):
 
 @_jit
 def tip_point_masses(
-    tip_jacobians,
+    tip_mobilities,
     tip_rotations,
-    minv,
     counts,
     base_rotation,
     points_in_tip,
@@ -37,9 +36,6 @@ def tip_point_masses(
     motion_of,
     masses,
     stationary_mobilities,
-    jacobian_in_base,
-    solved,
-    mobility,
     lever_rotation,
     row,
 ):
@@ -49,48 +45,21 @@ def tip_point_masses(
     stationary_mobilities instead ((g, i, k) order) and masses[g, i, k] is left as it is.
 
     The point's Jacobian (base axes) is J_p = J_v - r^ J_w with r the tip -> point lever, so
-    u^T A u = y^T (J M^-1 J^T) y with y = (u, r x u): the tip's 6 x 6 mobility (``mobility``)
-    is formed once per sample, then each point costs a quadratic form.
+    u^T A u = y^T (J M^-1 J^T) y with y = (u, r x u): each point costs a quadratic form of the
+    tip's 6 x 6 mobility.
 
     Args:
-        tip_jacobians, tip_rotations, minv, counts: SampleTerms' fields of the grasps (world
-            frame) and the number of samples of each grasp.
+        tip_mobilities, tip_rotations, counts: SampleTerms' fields of the grasps (the tip's
+            mobility in base axes, its frame in the world frame) and their sample counts.
         base_rotation: (3, 3) the base frame's rotation in the world frame.
-        jacobian_in_base (6, n), solved (n, 6), mobility (6, 6), lever_rotation (3, 3),
-            row (3, 6): scratch.
+        lever_rotation (3, 3), row (3, 6): scratch.
     """
-    n = minv.shape[2]
     r = base_rotation
     count = 0
-    for g in range(tip_jacobians.shape[0]):
+    for g in range(tip_mobilities.shape[0]):
         m = motion_of[g]
         for i in range(counts[g]):
-            jacobian, tip, inverse = tip_jacobians[g, i], tip_rotations[g, i], minv[g, i]
-            for c in range(n):
-                for a in range(3):
-                    jacobian_in_base[a, c] = (
-                        r[0, a] * jacobian[0, c]
-                        + r[1, a] * jacobian[1, c]
-                        + r[2, a] * jacobian[2, c]
-                    )
-                    jacobian_in_base[3 + a, c] = (
-                        r[0, a] * jacobian[3, c]
-                        + r[1, a] * jacobian[4, c]
-                        + r[2, a] * jacobian[5, c]
-                    )
-            for a in range(n):
-                for s in range(6):
-                    total = 0.0
-                    for c in range(n):
-                        total += inverse[a, c] * jacobian_in_base[s, c]
-                    solved[a, s] = total
-            for s in range(6):
-                for t in range(s, 6):
-                    total = 0.0
-                    for a in range(n):
-                        total += jacobian_in_base[s, a] * solved[a, t]
-                    mobility[s, t] = total
-                    mobility[t, s] = total
+            mobility, tip = tip_mobilities[g, i], tip_rotations[g, i]
             for a in range(3):  # tip frame -> base axes
                 for b in range(3):
                     lever_rotation[a, b] = (

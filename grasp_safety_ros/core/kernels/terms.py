@@ -1,5 +1,6 @@
 """The per-(grasp, sample) terms every analysis shares, compiled: joint and tip poses, the tip
-Jacobian and the inverse joint-space inertia of the augmented chain (``method.terms``).
+Jacobian, the tip's mobility and the inverse joint-space inertia of the augmented chain
+(``method.terms``).
 
 M is the one ``_mobility_from_frames`` builds and factorises for the ranking, so the ranking and
 the analyses read the same mass matrix (whatever it includes: object, armature)."""
@@ -29,20 +30,23 @@ def _motions_and_jacobian(axes, prismatic, jr, jp, ft, motions, jacobian):
 
 
 @_jit
-def sample_terms(chain, bodies, q_all, counts, out, lower_inverse, ws):
+def sample_terms(chain, bodies, q_all, counts, optional, out, lower_inverse, angular, ws):
     """For each grasp g (axis 0 of q_all (G, N, nq), of ``bodies`` and of ``out``) and its
-    samples i < counts[g]: joint poses and motion subspaces, tip pose, tip Jacobian,
-    tip mobility and M^-1 into ``out`` (``method.terms.SampleTerms``); rows from counts[g]
-    on are left untouched.
-    lower_inverse: (n, n) scratch; ws: ``ik.workspace(n)``."""
+    samples i < counts[g]: joint poses and motion subspaces, tip pose and tip Jacobian, and
+    where ``optional`` (two flags) asks, the tip's 6 x 6 mobility and M^-1, into ``out``
+    (``method.terms.SampleTerms``; the fields not asked and the rows from counts[g] on are
+    left untouched).
+    lower_inverse: (n, n) and angular: (n, 3) scratch; ws: ``ik.workspace(n)``."""
     axes, prismatic = chain.axes, chain.prismatic
     n = axes.shape[0]
     jr, jp, fr, ft = ws[0], ws[1], ws[2], ws[3]
-    inverse_diagonal, factor = ws[14], ws[15]
+    inverse_diagonal, factor, top = ws[14], ws[15], ws[19]
+    tip_mobilities, inverses = optional
     for g in range(q_all.shape[0]):
         for i in range(counts[g]):
             _forward_kinematics(chain, q_all[g, i], ws)
-            _mobility_from_frames(chain, bodies, g, ws, out.mobilities_tip_in_base[g, i])
+            if tip_mobilities or inverses:  # M and its Cholesky factor
+                _mobility_from_frames(chain, bodies, g, ws, top)
             joint_rotations, joint_origins = (
                 out.rotations_joint_to_world[g, i],
                 out.translations_joint_in_world[g, i],
@@ -58,20 +62,68 @@ def sample_terms(chain, bodies, q_all, counts, out, lower_inverse, ws):
                     joint_origins[k, a] = jp[k, a]
                     for b in range(3):
                         joint_rotations[k, a, b] = jr[k, a, b]
-            # M = L L^T (L's strict lower triangle in ``factor``, 1/L_jj in inverse_diagonal):
-            # L^-1 by forward substitution, then M^-1 = L^-T L^-1.
-            for j in range(n):
-                lower_inverse[j, j] = inverse_diagonal[j]
-                for r in range(j + 1, n):
-                    total = 0.0
-                    for k in range(j, r):
-                        total -= factor[r, k] * lower_inverse[k, j]
-                    lower_inverse[r, j] = total * inverse_diagonal[r]
-            minv = out.mass_matrix_inverses[g, i]
-            for a in range(n):
-                for b in range(a, n):
-                    total = 0.0
-                    for r in range(b, n):
-                        total += lower_inverse[r, a] * lower_inverse[r, b]
-                    minv[a, b] = total
-                    minv[b, a] = total
+            if tip_mobilities:
+                mobility = out.mobilities_tip_in_base[g, i]
+                _tip_mobility(chain.base_rotation, ws, jacobian, angular, top, mobility)
+            if inverses:
+                _mass_matrix_inverse(
+                    factor, inverse_diagonal, lower_inverse, out.mass_matrix_inverses[g, i]
+                )
+
+
+@_jit_inline
+def _tip_mobility(base_rotation, ws, jacobian, angular, top, mobility):
+    """The tip's 6 x 6 mobility J M^-1 J^T, base axes, rows [linear; angular], from what
+    ``_mobility_from_frames`` leaves: its linear block ``top`` and X_v = L^-1 J_v^T (ws[18]),
+    L (M = L L^T: strict lower triangle in ws[15], 1/L_jj in ws[14]); X_w = L^-1 J_w^T (into
+    ``angular``, J_w from the world-frame ``jacobian``) gives the other blocks, X^T X."""
+    n = jacobian.shape[1]
+    linear, factor, inverse_diagonal = ws[18], ws[15], ws[14]
+    for i in range(n):
+        w0, w1, w2 = jacobian[3, i], jacobian[4, i], jacobian[5, i]
+        r = base_rotation  # J_w's column in base axes: R^T w
+        x0 = r[0, 0] * w0 + r[1, 0] * w1 + r[2, 0] * w2
+        x1 = r[0, 1] * w0 + r[1, 1] * w1 + r[2, 1] * w2
+        x2 = r[0, 2] * w0 + r[1, 2] * w1 + r[2, 2] * w2
+        for k in range(i):
+            f = factor[i, k]
+            x0 -= f * angular[k, 0]
+            x1 -= f * angular[k, 1]
+            x2 -= f * angular[k, 2]
+        inverse = inverse_diagonal[i]
+        angular[i, 0], angular[i, 1], angular[i, 2] = x0 * inverse, x1 * inverse, x2 * inverse
+    for a in range(3):
+        for b in range(3):
+            mobility[a, b] = top[a, b]
+            cross = 0.0
+            for i in range(n):
+                cross += linear[i, a] * angular[i, b]
+            mobility[a, 3 + b] = cross
+            mobility[3 + b, a] = cross
+        for b in range(a, 3):
+            total = 0.0
+            for i in range(n):
+                total += angular[i, a] * angular[i, b]
+            mobility[3 + a, 3 + b] = total
+            mobility[3 + b, 3 + a] = total
+
+
+@_jit_inline
+def _mass_matrix_inverse(factor, inverse_diagonal, lower_inverse, minv):
+    """M^-1 from M = L L^T (L's strict lower triangle in ``factor``, 1/L_jj in
+    inverse_diagonal): L^-1 by forward substitution (into lower_inverse), M^-1 = L^-T L^-1."""
+    n = minv.shape[0]
+    for j in range(n):
+        lower_inverse[j, j] = inverse_diagonal[j]
+        for r in range(j + 1, n):
+            total = 0.0
+            for k in range(j, r):
+                total -= factor[r, k] * lower_inverse[k, j]
+            lower_inverse[r, j] = total * inverse_diagonal[r]
+    for a in range(n):
+        for b in range(a, n):
+            total = 0.0
+            for r in range(b, n):
+                total += lower_inverse[r, a] * lower_inverse[r, b]
+            minv[a, b] = total
+            minv[b, a] = total

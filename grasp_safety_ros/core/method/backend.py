@@ -10,7 +10,7 @@ Pinocchio reference path, which ``test_performance_paths`` holds equal to the co
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,7 +22,7 @@ from .compiled import chain_arrays
 from .ik import IKSolver
 from .ik_config import compiled_available
 from .packed import ChainArrays
-from .terms import SampleTerms, grasps_terms
+from .terms import OPTIONAL_TERMS, SampleTerms, grasps_terms
 
 
 @dataclass(frozen=True)
@@ -55,11 +55,18 @@ class Backend:
         transforms_tip_to_object: Sequence[pin.SE3],
         joint_positions: Sequence[np.ndarray],
         out: SampleTerms | None = None,
+        optional: Collection[str] = OPTIONAL_TERMS,
     ) -> tuple[SampleTerms, np.ndarray]:
         """``terms.grasps_terms`` on this backend's chain (the per-sample terms of G grasps
         and their counts); only the compiled backend has them (ValueError otherwise)."""
         if self.chain is None:
             raise ValueError("the Pinocchio backend has no shared terms")
         return grasps_terms(
-            robot, self.chain, object_inertia, transforms_tip_to_object, joint_positions, out
+            robot,
+            self.chain,
+            object_inertia,
+            transforms_tip_to_object,
+            joint_positions,
+            out,
+            optional,
         )

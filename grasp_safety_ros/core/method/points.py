@@ -53,12 +53,10 @@ def tip_point_masses(
     mask = still[motion_of, :samples] & valid_rows(counts, samples)[..., None]
     mobilities = np.empty((int(mask.sum()), 3, 3))
     masses = np.empty((grasps, samples, points_in_tip_m.shape[1]))
-    n = terms.mass_matrix_inverses.shape[-1]
     call_kernel(
         kernel,
-        plain_array(terms.jacobians_tip_in_world),
+        plain_array(terms.mobilities_tip_in_base),
         plain_array(terms.rotations_tip_to_world),
-        plain_array(terms.mass_matrix_inverses),
         np.ascontiguousarray(counts, dtype=np.int64),
         plain_array(base_rotation),
         plain_array(points_in_tip_m),
@@ -67,9 +65,6 @@ def tip_point_masses(
         motion_of,
         masses,
         mobilities,
-        np.empty((6, n)),
-        np.empty((n, 6)),
-        np.empty((6, 6)),
         np.empty((3, 3)),
         np.empty((3, 6)),
     )

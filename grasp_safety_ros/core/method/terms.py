@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 import sys
 import threading
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -35,7 +35,10 @@ class SampleTerms(NamedTuple):
     drops axis 0) of a chain of n joints, world frame (Pinocchio's model root) unless said.
 
     The Jacobian is Pinocchio's LOCAL_WORLD_ALIGNED one at the tip: rows [linear; angular],
-    world axes, linear part the velocity of the tip origin. A joint's motion subspace is its
+    world axes, linear part the velocity of the tip origin. The tip's mobility is J M⁻¹ Jᵀ
+    with J's rows in base axes (its linear block: the ranking's translational mobility, to
+    rounding), computed from the Cholesky factor of M. It and M⁻¹ (OPTIONAL_TERMS) are
+    computed only when asked (else undefined). A joint's motion subspace is its
     unit twist at the world origin, [p × w + slide u; w] (u its axis, p its origin, w = u for
     a revolute joint and 0 for a prismatic one, slide = 1 - |w|).
     """
@@ -46,13 +49,17 @@ class SampleTerms(NamedTuple):
     rotations_tip_to_world: np.ndarray  # (G, N, 3, 3) tip frame
     translations_tip_in_world: np.ndarray  # (G, N, 3) [m]
     jacobians_tip_in_world: np.ndarray  # (G, N, 6, n) [m/rad or 1; rad/rad or rad/m]
-    mobilities_tip_in_base: np.ndarray  # (G, N, 3, 3) [1/kg] J_v M^-1 J_v^T, base axes
+    mobilities_tip_in_base: np.ndarray  # (G, N, 6, 6) J M^-1 J^T, base axes [1/kg, ...]
     mass_matrix_inverses: np.ndarray  # (G, N, n, n) M^-1 of the augmented chain [1/kg, ...]
 
     def of_grasp(self, g: int, count: int | None = None) -> SampleTerms:
         """Grasp g's terms (axis 0 dropped), its first ``count`` samples (all: None)."""
         return SampleTerms(*(array[g, :count] for array in self))
 
+
+OPTIONAL_TERMS = ("mobilities_tip_in_base", "mass_matrix_inverses")
+"""The fields of SampleTerms computed only when asked (``batch_terms``' ``optional``): for a
+7-joint arm the tip's mobility costs a tenth of the kernel's time, M⁻¹ a quarter."""
 
 KEPT_TERMS_BYTES = 64 << 20
 """Memory of released terms each thread keeps for the next ``sample_terms_buffers`` (bytes):
@@ -98,7 +105,7 @@ def sample_terms_buffers(grasps: int, count: int, n: int) -> SampleTerms:
     """Uninitialised SampleTerms for ``grasps`` grasps of ``count`` samples, n joints: views of
     one kept block (``_block``; the memory of earlier terms no longer referenced when there is
     one), else an array per field (terms beyond what the threads keep)."""
-    shapes = ((n, 3, 3), (n, 3), (n, 6), (3, 3), (3,), (6, n), (3, 3), (n, n))
+    shapes = ((n, 3, 3), (n, 3), (n, 6), (3, 3), (3,), (6, n), (6, 6), (n, n))
     sizes = [grasps * count * math.prod(shape) for shape in shapes]
     block = _block(sum(sizes))
     if block is None:
@@ -148,16 +155,18 @@ def grasps_terms(
     transforms_tip_to_object: Sequence[pin.SE3],
     joint_positions: Sequence[np.ndarray],
     out: SampleTerms | None = None,
+    optional: Collection[str] = OPTIONAL_TERMS,
 ) -> tuple[SampleTerms, np.ndarray]:
     """The terms of G grasps along their joint paths ((N_g, n) positions each, chain order),
     in one kernel call, and the sample counts N_g (G,). Axis 1 has max N_g rows; grasp g's
     rows from N_g on are undefined (``SampleTerms.of_grasp(g, N_g)`` drops them). Each grasp's
     terms are those ``grasp_terms`` gives it alone, bit for bit (the same kernel code per
     grasp). ``chain``: ``compiled.chain_arrays(robot)`` (numba must be installed); ``out``:
-    terms no longer needed, overwritten when their shape is (G, max N_g) (``batch_terms``)."""
+    terms no longer needed, overwritten when their shape is (G, max N_g); ``optional``: the
+    OPTIONAL_TERMS computed (``batch_terms``)."""
     bodies = augmented_bodies(robot, object_inertia, *pose_arrays(transforms_tip_to_object))
     q_all, counts = padded_configurations(robot, joint_positions)
-    return batch_terms(chain, bodies, q_all, counts, out), counts
+    return batch_terms(chain, bodies, q_all, counts, out, optional), counts
 
 
 def padded_configurations(
@@ -178,12 +187,14 @@ def batch_terms(
     q_all: np.ndarray,
     counts: np.ndarray,
     out: SampleTerms | None = None,
+    optional: Collection[str] = OPTIONAL_TERMS,
 ) -> SampleTerms:
     """The terms of G grasps in one kernel call: grasp g's augmented ``bodies`` (axis 0 the
     grasp, ``compiled.augmented_bodies``) along its first counts[g] configurations of
     ``q_all`` (G, N, nq); its rows from counts[g] on are left uninitialised. ``out``: terms
     no longer needed, overwritten (no new allocation, whose first touch of fresh pages costs
-    as much as the kernel) when their first two axes are (G, N); else new buffers."""
+    as much as the kernel) when their first two axes are (G, N); else new buffers.
+    ``optional``: the OPTIONAL_TERMS computed (the others undefined)."""
     from ..kernels.ik import thread_workspace
     from ..kernels.terms import sample_terms
 
@@ -192,10 +203,19 @@ def batch_terms(
     if out is None or out.jacobians_tip_in_world.shape[:2] != q_all.shape[:2]:
         out = sample_terms_buffers(q_all.shape[0], q_all.shape[1], n)
     if q_all.shape[0]:
-        lower_inverse = np.empty((n, n))
-        ws = thread_workspace(n)
+        scratch = (np.empty((n, n)), np.empty((n, 3)))
         counts = np.ascontiguousarray(counts, dtype=np.int64)
-        call_kernel(sample_terms, chain, bodies, q_all, counts, out, lower_inverse, ws)
+        call_kernel(
+            sample_terms,
+            chain,
+            bodies,
+            q_all,
+            counts,
+            tuple(name in optional for name in OPTIONAL_TERMS),
+            out,
+            *scratch,
+            thread_workspace(n),
+        )
     return out
 
 
