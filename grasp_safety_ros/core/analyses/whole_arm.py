@@ -41,7 +41,12 @@ from ..exceptions import InvalidInputError
 from ..input_checks import read_only
 from ..method.effective_mass import augmented_model
 from ..method.executable import clamped_spline_velocities, joint_velocities_accelerations
-from ..method.points import PSEUDO_INVERSE_RCOND, site_masses, tip_following_rates, valid_rows
+from ..method.points import (
+    PSEUDO_INVERSE_RCOND,
+    arm_site_exposure,
+    site_mobilities,
+    tip_following_rates,
+)
 from ..method.ranking import Grasp, GraspEvaluation
 from ..method.terms import SampleTerms
 from ..model.inertia import ObjectInertia
@@ -417,15 +422,15 @@ def evaluate_whole_arm_on_terms(
     """``evaluate_whole_arm`` of G feasible grasps at once, on their shared terms
     (``method.terms.grasps_terms`` along ``joint_positions``, default the evaluations' own:
     axis 0 the grasp, ``counts`` samples each): q̇ from the terms' tip Jacobians (compiled,
-    ``method.points.tip_following_rates``), the sites' positions, speeds and masses by one
-    compiled call over (grasp, sample, site) (``method.points.site_masses``), ISO/TS 15066 in
-    one array pass per region.
+    ``method.points.tip_following_rates``), the sites' positions, directions, speeds and
+    masses by one compiled call over (grasp, sample, site) (``method.points.arm_site_exposure``:
+    the sites on one body share its mobility), the mobilities of the sites at rest by another,
+    ISO/TS 15066's peaks compiled (``method.points.region_peaks``, numpy's bits).
     Equal to the Pinocchio path to rounding; each grasp's result is the one it gets alone."""
     grasp_count, samples = len(evaluations), terms.jacobians_tip_in_world.shape[1]
     paths = (
         [e.joint_positions for e in evaluations] if joint_positions is None else joint_positions
     )
-    valid = valid_rows(counts, samples)
     twists = np.zeros((grasp_count, samples, 6))
     spline_rates = np.zeros((grasp_count, samples, robot.num_joints))
     by_times: dict[bytes, list[int]] = {}
@@ -450,40 +455,32 @@ def evaluate_whole_arm_on_terms(
             robot, times, [paths[g] for g in group], compiled=True
         )
     rates = tip_following_rates(terms.jacobians_tip_in_world, counts, twists, spline_rates)
-    site_joints = sites.joint_ids - 1
-    positions, velocities, speeds, masses = site_masses(
+    base = robot.transform_base_to_world
+    positions, directions, speeds, masses, stationary = arm_site_exposure(
         terms,
         counts,
-        site_joints,
+        (base.rotation, base.translation),
+        sites.joint_ids - 1,
         sites.points_in_joint_m,
         sites.support,
         rates,
         STATIONARY_SPEED_M_S,
     )
-    speeds[~valid] = 0.0
-    stationary = (speeds < STATIONARY_SPEED_M_S) & valid[..., None]
-    directions = velocities / np.where(stationary | ~valid[..., None], 1.0, speeds)[..., None]
-    if stationary.any():  # the rest ends: A from the terms on arrays, then its eigenvectors
-        at_grasp, at_sample, at_site = np.nonzero(stationary)
-        motions = terms.motions_joint_in_world[at_grasp, at_sample]  # (S, n, 6)
-        columns = motions[..., :3] + np.cross(
-            motions[..., 3:], positions[at_grasp, at_sample, at_site, None]
+    if stationary.any():  # the rest ends: A's eigenvectors, world axes, then base axes
+        at = np.argwhere(stationary)
+        mobilities = site_mobilities(
+            terms, sites.joint_ids - 1, sites.points_in_joint_m, sites.support, at
         )
-        jacobian = np.swapaxes(columns * sites.support[at_site, :, None], 1, 2)  # (S, 3, n)
-        minv = terms.mass_matrix_inverses[at_grasp, at_sample]
-        mobilities = jacobian @ minv @ np.swapaxes(jacobian, -1, -2)
-        directions[stationary], masses[stationary] = _largest_mass_directions(mobilities)
-    speeds[stationary] = 0.0
-    masses[~valid] = 1.0
+        at_rest, masses[stationary] = _largest_mass_directions(mobilities)
+        directions[stationary] = at_rest @ base.rotation
     durations = [float(t.duration_s) for t in trajectories]
-    assessed = assess_sites_batch(speeds, masses, durations, regions)
-    base = robot.transform_base_to_world
+    assessed = assess_sites_batch(speeds, masses, durations, regions, compiled=True)
     results = []
     for g, evaluation in enumerate(evaluations):
         count = int(counts[g])
         exposure = SiteExposure(
-            positions_in_base_m=(positions[g, :count] - base.translation) @ base.rotation,
-            directions_in_base=directions[g, :count] @ base.rotation,
+            positions_in_base_m=positions[g, :count],
+            directions_in_base=directions[g, :count],
             stationary=stationary[g, :count],
             speed_m_s=speeds[g, :count],
             effective_mass_kg=masses[g, :count],

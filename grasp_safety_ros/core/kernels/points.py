@@ -9,6 +9,8 @@ handed back (``method.points`` takes its smallest eigenvalue, as the Pinocchio p
 The self-motion's joint rates come from the clamped cubic spline through the samples
 (``clamped_spline_velocities``, ``method.executable``'s numbers bit for bit)."""
 
+import math
+
 from ._jit import _jit, _jit_exact, _jit_inline
 
 
@@ -129,81 +131,293 @@ def tip_point_masses(
 
 
 @_jit
-def site_masses(
+def arm_site_exposure(
     joint_rotations,
     joint_origins,
     joint_motions,
     minv,
     counts,
+    base_rotation,
+    base_translation,
     site_joints,
     points_in_joint,
     support,
+    site_body,
+    body_joints,
+    body_support,
     joint_velocities,
     stationary_speed,
     positions,
-    velocities,
+    directions,
     speeds,
     masses,
+    stationary,
     jacobian,
     weights,
+    solved,
+    columns,
+    body_mobilities,
+    body_twists,
+    lever_row,
 ):
     """For grasp g, sample i < counts[g] and site k (the point points_in_joint[k] [m] of chain
-    joint site_joints[k]'s frame, moved by the joints where support[k]): its world position,
-    velocity J_p q̇ [m/s] and speed, and where the speed is >= ``stationary_speed`` its
-    effective mass along the velocity, 1 / (u^T J_p M^-1 J_p^T u) [kg] (else left as it is).
+    joint site_joints[k]'s frame, moved by the joints where support[k]): its position
+    (base frame), speed |J_p q̇| and, where that is >= ``stationary_speed``, its unit velocity
+    (base axes) and effective mass along it, 1 / (u^T J_p M^-1 J_p^T u) [kg]; below it,
+    stationary[g, i, k] is set, the speed is 0 and direction and mass are left as they are.
+    Rows from counts[g] on: speed 0, mass 1, not stationary (positions, directions left).
 
-    J_p's column c is v_c + w_c x p for the supporting joints (S_c = (v_c, w_c) at the world
-    origin: SampleTerms.motions_joint_in_world), 0 for the others: their terms (exact zeros)
-    are skipped, so a site near the base costs a fraction of one at the tip.
-    jacobian (3, n), weights (n,): scratch."""
+    Sites with site_body[k] = -1 are computed alone: J_p's column c is v_c + w_c x p for the
+    supporting joints (S_c = (v_c, w_c) at the world origin:
+    SampleTerms.motions_joint_in_world), 0 for the others. Sites with site_body[k] = b >= 0
+    share body b (chain joint body_joints[b], the same as site_joints[k], moved by the joints
+    where body_support[b]): its twist V = (v_o, w) and 6 x 6 mobility L = J_o M^-1 J_o^T at
+    the joint's origin o, once per sample; with the lever r = p - o (the point, world axes),
+    v = v_o + w x r and u^T J_p = y^T J_o with y = (u, r x u), so the mass is 1 / (y^T L y)
+    (the rigid lever transform of L, as ``tip_point_masses``). Every sum runs in index order;
+    the loops accumulate independent sums side by side (a sum's terms one after the other
+    wait for each other).
+
+    base_rotation (3, 3), base_translation (3,): the base frame in the world frame.
+    jacobian (3, n), weights (n,), solved (n, 6): M^-1 w or M^-1 J_o^T, columns (n, 6): J_o^T,
+    body_mobilities (B, 6, 6), body_twists (B, 6), lever_row (12,): y, L y; scratch."""
     n = minv.shape[2]
+    r = base_rotation
     for g in range(joint_motions.shape[0]):
         for i in range(counts[g]):
             motions, inverse, rates = joint_motions[g, i], minv[g, i], joint_velocities[g, i]
+            for b in range(body_joints.shape[0]):
+                o = joint_origins[g, i, body_joints[b]]
+                twist, mobility = body_twists[b], body_mobilities[b]
+                for a in range(6):
+                    twist[a] = 0.0
+                for c in range(n):  # J_o's column c (0 for the joints that do not move b)
+                    s = motions[c]
+                    moves = body_support[b, c]
+                    columns[c, 0] = s[0] + (s[4] * o[2] - s[5] * o[1]) if moves else 0.0
+                    columns[c, 1] = s[1] + (s[5] * o[0] - s[3] * o[2]) if moves else 0.0
+                    columns[c, 2] = s[2] + (s[3] * o[1] - s[4] * o[0]) if moves else 0.0
+                    for a in range(3, 6):
+                        columns[c, a] = s[a] if moves else 0.0
+                    for a in range(6):
+                        twist[a] += columns[c, a] * rates[c]
+                for a in range(n):  # M^-1 J_o^T, row by row
+                    for t in range(6):
+                        solved[a, t] = 0.0
+                    for c in range(n):
+                        weight = inverse[a, c]
+                        for t in range(6):
+                            solved[a, t] += weight * columns[c, t]
+                for s_ in range(6):  # J_o M^-1 J_o^T, its upper triangle, then mirrored
+                    for t in range(s_, 6):
+                        mobility[s_, t] = 0.0
+                    for a in range(n):
+                        weight = columns[a, s_]
+                        for t in range(s_, 6):
+                            mobility[s_, t] += weight * solved[a, t]
+                    for t in range(s_ + 1, 6):
+                        mobility[t, s_] = mobility[s_, t]
             for k in range(site_joints.shape[0]):
                 j = site_joints[k]
                 rotation, origin, point = (
                     joint_rotations[g, i, j],
                     joint_origins[g, i, j],
-                    (points_in_joint[k]),
+                    points_in_joint[k],
                 )
-                p0 = origin[0] + rotation[0, 0] * point[0] + rotation[0, 1] * point[1]
-                p0 += rotation[0, 2] * point[2]
-                p1 = origin[1] + rotation[1, 0] * point[0] + rotation[1, 1] * point[1]
-                p1 += rotation[1, 2] * point[2]
-                p2 = origin[2] + rotation[2, 0] * point[0] + rotation[2, 1] * point[1]
-                p2 += rotation[2, 2] * point[2]
-                positions[g, i, k, 0], positions[g, i, k, 1], positions[g, i, k, 2] = p0, p1, p2
-                v0 = v1 = v2 = 0.0
-                for c in range(n):  # J_p's zero columns (and their zero terms) skipped
-                    if support[k, c]:
+                l0 = rotation[0, 0] * point[0] + rotation[0, 1] * point[1]
+                l0 += rotation[0, 2] * point[2]
+                l1 = rotation[1, 0] * point[0] + rotation[1, 1] * point[1]
+                l1 += rotation[1, 2] * point[2]
+                l2 = rotation[2, 0] * point[0] + rotation[2, 1] * point[1]
+                l2 += rotation[2, 2] * point[2]
+                p0, p1, p2 = origin[0] + l0, origin[1] + l1, origin[2] + l2
+                q0 = p0 - base_translation[0]
+                q1 = p1 - base_translation[1]
+                q2 = p2 - base_translation[2]
+                for a in range(3):
+                    positions[g, i, k, a] = r[0, a] * q0 + r[1, a] * q1 + r[2, a] * q2
+                b = site_body[k]
+                if b >= 0:
+                    v_ = body_twists[b]
+                    v0 = v_[0] + (v_[4] * l2 - v_[5] * l1)
+                    v1 = v_[1] + (v_[5] * l0 - v_[3] * l2)
+                    v2 = v_[2] + (v_[3] * l1 - v_[4] * l0)
+                else:
+                    v0 = v1 = v2 = 0.0
+                    for c in range(n):
                         s = motions[c]
-                        jacobian[0, c] = s[0] + (s[4] * p2 - s[5] * p1)
-                        jacobian[1, c] = s[1] + (s[5] * p0 - s[3] * p2)
-                        jacobian[2, c] = s[2] + (s[3] * p1 - s[4] * p0)
+                        moves = support[k, c]
+                        jacobian[0, c] = s[0] + (s[4] * p2 - s[5] * p1) if moves else 0.0
+                        jacobian[1, c] = s[1] + (s[5] * p0 - s[3] * p2) if moves else 0.0
+                        jacobian[2, c] = s[2] + (s[3] * p1 - s[4] * p0) if moves else 0.0
                         v0 += jacobian[0, c] * rates[c]
                         v1 += jacobian[1, c] * rates[c]
                         v2 += jacobian[2, c] * rates[c]
-                velocities[g, i, k, 0], velocities[g, i, k, 1], velocities[g, i, k, 2] = v0, v1, v2
                 speed = (v0 * v0 + v1 * v1 + v2 * v2) ** 0.5
-                speeds[g, i, k] = speed
+                stationary[g, i, k] = speed < stationary_speed
                 if speed < stationary_speed:
+                    speeds[g, i, k] = 0.0
                     continue
+                speeds[g, i, k] = speed
                 u0, u1, u2 = v0 / speed, v1 / speed, v2 / speed
+                for a in range(3):
+                    directions[g, i, k, a] = r[0, a] * u0 + r[1, a] * u1 + r[2, a] * u2
+                if b >= 0:  # y^T L y: L y by L's rows (L symmetric), then y . (L y)
+                    mobility, y = body_mobilities[b], lever_row
+                    y[0], y[1], y[2] = u0, u1, u2
+                    y[3] = l1 * u2 - l2 * u1
+                    y[4] = l2 * u0 - l0 * u2
+                    y[5] = l0 * u1 - l1 * u0
+                    for t in range(6):
+                        y[6 + t] = 0.0
+                    for s_ in range(6):
+                        for t in range(6):
+                            y[6 + t] += mobility[s_, t] * y[s_]
+                    total = 0.0
+                    for t in range(6):
+                        total += y[t] * y[6 + t]
+                    masses[g, i, k] = 1.0 / total
+                    continue
+                for c in range(n):  # w = J_p^T u, then M^-1 w column by column
+                    weights[c] = jacobian[0, c] * u0 + jacobian[1, c] * u1 + jacobian[2, c] * u2
+                    solved[c, 0] = 0.0
                 for c in range(n):
-                    if support[k, c]:
-                        weights[c] = (
-                            jacobian[0, c] * u0 + jacobian[1, c] * u1 + jacobian[2, c] * u2
-                        )
+                    weight = weights[c]
+                    for a in range(n):
+                        solved[a, 0] += inverse[a, c] * weight
                 total = 0.0
                 for a in range(n):
-                    if support[k, a]:
-                        inner = 0.0
-                        for c in range(n):
-                            if support[k, c]:
-                                inner += inverse[a, c] * weights[c]
-                        total += weights[a] * inner
+                    total += weights[a] * solved[a, 0]
                 masses[g, i, k] = 1.0 / total
+        for i in range(counts[g], joint_motions.shape[1]):
+            for k in range(site_joints.shape[0]):
+                speeds[g, i, k] = 0.0
+                masses[g, i, k] = 1.0
+                stationary[g, i, k] = False
+
+
+@_jit
+def site_mobilities(
+    joint_rotations,
+    joint_origins,
+    joint_motions,
+    minv,
+    site_joints,
+    points_in_joint,
+    support,
+    at,
+    out,
+    jacobian,
+):
+    """For each row (g, i, k) of ``at``: the translational mobility J_p M^-1 J_p^T (3 x 3,
+    world axes) [1/kg] of site k at grasp g's sample i (``arm_site_exposure``'s sites and
+    terms): the sites at rest, whose direction is the mobility's eigenvector of largest
+    effective mass. jacobian (3, n): scratch."""
+    n = minv.shape[2]
+    for row in range(at.shape[0]):
+        g, i, k = at[row, 0], at[row, 1], at[row, 2]
+        j = site_joints[k]
+        rotation, origin, point = (
+            joint_rotations[g, i, j],
+            joint_origins[g, i, j],
+            points_in_joint[k],
+        )
+        l0 = rotation[0, 0] * point[0] + rotation[0, 1] * point[1]
+        l0 += rotation[0, 2] * point[2]
+        l1 = rotation[1, 0] * point[0] + rotation[1, 1] * point[1]
+        l1 += rotation[1, 2] * point[2]
+        l2 = rotation[2, 0] * point[0] + rotation[2, 1] * point[1]
+        l2 += rotation[2, 2] * point[2]
+        p0, p1, p2 = origin[0] + l0, origin[1] + l1, origin[2] + l2
+        motions, inverse = joint_motions[g, i], minv[g, i]
+        for c in range(n):
+            s = motions[c]
+            moves = support[k, c]
+            jacobian[0, c] = s[0] + (s[4] * p2 - s[5] * p1) if moves else 0.0
+            jacobian[1, c] = s[1] + (s[5] * p0 - s[3] * p2) if moves else 0.0
+            jacobian[2, c] = s[2] + (s[3] * p1 - s[4] * p0) if moves else 0.0
+        for a in range(3):
+            for b in range(a, 3):
+                total = 0.0
+                for c in range(n):
+                    inner = 0.0
+                    for d in range(n):
+                        inner += inverse[c, d] * jacobian[b, d]
+                    total += jacobian[a, c] * inner
+                out[row, a, b] = total
+                out[row, b, a] = total
+
+
+@_jit_exact
+def region_peaks(
+    speeds, masses, sites, human_inverse, springs, where, peak, bounds, fastest, heaviest, exact
+):
+    """numpy's ``arm_regions.assess_sites_batch`` forces and their first maximum, bit for bit,
+    without evaluating most of them: for motion g and region r, over the entries e = i K + k
+    (sample i, site k; K = ``sites``) of speeds[g] and masses[g], F = v sqrt(k / (c + 1/m))
+    (c = human_inverse[r] = 1/m_h, k = springs[r], the same operations in the same order;
+    0 where not v > 0): where[g, r] the first e of the largest F (or of the first NaN, as
+    numpy's argmax) and peak[g, r] that F.
+
+    F rounds monotonically in v and in m > 0 (each operation does), so no entry of sample i
+    exceeds F(max v, max m) over its moving sites (``bounds``), and a sample whose bound is
+    below an F already computed holds no maximum: only the other samples are evaluated
+    (samples with a moving mass not > 0 or NaN always are).
+    bounds (N,), fastest (N,), heaviest (N,), exact (N,) bool: scratch."""
+    samples = speeds.shape[1] // sites if sites > 0 else 0
+    for g in range(speeds.shape[0]):
+        for i in range(samples):
+            top_v, top_m, plain = 0.0, 0.0, True
+            for k in range(sites):
+                v = speeds[g, i * sites + k]
+                if v > 0.0:
+                    m = masses[g, i * sites + k]
+                    if not m > 0.0:
+                        plain = False
+                    top_v = max(top_v, v)
+                    if m > top_m:
+                        top_m = m
+            fastest[i], heaviest[i], exact[i] = top_v, top_m, not plain
+        for r in range(human_inverse.shape[0]):
+            c, spring = human_inverse[r], springs[r]
+            first, largest = 0, -1.0
+            for i in range(samples):
+                bound = 0.0
+                if fastest[i] > 0.0:
+                    bound = fastest[i] * math.sqrt(spring * (1.0 / (c + 1.0 / heaviest[i])))
+                if exact[i] or not bound >= 0.0:
+                    bound = math.inf
+                bounds[i] = bound
+                if bound > largest:
+                    first, largest = i, bound
+            low = 0.0 if sites > 0 else -1.0  # a site at rest: F = 0
+            for k in range(sites):  # the sample of the largest bound, evaluated
+                e = first * sites + k
+                if speeds[g, e] > 0.0:
+                    force = speeds[g, e] * math.sqrt(spring * (1.0 / (c + 1.0 / masses[g, e])))
+                    if force != force:  # NaN: no pruning (its first one is the answer)
+                        low = -1.0
+                        break
+                    low = max(low, force)
+            at, top = 0, -1.0
+            for i in range(samples):
+                if bounds[i] < low:
+                    continue
+                found = False
+                for k in range(sites):
+                    e = i * sites + k
+                    v = speeds[g, e]
+                    force = 0.0
+                    if v > 0.0:
+                        force = v * math.sqrt(spring * (1.0 / (c + 1.0 / masses[g, e])))
+                    if force != force:
+                        at, top, found = e, force, True
+                        break
+                    if force > top:
+                        at, top = e, force
+                if found:
+                    break
+            where[g, r], peak[g, r] = at, top
 
 
 @_jit
@@ -287,52 +501,62 @@ def tip_following_rates(
 
 @_jit_exact
 def clamped_spline_velocities(
-    times, positions, interchanged, factors, diagonal, upper, lower, out
+    times, positions, interchanged, factors, diagonal, upper, lower, out, last
 ):
     """``method.executable._clamped_spline_rates``' velocities, operation for operation (no
     fused multiply-adds: its numbers bit for bit): the knots' first derivatives out (N, m) of
-    the clamped cubic spline through positions (N, m) at times (N,), N >= 2, columns apart.
+    the clamped cubic spline through positions (N, m) at times (N,), N >= 2, columns apart
+    (each row's operations run over the columns: the same per column, in vector loops).
 
     interchanged (N-1,), factors (N-1,): each elimination step's row interchange and factor;
-    diagonal, upper, lower (N,): the U factor's diagonals (``_tridiagonal_elimination``)."""
+    diagonal, upper, lower (N,): the U factor's diagonals (``_tridiagonal_elimination``);
+    last (m,): scratch."""
     count, columns = positions.shape
     for c in range(columns):
         out[0, c] = 0.0  # the right-hand side: q̇ = 0 at both ends
         out[count - 1, c] = 0.0
-        for i in range(1, count - 1):
-            before = (positions[i, c] - positions[i - 1, c]) / (times[i] - times[i - 1])
-            after = (positions[i + 1, c] - positions[i, c]) / (times[i + 1] - times[i])
-            out[i, c] = 3.0 * (
-                (times[i + 1] - times[i]) * before + (times[i] - times[i - 1]) * after
-            )
-        for i in range(count - 1):  # dgtsv's forward elimination
-            if interchanged[i]:
+    for i in range(1, count - 1):
+        before_dt, after_dt = times[i] - times[i - 1], times[i + 1] - times[i]
+        for c in range(columns):
+            before = (positions[i, c] - positions[i - 1, c]) / before_dt
+            after = (positions[i + 1, c] - positions[i, c]) / after_dt
+            out[i, c] = 3.0 * (after_dt * before + before_dt * after)
+    for i in range(count - 1):  # dgtsv's forward elimination
+        factor = factors[i]
+        if interchanged[i]:
+            for c in range(columns):
                 swapped = out[i + 1, c]
-                out[i + 1, c] = out[i, c] - factors[i] * swapped
+                out[i + 1, c] = out[i, c] - factor * swapped
                 out[i, c] = swapped
-            else:
-                out[i + 1, c] = out[i + 1, c] - factors[i] * out[i, c]
+        else:
+            for c in range(columns):
+                out[i + 1, c] = out[i + 1, c] - factor * out[i, c]
+    for c in range(columns):
         out[count - 1, c] = out[count - 1, c] / diagonal[count - 1]
         out[count - 2, c] = (out[count - 2, c] - upper[count - 2] * out[count - 1, c]) / diagonal[
             count - 2
         ]
-        for i in range(count - 3, -1, -1):
+    for i in range(count - 3, -1, -1):
+        for c in range(columns):
             out[i, c] = (
                 out[i, c] - upper[i] * out[i + 1, c] - lower[i] * out[i + 2, c]
             ) / diagonal[i]
-        # the knots' derivatives of the piecewise polynomial: offset 0 into interval i < N-1,
-        # the last interval's length at the last knot (computed first: it reads out[N-2])
-        i = count - 2
-        dx = times[i + 1] - times[i]
+    # the knots' derivatives of the piecewise polynomial: offset 0 into interval i < N-1,
+    # the last interval's length at the last knot (computed first: it reads out[N-2])
+    i = count - 2
+    dx = times[i + 1] - times[i]
+    for c in range(columns):
         slope = (positions[i + 1, c] - positions[i, c]) / dx
         t = (out[i, c] + out[i + 1, c] - 2.0 * slope) / dx
         c0, c1, c2 = t / dx, (slope - out[i, c]) / dx - t, out[i, c]
         z1 = 1.0 * dx
-        last = 0.0 + c2 * 1.0 * 1.0 + c1 * z1 * 2.0 + c0 * (z1 * dx) * 3.0
-        for i in range(count - 1):
-            dx = times[i + 1] - times[i]
+        last[c] = 0.0 + c2 * 1.0 * 1.0 + c1 * z1 * 2.0 + c0 * (z1 * dx) * 3.0
+    for i in range(count - 1):
+        dx = times[i + 1] - times[i]
+        for c in range(columns):
             slope = (positions[i + 1, c] - positions[i, c]) / dx
             t = (out[i, c] + out[i + 1, c] - 2.0 * slope) / dx
             c0, c1, c2 = t / dx, (slope - out[i, c]) / dx - t, out[i, c]
             out[i, c] = 0.0 + c2 * 1.0 * 1.0 + c1 * 0.0 * 2.0 + c0 * (0.0 * 0.0) * 3.0
-        out[count - 1, c] = last
+    for c in range(columns):
+        out[count - 1, c] = last[c]

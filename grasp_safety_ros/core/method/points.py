@@ -76,35 +76,60 @@ def tip_point_masses(
     return masses, mask, mobilities
 
 
-def site_masses(
+SHARED_BODY_SITES = 4
+"""Sites on one body from which they share its 6 x 6 mobility per sample
+(``arm_site_exposure``): forming it costs about as much as this many sites computed alone."""
+
+
+def _shared_bodies(site_joints: np.ndarray, support: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(K,) each site's shared body (-1: computed alone), the shared bodies' chain joints (B,)
+    and their supports (B, n): the bodies carrying at least SHARED_BODY_SITES sites."""
+    joints, first, count = np.unique(site_joints, return_index=True, return_counts=True)
+    shared = count >= SHARED_BODY_SITES
+    site_body = np.full(len(site_joints), -1, dtype=np.int64)
+    for b, joint in enumerate(joints[shared]):
+        site_body[site_joints == joint] = b
+    return site_body, joints[shared].astype(np.int64), np.asarray(support, bool)[first[shared]]
+
+
+def arm_site_exposure(
     terms: SampleTerms,
     counts: np.ndarray,
+    transform_base_to_world: tuple[np.ndarray, np.ndarray],
     site_joints: np.ndarray,
     points_in_joint_m: np.ndarray,
     support: np.ndarray,
     joint_velocities: np.ndarray,
     stationary_speed_m_s: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """World positions (G, N, K, 3) [m], velocities (G, N, K, 3) [m/s], speeds (G, N, K) and
-    effective masses along the velocity (G, N, K) [kg] of K sites fixed to the links.
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Positions (G, N, K, 3) [m] (base frame), unit velocities (G, N, K, 3) (base axes),
+    speeds (G, N, K) [m/s], effective masses along the velocity (G, N, K) [kg] and the
+    stationary mask (G, N, K) of K sites fixed to the links; sites on a body carrying
+    SHARED_BODY_SITES or more share its mobility (``kernels.points.arm_site_exposure``).
 
     Args:
         terms, counts: The grasps' terms (axis 0 the grasp, N rows) and sample counts (G,).
+        transform_base_to_world: (rotation (3, 3), translation (3,) [m]) of the base frame.
         site_joints: (K,) the chain joint (0-based) whose frame carries each site.
         points_in_joint_m: (K, 3) the sites in those frames [m].
         support: (K, n) True where chain joint c moves the site's body.
         joint_velocities: (G, N, n) q̇ [rad/s or m/s].
-        stationary_speed_m_s: Below this speed a site has no direction: its mass is left
-            undefined (as in rows beyond a grasp's count).
+        stationary_speed_m_s: Below this speed a site is stationary: speed 0, direction and
+            mass undefined (``site_mobilities`` gives what they come from).
+    Rows beyond a grasp's count: speed 0, mass 1, not stationary, the rest undefined.
     """
-    from ..kernels.points import site_masses as kernel
+    from ..kernels.points import arm_site_exposure as kernel
 
     grasps, samples = terms.jacobians_tip_in_world.shape[:2]
-    count, n = len(site_joints), terms.mass_matrix_inverses.shape[-1]
+    joints = np.ascontiguousarray(site_joints, dtype=np.int64)
+    count, n = len(joints), terms.mass_matrix_inverses.shape[-1]
+    site_body, body_joints, body_support = _shared_bodies(joints, support)
     positions = np.empty((grasps, samples, count, 3))
-    velocities = np.empty((grasps, samples, count, 3))
+    directions = np.empty((grasps, samples, count, 3))
     speeds = np.empty((grasps, samples, count))
     masses = np.empty((grasps, samples, count))
+    stationary = np.empty((grasps, samples, count), dtype=bool)
+    rotation, translation = transform_base_to_world
     call_kernel(
         kernel,
         plain_array(terms.rotations_joint_to_world),
@@ -112,19 +137,93 @@ def site_masses(
         plain_array(terms.motions_joint_in_world),
         plain_array(terms.mass_matrix_inverses),
         np.ascontiguousarray(counts, dtype=np.int64),
-        np.ascontiguousarray(site_joints, dtype=np.int64),
+        plain_array(rotation),
+        plain_array(translation),
+        joints,
         plain_array(points_in_joint_m),
         plain_array(support, bool),  # ArmSites.support is frozen
+        site_body,
+        body_joints,
+        plain_array(body_support, bool),
         plain_array(joint_velocities),
         float(stationary_speed_m_s),
         positions,
-        velocities,
+        directions,
         speeds,
         masses,
+        stationary,
         np.empty((3, n)),
         np.empty(n),
+        np.empty((n, 6)),
+        np.empty((n, 6)),
+        np.empty((len(body_joints), 6, 6)),
+        np.empty((len(body_joints), 6)),
+        np.empty(12),
     )
-    return positions, velocities, speeds, masses
+    return positions, directions, speeds, masses, stationary
+
+
+def site_mobilities(
+    terms: SampleTerms,
+    site_joints: np.ndarray,
+    points_in_joint_m: np.ndarray,
+    support: np.ndarray,
+    at: np.ndarray,
+) -> np.ndarray:
+    """Translational mobilities J_p M⁻¹ J_pᵀ (S, 3, 3) [1/kg], world axes, of the sites (as
+    ``arm_site_exposure``'s) at the rows (g, i, k) of ``at`` (S, 3): grasp, sample, site."""
+    from ..kernels.points import site_mobilities as kernel
+
+    at = np.ascontiguousarray(at, dtype=np.int64).reshape(-1, 3)
+    out = np.empty((len(at), 3, 3))
+    call_kernel(
+        kernel,
+        plain_array(terms.rotations_joint_to_world),
+        plain_array(terms.translations_joint_in_world),
+        plain_array(terms.motions_joint_in_world),
+        plain_array(terms.mass_matrix_inverses),
+        np.ascontiguousarray(site_joints, dtype=np.int64),
+        plain_array(points_in_joint_m),
+        plain_array(support, bool),
+        at,
+        out,
+        np.empty((3, terms.mass_matrix_inverses.shape[-1])),
+    )
+    return out
+
+
+def region_peaks(
+    speed_m_s: np.ndarray,
+    effective_mass_kg: np.ndarray,
+    human_inverse_kg: np.ndarray,
+    springs_n_per_m: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """For G motions' (G, N, K) site speeds [m/s] and masses [kg] and R body regions (1/m_h
+    [1/kg], k [N/m]): the flat index (G, R) into (N, K) of the first largest ISO/TS 15066
+    transient force F = v sqrt(k / (1/m_h + 1/m)) (0 where not v > 0) and that force (G, R)
+    [N], numpy's arithmetic and ``argmax`` bit for bit, most forces not evaluated
+    (``kernels.points.region_peaks``)."""
+    from ..kernels.points import region_peaks as kernel
+
+    grasps, samples, sites = speed_m_s.shape
+    regions = len(human_inverse_kg)
+    where = np.zeros((grasps, regions), dtype=np.int64)
+    peak = np.zeros((grasps, regions))
+    call_kernel(
+        kernel,
+        plain_array(speed_m_s).reshape(grasps, -1),
+        plain_array(effective_mass_kg).reshape(grasps, -1),
+        sites,
+        plain_array(human_inverse_kg),
+        plain_array(springs_n_per_m),
+        where,
+        peak,
+        np.empty(samples),
+        np.empty(samples),
+        np.empty(samples),
+        np.empty(samples, dtype=bool),
+    )
+    return where, peak
 
 
 PSEUDO_INVERSE_RCOND = 1e-10
