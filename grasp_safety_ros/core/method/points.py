@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from .compiled import call_kernel, plain_array
-from .terms import SampleTerms
+from .terms import SampleTerms, _block
 
 
 def valid_rows(counts: np.ndarray, samples: int) -> np.ndarray:
@@ -92,6 +92,26 @@ def _shared_bodies(site_joints: np.ndarray, support: np.ndarray) -> tuple[np.nda
     return site_body, joints[shared].astype(np.int64), np.asarray(support, bool)[first[shared]]
 
 
+def _exposure_buffers(grasps: int, samples: int, count: int) -> list[np.ndarray]:
+    """Uninitialised (G, N, K, 3) positions and directions, (G, N, K) speeds and masses and a
+    (G, N, K) bool mask: views of one block of earlier terms or results no array refers to
+    any longer (``terms._block``: fresh pages cost as much to touch as the kernel that fills
+    them), else new arrays."""
+    shape = (grasps, samples, count)
+    size = grasps * samples * count
+    block = _block(8 * size + (size + 7) // 8)
+    if block is None:
+        vectors = [np.empty((*shape, 3)) for _ in range(2)]
+        return [*vectors, np.empty(shape), np.empty(shape), np.empty(shape, dtype=bool)]
+    return [
+        block[: 3 * size].reshape(*shape, 3),
+        block[3 * size : 6 * size].reshape(*shape, 3),
+        block[6 * size : 7 * size].reshape(shape),
+        block[7 * size : 8 * size].reshape(shape),
+        block[8 * size :].view(np.bool_)[:size].reshape(shape),
+    ]
+
+
 def arm_site_exposure(
     terms: SampleTerms,
     counts: np.ndarray,
@@ -124,11 +144,7 @@ def arm_site_exposure(
     joints = np.ascontiguousarray(site_joints, dtype=np.int64)
     count, n = len(joints), terms.mass_matrix_inverses.shape[-1]
     site_body, body_joints, body_support = _shared_bodies(joints, support)
-    positions = np.empty((grasps, samples, count, 3))
-    directions = np.empty((grasps, samples, count, 3))
-    speeds = np.empty((grasps, samples, count))
-    masses = np.empty((grasps, samples, count))
-    stationary = np.empty((grasps, samples, count), dtype=bool)
+    positions, directions, speeds, masses, stationary = _exposure_buffers(grasps, samples, count)
     rotation, translation = transform_base_to_world
     call_kernel(
         kernel,
@@ -221,7 +237,9 @@ def region_peaks(
         np.empty(samples),
         np.empty(samples),
         np.empty(samples),
-        np.empty(samples, dtype=bool),
+        np.empty(samples, dtype=np.int64),
+        np.empty(samples * sites),
+        np.empty(samples * sites),
     )
     return where, peak
 
