@@ -130,6 +130,30 @@ def tip_point_masses(
                 count += 1
 
 
+@_jit_inline
+def _row_products(matrix, row, vectors, count):
+    """The six sums over c < count of matrix[row, c] * vectors[c, t] (t = 0..5), each in
+    index order, side by side in registers."""
+    t0 = t1 = t2 = t3 = t4 = t5 = 0.0
+    for c in range(count):
+        weight = matrix[row, c]
+        vector = vectors[c]
+        t0 += weight * vector[0]
+        t1 += weight * vector[1]
+        t2 += weight * vector[2]
+        t3 += weight * vector[3]
+        t4 += weight * vector[4]
+        t5 += weight * vector[5]
+    return t0, t1, t2, t3, t4, t5
+
+
+@_jit_inline
+def _dot6(row, y0, y1, y2, y3, y4, y5):
+    """row . y of a 6-vector row and y = (y0, ..., y5), in index order."""
+    total = row[0] * y0 + row[1] * y1 + row[2] * y2
+    return total + row[3] * y3 + row[4] * y4 + row[5] * y5
+
+
 @_jit
 def arm_site_exposure(
     joint_rotations,
@@ -142,6 +166,7 @@ def arm_site_exposure(
     site_joints,
     points_in_joint,
     support,
+    site_columns,
     site_body,
     body_joints,
     body_support,
@@ -158,14 +183,14 @@ def arm_site_exposure(
     columns,
     body_mobilities,
     body_twists,
-    lever_row,
 ):
     """For grasp g, sample i < counts[g] and site k (the point points_in_joint[k] [m] of chain
-    joint site_joints[k]'s frame, moved by the joints where support[k]): its position
-    (base frame), speed |J_p q̇| and, where that is >= ``stationary_speed``, its unit velocity
-    (base axes) and effective mass along it, 1 / (u^T J_p M^-1 J_p^T u) [kg]; below it,
-    stationary[g, i, k] is set, the speed is 0 and direction and mass are left as they are.
-    Rows from counts[g] on: speed 0, mass 1, not stationary (positions, directions left).
+    joint site_joints[k]'s frame, moved by the joints where support[k], all before
+    site_columns[k]): its position (base frame), speed |J_p q̇| and, where that is >=
+    ``stationary_speed``, its unit velocity (base axes) and effective mass along it,
+    1 / (u^T J_p M^-1 J_p^T u) [kg]; below it, stationary[g, i, k] is set, the speed is 0 and
+    direction and mass are left as they are. Rows from counts[g] on: speed 0, mass 1, not
+    stationary (positions, directions left).
 
     Sites with site_body[k] = -1 are computed alone: J_p's column c is v_c + w_c x p for the
     supporting joints (S_c = (v_c, w_c) at the world origin:
@@ -175,12 +200,12 @@ def arm_site_exposure(
     the joint's origin o, once per sample; with the lever r = p - o (the point, world axes),
     v = v_o + w x r and u^T J_p = y^T J_o with y = (u, r x u), so the mass is 1 / (y^T L y)
     (the rigid lever transform of L, as ``tip_point_masses``). Every sum runs in index order;
-    the loops accumulate independent sums side by side (a sum's terms one after the other
-    wait for each other).
+    independent sums run side by side (a sum's terms one after the other wait for each
+    other).
 
     base_rotation (3, 3), base_translation (3,): the base frame in the world frame.
-    jacobian (3, n), weights (n,), solved (n, 6): M^-1 w or M^-1 J_o^T, columns (n, 6): J_o^T,
-    body_mobilities (B, 6, 6), body_twists (B, 6), lever_row (12,): y, L y; scratch."""
+    jacobian (3, n), weights (n,), solved (n, 6): M^-1 J_o^T, columns (n, 6): J_o^T,
+    body_mobilities (B, 6, 6), body_twists (B, 6): scratch."""
     n = minv.shape[2]
     r = base_rotation
     for g in range(joint_motions.shape[0]):
@@ -188,9 +213,6 @@ def arm_site_exposure(
             motions, inverse, rates = joint_motions[g, i], minv[g, i], joint_velocities[g, i]
             for b in range(body_joints.shape[0]):
                 o = joint_origins[g, i, body_joints[b]]
-                twist, mobility = body_twists[b], body_mobilities[b]
-                for a in range(6):
-                    twist[a] = 0.0
                 for c in range(n):  # J_o's column c (0 for the joints that do not move b)
                     s = motions[c]
                     moves = body_support[b, c]
@@ -199,24 +221,28 @@ def arm_site_exposure(
                     columns[c, 2] = s[2] + (s[3] * o[1] - s[4] * o[0]) if moves else 0.0
                     for a in range(3, 6):
                         columns[c, a] = s[a] if moves else 0.0
-                    for a in range(6):
-                        twist[a] += columns[c, a] * rates[c]
+                twist, mobility = body_twists[b], body_mobilities[b]
+                t0 = t1 = t2 = t3 = t4 = t5 = 0.0
+                for c in range(n):
+                    rate = rates[c]
+                    t0 += columns[c, 0] * rate
+                    t1 += columns[c, 1] * rate
+                    t2 += columns[c, 2] * rate
+                    t3 += columns[c, 3] * rate
+                    t4 += columns[c, 4] * rate
+                    t5 += columns[c, 5] * rate
+                twist[0], twist[1], twist[2], twist[3], twist[4], twist[5] = t0, t1, t2, t3, t4, t5
                 for a in range(n):  # M^-1 J_o^T, row by row
+                    products = _row_products(inverse, a, columns, n)
                     for t in range(6):
-                        solved[a, t] = 0.0
-                    for c in range(n):
-                        weight = inverse[a, c]
-                        for t in range(6):
-                            solved[a, t] += weight * columns[c, t]
-                for s_ in range(6):  # J_o M^-1 J_o^T, its upper triangle, then mirrored
-                    for t in range(s_, 6):
-                        mobility[s_, t] = 0.0
-                    for a in range(n):
-                        weight = columns[a, s_]
-                        for t in range(s_, 6):
-                            mobility[s_, t] += weight * solved[a, t]
-                    for t in range(s_ + 1, 6):
-                        mobility[t, s_] = mobility[s_, t]
+                        solved[a, t] = products[t]
+                for a in range(6):  # J_o M^-1 J_o^T = (J_o^T)^T (M^-1 J_o^T), rows of both
+                    products = _row_products(columns.T, a, solved, n)
+                    for t in range(6):
+                        mobility[a, t] = products[t]
+                for a in range(6):  # symmetric: the upper triangle's numbers
+                    for t in range(a + 1, 6):
+                        mobility[t, a] = mobility[a, t]
             for k in range(site_joints.shape[0]):
                 j = site_joints[k]
                 rotation, origin, point = (
@@ -237,6 +263,7 @@ def arm_site_exposure(
                 for a in range(3):
                     positions[g, i, k, a] = r[0, a] * q0 + r[1, a] * q1 + r[2, a] * q2
                 b = site_body[k]
+                width = site_columns[k]
                 if b >= 0:
                     v_ = body_twists[b]
                     v0 = v_[0] + (v_[4] * l2 - v_[5] * l1)
@@ -244,7 +271,7 @@ def arm_site_exposure(
                     v2 = v_[2] + (v_[3] * l1 - v_[4] * l0)
                 else:
                     v0 = v1 = v2 = 0.0
-                    for c in range(n):
+                    for c in range(width):
                         s = motions[c]
                         moves = support[k, c]
                         jacobian[0, c] = s[0] + (s[4] * p2 - s[5] * p1) if moves else 0.0
@@ -262,32 +289,27 @@ def arm_site_exposure(
                 u0, u1, u2 = v0 / speed, v1 / speed, v2 / speed
                 for a in range(3):
                     directions[g, i, k, a] = r[0, a] * u0 + r[1, a] * u1 + r[2, a] * u2
-                if b >= 0:  # y^T L y: L y by L's rows (L symmetric), then y . (L y)
-                    mobility, y = body_mobilities[b], lever_row
-                    y[0], y[1], y[2] = u0, u1, u2
-                    y[3] = l1 * u2 - l2 * u1
-                    y[4] = l2 * u0 - l0 * u2
-                    y[5] = l0 * u1 - l1 * u0
-                    for t in range(6):
-                        y[6 + t] = 0.0
-                    for s_ in range(6):
-                        for t in range(6):
-                            y[6 + t] += mobility[s_, t] * y[s_]
-                    total = 0.0
-                    for t in range(6):
-                        total += y[t] * y[6 + t]
+                if b >= 0:  # y^T L y, y = (u, r x u): L y by L's rows, then y . (L y)
+                    mobility = body_mobilities[b]
+                    y3 = l1 * u2 - l2 * u1
+                    y4 = l2 * u0 - l0 * u2
+                    y5 = l0 * u1 - l1 * u0
+                    total = u0 * _dot6(mobility[0], u0, u1, u2, y3, y4, y5)
+                    total += u1 * _dot6(mobility[1], u0, u1, u2, y3, y4, y5)
+                    total += u2 * _dot6(mobility[2], u0, u1, u2, y3, y4, y5)
+                    total += y3 * _dot6(mobility[3], u0, u1, u2, y3, y4, y5)
+                    total += y4 * _dot6(mobility[4], u0, u1, u2, y3, y4, y5)
+                    total += y5 * _dot6(mobility[5], u0, u1, u2, y3, y4, y5)
                     masses[g, i, k] = 1.0 / total
                     continue
-                for c in range(n):  # w = J_p^T u, then M^-1 w column by column
+                for c in range(width):  # w = J_p^T u, then w^T M^-1 w
                     weights[c] = jacobian[0, c] * u0 + jacobian[1, c] * u1 + jacobian[2, c] * u2
-                    solved[c, 0] = 0.0
-                for c in range(n):
-                    weight = weights[c]
-                    for a in range(n):
-                        solved[a, 0] += inverse[a, c] * weight
                 total = 0.0
-                for a in range(n):
-                    total += weights[a] * solved[a, 0]
+                for a in range(width):
+                    inner = 0.0
+                    for c in range(width):
+                        inner += inverse[a, c] * weights[c]
+                    total += weights[a] * inner
                 masses[g, i, k] = 1.0 / total
         for i in range(counts[g], joint_motions.shape[1]):
             for k in range(site_joints.shape[0]):

@@ -92,6 +92,14 @@ def _shared_bodies(site_joints: np.ndarray, support: np.ndarray) -> tuple[np.nda
     return site_body, joints[shared].astype(np.int64), np.asarray(support, bool)[first[shared]]
 
 
+def _last_columns(support: np.ndarray) -> np.ndarray:
+    """(K,) one past the last joint that moves each site (its Jacobian's columns from there
+    on are 0: a serial chain's site near the base has fewer terms)."""
+    support = np.asarray(support, bool)
+    last = support.shape[1] - np.argmax(support[:, ::-1], axis=1)
+    return np.where(support.any(axis=1), last, 0).astype(np.int64)
+
+
 def _exposure_buffers(grasps: int, samples: int, count: int) -> list[np.ndarray]:
     """Uninitialised (G, N, K, 3) positions and directions, (G, N, K) speeds and masses and a
     (G, N, K) bool mask: views of one block of earlier terms or results no array refers to
@@ -158,6 +166,7 @@ def arm_site_exposure(
         joints,
         plain_array(points_in_joint_m),
         plain_array(support, bool),  # ArmSites.support is frozen
+        _last_columns(support),
         site_body,
         body_joints,
         plain_array(body_support, bool),
@@ -174,7 +183,6 @@ def arm_site_exposure(
         np.empty((n, 6)),
         np.empty((len(body_joints), 6, 6)),
         np.empty((len(body_joints), 6)),
-        np.empty(12),
     )
     return positions, directions, speeds, masses, stationary
 
