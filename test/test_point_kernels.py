@@ -432,7 +432,8 @@ def _region_peaks_case() -> tuple[np.ndarray, np.ndarray, list]:
     masses[2, 11, 1] = np.nan
     speeds[2, 11, 1] = 1.0
     speeds[3] = 0.0  # nothing moves
-    regions = list(select_regions(None)) + [
+    regions = [
+        *select_regions(None),
         BodyRegion("rigid", 100.0, 200.0, 30_000.0, np.inf),
         BodyRegion("forbidden", 100.0, None, 30_000.0, 5.0),
     ]

@@ -81,22 +81,25 @@ def assess_sites_batch(
         else:
             worst = peak[:, r] / region.max_transient_force_n
         columns.append((where[:, r].tolist(), worst.tolist(), peak[:, r].tolist()))
+    named = [(r.name, r.transient_contact_permitted) for r in regions]
     results = []
     for g in range(grasps):
         assessed = []
-        for region, (where_list, worst_list, peak_list) in zip(regions, columns, strict=True):
+        for (name, permitted), (where_list, worst_list, peak_list) in zip(
+            named, columns, strict=True
+        ):
             sample, site = divmod(where_list[g], count_sites) if count_sites else (0, 0)
             worst = worst_list[g]
             assessed.append(
                 WholeArmRegion(
-                    region=region.name,
-                    transient_contact_permitted=region.transient_contact_permitted,
-                    worst_force_ratio=worst,
-                    worst_site=int(site),
-                    worst_sample=int(sample),
-                    peak_contact_force_n=peak_list[g],
-                    admissible=worst <= 1.0 + ADMISSIBLE_RATIO_TOLERANCE,
-                    min_duration_s=durations_s[g] * worst if worst > 0.0 else 0.0,
+                    name,
+                    permitted,
+                    worst,
+                    site,
+                    sample,
+                    peak_list[g],
+                    worst <= 1.0 + ADMISSIBLE_RATIO_TOLERANCE,
+                    durations_s[g] * worst if worst > 0.0 else 0.0,
                 )
             )
         results.append(tuple(assessed))

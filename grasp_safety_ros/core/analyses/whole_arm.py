@@ -181,16 +181,13 @@ def tip_twists_in_base(
     trajectory: Trajectory,
     transform_tip_to_object: pin.SE3,
     times_s: np.ndarray,
-    object_motion: ObjectMotion | None = None,
 ) -> np.ndarray:
     """Tip twists (N, 6) (linear [m/s], angular [rad/s]), base axes: from the object motion
-    sampled once (ObjectMotion: tangent times speed per tangent; ``object_motion`` when
-    already sampled at ``times_s``) for an object path, else the trajectory's ``tip_twists``."""
-    motion = object_motion
-    if motion is None:
-        if not isinstance(trajectory, ObjectPath):
-            return trajectory.tip_twists(transform_tip_to_object, times_s)[0]
-        motion = trajectory.object_motion(times_s)
+    sampled once (ObjectMotion: tangent times speed per tangent) for an object path, else the
+    trajectory's ``tip_twists``."""
+    if not isinstance(trajectory, ObjectPath):
+        return trajectory.tip_twists(transform_tip_to_object, times_s)[0]
+    motion = trajectory.object_motion(times_s)
     rate = motion.speed_per_tangent[:, None]
     tangents = motion.tip_tangents(transform_tip_to_object)
     return np.concatenate([tangents * rate, motion.angular_tangents * rate], axis=1)
@@ -397,15 +394,39 @@ def _tip_twists_in_world(
     trajectory: Trajectory,
     grasp: Grasp,
     times: np.ndarray,
-    object_motion: ObjectMotion | None = None,
 ) -> np.ndarray:
     """(N, 6) the tip's twists (linear [m/s], angular [rad/s]), world axes."""
     transform = grasp.transform_tip_to_object
-    twists_in_base = tip_twists_in_base(trajectory, transform, times, object_motion)
+    twists_in_base = tip_twists_in_base(trajectory, transform, times)
     rotation = robot.transform_base_to_world.rotation
     return np.concatenate(
         [twists_in_base[:, :3] @ rotation.T, twists_in_base[:, 3:] @ rotation.T], axis=1
     )
+
+
+def _tip_twists_of_motion(
+    robot: RobotModel, motion: ObjectMotion, tips_in_object_m: np.ndarray
+) -> np.ndarray:
+    """(G, N, 6) the tip twists (linear [m/s], angular [rad/s]), world axes, of G grasps with
+    their tip origins at ``tips_in_object_m`` (G, 3) [m, object frame] on one sampled object
+    motion: ``ObjectMotion.tip_tangents`` times the speed per tangent, all grasps at once,
+    element by element (each grasp's numbers whatever the others)."""
+    rotations, tips = motion.rotations[None], tips_in_object_m[:, None, None, :]
+    lever = rotations[..., 0] * tips[..., 0] + rotations[..., 1] * tips[..., 1]
+    lever += rotations[..., 2] * tips[..., 2]  # (G, N, 3): the object origin -> tip
+    w, rate = motion.angular_tangents, motion.speed_per_tangent[:, None]
+    tangents = np.empty_like(lever)  # w x r (np.cross is slower on short rows)
+    tangents[..., 0] = w[:, 1] * lever[..., 2] - w[:, 2] * lever[..., 1]
+    tangents[..., 1] = w[:, 2] * lever[..., 0] - w[:, 0] * lever[..., 2]
+    tangents[..., 2] = w[:, 0] * lever[..., 1] - w[:, 1] * lever[..., 0]
+    tangents += motion.linear_tangents
+    rotation = robot.transform_base_to_world.rotation
+    twists = np.empty((len(tips), len(rate), 6))
+    for part, vectors in ((slice(0, 3), tangents * rate), (slice(3, 6), w * rate)):
+        twists[..., part] = vectors[..., 0, None] * rotation[:, 0]  # base -> world axes
+        twists[..., part] += vectors[..., 1, None] * rotation[:, 1]
+        twists[..., part] += vectors[..., 2, None] * rotation[:, 2]
+    return twists
 
 
 def evaluate_whole_arm_on_terms(
@@ -434,7 +455,7 @@ def evaluate_whole_arm_on_terms(
     twists = np.zeros((grasp_count, samples, 6))
     spline_rates = np.zeros((grasp_count, samples, robot.num_joints))
     by_times: dict[bytes, list[int]] = {}
-    sampled: dict[tuple[int, bytes], ObjectMotion] = {}  # each object path sampled once
+    by_motion: dict[tuple[int, bytes], list[int]] = {}  # each object path sampled once
     as_path: dict[int, ObjectPath | None] = {}  # a runtime Protocol's isinstance: ~10 µs
     for g, (evaluation, trajectory, grasp) in enumerate(
         zip(evaluations, trajectories, grasps, strict=True)
@@ -443,12 +464,16 @@ def evaluate_whole_arm_on_terms(
         key = (id(trajectory), times.tobytes())
         if key[0] not in as_path:
             as_path[key[0]] = trajectory if isinstance(trajectory, ObjectPath) else None
-        path = as_path[key[0]]
-        if path is not None and key not in sampled:
-            sampled[key] = path.object_motion(times)
-        motion = sampled.get(key)
-        twists[g, : counts[g]] = _tip_twists_in_world(robot, trajectory, grasp, times, motion)
+        if as_path[key[0]] is None:
+            twists[g, : counts[g]] = _tip_twists_in_world(robot, trajectory, grasp, times)
+        else:
+            by_motion.setdefault(key, []).append(g)
         by_times.setdefault(key[1], []).append(g)
+    for (trajectory_id, _), group in by_motion.items():
+        times, count = np.asarray(evaluations[group[0]].times_s, dtype=float), counts[group[0]]
+        motion = as_path[trajectory_id].object_motion(times)  # type: ignore[union-attr]
+        tips = np.array([grasps[g].transform_tip_to_object.translation for g in group])
+        twists[group, :count] = _tip_twists_of_motion(robot, motion, tips)
     for group in by_times.values():
         times, count = np.asarray(evaluations[group[0]].times_s, dtype=float), counts[group[0]]
         spline_rates[group, :count] = _spline_rates(
