@@ -126,7 +126,7 @@ def test_sites_of_a_one_joint_arm_have_the_closed_form_speed_and_mass(
     rates[0, 2] = 0.0  # at rest: no direction, the mass is left to the caller
     in_joint = np.column_stack([radii, np.zeros(4), np.zeros(4)])[:sites]
     site = (np.zeros(sites, np.int64), in_joint, np.ones((sites, 1), dtype=bool))
-    positions, directions, speeds, masses, still = points.arm_site_exposure(
+    positions, directions, speeds, masses, energies, still = points.arm_site_exposure(
         terms, counts, (np.eye(3), np.zeros(3)), *site, rates, 1e-9
     )
     moving = rates[0, :, 0] != 0.0
@@ -143,6 +143,8 @@ def test_sites_of_a_one_joint_arm_have_the_closed_form_speed_and_mass(
         )
         expected = np.full(moving.sum(), inertia / radius**2)
         assert_close_to_scale(masses[0, moving, k], expected, "I / r^2", CLOSED_FORM)
+        expected = 0.5 * inertia * np.where(moving, rate, 0.0) ** 2  # ½ M_eff v² = ½ I q̇²
+        assert_close_to_scale(energies[0, :, k], expected, "energy", CLOSED_FORM)
     at = np.argwhere(still)
     mobilities = points.site_mobilities(terms, *site, at)
     for (_, i, k), mobility in zip(at, mobilities, strict=True):

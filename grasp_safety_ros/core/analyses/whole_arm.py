@@ -301,16 +301,20 @@ def _whole_arm_result(
     regions: tuple[BodyRegion, ...],
     duration_s: float,
     assessed: tuple[WholeArmRegion, ...] | None = None,
+    energy_j: np.ndarray | None = None,
 ) -> WholeArmEvaluation:
-    """The evaluation from a grasp's exposure; ``assessed``: its ``assess_sites`` when already
-    computed (with the grasp's fellows in a batch)."""
+    """The evaluation from a grasp's exposure; ``assessed``: its ``assess_sites`` and
+    ``energy_j`` its ½ M_eff v² (0 where stationary) when already computed (with the grasp's
+    fellows in a batch)."""
     speeds, masses = exposure.speed_m_s, exposure.effective_mass_kg
     if assessed is None:
         assessed = assess_sites(speeds, masses, duration_s, regions)
     permitted = [a for a in assessed if a.transient_contact_permitted]
     limiting = max(permitted, key=lambda a: a.worst_force_ratio) if permitted else None
     feasible = evaluation.feasible
-    energy = np.where(exposure.stationary, 0.0, 0.5 * masses * speeds**2)
+    energy = energy_j
+    if energy is None:
+        energy = np.where(exposure.stationary, 0.0, 0.5 * masses * speeds**2)
     return WholeArmEvaluation(
         index=evaluation.index,
         name=evaluation.name,
@@ -481,7 +485,7 @@ def evaluate_whole_arm_on_terms(
         )
     rates = tip_following_rates(terms.jacobians_tip_in_world, counts, twists, spline_rates)
     base = robot.transform_base_to_world
-    positions, directions, speeds, masses, stationary = arm_site_exposure(
+    positions, directions, speeds, masses, energies, stationary = arm_site_exposure(
         terms,
         counts,
         (base.rotation, base.translation),
@@ -492,12 +496,12 @@ def evaluate_whole_arm_on_terms(
         STATIONARY_SPEED_M_S,
     )
     if stationary.any():  # the rest ends: A's eigenvectors, world axes, then base axes
-        at = np.argwhere(stationary)
+        at = np.nonzero(stationary)
         mobilities = site_mobilities(
-            terms, sites.joint_ids - 1, sites.points_in_joint_m, sites.support, at
+            terms, sites.joint_ids - 1, sites.points_in_joint_m, sites.support, np.stack(at, 1)
         )
-        at_rest, masses[stationary] = _largest_mass_directions(mobilities)
-        directions[stationary] = at_rest @ base.rotation
+        at_rest, masses[at] = _largest_mass_directions(mobilities)
+        directions[at] = at_rest @ base.rotation
     durations = [float(t.duration_s) for t in trajectories]
     assessed = assess_sites_batch(speeds, masses, durations, regions, compiled=True)
     results = []
@@ -513,7 +517,14 @@ def evaluate_whole_arm_on_terms(
         times = np.asarray(evaluation.times_s, dtype=float)
         results.append(
             _whole_arm_result(
-                evaluation, sites, times, exposure, regions, durations[g], assessed[g]
+                evaluation,
+                sites,
+                times,
+                exposure,
+                regions,
+                durations[g],
+                assessed[g],
+                energies[g, :count],
             )
         )
     return results

@@ -176,6 +176,7 @@ def arm_site_exposure(
     directions,
     speeds,
     masses,
+    energies,
     stationary,
     jacobian,
     weights,
@@ -187,10 +188,10 @@ def arm_site_exposure(
     """For grasp g, sample i < counts[g] and site k (the point points_in_joint[k] [m] of chain
     joint site_joints[k]'s frame, moved by the joints where support[k], all before
     site_columns[k]): its position (base frame), speed |J_p q̇| and, where that is >=
-    ``stationary_speed``, its unit velocity (base axes) and effective mass along it,
-    1 / (u^T J_p M^-1 J_p^T u) [kg]; below it, stationary[g, i, k] is set, the speed is 0 and
-    direction and mass are left as they are. Rows from counts[g] on: speed 0, mass 1, not
-    stationary (positions, directions left).
+    ``stationary_speed``, its unit velocity (base axes), effective mass along it,
+    1 / (u^T J_p M^-1 J_p^T u) [kg], and energy 0.5 m v^2 [J]; below it, stationary[g, i, k]
+    is set, the speed and the energy are 0 and direction and mass are left as they are. Rows
+    from counts[g] on: speed 0, mass 1, not stationary (the rest left).
 
     Sites with site_body[k] = -1 are computed alone: J_p's column c is v_c + w_c x p for the
     supporting joints (S_c = (v_c, w_c) at the world origin:
@@ -284,6 +285,7 @@ def arm_site_exposure(
                 stationary[g, i, k] = speed < stationary_speed
                 if speed < stationary_speed:
                     speeds[g, i, k] = 0.0
+                    energies[g, i, k] = 0.0
                     continue
                 speeds[g, i, k] = speed
                 u0, u1, u2 = v0 / speed, v1 / speed, v2 / speed
@@ -301,6 +303,7 @@ def arm_site_exposure(
                     total += y4 * _dot6(mobility[4], u0, u1, u2, y3, y4, y5)
                     total += y5 * _dot6(mobility[5], u0, u1, u2, y3, y4, y5)
                     masses[g, i, k] = 1.0 / total
+                    energies[g, i, k] = 0.5 * masses[g, i, k] * (speed * speed)
                     continue
                 for c in range(width):  # w = J_p^T u, then w^T M^-1 w
                     weights[c] = jacobian[0, c] * u0 + jacobian[1, c] * u1 + jacobian[2, c] * u2
@@ -311,6 +314,7 @@ def arm_site_exposure(
                         inner += inverse[a, c] * weights[c]
                     total += weights[a] * inner
                 masses[g, i, k] = 1.0 / total
+                energies[g, i, k] = 0.5 * masses[g, i, k] * (speed * speed)
         for i in range(counts[g], joint_motions.shape[1]):
             for k in range(site_joints.shape[0]):
                 speeds[g, i, k] = 0.0

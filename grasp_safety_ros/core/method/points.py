@@ -101,22 +101,22 @@ def _last_columns(support: np.ndarray) -> np.ndarray:
 
 
 def _exposure_buffers(grasps: int, samples: int, count: int) -> list[np.ndarray]:
-    """Uninitialised (G, N, K, 3) positions and directions, (G, N, K) speeds and masses and a
-    (G, N, K) bool mask: views of one block of earlier terms or results no array refers to
-    any longer (``terms._block``: fresh pages cost as much to touch as the kernel that fills
-    them), else new arrays."""
+    """Uninitialised (G, N, K, 3) positions and directions, (G, N, K) speeds, masses and
+    energies and a (G, N, K) bool mask: views of one block of earlier terms or results no
+    array refers to any longer (``terms._block``: fresh pages cost as much to touch as the
+    kernel that fills them), else new arrays."""
     shape = (grasps, samples, count)
     size = grasps * samples * count
-    block = _block(8 * size + (size + 7) // 8)
+    block = _block(9 * size + (size + 7) // 8)
     if block is None:
         vectors = [np.empty((*shape, 3)) for _ in range(2)]
-        return [*vectors, np.empty(shape), np.empty(shape), np.empty(shape, dtype=bool)]
+        scalars = [np.empty(shape) for _ in range(3)]
+        return [*vectors, *scalars, np.empty(shape, dtype=bool)]
     return [
         block[: 3 * size].reshape(*shape, 3),
         block[3 * size : 6 * size].reshape(*shape, 3),
-        block[6 * size : 7 * size].reshape(shape),
-        block[7 * size : 8 * size].reshape(shape),
-        block[8 * size :].view(np.bool_)[:size].reshape(shape),
+        *(block[start * size : (start + 1) * size].reshape(shape) for start in (6, 7, 8)),
+        block[9 * size :].view(np.bool_)[:size].reshape(shape),
     ]
 
 
@@ -129,11 +129,12 @@ def arm_site_exposure(
     support: np.ndarray,
     joint_velocities: np.ndarray,
     stationary_speed_m_s: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, ...]:
     """Positions (G, N, K, 3) [m] (base frame), unit velocities (G, N, K, 3) (base axes),
-    speeds (G, N, K) [m/s], effective masses along the velocity (G, N, K) [kg] and the
-    stationary mask (G, N, K) of K sites fixed to the links; sites on a body carrying
-    SHARED_BODY_SITES or more share its mobility (``kernels.points.arm_site_exposure``).
+    speeds (G, N, K) [m/s], effective masses along the velocity (G, N, K) [kg], energies
+    ½ M_eff v² (G, N, K) [J] and the stationary mask (G, N, K) of K sites fixed to the
+    links; sites on a body carrying SHARED_BODY_SITES or more share its mobility
+    (``kernels.points.arm_site_exposure``).
 
     Args:
         terms, counts: The grasps' terms (axis 0 the grasp, N rows) and sample counts (G,).
@@ -142,8 +143,8 @@ def arm_site_exposure(
         points_in_joint_m: (K, 3) the sites in those frames [m].
         support: (K, n) True where chain joint c moves the site's body.
         joint_velocities: (G, N, n) q̇ [rad/s or m/s].
-        stationary_speed_m_s: Below this speed a site is stationary: speed 0, direction and
-            mass undefined (``site_mobilities`` gives what they come from).
+        stationary_speed_m_s: Below this speed a site is stationary: speed and energy 0,
+            direction and mass undefined (``site_mobilities`` gives what they come from).
     Rows beyond a grasp's count: speed 0, mass 1, not stationary, the rest undefined.
     """
     from ..kernels.points import arm_site_exposure as kernel
@@ -152,7 +153,7 @@ def arm_site_exposure(
     joints = np.ascontiguousarray(site_joints, dtype=np.int64)
     count, n = len(joints), terms.mass_matrix_inverses.shape[-1]
     site_body, body_joints, body_support = _shared_bodies(joints, support)
-    positions, directions, speeds, masses, stationary = _exposure_buffers(grasps, samples, count)
+    outputs = _exposure_buffers(grasps, samples, count)
     rotation, translation = transform_base_to_world
     call_kernel(
         kernel,
@@ -172,11 +173,7 @@ def arm_site_exposure(
         plain_array(body_support, bool),
         plain_array(joint_velocities),
         float(stationary_speed_m_s),
-        positions,
-        directions,
-        speeds,
-        masses,
-        stationary,
+        *outputs,
         np.empty((3, n)),
         np.empty(n),
         np.empty((n, 6)),
@@ -184,7 +181,7 @@ def arm_site_exposure(
         np.empty((len(body_joints), 6, 6)),
         np.empty((len(body_joints), 6)),
     )
-    return positions, directions, speeds, masses, stationary
+    return tuple(outputs)
 
 
 def site_mobilities(
