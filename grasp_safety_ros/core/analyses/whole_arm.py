@@ -46,12 +46,13 @@ from ..method.points import (
     arm_site_exposure,
     site_mobilities,
     tip_following_rates,
+    tip_twists_into,
 )
 from ..method.ranking import Grasp, GraspEvaluation
 from ..method.terms import SampleTerms
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
-from ..model.trajectory import ObjectMotion, ObjectPath, Trajectory
+from ..model.trajectory import ObjectPath, Trajectory
 from .arm_regions import WholeArmRegion as WholeArmRegion
 from .arm_regions import assess_sites as assess_sites
 from .arm_regions import assess_sites_batch
@@ -408,31 +409,6 @@ def _tip_twists_in_world(
     )
 
 
-def _tip_twists_of_motion(
-    robot: RobotModel, motion: ObjectMotion, tips_in_object_m: np.ndarray
-) -> np.ndarray:
-    """(G, N, 6) the tip twists (linear [m/s], angular [rad/s]), world axes, of G grasps with
-    their tip origins at ``tips_in_object_m`` (G, 3) [m, object frame] on one sampled object
-    motion: ``ObjectMotion.tip_tangents`` times the speed per tangent, all grasps at once,
-    element by element (each grasp's numbers whatever the others)."""
-    rotations, tips = motion.rotations[None], tips_in_object_m[:, None, None, :]
-    lever = rotations[..., 0] * tips[..., 0] + rotations[..., 1] * tips[..., 1]
-    lever += rotations[..., 2] * tips[..., 2]  # (G, N, 3): the object origin -> tip
-    w, rate = motion.angular_tangents, motion.speed_per_tangent[:, None]
-    tangents = np.empty_like(lever)  # w x r (np.cross is slower on short rows)
-    tangents[..., 0] = w[:, 1] * lever[..., 2] - w[:, 2] * lever[..., 1]
-    tangents[..., 1] = w[:, 2] * lever[..., 0] - w[:, 0] * lever[..., 2]
-    tangents[..., 2] = w[:, 0] * lever[..., 1] - w[:, 1] * lever[..., 0]
-    tangents += motion.linear_tangents
-    rotation = robot.transform_base_to_world.rotation
-    twists = np.empty((len(tips), len(rate), 6))
-    for part, vectors in ((slice(0, 3), tangents * rate), (slice(3, 6), w * rate)):
-        twists[..., part] = vectors[..., 0, None] * rotation[:, 0]  # base -> world axes
-        twists[..., part] += vectors[..., 1, None] * rotation[:, 1]
-        twists[..., part] += vectors[..., 2, None] * rotation[:, 2]
-    return twists
-
-
 def evaluate_whole_arm_on_terms(
     robot: RobotModel,
     evaluations: Sequence[GraspEvaluation],
@@ -477,7 +453,7 @@ def evaluate_whole_arm_on_terms(
         times, count = np.asarray(evaluations[group[0]].times_s, dtype=float), counts[group[0]]
         motion = as_path[trajectory_id].object_motion(times)  # type: ignore[union-attr]
         tips = np.array([grasps[g].transform_tip_to_object.translation for g in group])
-        twists[group, :count] = _tip_twists_of_motion(robot, motion, tips)
+        tip_twists_into(motion, tips, robot.transform_base_to_world.rotation, group, twists)
     for group in by_times.values():
         times, count = np.asarray(evaluations[group[0]].times_s, dtype=float), counts[group[0]]
         spline_rates[group, :count] = _spline_rates(

@@ -465,6 +465,33 @@ def region_peaks(
 
 
 @_jit
+def tip_twists(
+    rotations, linear_tangents, angular_tangents, speed_per_tangent, tips, base_rotation, rows, out
+):
+    """For each grasp g of ``rows`` (its tip origin tips[k] in the object frame [m], k the
+    row's index) and sample i of one sampled object motion (rotations (N, 3, 3) object ->
+    base, tangents (N, 3) of the object origin, linear and angular, base axes; speed per
+    tangent (N,) [1/s]): the tip twist (linear [m/s], angular [rad/s]), world axes, into
+    out[g, i]: ``ObjectMotion.tip_tangents`` (w x (R t) + the linear tangent) and the angular
+    tangent times the speed per tangent, then base -> world (``base_rotation``)."""
+    r = base_rotation
+    for k in range(rows.shape[0]):
+        g, t = rows[k], tips[k]
+        for i in range(rotations.shape[0]):
+            rotation, w, rate = rotations[i], angular_tangents[i], speed_per_tangent[i]
+            l0 = rotation[0, 0] * t[0] + rotation[0, 1] * t[1] + rotation[0, 2] * t[2]
+            l1 = rotation[1, 0] * t[0] + rotation[1, 1] * t[1] + rotation[1, 2] * t[2]
+            l2 = rotation[2, 0] * t[0] + rotation[2, 1] * t[1] + rotation[2, 2] * t[2]
+            v0 = (w[1] * l2 - w[2] * l1 + linear_tangents[i, 0]) * rate
+            v1 = (w[2] * l0 - w[0] * l2 + linear_tangents[i, 1]) * rate
+            v2 = (w[0] * l1 - w[1] * l0 + linear_tangents[i, 2]) * rate
+            w0, w1, w2 = w[0] * rate, w[1] * rate, w[2] * rate
+            for a in range(3):
+                out[g, i, a] = r[a, 0] * v0 + r[a, 1] * v1 + r[a, 2] * v2
+                out[g, i, 3 + a] = r[a, 0] * w0 + r[a, 1] * w1 + r[a, 2] * w2
+
+
+@_jit
 def tip_following_rates(
     tip_jacobians,
     counts,

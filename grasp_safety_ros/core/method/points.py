@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..model.trajectory import ObjectMotion
 from .compiled import call_kernel, plain_array
 from .terms import SampleTerms, _block
 
@@ -247,6 +248,32 @@ def region_peaks(
         np.empty(samples * sites),
     )
     return where, peak
+
+
+def tip_twists_into(
+    motion: ObjectMotion,
+    tips_in_object_m: np.ndarray,
+    base_rotation: np.ndarray,
+    rows: list[int],
+    out: np.ndarray,
+) -> None:
+    """The tip twists (linear [m/s], angular [rad/s]), world axes, of the grasps ``rows`` of
+    ``out`` (G, N_max, 6), their tip origins at ``tips_in_object_m`` (len(rows), 3) [m,
+    object frame], on one sampled object motion (N samples, into out[g, :N]); each grasp's
+    numbers whatever the others (``kernels.points.tip_twists``)."""
+    from ..kernels.points import tip_twists as kernel
+
+    call_kernel(
+        kernel,
+        plain_array(motion.rotations),
+        plain_array(motion.linear_tangents),
+        plain_array(motion.angular_tangents),
+        plain_array(motion.speed_per_tangent),
+        plain_array(tips_in_object_m),
+        plain_array(base_rotation),
+        np.array(rows, dtype=np.int64),
+        out,
+    )
 
 
 PSEUDO_INVERSE_RCOND = 1e-10
