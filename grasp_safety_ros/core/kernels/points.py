@@ -504,6 +504,7 @@ def tip_following_rates(
     diagonal,
     scales,
     solution,
+    dots,
 ):
     """For grasp g and sample i < counts[g]: q̇ = q̇_s + J⁺ (ξ − J q̇_s) into rates[g, i], with
     J = tip_jacobians[g, i] (6, n), ξ = twists[g, i], q̇_s = spline_rates[g, i]: the
@@ -513,7 +514,9 @@ def tip_following_rates(
     J near rank-deficient, where the pseudo-inverse drops directions), fallback[g, i] is set
     and rates[g, i] left as it is, for the caller's pseudo-inverse.
 
-    transposed (n, 6), diagonal (6,), scales (6,), solution (n,): scratch."""
+    The reflectors' dot products with every column are taken side by side with the norm
+    (one pass over x, the critical path of each reflector a single sum).
+    transposed (n, 6), diagonal (6,), scales (6,), solution (n,), dots (6,): scratch."""
     n = tip_jacobians.shape[3]
     for g in range(tip_jacobians.shape[0]):
         for i in range(counts[g]):
@@ -526,22 +529,27 @@ def tip_following_rates(
                     transposed[r, c] = jacobian[c, r]
             largest = 0.0
             for j in range(6):  # reflector j: I - scales[j] v vᵀ, v kept in transposed[j:, j]
-                norm = 0.0
+                # x = transposed[j:, j]: |x|² and every column's x . column side by side
+                norm = d0 = d1 = d2 = d3 = d4 = d5 = 0.0
                 for r in range(j, n):
-                    norm += transposed[r, j] * transposed[r, j]
+                    x, row = transposed[r, j], transposed[r]
+                    norm += x * x
+                    d0 += x * row[0]
+                    d1 += x * row[1]
+                    d2 += x * row[2]
+                    d3 += x * row[3]
+                    d4 += x * row[4]
+                    d5 += x * row[5]
+                dots[0], dots[1], dots[2], dots[3], dots[4], dots[5] = d0, d1, d2, d3, d4, d5
                 norm = norm**0.5
-                alpha = -norm if transposed[j, j] >= 0.0 else norm
+                head = transposed[j, j]
+                alpha = -norm if head >= 0.0 else norm
                 diagonal[j] = alpha
-                transposed[j, j] -= alpha
-                length = 0.0
-                for r in range(j, n):
-                    length += transposed[r, j] * transposed[r, j]
-                scales[j] = 2.0 / length if length > 0.0 else 0.0
-                for c in range(j + 1, 6):
-                    dot = 0.0
-                    for r in range(j, n):
-                        dot += transposed[r, j] * transposed[r, c]
-                    dot *= scales[j]
+                transposed[j, j] = head - alpha  # v = x - alpha e_j: |v|² = 2 |x| (|x| + |x_j|)
+                length = norm * (norm + abs(head))
+                scales[j] = 1.0 / length if length > 0.0 else 0.0
+                for c in range(j + 1, 6):  # v . column = x . column - alpha column_j
+                    dot = (dots[c] - alpha * transposed[j, c]) * scales[j]
                     for r in range(j, n):
                         transposed[r, c] -= dot * transposed[r, j]
                 largest = max(largest, abs(alpha))

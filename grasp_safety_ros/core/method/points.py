@@ -323,6 +323,7 @@ def tip_following_rates(
         np.empty(6),
         np.empty(6),
         np.empty(n),
+        np.empty(6),
     )
     if fallback.any():
         jacobian, twist, rate = jacobians[fallback], twists[fallback], base[fallback]
