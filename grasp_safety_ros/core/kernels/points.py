@@ -1,7 +1,9 @@
 """Effective masses at points of the moving chain over (grasp, sample, point), compiled, from
 the shared per-(grasp, sample) terms (``method.terms.SampleTerms``): points fixed to the tip
-(the carried object's exposed points) and sites fixed to the links (the whole arm); and the
-joint velocities that make the tip follow its twist (``tip_following_rates``).
+(the carried object's exposed points) and sites fixed to the links (the whole arm, sites on
+one body sharing its 6 x 6 mobility); the tip twists of an object motion (``tip_twists``)
+and the joint velocities that make the tip follow them (``tip_following_rates``); the whole
+arm's ISO/TS 15066 worst cases (``region_peaks``).
 
 A point's translational mobility is A = J_p M^-1 J_p^T [1/kg] and its effective mass along a
 unit direction u is 1 / (u^T A u); a point that does not move has no direction, so its A is

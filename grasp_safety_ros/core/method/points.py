@@ -1,6 +1,7 @@
 """Effective masses at points of the moving chain over (grasp, sample, point), on the shared
 terms (``terms.SampleTerms``) by the compiled kernels ``kernels.points``: points fixed to the
-tip (``analyses.exposed_points``) and sites fixed to the links (``analyses.whole_arm``).
+tip (``analyses.exposed_points``) and sites fixed to the links (``analyses.whole_arm``); the
+tip twists and tip-following joint rates, and the whole arm's ISO/TS 15066 peaks.
 
 A point's translational mobility is A = J_p M⁻¹ J_pᵀ [1/kg] (M of the augmented chain, as the
 ranking's); its effective mass along a unit direction u is 1 / (uᵀ A u) [kg]. Where a point
