@@ -481,27 +481,13 @@ def evaluate_whole_arm_on_terms(
     durations = [float(t.duration_s) for t in trajectories]
     assessed = assess_sites_batch(speeds, masses, durations, regions, compiled=True)
     results = []
+    arrays = (positions, directions, stationary, speeds, masses, energies)  # SiteExposure's
     for g, evaluation in enumerate(evaluations):
-        count = int(counts[g])
-        exposure = SiteExposure(
-            positions_in_base_m=positions[g, :count],
-            directions_in_base=directions[g, :count],
-            stationary=stationary[g, :count],
-            speed_m_s=speeds[g, :count],
-            effective_mass_kg=masses[g, :count],
-        )
+        *exposure, energy = (array[g, : int(counts[g])] for array in arrays)
         times = np.asarray(evaluation.times_s, dtype=float)
+        assessment = (regions, durations[g], assessed[g], energy)
         results.append(
-            _whole_arm_result(
-                evaluation,
-                sites,
-                times,
-                exposure,
-                regions,
-                durations[g],
-                assessed[g],
-                energies[g, :count],
-            )
+            _whole_arm_result(evaluation, sites, times, SiteExposure(*exposure), *assessment)
         )
     return results
 

@@ -3,15 +3,13 @@ the shared per-(grasp, sample) terms (``method.terms.SampleTerms``): points fixe
 (the carried object's exposed points) and sites fixed to the links (the whole arm, sites on
 one body sharing its 6 x 6 mobility); the tip twists of an object motion (``tip_twists``)
 and the joint velocities that make the tip follow them (``tip_following_rates``); the whole
-arm's ISO/TS 15066 worst cases (``region_peaks``).
+arm's ISO/TS 15066 worst cases are in ``kernels.regions``.
 
 A point's translational mobility is A = J_p M^-1 J_p^T [1/kg] and its effective mass along a
 unit direction u is 1 / (u^T A u); a point that does not move has no direction, so its A is
 handed back (``method.points`` takes its smallest eigenvalue, as the Pinocchio path does).
 The self-motion's joint rates come from the clamped cubic spline through the samples
 (``clamped_spline_velocities``, ``method.executable``'s numbers bit for bit)."""
-
-import math
 
 from ._jit import _jit, _jit_exact, _jit_inline
 
@@ -156,6 +154,86 @@ def _dot6(row, y0, y1, y2, y3, y4, y5):
     return total + row[3] * y3 + row[4] * y4 + row[5] * y5
 
 
+@_jit_inline
+def _body_mobility(motions, inverse, origin, moves, columns, solved):
+    """J_o^T (n, 6) of a body at its joint's origin o into ``columns`` (v_c + w_c x o, w_c;
+    0 where not moves[c]) and M^-1 J_o^T into ``solved``, row by row."""
+    n = inverse.shape[0]
+    o = origin
+    for c in range(n):
+        s = motions[c]
+        columns[c, 0] = s[0] + (s[4] * o[2] - s[5] * o[1]) if moves[c] else 0.0
+        columns[c, 1] = s[1] + (s[5] * o[0] - s[3] * o[2]) if moves[c] else 0.0
+        columns[c, 2] = s[2] + (s[3] * o[1] - s[4] * o[0]) if moves[c] else 0.0
+        for a in range(3, 6):
+            columns[c, a] = s[a] if moves[c] else 0.0
+    for a in range(n):
+        products = _row_products(inverse, a, columns, n)
+        for t in range(6):
+            solved[a, t] = products[t]
+
+
+@_jit_inline
+def _body_products(columns, solved, rates, twist, mobility):
+    """The body's twist J_o q̇ (6,) and mobility J_o M^-1 J_o^T (6, 6), exactly symmetric (the
+    upper triangle's numbers), from ``_body_mobility``'s J_o^T and M^-1 J_o^T."""
+    n = columns.shape[0]
+    products = _row_products(rates.reshape((1, n)), 0, columns, n)
+    for t in range(6):
+        twist[t] = products[t]
+    for a in range(6):
+        products = _row_products(columns.T, a, solved, n)
+        for t in range(a, 6):
+            mobility[a, t] = products[t]
+            mobility[t, a] = products[t]
+
+
+@_jit_inline
+def _lever_quadratic(mobility, u0, u1, u2, l0, l1, l2):
+    """y^T L y with y = (u, r x u), r = (l0, l1, l2) the lever from the body's origin: L y by
+    L's rows, then y . (L y) (a point's u^T J_p M^-1 J_p^T u from its body's L)."""
+    y3 = l1 * u2 - l2 * u1
+    y4 = l2 * u0 - l0 * u2
+    y5 = l0 * u1 - l1 * u0
+    total = u0 * _dot6(mobility[0], u0, u1, u2, y3, y4, y5)
+    total += u1 * _dot6(mobility[1], u0, u1, u2, y3, y4, y5)
+    total += u2 * _dot6(mobility[2], u0, u1, u2, y3, y4, y5)
+    total += y3 * _dot6(mobility[3], u0, u1, u2, y3, y4, y5)
+    total += y4 * _dot6(mobility[4], u0, u1, u2, y3, y4, y5)
+    return total + y5 * _dot6(mobility[5], u0, u1, u2, y3, y4, y5)
+
+
+@_jit_inline
+def _site_jacobian(motions, rates, p0, p1, p2, moves, width, jacobian):
+    """J_p (3, width) of the point p into ``jacobian`` (v_c + w_c x p; 0 where not moves[c])
+    and its velocity J_p q̇."""
+    v0 = v1 = v2 = 0.0
+    for c in range(width):
+        s = motions[c]
+        jacobian[0, c] = s[0] + (s[4] * p2 - s[5] * p1) if moves[c] else 0.0
+        jacobian[1, c] = s[1] + (s[5] * p0 - s[3] * p2) if moves[c] else 0.0
+        jacobian[2, c] = s[2] + (s[3] * p1 - s[4] * p0) if moves[c] else 0.0
+        v0 += jacobian[0, c] * rates[c]
+        v1 += jacobian[1, c] * rates[c]
+        v2 += jacobian[2, c] * rates[c]
+    return v0, v1, v2
+
+
+@_jit_inline
+def _site_quadratic(inverse, jacobian, weights, u0, u1, u2, width):
+    """u^T J_p M^-1 J_p^T u over J_p's first ``width`` columns: w = J_p^T u into ``weights``,
+    then w^T M^-1 w."""
+    for c in range(width):
+        weights[c] = jacobian[0, c] * u0 + jacobian[1, c] * u1 + jacobian[2, c] * u2
+    total = 0.0
+    for a in range(width):
+        inner = 0.0
+        for c in range(width):
+            inner += inverse[a, c] * weights[c]
+        total += weights[a] * inner
+    return total
+
+
 @_jit
 def arm_site_exposure(
     joint_rotations,
@@ -209,43 +287,15 @@ def arm_site_exposure(
     base_rotation (3, 3), base_translation (3,): the base frame in the world frame.
     jacobian (3, n), weights (n,), solved (n, 6): M^-1 J_o^T, columns (n, 6): J_o^T,
     body_mobilities (B, 6, 6), body_twists (B, 6): scratch."""
-    n = minv.shape[2]
     r = base_rotation
     for g in range(joint_motions.shape[0]):
         for i in range(counts[g]):
             motions, inverse, rates = joint_motions[g, i], minv[g, i], joint_velocities[g, i]
             for b in range(body_joints.shape[0]):
-                o = joint_origins[g, i, body_joints[b]]
-                for c in range(n):  # J_o's column c (0 for the joints that do not move b)
-                    s = motions[c]
-                    moves = body_support[b, c]
-                    columns[c, 0] = s[0] + (s[4] * o[2] - s[5] * o[1]) if moves else 0.0
-                    columns[c, 1] = s[1] + (s[5] * o[0] - s[3] * o[2]) if moves else 0.0
-                    columns[c, 2] = s[2] + (s[3] * o[1] - s[4] * o[0]) if moves else 0.0
-                    for a in range(3, 6):
-                        columns[c, a] = s[a] if moves else 0.0
-                twist, mobility = body_twists[b], body_mobilities[b]
-                t0 = t1 = t2 = t3 = t4 = t5 = 0.0
-                for c in range(n):
-                    rate = rates[c]
-                    t0 += columns[c, 0] * rate
-                    t1 += columns[c, 1] * rate
-                    t2 += columns[c, 2] * rate
-                    t3 += columns[c, 3] * rate
-                    t4 += columns[c, 4] * rate
-                    t5 += columns[c, 5] * rate
-                twist[0], twist[1], twist[2], twist[3], twist[4], twist[5] = t0, t1, t2, t3, t4, t5
-                for a in range(n):  # M^-1 J_o^T, row by row
-                    products = _row_products(inverse, a, columns, n)
-                    for t in range(6):
-                        solved[a, t] = products[t]
-                for a in range(6):  # J_o M^-1 J_o^T = (J_o^T)^T (M^-1 J_o^T), rows of both
-                    products = _row_products(columns.T, a, solved, n)
-                    for t in range(6):
-                        mobility[a, t] = products[t]
-                for a in range(6):  # symmetric: the upper triangle's numbers
-                    for t in range(a + 1, 6):
-                        mobility[t, a] = mobility[a, t]
+                origin = joint_origins[g, i, body_joints[b]]
+                mobility, twist = body_mobilities[b], body_twists[b]
+                _body_mobility(motions, inverse, origin, body_support[b], columns, solved)
+                _body_products(columns, solved, rates, twist, mobility)
             for k in range(site_joints.shape[0]):
                 j = site_joints[k]
                 rotation, origin, point = (
@@ -273,16 +323,9 @@ def arm_site_exposure(
                     v1 = v_[1] + (v_[5] * l0 - v_[3] * l2)
                     v2 = v_[2] + (v_[3] * l1 - v_[4] * l0)
                 else:
-                    v0 = v1 = v2 = 0.0
-                    for c in range(width):
-                        s = motions[c]
-                        moves = support[k, c]
-                        jacobian[0, c] = s[0] + (s[4] * p2 - s[5] * p1) if moves else 0.0
-                        jacobian[1, c] = s[1] + (s[5] * p0 - s[3] * p2) if moves else 0.0
-                        jacobian[2, c] = s[2] + (s[3] * p1 - s[4] * p0) if moves else 0.0
-                        v0 += jacobian[0, c] * rates[c]
-                        v1 += jacobian[1, c] * rates[c]
-                        v2 += jacobian[2, c] * rates[c]
+                    v0, v1, v2 = _site_jacobian(
+                        motions, rates, p0, p1, p2, support[k], width, jacobian
+                    )
                 speed = (v0 * v0 + v1 * v1 + v2 * v2) ** 0.5
                 stationary[g, i, k] = speed < stationary_speed
                 if speed < stationary_speed:
@@ -293,28 +336,10 @@ def arm_site_exposure(
                 u0, u1, u2 = v0 / speed, v1 / speed, v2 / speed
                 for a in range(3):
                     directions[g, i, k, a] = r[0, a] * u0 + r[1, a] * u1 + r[2, a] * u2
-                if b >= 0:  # y^T L y, y = (u, r x u): L y by L's rows, then y . (L y)
-                    mobility = body_mobilities[b]
-                    y3 = l1 * u2 - l2 * u1
-                    y4 = l2 * u0 - l0 * u2
-                    y5 = l0 * u1 - l1 * u0
-                    total = u0 * _dot6(mobility[0], u0, u1, u2, y3, y4, y5)
-                    total += u1 * _dot6(mobility[1], u0, u1, u2, y3, y4, y5)
-                    total += u2 * _dot6(mobility[2], u0, u1, u2, y3, y4, y5)
-                    total += y3 * _dot6(mobility[3], u0, u1, u2, y3, y4, y5)
-                    total += y4 * _dot6(mobility[4], u0, u1, u2, y3, y4, y5)
-                    total += y5 * _dot6(mobility[5], u0, u1, u2, y3, y4, y5)
-                    masses[g, i, k] = 1.0 / total
-                    energies[g, i, k] = 0.5 * masses[g, i, k] * (speed * speed)
-                    continue
-                for c in range(width):  # w = J_p^T u, then w^T M^-1 w
-                    weights[c] = jacobian[0, c] * u0 + jacobian[1, c] * u1 + jacobian[2, c] * u2
-                total = 0.0
-                for a in range(width):
-                    inner = 0.0
-                    for c in range(width):
-                        inner += inverse[a, c] * weights[c]
-                    total += weights[a] * inner
+                if b >= 0:
+                    total = _lever_quadratic(body_mobilities[b], u0, u1, u2, l0, l1, l2)
+                else:
+                    total = _site_quadratic(inverse, jacobian, weights, u0, u1, u2, width)
                 masses[g, i, k] = 1.0 / total
                 energies[g, i, k] = 0.5 * masses[g, i, k] * (speed * speed)
         for i in range(counts[g], joint_motions.shape[1]):
@@ -374,96 +399,6 @@ def site_mobilities(
                     total += jacobian[a, c] * inner
                 out[row, a, b] = total
                 out[row, b, a] = total
-
-
-PRUNE_MARGIN = 1e-9
-"""Relative margin of ``region_peaks``' pruning: far above the few roundings of its bounds."""
-
-
-@_jit_exact
-def region_peaks(
-    speeds,
-    masses,
-    sites,
-    human_inverse,
-    springs,
-    where,
-    peak,
-    bounds,
-    sample_speeds,
-    sample_energies,
-    kind,
-    site_speeds,
-    site_energies,
-):
-    """numpy's ``arm_regions.assess_sites_batch`` forces and their first maximum, bit for bit,
-    without evaluating most of them: for motion g and region r, over the entries e = i K + k
-    (sample i, site k; K = ``sites``) of speeds[g] and masses[g], F = v sqrt(k / (c + 1/m))
-    (c = human_inverse[r] = 1/m_h, k = springs[r], the same operations in the same order;
-    0 where not v > 0): where[g, r] the first e of the largest F (or of the first NaN, as
-    numpy's argmax) and peak[g, r] that F.
-
-    F² = k / (c a + b) with a = 1/v² and b = 1/(m v²), per entry (``site_speeds``,
-    ``site_energies``) and their minima per sample (a bound of the sample's F²). With L the
-    largest F of the sample of the largest bound, a sample, then an entry, whose bound is
-    below L² by more than PRUNE_MARGIN (the bounds' and F's roundings are a few 1e-16) has
-    no F >= L and is not evaluated. Samples where a moving site's mass is not > 0 (NaN, 0,
-    negative) are evaluated whole, and everything is where L is not within [1e-100, 1e100]
-    (no underflow or overflow in the bounds).
-    bounds, sample_speeds, sample_energies (N,), kind (N,) int64 (0: no site moves,
-    1: bounded, 2: evaluated), site_speeds, site_energies (N K,): scratch."""
-    samples = speeds.shape[1] // sites if sites > 0 else 0
-    for g in range(speeds.shape[0]):
-        for i in range(samples):
-            smallest_a, smallest_b, state = math.inf, math.inf, 0
-            for k in range(sites):
-                e = i * sites + k
-                v = speeds[g, e]
-                if v > 0.0:
-                    m = masses[g, e]
-                    state = max(state, 1 if m > 0.0 else 2)
-                    site_speeds[e] = 1.0 / (v * v)
-                    site_energies[e] = 1.0 / (m * v * v)
-                    smallest_a = min(smallest_a, site_speeds[e])
-                    smallest_b = min(smallest_b, site_energies[e])
-            sample_speeds[i], sample_energies[i], kind[i] = smallest_a, smallest_b, state
-        for r in range(human_inverse.shape[0]):
-            c, spring = human_inverse[r], springs[r]
-            first, smallest = -1, math.inf
-            for i in range(samples):
-                bounds[i] = c * sample_speeds[i] + sample_energies[i]
-                if kind[i] == 1 and bounds[i] < smallest:
-                    first, smallest = i, bounds[i]
-            low = -1.0
-            for k in range(sites if first >= 0 else 0):
-                e = first * sites + k
-                if speeds[g, e] > 0.0:
-                    force = speeds[g, e] * math.sqrt(spring * (1.0 / (c + 1.0 / masses[g, e])))
-                    low = max(low, force)
-            prune = 1e-100 <= low <= 1e100
-            scale = low * low * (1.0 - PRUNE_MARGIN)
-            at, top = 0, -1.0
-            for i in range(samples):
-                if prune and (kind[i] == 0 or (kind[i] == 1 and bounds[i] * scale > spring)):
-                    continue
-                found = False
-                for k in range(sites):
-                    e = i * sites + k
-                    v = speeds[g, e]
-                    if prune and kind[i] == 1:  # F = 0, or its bound below L
-                        if not v > 0.0 or (c * site_speeds[e] + site_energies[e]) * scale > spring:
-                            continue
-                    force = 0.0
-                    if v > 0.0:
-                        force = v * math.sqrt(spring * (1.0 / (c + 1.0 / masses[g, e])))
-                    if force != force:
-                        at, top, found = e, force, True
-                        break
-                    if force > top:
-                        at, top = e, force
-                if found:
-                    break
-            where[g, r], peak[g, r] = at, top
 
 
 @_jit

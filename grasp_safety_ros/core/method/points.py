@@ -225,8 +225,8 @@ def region_peaks(
     [1/kg], k [N/m]): the flat index (G, R) into (N, K) of the first largest ISO/TS 15066
     transient force F = v sqrt(k / (1/m_h + 1/m)) (0 where not v > 0) and that force (G, R)
     [N], numpy's arithmetic and ``argmax`` bit for bit, most forces not evaluated
-    (``kernels.points.region_peaks``)."""
-    from ..kernels.points import region_peaks as kernel
+    (``kernels.regions.region_peaks``)."""
+    from ..kernels.regions import region_peaks as kernel
 
     grasps, samples, sites = speed_m_s.shape
     regions = len(human_inverse_kg)
