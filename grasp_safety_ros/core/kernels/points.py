@@ -155,6 +155,25 @@ def _dot6(row, y0, y1, y2, y3, y4, y5):
 
 
 @_jit_inline
+def _rotated(rotation, point):
+    """rotation @ point (3 x 3, 3), component by component."""
+    x0 = rotation[0, 0] * point[0] + rotation[0, 1] * point[1]
+    x0 += rotation[0, 2] * point[2]
+    x1 = rotation[1, 0] * point[0] + rotation[1, 1] * point[1]
+    x1 += rotation[1, 2] * point[2]
+    x2 = rotation[2, 0] * point[0] + rotation[2, 1] * point[1]
+    x2 += rotation[2, 2] * point[2]
+    return x0, x1, x2
+
+
+@_jit_inline
+def _store_in_base(rotation, x0, x1, x2, out):
+    """out = rotation^T x: world axes -> base axes (``rotation`` the base's in the world)."""
+    for a in range(3):
+        out[a] = rotation[0, a] * x0 + rotation[1, a] * x1 + rotation[2, a] * x2
+
+
+@_jit_inline
 def _body_mobility(motions, inverse, origin, moves, columns, solved):
     """J_o^T (n, 6) of a body at its joint's origin o into ``columns`` (v_c + w_c x o, w_c;
     0 where not moves[c]) and M^-1 J_o^T into ``solved``, row by row."""
@@ -297,24 +316,11 @@ def arm_site_exposure(
                 _body_mobility(motions, inverse, origin, body_support[b], columns, solved)
                 _body_products(columns, solved, rates, twist, mobility)
             for k in range(site_joints.shape[0]):
-                j = site_joints[k]
-                rotation, origin, point = (
-                    joint_rotations[g, i, j],
-                    joint_origins[g, i, j],
-                    points_in_joint[k],
-                )
-                l0 = rotation[0, 0] * point[0] + rotation[0, 1] * point[1]
-                l0 += rotation[0, 2] * point[2]
-                l1 = rotation[1, 0] * point[0] + rotation[1, 1] * point[1]
-                l1 += rotation[1, 2] * point[2]
-                l2 = rotation[2, 0] * point[0] + rotation[2, 1] * point[1]
-                l2 += rotation[2, 2] * point[2]
+                j, t = site_joints[k], base_translation
+                l0, l1, l2 = _rotated(joint_rotations[g, i, j], points_in_joint[k])  # the lever
+                origin = joint_origins[g, i, j]
                 p0, p1, p2 = origin[0] + l0, origin[1] + l1, origin[2] + l2
-                q0 = p0 - base_translation[0]
-                q1 = p1 - base_translation[1]
-                q2 = p2 - base_translation[2]
-                for a in range(3):
-                    positions[g, i, k, a] = r[0, a] * q0 + r[1, a] * q1 + r[2, a] * q2
+                _store_in_base(r, p0 - t[0], p1 - t[1], p2 - t[2], positions[g, i, k])
                 b = site_body[k]
                 width = site_columns[k]
                 if b >= 0:
@@ -334,8 +340,7 @@ def arm_site_exposure(
                     continue
                 speeds[g, i, k] = speed
                 u0, u1, u2 = v0 / speed, v1 / speed, v2 / speed
-                for a in range(3):
-                    directions[g, i, k, a] = r[0, a] * u0 + r[1, a] * u1 + r[2, a] * u2
+                _store_in_base(r, u0, u1, u2, directions[g, i, k])
                 if b >= 0:
                     total = _lever_quadratic(body_mobilities[b], u0, u1, u2, l0, l1, l2)
                 else:
