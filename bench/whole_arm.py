@@ -7,11 +7,12 @@ process (less inflated than wall-clock time when other processes share the cores
 
 - ``us_per_sample``: the whole arm as the report runs it with a compiled evaluator: the shared
   terms of all feasible grasps in one kernel call (``method.terms.grasps_terms``), then
-  ``evaluate_whole_arm_on_terms`` (q̇, the site kernel over (grasp, sample, site), ISO/TS 15066
-  over every body region in one array pass), the default sites (joint origins from the third,
-  the tip) + 8 points: the box's corners as user points on the tip's link (``arm_points_m``,
-  placed by the first candidate grasp; what a user declares for a held box), as issue 30's
-  row "default sites + 8 points" and bench/retime.py's 14 Panda sites;
+  ``evaluate_whole_arm_on_terms`` (q̇, the site kernel over (grasp, sample, site), ISO/TS
+  15066's peaks over every body region; per step: ``whole_arm_steps.py``), the default sites
+  (joint origins from the third, the tip) + 8 points: the box's corners as user points on the
+  tip's link (``arm_points_m``, placed by the first candidate grasp; what a user declares for a
+  held box), as issue 30's row "default sites + 8 points" and bench/retime.py's 14 Panda
+  sites;
 - ``us_per_sample_pinocchio``: ``evaluate_whole_arm`` per grasp on the Pinocchio reference path
   (per-sample placements, Jacobians, M⁻¹ of the augmented model; q̇; vectorised site arrays);
 - ``us_per_sample_given_terms``: the reference's vectorised part alone (``site_exposure`` +

@@ -111,24 +111,47 @@ def test_tip_points_of_a_one_joint_arm_have_the_closed_form_mass(one_joint: tupl
 
 
 @needs_numba
-def test_sites_of_a_one_joint_arm_have_the_closed_form_speed_and_mass(one_joint: tuple) -> None:
-    from grasp_safety_ros.core.method.points import site_masses
+@pytest.mark.parametrize("alone", [True, False])
+def test_sites_of_a_one_joint_arm_have_the_closed_form_speed_and_mass(
+    one_joint: tuple, alone: bool
+) -> None:
+    """A site at radius r: on a circle, speed |q̇| r, M_eff = I / r² along the tangent, each
+    site alone and (four on the body) through the body's shared 6 x 6 mobility; at rest it is
+    flagged, its mobility (r²/I) t tᵀ."""
+    from grasp_safety_ros.core.method import points
 
     _, angles, terms, counts = one_joint
-    radius, rate = 0.3, -1.7  # [m], [rad/s]
+    radii, rate = np.array([0.3, 0.1, 0.45, 0.2]), -1.7  # [m], [rad/s]
+    sites = 1 if alone else len(radii)
+    assert (sites >= points.SHARED_BODY_SITES) != alone
     rates = np.full((1, len(angles), 1), rate)
     rates[0, 2] = 0.0  # at rest: no direction, the mass is left to the caller
-    positions, velocities, speeds, masses = site_masses(
-        terms, counts, [0], [[radius, 0.0, 0.0]], [[True]], rates, 1e-9
+    in_joint = np.column_stack([radii, np.zeros(4), np.zeros(4)])[:sites]
+    site = (np.zeros(sites, np.int64), in_joint, np.ones((sites, 1), dtype=bool))
+    positions, directions, speeds, masses, energies, still = points.arm_site_exposure(
+        terms, counts, (np.eye(3), np.zeros(3)), *site, rates, 1e-9
     )
-    circle = radius * np.stack([np.cos(angles), np.sin(angles), np.zeros_like(angles)], axis=1)
-    assert_close_to_scale(positions[0, :, 0], circle, "positions", CLOSED_FORM)
-    tangent = rates[0] * np.stack([-circle[:, 1], circle[:, 0], np.zeros_like(angles)], axis=1)
-    assert_close_to_scale(velocities[0, :, 0], tangent, "velocities", CLOSED_FORM)
-    assert_close_to_scale(speeds[0, :, 0], np.abs(rates[0, :, 0]) * radius, "speeds", CLOSED_FORM)
     moving = rates[0, :, 0] != 0.0
-    expected = np.full(moving.sum(), one_joint_inertia_kgm2() / radius**2)
-    assert_close_to_scale(masses[0, moving, 0], expected, "I / r^2", CLOSED_FORM)
+    np.testing.assert_array_equal(still[0], ~moving[:, None].repeat(sites, 1))
+    inertia = one_joint_inertia_kgm2()
+    circle = np.stack([np.cos(angles), np.sin(angles), np.zeros_like(angles)], axis=1)
+    tangent = np.stack([-circle[:, 1], circle[:, 0], np.zeros_like(angles)], axis=1)
+    for k, radius in enumerate(radii[:sites]):
+        assert_close_to_scale(positions[0, :, k], radius * circle, "positions", CLOSED_FORM)
+        expected = np.where(moving, abs(rate) * radius, 0.0)
+        assert_close_to_scale(speeds[0, :, k], expected, "speeds", CLOSED_FORM)
+        assert_close_to_scale(
+            directions[0, moving, k], np.sign(rate) * tangent[moving], "u", CLOSED_FORM
+        )
+        expected = np.full(moving.sum(), inertia / radius**2)
+        assert_close_to_scale(masses[0, moving, k], expected, "I / r^2", CLOSED_FORM)
+        expected = 0.5 * inertia * np.where(moving, rate, 0.0) ** 2  # ½ M_eff v² = ½ I q̇²
+        assert_close_to_scale(energies[0, :, k], expected, "energy", CLOSED_FORM)
+    at = np.argwhere(still)
+    mobilities = points.site_mobilities(terms, *site, at)
+    for (_, i, k), mobility in zip(at, mobilities, strict=True):
+        expected = radii[k] ** 2 / inertia * np.outer(tangent[i], tangent[i])
+        assert_close_to_scale(mobility, expected, "mobility", CLOSED_FORM)
 
 
 @needs_numba
@@ -344,3 +367,103 @@ def test_exposed_points_on_recycled_terms_buffers_equal_one_chunk(
         for field, value in _fields(ours).items():
             np.testing.assert_array_equal(value, getattr(theirs, field), err_msg=field)
             assert not (ours.feasible and value.flags.writeable), field
+
+
+@needs_numba
+@pytest.mark.parametrize("name", ["arm7", "baxter", "prismatic_arm", "continuous_arm"])
+def test_sites_sharing_their_bodys_mobility_equal_pinocchio(
+    name: str, request: pytest.FixtureRequest
+) -> None:
+    """Several random points on the base-most moving link, on a link without a joint of its
+    own (welded to a moving one) and on the tip's link: through their body's shared 6 x 6
+    mobility (u^T J_p M⁻¹ J_pᵀ u = yᵀ L y, y = (u, r × u)) equal to the Pinocchio
+    reference's per-site J_p M⁻¹ J_pᵀ."""
+    from grasp_safety_ros.core.analyses.arm_sites import _child_link
+    from grasp_safety_ros.core.analyses.whole_arm import evaluate_whole_arm, resolve_arm_sites
+    from grasp_safety_ros.core.method.points import SHARED_BODY_SITES, _shared_bodies
+
+    robot: RobotModel = request.getfixturevalue(name)
+    model = robot.model
+    grasp, evaluation, terms, motion = terms_case(robot, 23)
+    moving = [f for f in model.frames if f.type == pin.FrameType.BODY and f.parentJoint > 0]
+    base_most = min(moving, key=lambda f: f.parentJoint)
+    welded = [f for f in moving if f.name != _child_link(model, f.parentJoint)]
+    assert welded, "a link without a joint of its own"
+    rng = np.random.default_rng(24)
+    count = SHARED_BODY_SITES + 1
+    links = {base_most.name, welded[0].name, robot.tip_frame}
+    points = {link: rng.uniform(-0.3, 0.3, (count, 3)) for link in sorted(links)}
+    sites = resolve_arm_sites(robot, points)
+    site_body = _shared_bodies(sites.joint_ids - 1, sites.support)[0]
+    shared = np.array([name.endswith("]") for name in sites.names])
+    assert (site_body[shared] >= 0).all()  # every user point through its body's mobility
+    reference = evaluate_whole_arm(robot, evaluation, BOX, grasp, motion, sites)
+    (ours,) = evaluate_whole_arm_on_terms(
+        robot, [evaluation], [motion], [grasp], sites, select_regions(None), *one_grasp(terms)
+    )
+    np.testing.assert_array_equal(ours.stationary, reference.stationary)
+    still = reference.stationary
+    assert still.any() and not still.all()
+    tolerance = dynamics_tolerance(robot, terms)
+    for field in ("positions_in_base_m", "speed_m_s", "energy_j"):
+        assert_close_to_scale(getattr(ours, field), getattr(reference, field), field, tolerance)
+    assert_close_to_scale(
+        ours.effective_mass_kg[~still], reference.effective_mass_kg[~still], "m", tolerance
+    )
+    assert_close_to_scale(  # at rest 1/λ_min (conditioned by λ_max/λ_min): compare 1/m
+        1.0 / ours.effective_mass_kg[still],
+        1.0 / reference.effective_mass_kg[still],
+        "1/m at rest",
+        tolerance,
+    )
+    assert_close_to_scale(
+        ours.directions_in_base[~still], reference.directions_in_base[~still], "u", tolerance
+    )
+
+
+def _region_peaks_case() -> tuple[np.ndarray, np.ndarray, list]:
+    """Speeds and masses (G, N, K) with what argmax's order decides: exact ties (a repeated
+    sample, a repeated site), sites and samples at rest, masses inf, 0 and negative, a NaN
+    force in one motion; regions of finite and infinite m_h, without F_tr too."""
+    from grasp_safety_ros.core.analyses.iso15066 import BodyRegion
+
+    rng = np.random.default_rng(25)
+    speeds = rng.uniform(0.0, 2.0, (4, 30, 5)) ** 3
+    masses = rng.uniform(0.5, 20.0, (4, 30, 5))
+    speeds[rng.uniform(size=speeds.shape) < 0.2] = 0.0
+    speeds[:, 7] = speeds[:, 3]  # a repeated sample
+    masses[:, 7] = masses[:, 3]
+    speeds[:, :, 4], masses[:, :, 4] = speeds[:, :, 1], masses[:, :, 1]  # a repeated site
+    speeds[:, 0] = 0.0  # a rest end
+    masses[0, 5, 2], masses[1, 9, 0], masses[1, 9, 3] = np.inf, 0.0, -3.0
+    masses[2, 11, 1] = np.nan
+    speeds[2, 11, 1] = 1.0
+    speeds[3] = 0.0  # nothing moves
+    regions = [
+        *select_regions(None),
+        BodyRegion("rigid", 100.0, 200.0, 30_000.0, np.inf),
+        BodyRegion("forbidden", 100.0, None, 30_000.0, 5.0),
+    ]
+    return speeds, masses, regions
+
+
+@needs_numba
+def test_compiled_region_peaks_are_numpys_bit_for_bit() -> None:
+    """The compiled peaks evaluate few forces (a sample whose bound F(max v, max m) is below
+    a force found holds no maximum) yet give numpy's forces and argmax, ties, rest, inf, 0,
+    negative and NaN masses included."""
+    from grasp_safety_ros.core.analyses.arm_regions import _region_peaks, assess_sites_batch
+
+    speeds, masses, regions = _region_peaks_case()
+    durations = [2.0, 1.5, 3.0, 1.0]
+    with np.errstate(invalid="ignore"):
+        compiled = assess_sites_batch(speeds, masses, durations, regions, compiled=True)
+        expected = assess_sites_batch(speeds, masses, durations, regions)
+        where, peak = _region_peaks(speeds, masses, regions)
+    # every field; the floats bit for bit (repr round-trips a float; NaN == NaN as text)
+    assert repr(compiled) == repr(expected)
+    assert np.isnan(peak[2]).all() and (peak[3] == 0.0).all() and (where[3] == 0).all()
+    assert np.isnan(peak[1]).any() and np.isinf(peak[:2]).any()  # m < 0; m_h = m = inf
+    tied = np.isin(where[:2] // 5, [3, 7]) | np.isin(where[:2] % 5, [1, 4])
+    assert tied.any()  # the ties decide somewhere: the first of them
+    assert not (np.isin(where[:2] // 5, [7]) | np.isin(where[:2] % 5, [4])).any()

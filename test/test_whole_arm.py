@@ -533,6 +533,7 @@ def test_tip_twists_from_the_object_motion_equal_the_trajectorys() -> None:
     """The vectorised twists (object motion sampled once) equal each trajectory's tip_twists,
     for the quintic and for a waypoint path."""
     from grasp_safety_ros.core.analyses.whole_arm import tip_twists_in_base
+    from grasp_safety_ros.core.method.points import tip_twists_into
     from grasp_safety_ros.paths import config_file
     from grasp_safety_ros.scenario.schema import load_scenario
 
@@ -543,6 +544,15 @@ def test_tip_twists_from_the_object_motion_equal_the_trajectorys() -> None:
         expected = trajectory.tip_twists(grasp, times)[0]
         got = tip_twists_in_base(trajectory, grasp, times)
         np.testing.assert_allclose(got, expected, rtol=0, atol=1e-14 * np.abs(expected).max())
+        # several grasps at once, world axes of a rotated base: each its own tip_twists
+        tips = np.array([grasp.translation, [0.1, 0.0, -0.2], [0.0, 0.3, 0.1]])
+        many = np.zeros((4, len(times), 6))
+        tip_twists_into(trajectory.object_motion(times), tips, grasp.rotation, [2, 0, 3], many)
+        assert not many[1].any()  # a row not asked for
+        for tip, got in zip(tips, many[[2, 0, 3]], strict=True):
+            twists = trajectory.tip_twists(pin.SE3(grasp.rotation, tip), times)[0]
+            expected = (twists.reshape(-1, 2, 3) @ grasp.rotation.T).reshape(-1, 6)
+            np.testing.assert_allclose(got, expected, rtol=0, atol=1e-14 * np.abs(expected).max())
 
 
 def test_cli_rank_by_whole_arm_chooses_postures_by_it(

@@ -56,11 +56,62 @@ def assess_sites_batch(
     effective_mass_kg: np.ndarray,
     durations_s: Sequence[float],
     regions: Sequence[BodyRegion],
+    compiled: bool = False,
 ) -> list[tuple[WholeArmRegion, ...]]:
     """``assess_sites`` of G motions at once: (G, N, K) speeds [m/s] and masses [kg] (rows a
     motion does not have: speed 0), (G,) durations [s]; the same numbers, one array pass per
-    region over every motion."""
+    region over every motion, or with ``compiled`` (numba installed) the peaks by
+    ``method.points.region_peaks``, the same bits without evaluating most forces."""
     grasps, _, count_sites = speed_m_s.shape
+    if compiled and speed_m_s.size:
+        from ..method.points import region_peaks
+
+        human_inverse = np.array([1.0 / r.effective_mass_kg for r in regions])  # inf: 0
+        springs = np.array([r.spring_constant_n_per_m for r in regions])
+        where, peak = region_peaks(speed_m_s, effective_mass_kg, human_inverse, springs)
+    else:
+        where, peak = _region_peaks(speed_m_s, effective_mass_kg, regions)
+    moving = np.zeros(where.shape, dtype=bool)  # the site at each peak moves
+    if speed_m_s.size:
+        moving = np.take_along_axis(speed_m_s.reshape(grasps, -1), where, axis=1) > 0.0
+    columns = []
+    for r, region in enumerate(regions):
+        if region.max_transient_force_n is None:  # inf wherever a site moves
+            worst = np.where(moving[:, r], np.inf, 0.0)
+        else:
+            worst = peak[:, r] / region.max_transient_force_n
+        columns.append((where[:, r].tolist(), worst.tolist(), peak[:, r].tolist()))
+    named = [(r.name, r.transient_contact_permitted) for r in regions]
+    results = []
+    for g in range(grasps):
+        assessed = []
+        for (name, permitted), (where_list, worst_list, peak_list) in zip(
+            named, columns, strict=True
+        ):
+            sample, site = divmod(where_list[g], count_sites) if count_sites else (0, 0)
+            worst = worst_list[g]
+            assessed.append(
+                WholeArmRegion(
+                    name,
+                    permitted,
+                    worst,
+                    site,
+                    sample,
+                    peak_list[g],
+                    worst <= 1.0 + ADMISSIBLE_RATIO_TOLERANCE,
+                    durations_s[g] * worst if worst > 0.0 else 0.0,
+                )
+            )
+        results.append(tuple(assessed))
+    return results
+
+
+def _region_peaks(
+    speed_m_s: np.ndarray, effective_mass_kg: np.ndarray, regions: Sequence[BodyRegion]
+) -> tuple[np.ndarray, np.ndarray]:
+    """For (G, N, K) speeds and masses: each region's first largest force F = v sqrt(μ k)
+    (0 where not v > 0), its flat index into (N, K) and value, both (G, R), in numpy."""
+    grasps = speed_m_s.shape[0]
     speeds = speed_m_s.reshape(grasps, -1)
     masses = effective_mass_kg.reshape(grasps, -1)
     still = ~(speeds > 0.0)
@@ -68,8 +119,11 @@ def assess_sites_batch(
     with np.errstate(divide="ignore"):
         inverse_masses = 1.0 / masses
     force = np.empty_like(speeds)  # one buffer for every region (no temporaries per region)
-    columns = []
-    for region in regions:
+    where = np.zeros((grasps, len(regions)), dtype=np.int64)
+    peak = np.zeros((grasps, len(regions)))
+    if not force.shape[1]:
+        return where, peak
+    for r, region in enumerate(regions):
         # transient_contact_force_n's operations in place: F = v sqrt(k / (1/m_h + 1/m_r))
         with np.errstate(divide="ignore", invalid="ignore"):  # m_h = m_r = inf: μ = inf
             np.add(1.0 / region.effective_mass_kg, inverse_masses, out=force)
@@ -78,33 +132,6 @@ def assess_sites_batch(
             np.sqrt(force, out=force)
             np.multiply(speeds, force, out=force)
         np.copyto(force, 0.0, where=still)  # a site at rest: no force (not 0·inf)
-        if force.shape[1]:  # at the peak force: F/F_tr's maximum, or inf wherever moving
-            where = np.argmax(force, axis=1)
-            peak = force[rows, where]
-            if region.max_transient_force_n is None:
-                worst = np.where(still[rows, where], 0.0, np.inf)
-            else:
-                worst = peak / region.max_transient_force_n
-        else:
-            where, worst, peak = np.zeros(grasps, dtype=int), np.zeros(grasps), np.zeros(grasps)
-        columns.append((where.tolist(), worst.tolist(), peak.tolist()))
-    results = []
-    for g in range(grasps):
-        assessed = []
-        for region, (where, worst_list, peak_list) in zip(regions, columns, strict=True):
-            sample, site = divmod(where[g], count_sites) if count_sites else (0, 0)
-            worst = worst_list[g]
-            assessed.append(
-                WholeArmRegion(
-                    region=region.name,
-                    transient_contact_permitted=region.transient_contact_permitted,
-                    worst_force_ratio=worst,
-                    worst_site=int(site),
-                    worst_sample=int(sample),
-                    peak_contact_force_n=peak_list[g],
-                    admissible=worst <= 1.0 + ADMISSIBLE_RATIO_TOLERANCE,
-                    min_duration_s=durations_s[g] * worst if worst > 0.0 else 0.0,
-                )
-            )
-        results.append(tuple(assessed))
-    return results
+        where[:, r] = np.argmax(force, axis=1)
+        peak[:, r] = force[rows, where[:, r]]
+    return where, peak

@@ -41,12 +41,18 @@ from ..exceptions import InvalidInputError
 from ..input_checks import read_only
 from ..method.effective_mass import augmented_model
 from ..method.executable import clamped_spline_velocities, joint_velocities_accelerations
-from ..method.points import PSEUDO_INVERSE_RCOND, site_masses, tip_following_rates, valid_rows
+from ..method.points import (
+    PSEUDO_INVERSE_RCOND,
+    arm_site_exposure,
+    site_mobilities,
+    tip_following_rates,
+    tip_twists_into,
+)
 from ..method.ranking import Grasp, GraspEvaluation
 from ..method.terms import SampleTerms
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
-from ..model.trajectory import ObjectMotion, ObjectPath, Trajectory
+from ..model.trajectory import ObjectPath, Trajectory
 from .arm_regions import WholeArmRegion as WholeArmRegion
 from .arm_regions import assess_sites as assess_sites
 from .arm_regions import assess_sites_batch
@@ -176,16 +182,13 @@ def tip_twists_in_base(
     trajectory: Trajectory,
     transform_tip_to_object: pin.SE3,
     times_s: np.ndarray,
-    object_motion: ObjectMotion | None = None,
 ) -> np.ndarray:
     """Tip twists (N, 6) (linear [m/s], angular [rad/s]), base axes: from the object motion
-    sampled once (ObjectMotion: tangent times speed per tangent; ``object_motion`` when
-    already sampled at ``times_s``) for an object path, else the trajectory's ``tip_twists``."""
-    motion = object_motion
-    if motion is None:
-        if not isinstance(trajectory, ObjectPath):
-            return trajectory.tip_twists(transform_tip_to_object, times_s)[0]
-        motion = trajectory.object_motion(times_s)
+    sampled once (ObjectMotion: tangent times speed per tangent) for an object path, else the
+    trajectory's ``tip_twists``."""
+    if not isinstance(trajectory, ObjectPath):
+        return trajectory.tip_twists(transform_tip_to_object, times_s)[0]
+    motion = trajectory.object_motion(times_s)
     rate = motion.speed_per_tangent[:, None]
     tangents = motion.tip_tangents(transform_tip_to_object)
     return np.concatenate([tangents * rate, motion.angular_tangents * rate], axis=1)
@@ -299,16 +302,20 @@ def _whole_arm_result(
     regions: tuple[BodyRegion, ...],
     duration_s: float,
     assessed: tuple[WholeArmRegion, ...] | None = None,
+    energy_j: np.ndarray | None = None,
 ) -> WholeArmEvaluation:
-    """The evaluation from a grasp's exposure; ``assessed``: its ``assess_sites`` when already
-    computed (with the grasp's fellows in a batch)."""
+    """The evaluation from a grasp's exposure; ``assessed``: its ``assess_sites`` and
+    ``energy_j`` its ½ M_eff v² (0 where stationary) when already computed (with the grasp's
+    fellows in a batch)."""
     speeds, masses = exposure.speed_m_s, exposure.effective_mass_kg
     if assessed is None:
         assessed = assess_sites(speeds, masses, duration_s, regions)
     permitted = [a for a in assessed if a.transient_contact_permitted]
     limiting = max(permitted, key=lambda a: a.worst_force_ratio) if permitted else None
     feasible = evaluation.feasible
-    energy = np.where(exposure.stationary, 0.0, 0.5 * masses * speeds**2)
+    energy = energy_j
+    if energy is None:
+        energy = np.where(exposure.stationary, 0.0, 0.5 * masses * speeds**2)
     return WholeArmEvaluation(
         index=evaluation.index,
         name=evaluation.name,
@@ -392,11 +399,10 @@ def _tip_twists_in_world(
     trajectory: Trajectory,
     grasp: Grasp,
     times: np.ndarray,
-    object_motion: ObjectMotion | None = None,
 ) -> np.ndarray:
     """(N, 6) the tip's twists (linear [m/s], angular [rad/s]), world axes."""
     transform = grasp.transform_tip_to_object
-    twists_in_base = tip_twists_in_base(trajectory, transform, times, object_motion)
+    twists_in_base = tip_twists_in_base(trajectory, transform, times)
     rotation = robot.transform_base_to_world.rotation
     return np.concatenate(
         [twists_in_base[:, :3] @ rotation.T, twists_in_base[:, 3:] @ rotation.T], axis=1
@@ -417,19 +423,19 @@ def evaluate_whole_arm_on_terms(
     """``evaluate_whole_arm`` of G feasible grasps at once, on their shared terms
     (``method.terms.grasps_terms`` along ``joint_positions``, default the evaluations' own:
     axis 0 the grasp, ``counts`` samples each): q̇ from the terms' tip Jacobians (compiled,
-    ``method.points.tip_following_rates``), the sites' positions, speeds and masses by one
-    compiled call over (grasp, sample, site) (``method.points.site_masses``), ISO/TS 15066 in
-    one array pass per region.
+    ``method.points.tip_following_rates``), the sites' positions, directions, speeds and
+    masses by one compiled call over (grasp, sample, site) (``method.points.arm_site_exposure``:
+    the sites on one body share its mobility), the mobilities of the sites at rest by another,
+    ISO/TS 15066's peaks compiled (``method.points.region_peaks``, numpy's bits).
     Equal to the Pinocchio path to rounding; each grasp's result is the one it gets alone."""
     grasp_count, samples = len(evaluations), terms.jacobians_tip_in_world.shape[1]
     paths = (
         [e.joint_positions for e in evaluations] if joint_positions is None else joint_positions
     )
-    valid = valid_rows(counts, samples)
     twists = np.zeros((grasp_count, samples, 6))
     spline_rates = np.zeros((grasp_count, samples, robot.num_joints))
     by_times: dict[bytes, list[int]] = {}
-    sampled: dict[tuple[int, bytes], ObjectMotion] = {}  # each object path sampled once
+    by_motion: dict[tuple[int, bytes], list[int]] = {}  # each object path sampled once
     as_path: dict[int, ObjectPath | None] = {}  # a runtime Protocol's isinstance: ~10 µs
     for g, (evaluation, trajectory, grasp) in enumerate(
         zip(evaluations, trajectories, grasps, strict=True)
@@ -438,61 +444,50 @@ def evaluate_whole_arm_on_terms(
         key = (id(trajectory), times.tobytes())
         if key[0] not in as_path:
             as_path[key[0]] = trajectory if isinstance(trajectory, ObjectPath) else None
-        path = as_path[key[0]]
-        if path is not None and key not in sampled:
-            sampled[key] = path.object_motion(times)
-        motion = sampled.get(key)
-        twists[g, : counts[g]] = _tip_twists_in_world(robot, trajectory, grasp, times, motion)
+        if as_path[key[0]] is None:
+            twists[g, : counts[g]] = _tip_twists_in_world(robot, trajectory, grasp, times)
+        else:
+            by_motion.setdefault(key, []).append(g)
         by_times.setdefault(key[1], []).append(g)
+    for (trajectory_id, _), group in by_motion.items():
+        times, count = np.asarray(evaluations[group[0]].times_s, dtype=float), counts[group[0]]
+        motion = as_path[trajectory_id].object_motion(times)  # type: ignore[union-attr]
+        tips = np.array([grasps[g].transform_tip_to_object.translation for g in group])
+        tip_twists_into(motion, tips, robot.transform_base_to_world.rotation, group, twists)
     for group in by_times.values():
         times, count = np.asarray(evaluations[group[0]].times_s, dtype=float), counts[group[0]]
         spline_rates[group, :count] = _spline_rates(
             robot, times, [paths[g] for g in group], compiled=True
         )
     rates = tip_following_rates(terms.jacobians_tip_in_world, counts, twists, spline_rates)
-    site_joints = sites.joint_ids - 1
-    positions, velocities, speeds, masses = site_masses(
+    base = robot.transform_base_to_world
+    positions, directions, speeds, masses, energies, stationary = arm_site_exposure(
         terms,
         counts,
-        site_joints,
+        (base.rotation, base.translation),
+        sites.joint_ids - 1,
         sites.points_in_joint_m,
         sites.support,
         rates,
         STATIONARY_SPEED_M_S,
     )
-    speeds[~valid] = 0.0
-    stationary = (speeds < STATIONARY_SPEED_M_S) & valid[..., None]
-    directions = velocities / np.where(stationary | ~valid[..., None], 1.0, speeds)[..., None]
-    if stationary.any():  # the rest ends: A from the terms on arrays, then its eigenvectors
-        at_grasp, at_sample, at_site = np.nonzero(stationary)
-        motions = terms.motions_joint_in_world[at_grasp, at_sample]  # (S, n, 6)
-        columns = motions[..., :3] + np.cross(
-            motions[..., 3:], positions[at_grasp, at_sample, at_site, None]
+    if stationary.any():  # the rest ends: A's eigenvectors, world axes, then base axes
+        at = np.nonzero(stationary)
+        mobilities = site_mobilities(
+            terms, sites.joint_ids - 1, sites.points_in_joint_m, sites.support, np.stack(at, 1)
         )
-        jacobian = np.swapaxes(columns * sites.support[at_site, :, None], 1, 2)  # (S, 3, n)
-        minv = terms.mass_matrix_inverses[at_grasp, at_sample]
-        mobilities = jacobian @ minv @ np.swapaxes(jacobian, -1, -2)
-        directions[stationary], masses[stationary] = _largest_mass_directions(mobilities)
-    speeds[stationary] = 0.0
-    masses[~valid] = 1.0
+        at_rest, masses[at] = _largest_mass_directions(mobilities)
+        directions[at] = at_rest @ base.rotation
     durations = [float(t.duration_s) for t in trajectories]
-    assessed = assess_sites_batch(speeds, masses, durations, regions)
-    base = robot.transform_base_to_world
+    assessed = assess_sites_batch(speeds, masses, durations, regions, compiled=True)
     results = []
+    arrays = (positions, directions, stationary, speeds, masses, energies)  # SiteExposure's
     for g, evaluation in enumerate(evaluations):
-        count = int(counts[g])
-        exposure = SiteExposure(
-            positions_in_base_m=(positions[g, :count] - base.translation) @ base.rotation,
-            directions_in_base=directions[g, :count] @ base.rotation,
-            stationary=stationary[g, :count],
-            speed_m_s=speeds[g, :count],
-            effective_mass_kg=masses[g, :count],
-        )
+        *exposure, energy = (array[g, : int(counts[g])] for array in arrays)
         times = np.asarray(evaluation.times_s, dtype=float)
+        assessment = (regions, durations[g], assessed[g], energy)
         results.append(
-            _whole_arm_result(
-                evaluation, sites, times, exposure, regions, durations[g], assessed[g]
-            )
+            _whole_arm_result(evaluation, sites, times, SiteExposure(*exposure), *assessment)
         )
     return results
 

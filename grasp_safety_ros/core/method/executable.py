@@ -174,7 +174,7 @@ def clamped_spline_velocities(times_s: np.ndarray, joint_positions: np.ndarray) 
             if len(_ELIMINATIONS) >= KEPT_ELIMINATIONS:
                 _ELIMINATIONS.pop(next(iter(_ELIMINATIONS)), None)  # the oldest
             _ELIMINATIONS[key] = elimination
-    call_kernel(kernel, times, positions, *elimination, velocities)
+    call_kernel(kernel, times, positions, *elimination, velocities, np.empty(positions.shape[1]))
     return velocities
 
 

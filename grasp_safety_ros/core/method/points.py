@@ -1,6 +1,7 @@
 """Effective masses at points of the moving chain over (grasp, sample, point), on the shared
 terms (``terms.SampleTerms``) by the compiled kernels ``kernels.points``: points fixed to the
-tip (``analyses.exposed_points``) and sites fixed to the links (``analyses.whole_arm``).
+tip (``analyses.exposed_points``) and sites fixed to the links (``analyses.whole_arm``); the
+tip twists and tip-following joint rates, and the whole arm's ISO/TS 15066 peaks.
 
 A point's translational mobility is A = J_p M⁻¹ J_pᵀ [1/kg] (M of the augmented chain, as the
 ranking's); its effective mass along a unit direction u is 1 / (uᵀ A u) [kg]. Where a point
@@ -12,8 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..model.trajectory import ObjectMotion
 from .compiled import call_kernel, plain_array
-from .terms import SampleTerms
+from .terms import SampleTerms, _block
 
 
 def valid_rows(counts: np.ndarray, samples: int) -> np.ndarray:
@@ -71,35 +73,85 @@ def tip_point_masses(
     return masses, mask, mobilities
 
 
-def site_masses(
+SHARED_BODY_SITES = 4
+"""Sites on one body from which they share its 6 x 6 mobility per sample
+(``arm_site_exposure``): forming it costs about as much as this many sites computed alone."""
+
+
+def _shared_bodies(site_joints: np.ndarray, support: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(K,) each site's shared body (-1: computed alone), the shared bodies' chain joints (B,)
+    and their supports (B, n): the bodies carrying at least SHARED_BODY_SITES sites."""
+    joints, first, count = np.unique(site_joints, return_index=True, return_counts=True)
+    shared = count >= SHARED_BODY_SITES
+    site_body = np.full(len(site_joints), -1, dtype=np.int64)
+    for b, joint in enumerate(joints[shared]):
+        site_body[site_joints == joint] = b
+    return site_body, joints[shared].astype(np.int64), np.asarray(support, bool)[first[shared]]
+
+
+def _last_columns(support: np.ndarray) -> np.ndarray:
+    """(K,) one past the last joint that moves each site (its Jacobian's columns from there
+    on are 0: a serial chain's site near the base has fewer terms)."""
+    support = np.asarray(support, bool)
+    last = support.shape[1] - np.argmax(support[:, ::-1], axis=1)
+    return np.where(support.any(axis=1), last, 0).astype(np.int64)
+
+
+def _exposure_buffers(grasps: int, samples: int, count: int) -> list[np.ndarray]:
+    """Uninitialised (G, N, K, 3) positions and directions, (G, N, K) speeds, masses and
+    energies and a (G, N, K) bool mask: views of one block of earlier terms or results no
+    array refers to any longer (``terms._block``: fresh pages cost as much to touch as the
+    kernel that fills them), else new arrays."""
+    shape = (grasps, samples, count)
+    size = grasps * samples * count
+    block = _block(9 * size + (size + 7) // 8)
+    if block is None:
+        vectors = [np.empty((*shape, 3)) for _ in range(2)]
+        scalars = [np.empty(shape) for _ in range(3)]
+        return [*vectors, *scalars, np.empty(shape, dtype=bool)]
+    return [
+        block[: 3 * size].reshape(*shape, 3),
+        block[3 * size : 6 * size].reshape(*shape, 3),
+        *(block[start * size : (start + 1) * size].reshape(shape) for start in (6, 7, 8)),
+        block[9 * size :].view(np.bool_)[:size].reshape(shape),
+    ]
+
+
+def arm_site_exposure(
     terms: SampleTerms,
     counts: np.ndarray,
+    transform_base_to_world: tuple[np.ndarray, np.ndarray],
     site_joints: np.ndarray,
     points_in_joint_m: np.ndarray,
     support: np.ndarray,
     joint_velocities: np.ndarray,
     stationary_speed_m_s: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """World positions (G, N, K, 3) [m], velocities (G, N, K, 3) [m/s], speeds (G, N, K) and
-    effective masses along the velocity (G, N, K) [kg] of K sites fixed to the links.
+) -> tuple[np.ndarray, ...]:
+    """Positions (G, N, K, 3) [m] (base frame), unit velocities (G, N, K, 3) (base axes),
+    speeds (G, N, K) [m/s], effective masses along the velocity (G, N, K) [kg], energies
+    ½ M_eff v² (G, N, K) [J] and the stationary mask (G, N, K) of K sites fixed to the
+    links; sites on a body carrying SHARED_BODY_SITES or more share its mobility
+    (``kernels.points.arm_site_exposure``).
 
     Args:
         terms, counts: The grasps' terms (axis 0 the grasp, N rows) and sample counts (G,).
+        transform_base_to_world: (rotation (3, 3), translation (3,) [m]) of the base frame.
         site_joints: (K,) the chain joint (0-based) whose frame carries each site.
         points_in_joint_m: (K, 3) the sites in those frames [m].
         support: (K, n) True where chain joint c moves the site's body.
         joint_velocities: (G, N, n) q̇ [rad/s or m/s].
-        stationary_speed_m_s: Below this speed a site has no direction: its mass is left
-            undefined (as in rows beyond a grasp's count).
+        stationary_speed_m_s: Below this speed a site is stationary: speed and energy 0,
+            direction and mass undefined (``site_mobilities`` gives what they come from).
+    Rows beyond a grasp's count: speed 0, mass 1, not stationary, the rest undefined.
     """
-    from ..kernels.points import site_masses as kernel
+    from ..kernels.points import arm_site_exposure as kernel
 
     grasps, samples = terms.jacobians_tip_in_world.shape[:2]
-    count, n = len(site_joints), terms.mass_matrix_inverses.shape[-1]
-    positions = np.empty((grasps, samples, count, 3))
-    velocities = np.empty((grasps, samples, count, 3))
-    speeds = np.empty((grasps, samples, count))
-    masses = np.empty((grasps, samples, count))
+    joints = np.ascontiguousarray(site_joints, dtype=np.int64)
+    count, n = len(joints), terms.mass_matrix_inverses.shape[-1]
+    site_body, body_joints, body_support = _shared_bodies(joints, support)
+    outputs = _exposure_buffers(grasps, samples, count)
+    rotation, translation = transform_base_to_world
     call_kernel(
         kernel,
         plain_array(terms.rotations_joint_to_world),
@@ -107,19 +159,117 @@ def site_masses(
         plain_array(terms.motions_joint_in_world),
         plain_array(terms.mass_matrix_inverses),
         np.ascontiguousarray(counts, dtype=np.int64),
-        np.ascontiguousarray(site_joints, dtype=np.int64),
+        plain_array(rotation),
+        plain_array(translation),
+        joints,
         plain_array(points_in_joint_m),
         plain_array(support, bool),  # ArmSites.support is frozen
+        _last_columns(support),
+        site_body,
+        body_joints,
+        plain_array(body_support, bool),
         plain_array(joint_velocities),
         float(stationary_speed_m_s),
-        positions,
-        velocities,
-        speeds,
-        masses,
+        *outputs,
         np.empty((3, n)),
         np.empty(n),
+        np.empty((n, 6)),
+        np.empty((n, 6)),
+        np.empty((len(body_joints), 6, 6)),
+        np.empty((len(body_joints), 6)),
     )
-    return positions, velocities, speeds, masses
+    return tuple(outputs)
+
+
+def site_mobilities(
+    terms: SampleTerms,
+    site_joints: np.ndarray,
+    points_in_joint_m: np.ndarray,
+    support: np.ndarray,
+    at: np.ndarray,
+) -> np.ndarray:
+    """Translational mobilities J_p M⁻¹ J_pᵀ (S, 3, 3) [1/kg], world axes, of the sites (as
+    ``arm_site_exposure``'s) at the rows (g, i, k) of ``at`` (S, 3): grasp, sample, site."""
+    from ..kernels.points import site_mobilities as kernel
+
+    at = np.ascontiguousarray(at, dtype=np.int64).reshape(-1, 3)
+    out = np.empty((len(at), 3, 3))
+    call_kernel(
+        kernel,
+        plain_array(terms.rotations_joint_to_world),
+        plain_array(terms.translations_joint_in_world),
+        plain_array(terms.motions_joint_in_world),
+        plain_array(terms.mass_matrix_inverses),
+        np.ascontiguousarray(site_joints, dtype=np.int64),
+        plain_array(points_in_joint_m),
+        plain_array(support, bool),
+        at,
+        out,
+        np.empty((3, terms.mass_matrix_inverses.shape[-1])),
+    )
+    return out
+
+
+def region_peaks(
+    speed_m_s: np.ndarray,
+    effective_mass_kg: np.ndarray,
+    human_inverse_kg: np.ndarray,
+    springs_n_per_m: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """For G motions' (G, N, K) site speeds [m/s] and masses [kg] and R body regions (1/m_h
+    [1/kg], k [N/m]): the flat index (G, R) into (N, K) of the first largest ISO/TS 15066
+    transient force F = v sqrt(k / (1/m_h + 1/m)) (0 where not v > 0) and that force (G, R)
+    [N], numpy's arithmetic and ``argmax`` bit for bit, most forces not evaluated
+    (``kernels.regions.region_peaks``)."""
+    from ..kernels.regions import region_peaks as kernel
+
+    grasps, samples, sites = speed_m_s.shape
+    regions = len(human_inverse_kg)
+    where = np.zeros((grasps, regions), dtype=np.int64)
+    peak = np.zeros((grasps, regions))
+    call_kernel(
+        kernel,
+        plain_array(speed_m_s).reshape(grasps, -1),
+        plain_array(effective_mass_kg).reshape(grasps, -1),
+        sites,
+        plain_array(human_inverse_kg),
+        plain_array(springs_n_per_m),
+        where,
+        peak,
+        np.empty(samples),
+        np.empty(samples),
+        np.empty(samples),
+        np.empty(samples, dtype=np.int64),
+        np.empty(samples * sites),
+        np.empty(samples * sites),
+    )
+    return where, peak
+
+
+def tip_twists_into(
+    motion: ObjectMotion,
+    tips_in_object_m: np.ndarray,
+    base_rotation: np.ndarray,
+    rows: list[int],
+    out: np.ndarray,
+) -> None:
+    """The tip twists (linear [m/s], angular [rad/s]), world axes, of the grasps ``rows`` of
+    ``out`` (G, N_max, 6), their tip origins at ``tips_in_object_m`` (len(rows), 3) [m,
+    object frame], on one sampled object motion (N samples, into out[g, :N]); each grasp's
+    numbers whatever the others (``kernels.points.tip_twists``)."""
+    from ..kernels.points import tip_twists as kernel
+
+    call_kernel(
+        kernel,
+        plain_array(motion.rotations),
+        plain_array(motion.linear_tangents),
+        plain_array(motion.angular_tangents),
+        plain_array(motion.speed_per_tangent),
+        plain_array(tips_in_object_m),
+        plain_array(base_rotation),
+        np.array(rows, dtype=np.int64),
+        out,
+    )
 
 
 PSEUDO_INVERSE_RCOND = 1e-10
@@ -169,6 +319,7 @@ def tip_following_rates(
         np.empty(6),
         np.empty(6),
         np.empty(n),
+        np.empty(6),
     )
     if fallback.any():
         jacobian, twist, rate = jacobians[fallback], twists[fallback], base[fallback]

@@ -111,7 +111,13 @@ def _warm_up_analysis_kernels(
     from .dynamics import joint_dynamics
     from .effective_mass import translational_mobilities_in_base
     from .perturbed import perturbed_effective_masses
-    from .points import site_masses, tip_following_rates, tip_point_masses
+    from .points import (
+        arm_site_exposure,
+        region_peaks,
+        site_mobilities,
+        tip_following_rates,
+        tip_point_masses,
+    )
     from .terms import configurations, grasps_terms
 
     translational_mobilities_in_base(robot, box, pin.SE3.Identity(), np.array([seed_q]), chain)
@@ -129,7 +135,10 @@ def _warm_up_analysis_kernels(
     )
     n = robot.model.nv
     support, rates = np.ones((1, n), dtype=bool), np.zeros((1, 1, n))
-    site_masses(terms, counts, np.zeros(1, np.int64), np.zeros((1, 3)), support, rates, 1e-9)
+    site = (np.zeros(1, np.int64), np.zeros((1, 3)), support)
+    arm_site_exposure(terms, counts, (np.eye(3), np.zeros(3)), *site, rates, 1e-9)
+    site_mobilities(terms, *site, np.zeros((1, 3), np.int64))
+    region_peaks(np.ones((1, 1, 1)), np.ones((1, 1, 1)), np.ones(1), np.ones(1))
     tip_following_rates(terms.jacobians_tip_in_world, counts, np.zeros((1, 1, 6)), rates)
     perturbed_effective_masses(  # the inertia-uncertainty kernel
         robot,
