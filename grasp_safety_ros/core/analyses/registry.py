@@ -36,6 +36,7 @@ from .iso15066 import (
 from .redundancy import resolve_redundancy
 from .uncertainty import analyse_inertia_uncertainty
 from .whole_arm import (
+    WHOLE_ARM_TERMS,
     ArmSites,
     WholeArmEvaluation,
     evaluate_whole_arm,
@@ -312,7 +313,7 @@ class WholeArm:
 
     name: str = "whole_arm"
     keeps_terms: bool = True  # with redundancy, it reads the chunks the exposed points read
-    optional_terms: tuple[str, ...] = ("mass_matrix_inverses",)  # the sites' mobilities
+    optional_terms: tuple[str, ...] = WHOLE_ARM_TERMS
 
     def wanted(self, options: AnalysisOptions) -> bool:
         return options.whole_arm

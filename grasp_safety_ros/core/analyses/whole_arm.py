@@ -65,6 +65,10 @@ from .iso15066 import BodyRegion, select_regions
 STATIONARY_SPEED_M_S = 1e-9
 """Below this speed [m/s] a site does not move: flagged, no direction of its own."""
 
+WHOLE_ARM_TERMS = ("mass_matrix_inverses",)
+"""The optional fields of the shared terms (``method.terms.OPTIONAL_TERMS``) the whole arm
+reads: M⁻¹, for its sites' mobilities J M⁻¹ Jᵀ."""
+
 EIGENVALUE_RELATIVE_TOLERANCE = 1e-12
 """A mobility eigenvalue below this times the largest counts as zero (a direction the site
 cannot move in)."""
@@ -572,7 +576,9 @@ class WholeArmPostureCriterion:
         if backend.compiled and evaluations:
             paths = [evaluation.joint_positions for evaluation in evaluations]
             transforms = [grasp.transform_tip_to_object] * count
-            terms = backend.grasps_terms(robot, object_inertia, transforms, paths)
+            terms = backend.grasps_terms(
+                robot, object_inertia, transforms, paths, optional=WHOLE_ARM_TERMS
+            )
             assessed = evaluate_whole_arm_on_terms(
                 robot,
                 evaluations,
