@@ -154,19 +154,17 @@ def grasps_terms(
     object_inertia: ObjectInertia,
     transforms_tip_to_object: Sequence[pin.SE3],
     joint_positions: Sequence[np.ndarray],
-    out: SampleTerms | None = None,
     optional: Collection[str] = OPTIONAL_TERMS,
 ) -> tuple[SampleTerms, np.ndarray]:
     """The terms of G grasps along their joint paths ((N_g, n) positions each, chain order),
     in one kernel call, and the sample counts N_g (G,). Axis 1 has max N_g rows; grasp g's
     rows from N_g on are undefined (``SampleTerms.of_grasp(g, N_g)`` drops them). Each grasp's
     terms are those ``grasp_terms`` gives it alone, bit for bit (the same kernel code per
-    grasp). ``chain``: ``compiled.chain_arrays(robot)`` (numba must be installed); ``out``:
-    terms no longer needed, overwritten when their shape is (G, max N_g); ``optional``: the
-    OPTIONAL_TERMS computed (``batch_terms``)."""
+    grasp). ``chain``: ``compiled.chain_arrays(robot)`` (numba must be installed);
+    ``optional``: the OPTIONAL_TERMS computed (``batch_terms``)."""
     bodies = augmented_bodies(robot, object_inertia, *pose_arrays(transforms_tip_to_object))
     q_all, counts = padded_configurations(robot, joint_positions)
-    return batch_terms(chain, bodies, q_all, counts, out, optional), counts
+    return batch_terms(chain, bodies, q_all, counts, optional), counts
 
 
 def padded_configurations(
@@ -186,22 +184,19 @@ def batch_terms(
     bodies: BodyInertias,
     q_all: np.ndarray,
     counts: np.ndarray,
-    out: SampleTerms | None = None,
     optional: Collection[str] = OPTIONAL_TERMS,
 ) -> SampleTerms:
     """The terms of G grasps in one kernel call: grasp g's augmented ``bodies`` (axis 0 the
     grasp, ``compiled.augmented_bodies``) along its first counts[g] configurations of
-    ``q_all`` (G, N, nq); its rows from counts[g] on are left uninitialised. ``out``: terms
-    no longer needed, overwritten (no new allocation, whose first touch of fresh pages costs
-    as much as the kernel) when their first two axes are (G, N); else new buffers.
-    ``optional``: the OPTIONAL_TERMS computed (the others undefined)."""
+    ``q_all`` (G, N, nq); its rows from counts[g] on are left uninitialised, and so are the
+    OPTIONAL_TERMS not in ``optional``. The buffers are ``sample_terms_buffers``' (kept
+    memory when there is some)."""
     from ..kernels.ik import thread_workspace
     from ..kernels.terms import sample_terms
 
     q_all = plain_array(q_all)
     n = chain.axes.shape[0]
-    if out is None or out.jacobians_tip_in_world.shape[:2] != q_all.shape[:2]:
-        out = sample_terms_buffers(q_all.shape[0], q_all.shape[1], n)
+    out = sample_terms_buffers(q_all.shape[0], q_all.shape[1], n)
     if q_all.shape[0]:
         scratch = (np.empty((n, n)), np.empty((n, 3)))
         counts = np.ascontiguousarray(counts, dtype=np.int64)
