@@ -1,16 +1,19 @@
 """The per-(grasp, sample) terms the analyses share, computed once along each grasp's joint
-path: joint and tip poses, the tip Jacobian and the inverse joint-space inertia of the augmented
-chain (robot + object), by the compiled kernel ``kernels.terms.sample_terms``: for many grasps
-in one call (``grasps_terms``, how ``analyses.safety_report.analyse`` takes them for every
-feasible grasp at once) or for one (``grasp_terms``, the same numbers bit for bit).
+path: joint and tip poses, the tip Jacobian and, only when a wanted analysis reads them
+(``OPTIONAL_TERMS``), the tip's 6x6 mobility J M⁻¹ Jᵀ and the inverse joint-space inertia M⁻¹
+of the augmented chain (robot + object), by the compiled kernel ``kernels.terms.sample_terms``:
+for many grasps in one call (``grasps_terms``, how ``analyses.safety_report.analyse`` takes them
+for chunks of feasible grasps) or for one (``grasp_terms``, the same numbers bit for bit).
 
-It is the one traversal every analysis reads from (pinocchio's ``computeAllTerms`` pattern):
-exposed points (``analyses.exposed_points``), effort (``analyses.effort``) and whole-arm
-points take Jacobians, poses and M⁻¹ from a ``SampleTerms`` instead of rerunning kinematics per
-sample. M is the ranking's own (``kernels.effective_mass._mobility_from_frames``), so whatever
-the ranking's M includes, the analyses' does too. Chains the kernels do not support have no
-terms; the analyses then run Pinocchio per sample, their
-reference path (``test_performance_paths`` holds both equal).
+It is the one traversal every analysis reads from (pinocchio's ``computeAllTerms`` pattern)
+instead of rerunning kinematics per sample: the exposed points (``analyses.exposed_points``)
+read the tip's poses and 6x6 mobility, effort (``analyses.effort``) the joint frames, motion
+subspaces and the tip's origin and Jacobian, the whole-arm sites the joint frames, motion
+subspaces, the tip Jacobian and M⁻¹. M is the ranking's own
+(``kernels.effective_mass._mobility_from_frames``), so whatever the ranking's M includes, the
+analyses' does too. The terms' memory is kept per thread and reused once nothing refers to it
+(``KEPT_TERMS_BYTES``). Chains the kernels do not support have no terms; the analyses then
+run Pinocchio per sample, their reference path (``test_performance_paths`` holds both equal).
 """
 
 from __future__ import annotations
