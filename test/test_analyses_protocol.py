@@ -5,6 +5,8 @@ every analysis runs on the evaluator's backend."""
 
 from __future__ import annotations
 
+import gc
+import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields, is_dataclass, replace
 
@@ -284,3 +286,40 @@ def test_analyses_run_ahead_on_the_shared_terms_give_their_numbers_bit_for_bit(
         ours = report(AnalysisOptions(points_in_object_m=points, effort=True, whole_arm=True))
         assert _same(ours.effort, effort) and _same(ours.whole_arm, whole_arm)
         assert calls == [(k, len(calls)) for k in range(1, len(calls) + 1)]
+
+
+class AbandonedError(Exception):
+    """Raised by a progress callback to abandon a request."""
+
+
+@needs_numba
+def test_an_abandoned_request_frees_its_terms_at_once(arm7: RobotModel) -> None:
+    """A request abandoned mid-way (its progress raises after the first grasp, the whole arm
+    and effort registered to run ahead: their chunk calls refer to the Shared) leaves no
+    Shared alive and no reference to the kept terms' memory, without a garbage collection:
+    the thread's next request reuses the memory at once."""
+    from grasp_safety_ros.core.method import terms as terms_module
+
+    evaluator, grasps, (trajectory, ranking) = _ranked(arm7, 3)
+    options = AnalysisOptions(
+        points_in_object_m=np.array([[0.04, 0.06, 0.1]]), effort=True, whole_arm=True
+    )
+
+    def abandon(done: int, total: int) -> None:
+        raise AbandonedError
+
+    gc.collect()
+    gc.disable()
+    try:
+        try:
+            safety_report.analyse(
+                evaluator, grasps, BOX, trajectory, options, ranking=ranking, progress=abandon
+            )
+        except AbandonedError:
+            pass
+        alive = [type(o) for o in gc.get_objects() if isinstance(o, Shared)]
+        blocks = terms_module._BLOCKS.blocks  # unreferenced: the list's and the call's only
+        referenced = [k for k in range(len(blocks)) if sys.getrefcount(blocks[k]) != 2]
+    finally:
+        gc.enable()
+    assert alive == [] and blocks and referenced == []
