@@ -23,7 +23,7 @@ from grasp_safety_ros.core.method.effective_mass import (
     translational_mobility_in_base,
 )
 from grasp_safety_ros.core.method.terms import (
-    KEPT_TERMS_BYTES,
+    KEPT_TERMS_SAMPLES,
     OPTIONAL_TERMS,
     SampleTerms,
     grasps_terms,
@@ -290,7 +290,7 @@ def test_terms_memory_is_reused_only_once_nothing_refers_to_it(arm7: RobotModel)
 
 
 def test_kept_terms_memory_survives_requests_it_cannot_hold() -> None:
-    """A request larger than KEPT_TERMS_BYTES, or of no samples, neither evicts the kept
+    """A request larger than KEPT_TERMS_SAMPLES, or of no samples, neither evicts the kept
     unreferenced blocks nor adds one: the next ordinary request still gets kept memory."""
 
     def kept_blocks() -> list[int]:  # addresses, so that no reference is held
@@ -298,11 +298,33 @@ def test_kept_terms_memory_survives_requests_it_cannot_hold() -> None:
 
     sample_terms_buffers(2, 10, 7)  # at least one kept block, unreferenced once dropped
     before = kept_blocks()
-    n = 7
-    too_many = KEPT_TERMS_BYTES // (8 * n * n) + 1  # the (n, n) field alone is over the limit
-    large = sample_terms_buffers(1, too_many, n)
-    empty = sample_terms_buffers(0, 0, n)
+    large = sample_terms_buffers(1, KEPT_TERMS_SAMPLES + 1, 7)
+    empty = sample_terms_buffers(0, 0, 7)
     assert kept_blocks() == before
     del large, empty
     again = sample_terms_buffers(2, 10, 7)
     assert again.rotations_joint_to_world.__array_interface__["data"][0] in before
+
+
+@needs_numba
+def test_a_full_chunk_of_a_12_joint_chain_comes_back_to_the_next_chunk() -> None:
+    """The memory each thread keeps holds a chunk of the analyses (TERMS_CHUNK_SAMPLES) of a
+    12-joint chain: the first chunk's terms are a kept block, the second's land in it (no
+    fresh pages to touch)."""
+    from conftest import serial_arm_urdf
+
+    from grasp_safety_ros.core.analyses.base import TERMS_CHUNK_SAMPLES
+
+    robot = RobotModel.from_urdf(serial_arm_urdf(("z", "y", "x") * 4, seed=3), "base_link", "tool")
+    chain = Backend.for_robot(robot).chain
+    assert chain is not None and robot.num_joints == 12
+    path = np.random.default_rng(4).uniform(-1.0, 1.0, (TERMS_CHUNK_SAMPLES, 12))
+    args = (robot, chain, BOX, [pin.SE3.Identity()], [path])
+    first, _ = grasps_terms(*args)
+    blocks = terms_module._BLOCKS.blocks
+    (kept,) = [k for k, b in enumerate(blocks) if np.shares_memory(b, first.mass_matrix_inverses)]
+    address = blocks[kept].__array_interface__["data"][0]
+    del first
+    second, _ = grasps_terms(*args)
+    assert second.mass_matrix_inverses.size == TERMS_CHUNK_SAMPLES * 12 * 12
+    assert second.rotations_joint_to_world.__array_interface__["data"][0] == address

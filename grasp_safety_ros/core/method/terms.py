@@ -12,7 +12,7 @@ subspaces and the tip's origin and Jacobian, the whole-arm sites the joint frame
 subspaces, the tip Jacobian and M⁻¹. M is the ranking's own
 (``kernels.effective_mass._mobility_from_frames``), so whatever the ranking's M includes, the
 analyses' does too. The terms' memory is kept per thread and reused once nothing refers to it
-(``KEPT_TERMS_BYTES``). Chains the kernels do not support have no terms; the analyses then
+(``KEPT_TERMS_SAMPLES``). Chains the kernels do not support have no terms; the analyses then
 run Pinocchio per sample, their reference path (``test_performance_paths`` holds both equal).
 """
 
@@ -64,11 +64,18 @@ OPTIONAL_TERMS = ("mobilities_tip_in_base", "mass_matrix_inverses")
 """The fields of SampleTerms computed only when asked (``batch_terms``' ``optional``): for a
 7-joint arm the tip's mobility costs a tenth of the kernel's time, M⁻¹ a quarter."""
 
-KEPT_TERMS_BYTES = 64 << 20
-"""Memory of released terms each thread keeps for the next ``sample_terms_buffers`` (bytes):
-returned to the allocator, freed terms come back as fresh pages whose first touch cost as much
-as the kernel that fills them (whole arm of 10 grasps x 201 samples: 0.5 µs per sample of 1.0,
-measured); a chunk of TERMS_CHUNK_SAMPLES of a 7-joint arm fits."""
+KEPT_TERMS_SAMPLES = 30_000
+"""Each thread keeps the memory of released terms, up to this many samples' worth for the
+chain asked (``field_shapes``), for the next ``sample_terms_buffers``: returned to the
+allocator, freed terms come back as fresh pages whose first touch costs as much as the kernel
+that fills them (whole arm of 10 grasps x 201 samples: 0.5 µs per sample of 1.0, measured). A
+chunk of ``analyses.base.TERMS_CHUNK_SAMPLES`` (25,000) of any chain fits with a fifth to spare
+(64 MB for a 7-joint arm, 115 MB for a 12-joint one; ``test_terms`` holds the chunk within)."""
+
+
+def field_shapes(n: int) -> tuple[tuple[int, ...], ...]:
+    """The shapes of one sample's fields of SampleTerms (in field order), n joints."""
+    return ((n, 3, 3), (n, 3), (n, 6), (3, 3), (3,), (6, n), (6, 6), (n, n))
 
 
 class _Blocks(threading.local):
@@ -81,12 +88,12 @@ class _Blocks(threading.local):
 _BLOCKS = _Blocks()
 
 
-def _block(size: int) -> np.ndarray | None:
+def _block(size: int, kept: int) -> np.ndarray | None:
     """A float64 block of at least ``size`` elements: a kept one no array refers to any longer
     (only this list holds it: every view of a block, SampleTerms' fields and their slices,
-    holds a reference to it), else a new one when the kept stay within KEPT_TERMS_BYTES with
+    holds a reference to it), else a new one when the kept stay within ``kept`` elements with
     it (the oldest unreferenced ones dropped first), else None."""
-    limit = KEPT_TERMS_BYTES - 8 * size
+    limit = kept - size
     if size == 0 or limit < 0:  # nothing to keep, or more than is kept: the kept stay
         return None
     blocks = _BLOCKS.blocks
@@ -94,11 +101,11 @@ def _block(size: int) -> np.ndarray | None:
         if blocks[k].size >= size and sys.getrefcount(blocks[k]) == 2:  # the list's, the call's
             return blocks[k]
     for k in range(len(blocks) - 1, -1, -1):
-        if sum(b.nbytes for b in blocks) <= limit:
+        if sum(b.size for b in blocks) <= limit:
             break
         if sys.getrefcount(blocks[k]) == 2:
             del blocks[k]
-    if sum(b.nbytes for b in blocks) > limit:
+    if sum(b.size for b in blocks) > limit:
         return None
     blocks.insert(0, np.empty(size))
     return blocks[0]
@@ -108,9 +115,9 @@ def sample_terms_buffers(grasps: int, count: int, n: int) -> SampleTerms:
     """Uninitialised SampleTerms for ``grasps`` grasps of ``count`` samples, n joints: views of
     one kept block (``_block``; the memory of earlier terms no longer referenced when there is
     one), else an array per field (terms beyond what the threads keep)."""
-    shapes = ((n, 3, 3), (n, 3), (n, 6), (3, 3), (3,), (6, n), (6, 6), (n, n))
+    shapes = field_shapes(n)
     sizes = [grasps * count * math.prod(shape) for shape in shapes]
-    block = _block(sum(sizes))
+    block = _block(sum(sizes), KEPT_TERMS_SAMPLES * sum(math.prod(shape) for shape in shapes))
     if block is None:
         return SampleTerms(*(np.empty((grasps, count, *shape)) for shape in shapes))
     fields, start = [], 0
