@@ -4,6 +4,8 @@ Pinocchio reference paths."""
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -241,7 +243,9 @@ def test_terms_without_optional_fields_are_the_same_numbers(
     name: str, request: pytest.FixtureRequest
 ) -> None:
     """Terms asked without an optional field (or with none) have every other field bit for
-    bit as with all."""
+    bit as with all, and the optional fields not asked are not computed: each call's terms
+    land in kept memory filled with NaN first, so that a field asked but skipped would be
+    NaN (not the numbers an earlier call left there)."""
     robot: RobotModel = request.getfixturevalue(name)
     grasp, evaluation, _, _ = terms_case(robot, 11)
     chain = Backend.for_robot(robot).chain
@@ -250,11 +254,22 @@ def test_terms_without_optional_fields_are_the_same_numbers(
     full, counts = grasps_terms(*args)
     held = [array.copy() for array in full]  # the kept memory comes back to the next call
     del full
+    blocks = terms_module._BLOCKS.blocks
     for optional in (("mobilities_tip_in_base",), ("mass_matrix_inverses",), ()):
+        filled = []  # the addresses of the unreferenced kept blocks, filled with NaN
+        for k in range(len(blocks)):
+            if sys.getrefcount(blocks[k]) == 2:  # the list's and the call's references only
+                blocks[k].fill(np.nan)
+                filled.append(blocks[k].__array_interface__["data"][0])
         lean, _ = grasps_terms(*args, optional=optional)
+        assert lean[0].__array_interface__["data"][0] in filled  # the terms start a block
         for field_name, ours, theirs in zip(SampleTerms._fields, lean, held, strict=True):
+            rows = ours[0, : counts[0]]
             if field_name in optional or field_name not in OPTIONAL_TERMS:
-                assert np.array_equal(ours[0, : counts[0]], theirs[0, : counts[0]]), field_name
+                assert np.array_equal(rows, theirs[0, : counts[0]]), field_name
+            else:
+                assert np.isnan(rows).all(), field_name
+        del lean, ours, rows  # the block is free for the next call
 
 
 @needs_numba
