@@ -6,9 +6,11 @@ every analysis runs on the evaluator's backend."""
 from __future__ import annotations
 
 import gc
+import inspect
 import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields, is_dataclass, replace
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -255,9 +257,14 @@ def test_analyses_run_ahead_on_the_shared_terms_give_their_numbers_bit_for_bit(
     """Run ahead on the exposed points' chunks of terms (all grasps in one chunk, or one
     grasp per chunk), effort gives the numbers of its one kernel call without terms and the
     whole arm those it gives alone (its own pass over the chunks), bit for bit; so do both
-    when no analysis before them reads the terms; the progress is counted in order."""
+    when no analysis before them reads the terms; the progress is counted in order. With no
+    chunk kept for a later reader (TERMS_CACHE_SAMPLES 0), each chunk's terms are computed
+    once all the same, and effort's dynamics read them when the exposed points computed them
+    (a reader that did not run ahead would compute every chunk again)."""
     from grasp_safety_ros.core.analyses import base
+    from grasp_safety_ros.core.analyses import effort as effort_module
     from grasp_safety_ros.core.analyses.effort import evaluate_efforts
+    from grasp_safety_ros.core.method import backend
 
     if chunk_samples is not None:
         monkeypatch.setattr(base, "TERMS_CHUNK_SAMPLES", chunk_samples)
@@ -266,9 +273,29 @@ def test_analyses_run_ahead_on_the_shared_terms_give_their_numbers_bit_for_bit(
     effort = evaluate_efforts(
         arm7, ranking.evaluations, BOX, grasps, motions, chain=evaluator.backend.chain
     )
+    feasible = [k for k, e in enumerate(ranking.evaluations) if e.feasible]
+    chunks = base.chunks(feasible, [len(ranking.evaluations[k].times_s) for k in feasible])
+    monkeypatch.setattr(base, "TERMS_CACHE_SAMPLES", 0)
+    terms_calls: list[int] = []  # the grasps of each terms call
+    with_terms: list[bool] = []  # whether each dynamics call was given the terms
+    computed, dynamics = backend.grasps_terms, effort_module.joint_dynamics
+
+    def terms_spy(*args: Any, **kwargs: Any) -> Any:
+        terms_calls.append(len(args[3]))  # transforms_tip_to_object
+        return computed(*args, **kwargs)
+
+    def dynamics_spy(*args: Any, **kwargs: Any) -> Any:
+        given = inspect.signature(dynamics).bind(*args, **kwargs).arguments.get("terms")
+        with_terms.append(given is not None)
+        return dynamics(*args, **kwargs)
+
+    monkeypatch.setattr(backend, "grasps_terms", terms_spy)
+    monkeypatch.setattr(effort_module, "joint_dynamics", dynamics_spy)
 
     def report(options: AnalysisOptions) -> safety_report.SafetyReport:
         calls.clear()
+        terms_calls.clear()
+        with_terms.clear()
         return safety_report.analyse(
             evaluator,
             grasps,
@@ -286,6 +313,8 @@ def test_analyses_run_ahead_on_the_shared_terms_give_their_numbers_bit_for_bit(
         ours = report(AnalysisOptions(points_in_object_m=points, effort=True, whole_arm=True))
         assert _same(ours.effort, effort) and _same(ours.whole_arm, whole_arm)
         assert calls == [(k, len(calls)) for k in range(1, len(calls) + 1)]
+        assert terms_calls == [len(chunk) for chunk in chunks]  # each chunk once
+        assert with_terms and all(given == (points is not None) for given in with_terms)
 
 
 class AbandonedError(Exception):
