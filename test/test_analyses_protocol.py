@@ -317,6 +317,59 @@ def test_analyses_run_ahead_on_the_shared_terms_give_their_numbers_bit_for_bit(
         assert with_terms and all(given == (points is not None) for given in with_terms)
 
 
+@needs_numba
+@pytest.mark.parametrize("chunk_samples", (None, 1))
+def test_no_analysis_reads_an_optional_terms_field_it_did_not_declare(
+    arm7: RobotModel, chunk_samples: int | None, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The analyses read only the optional fields of the terms a wanted analysis declares
+    (``Analysis.optional_terms``; the others are left as the memory was, NaN here): with the
+    terms' buffers filled with NaN before the kernel, each report is the one on the buffers as
+    they come bit for bit, every analysis on (run ahead along the evaluated paths; with
+    redundancy, terms of its own) and each reader of the terms with only its own declared
+    (all grasps in one chunk, or one grasp per chunk)."""
+    from grasp_safety_ros.core.analyses import base
+    from grasp_safety_ros.core.method import terms as terms_module
+
+    if chunk_samples is not None:
+        monkeypatch.setattr(base, "TERMS_CHUNK_SAMPLES", chunk_samples)
+    evaluator, grasps, (trajectory, ranking) = _ranked(arm7, 3)
+    points = np.array([[0.04, 0.06, 0.1], [-0.04, -0.06, -0.1]])
+    every = AnalysisOptions(
+        points_in_object_m=points,
+        uncertainty=InertiaUncertainty(mass_fraction=0.2, num_random_samples=2),
+        effort=True,
+        whole_arm=True,
+    )
+    requests = (
+        every,
+        replace(every, redundancy=True),
+        AnalysisOptions(points_in_object_m=points, effort=False),
+        AnalysisOptions(points_in_object_m=points, effort=True),
+        AnalysisOptions(effort=False, whole_arm=True),
+        AnalysisOptions(effort=True, whole_arm=True),
+    )
+
+    def reports() -> list[safety_report.SafetyReport]:
+        return [
+            safety_report.analyse(evaluator, grasps, BOX, trajectory, options, ranking=ranking)
+            for options in requests
+        ]
+
+    expected = reports()
+    buffers = terms_module.sample_terms_buffers
+
+    def poisoned(grasps: int, count: int, n: int) -> terms_module.SampleTerms:
+        terms = buffers(grasps, count, n)
+        for array in terms:
+            array.fill(np.nan)
+        return terms
+
+    monkeypatch.setattr(terms_module, "sample_terms_buffers", poisoned)
+    for ours, theirs, options in zip(reports(), expected, requests, strict=True):
+        assert _same(ours, theirs), options
+
+
 class AbandonedError(Exception):
     """Raised by a progress callback to abandon a request."""
 

@@ -317,7 +317,9 @@ def evaluate_exposed_points_on_terms(
     ``counts`` samples each): the mobilities by one compiled call over (grasp, sample, point)
     (``method.points.tip_point_masses``), the points' motions once per distinct motion (an
     object path moves the object's points alike whatever the grasp). Equal to the Pinocchio
-    path to rounding; each grasp's result is the one it gets alone, bit for bit."""
+    path to rounding; each grasp's result is the one it gets alone, bit for bit. It reads the
+    tip's rotations and 6x6 mobility: the terms must have been computed with the optional
+    ``mobilities_tip_in_base`` (``method.terms.OPTIONAL_TERMS``), M⁻¹ is not read."""
     points = check_points_in_object(points_in_object_m)
     count_points, grasp_count = len(points), len(evaluations)
     motion_keys: dict[tuple[int, bytes], int] = {}

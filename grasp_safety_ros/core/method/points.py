@@ -33,7 +33,9 @@ def tip_point_masses(
     """Effective masses of K points fixed to the tip of G grasps, per sample.
 
     Args:
-        terms, counts: The grasps' terms (axis 0 the grasp, N rows) and sample counts (G,).
+        terms, counts: The grasps' terms (axis 0 the grasp, N rows) and sample counts (G,):
+            the tip's rotations and 6x6 mobility are read, so they must have been computed
+            with the optional ``mobilities_tip_in_base`` (``terms.OPTIONAL_TERMS``).
         base_rotation: (3, 3) the base frame's rotation in the world frame.
         points_in_tip_m: (G, K, 3) the points in each grasp's tip frame [m].
         directions_in_base: (M, N, K, 3) unit directions of the points per motion, base axes.
@@ -84,7 +86,9 @@ def site_masses(
     effective masses along the velocity (G, N, K) [kg] of K sites fixed to the links.
 
     Args:
-        terms, counts: The grasps' terms (axis 0 the grasp, N rows) and sample counts (G,).
+        terms, counts: The grasps' terms (axis 0 the grasp, N rows) and sample counts (G,):
+            the joints' frames, motion subspaces and M⁻¹ are read, so they must have been
+            computed with the optional ``mass_matrix_inverses`` (``terms.OPTIONAL_TERMS``).
         site_joints: (K,) the chain joint (0-based) whose frame carries each site.
         points_in_joint_m: (K, 3) the sites in those frames [m].
         support: (K, n) True where chain joint c moves the site's body.
