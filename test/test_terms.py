@@ -82,7 +82,25 @@ def test_shared_terms_equal_pinocchio(name: str, request: pytest.FixtureRequest)
         rotation = robot.transform_base_to_world.rotation  # J's rows into base axes
         in_base = np.vstack([rotation.T @ jacobian[:3], rotation.T @ jacobian[3:]])
         mobility6 = in_base @ (upper + np.triu(upper, 1).T) @ in_base.T
-        assert_close_to_scale(terms.mobilities_tip_in_base[i], mobility6, "6 x 6", dynamic)
+        _assert_mobility_blocks_close(terms.mobilities_tip_in_base[i], mobility6, dynamic)
+
+
+def _assert_mobility_blocks_close(
+    actual: np.ndarray, expected: np.ndarray, tolerance: float
+) -> None:
+    """The tip's 6x6 mobility A = J M⁻¹ Jᵀ = Wᵀ W (W = L⁻¹ Jᵀ, M = L Lᵀ) block by block, rows
+    [linear; angular]: block A_ab = W_aᵀ W_b rounds relative to |W_a| |W_b|, i.e. to
+    sqrt(max|A_aa| max|A_bb|), which bounds its entries (Cauchy-Schwarz; for a diagonal block
+    its own largest entry), not to the whole 6x6's largest entry (the angular block's, which
+    may be many times the linear block's). ``tolerance``: k · cond · eps (``dynamics_tolerance``:
+    the triangular solves' rounding relative to |W| grows at most with cond(M))."""
+    scales = [float(np.abs(expected[3 * a : 3 * a + 3, 3 * a : 3 * a + 3]).max()) for a in (0, 1)]
+    for a in (0, 1):
+        for b in (0, 1):
+            block = np.s_[3 * a : 3 * a + 3, 3 * b : 3 * b + 3]
+            scale = max(np.sqrt(scales[a] * scales[b]), 1e-300)
+            error = float(np.abs(actual[block] - expected[block]).max()) / scale
+            assert error <= tolerance, f"6 x 6 block {a}{b}: {error:.2e} > {tolerance:.2e}"
 
 
 @needs_numba
