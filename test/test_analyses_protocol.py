@@ -5,8 +5,12 @@ every analysis runs on the evaluator's backend."""
 
 from __future__ import annotations
 
+import gc
+import inspect
+import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields, is_dataclass, replace
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -253,9 +257,14 @@ def test_analyses_run_ahead_on_the_shared_terms_give_their_numbers_bit_for_bit(
     """Run ahead on the exposed points' chunks of terms (all grasps in one chunk, or one
     grasp per chunk), effort gives the numbers of its one kernel call without terms and the
     whole arm those it gives alone (its own pass over the chunks), bit for bit; so do both
-    when no analysis before them reads the terms; the progress is counted in order."""
+    when no analysis before them reads the terms; the progress is counted in order. With no
+    chunk kept for a later reader (TERMS_CACHE_SAMPLES 0), each chunk's terms are computed
+    once all the same, and effort's dynamics read them when the exposed points computed them
+    (a reader that did not run ahead would compute every chunk again)."""
     from grasp_safety_ros.core.analyses import base
+    from grasp_safety_ros.core.analyses import effort as effort_module
     from grasp_safety_ros.core.analyses.effort import evaluate_efforts
+    from grasp_safety_ros.core.method import backend
 
     if chunk_samples is not None:
         monkeypatch.setattr(base, "TERMS_CHUNK_SAMPLES", chunk_samples)
@@ -264,9 +273,29 @@ def test_analyses_run_ahead_on_the_shared_terms_give_their_numbers_bit_for_bit(
     effort = evaluate_efforts(
         arm7, ranking.evaluations, BOX, grasps, motions, chain=evaluator.backend.chain
     )
+    feasible = [k for k, e in enumerate(ranking.evaluations) if e.feasible]
+    chunks = base.chunks(feasible, [len(ranking.evaluations[k].times_s) for k in feasible])
+    monkeypatch.setattr(base, "TERMS_CACHE_SAMPLES", 0)
+    terms_calls: list[int] = []  # the grasps of each terms call
+    with_terms: list[bool] = []  # whether each dynamics call was given the terms
+    computed, dynamics = backend.grasps_terms, effort_module.joint_dynamics
+
+    def terms_spy(*args: Any, **kwargs: Any) -> Any:
+        terms_calls.append(len(args[3]))  # transforms_tip_to_object
+        return computed(*args, **kwargs)
+
+    def dynamics_spy(*args: Any, **kwargs: Any) -> Any:
+        given = inspect.signature(dynamics).bind(*args, **kwargs).arguments.get("terms")
+        with_terms.append(given is not None)
+        return dynamics(*args, **kwargs)
+
+    monkeypatch.setattr(backend, "grasps_terms", terms_spy)
+    monkeypatch.setattr(effort_module, "joint_dynamics", dynamics_spy)
 
     def report(options: AnalysisOptions) -> safety_report.SafetyReport:
         calls.clear()
+        terms_calls.clear()
+        with_terms.clear()
         return safety_report.analyse(
             evaluator,
             grasps,
@@ -284,3 +313,95 @@ def test_analyses_run_ahead_on_the_shared_terms_give_their_numbers_bit_for_bit(
         ours = report(AnalysisOptions(points_in_object_m=points, effort=True, whole_arm=True))
         assert _same(ours.effort, effort) and _same(ours.whole_arm, whole_arm)
         assert calls == [(k, len(calls)) for k in range(1, len(calls) + 1)]
+        assert terms_calls == [len(chunk) for chunk in chunks]  # each chunk once
+        assert with_terms and all(given == (points is not None) for given in with_terms)
+
+
+@needs_numba
+@pytest.mark.parametrize("chunk_samples", (None, 1))
+def test_no_analysis_reads_an_optional_terms_field_it_did_not_declare(
+    arm7: RobotModel, chunk_samples: int | None, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The analyses read only the optional fields of the terms a wanted analysis declares
+    (``Analysis.optional_terms``; the others are left as the memory was, NaN here): with the
+    terms' buffers filled with NaN before the kernel, each report is the one on the buffers as
+    they come bit for bit, every analysis on (run ahead along the evaluated paths; with
+    redundancy, terms of its own) and each reader of the terms with only its own declared
+    (all grasps in one chunk, or one grasp per chunk)."""
+    from grasp_safety_ros.core.analyses import base
+    from grasp_safety_ros.core.method import terms as terms_module
+
+    if chunk_samples is not None:
+        monkeypatch.setattr(base, "TERMS_CHUNK_SAMPLES", chunk_samples)
+    evaluator, grasps, (trajectory, ranking) = _ranked(arm7, 3)
+    points = np.array([[0.04, 0.06, 0.1], [-0.04, -0.06, -0.1]])
+    every = AnalysisOptions(
+        points_in_object_m=points,
+        uncertainty=InertiaUncertainty(mass_fraction=0.2, num_random_samples=2),
+        effort=True,
+        whole_arm=True,
+    )
+    requests = (
+        every,
+        replace(every, redundancy=True),
+        AnalysisOptions(points_in_object_m=points, effort=False),
+        AnalysisOptions(points_in_object_m=points, effort=True),
+        AnalysisOptions(effort=False, whole_arm=True),
+        AnalysisOptions(effort=True, whole_arm=True),
+    )
+
+    def reports() -> list[safety_report.SafetyReport]:
+        return [
+            safety_report.analyse(evaluator, grasps, BOX, trajectory, options, ranking=ranking)
+            for options in requests
+        ]
+
+    expected = reports()
+    buffers = terms_module.sample_terms_buffers
+
+    def poisoned(grasps: int, count: int, n: int) -> terms_module.SampleTerms:
+        terms = buffers(grasps, count, n)
+        for array in terms:
+            array.fill(np.nan)
+        return terms
+
+    monkeypatch.setattr(terms_module, "sample_terms_buffers", poisoned)
+    for ours, theirs, options in zip(reports(), expected, requests, strict=True):
+        assert _same(ours, theirs), options
+
+
+class AbandonedError(Exception):
+    """Raised by a progress callback to abandon a request."""
+
+
+@needs_numba
+def test_an_abandoned_request_frees_its_terms_at_once(arm7: RobotModel) -> None:
+    """A request abandoned mid-way (its progress raises after the first grasp, the whole arm
+    and effort registered to run ahead: their chunk calls refer to the Shared) leaves no
+    Shared alive and no reference to the kept terms' memory, without a garbage collection:
+    the thread's next request reuses the memory at once."""
+    from grasp_safety_ros.core.method import terms as terms_module
+
+    evaluator, grasps, (trajectory, ranking) = _ranked(arm7, 3)
+    options = AnalysisOptions(
+        points_in_object_m=np.array([[0.04, 0.06, 0.1]]), effort=True, whole_arm=True
+    )
+
+    def abandon(done: int, total: int) -> None:
+        raise AbandonedError
+
+    gc.collect()
+    gc.disable()
+    try:
+        try:
+            safety_report.analyse(
+                evaluator, grasps, BOX, trajectory, options, ranking=ranking, progress=abandon
+            )
+        except AbandonedError:
+            pass
+        alive = [type(o) for o in gc.get_objects() if isinstance(o, Shared)]
+        blocks = terms_module._BLOCKS.blocks  # unreferenced: the list's and the call's only
+        referenced = [k for k in range(len(blocks)) if sys.getrefcount(blocks[k]) != 2]
+    finally:
+        gc.enable()
+    assert alive == [] and blocks and referenced == []

@@ -5,6 +5,7 @@ Pinocchio reference path, infeasible grasps mixed in."""
 
 from __future__ import annotations
 
+import gc
 from typing import Any
 
 import numpy as np
@@ -336,11 +337,14 @@ def test_exposed_points_on_recycled_terms_buffers_equal_one_chunk(
     arm7: RobotModel, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Without the whole arm no analysis reads the terms twice, so each chunk's terms are
-    computed into the memory of the previous chunk's (released, nothing refers to it): the
-    exposed points stay those of one chunk for all grasps, bit for bit (a reader holding a
-    view of reused memory would differ), and read-only."""
+    computed into the memory of the previous chunk's (released, nothing refers to it): no
+    new memory is taken, and the exposed points stay those of one chunk for all grasps, bit
+    for bit (a reader holding a view of reused memory would differ), and read-only. (The
+    garbage collector is off during the chunked run: a collection between two chunks may
+    free another kept block, which the next chunk then takes, new memory neither.)"""
     from grasp_safety_ros.core.analyses import base
     from grasp_safety_ros.core.method import backend
+    from grasp_safety_ros.core.method import terms as terms_module
 
     seed = random_positions(arm7, np.random.default_rng(18))
     trajectory = reach_trajectory(arm7, seed)
@@ -360,9 +364,20 @@ def test_exposed_points_on_recycled_terms_buffers_equal_one_chunk(
 
     monkeypatch.setattr(backend, "grasps_terms", spy)
     monkeypatch.setattr(base, "TERMS_CHUNK_SAMPLES", 1)
-    chunked = analyse(evaluator, grasps, BOX, trajectory, options, ranking=ranking)
+
+    def kept() -> list[int]:  # the addresses of the kept blocks (no reference held)
+        return [block.__array_interface__["data"][0] for block in terms_module._BLOCKS.blocks]
+
+    gc.collect()  # blocks held only by garbage cycles are free before the run
+    before = kept()
+    gc.disable()
+    try:
+        chunked = analyse(evaluator, grasps, BOX, trajectory, options, ranking=ranking)
+    finally:
+        gc.enable()
     feasible = sum(e.feasible for e in ranking.evaluations)
     assert feasible >= 2 and len(addresses) == feasible and len(set(addresses)) == 1
+    assert kept() == before and addresses[0] in before  # no new memory taken
     for ours, theirs in zip(chunked.exposed, whole.exposed, strict=True):
         for field, value in _fields(ours).items():
             np.testing.assert_array_equal(value, getattr(theirs, field), err_msg=field)

@@ -4,6 +4,8 @@ Pinocchio reference paths."""
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -23,7 +25,7 @@ from grasp_safety_ros.core.method.effective_mass import (
     translational_mobility_in_base,
 )
 from grasp_safety_ros.core.method.terms import (
-    KEPT_TERMS_BYTES,
+    KEPT_TERMS_SAMPLES,
     OPTIONAL_TERMS,
     SampleTerms,
     grasps_terms,
@@ -80,7 +82,25 @@ def test_shared_terms_equal_pinocchio(name: str, request: pytest.FixtureRequest)
         rotation = robot.transform_base_to_world.rotation  # J's rows into base axes
         in_base = np.vstack([rotation.T @ jacobian[:3], rotation.T @ jacobian[3:]])
         mobility6 = in_base @ (upper + np.triu(upper, 1).T) @ in_base.T
-        assert_close_to_scale(terms.mobilities_tip_in_base[i], mobility6, "6 x 6", dynamic)
+        _assert_mobility_blocks_close(terms.mobilities_tip_in_base[i], mobility6, dynamic)
+
+
+def _assert_mobility_blocks_close(
+    actual: np.ndarray, expected: np.ndarray, tolerance: float
+) -> None:
+    """The tip's 6x6 mobility A = J M⁻¹ Jᵀ = Wᵀ W (W = L⁻¹ Jᵀ, M = L Lᵀ) block by block, rows
+    [linear; angular]: block A_ab = W_aᵀ W_b rounds relative to |W_a| |W_b|, i.e. to
+    sqrt(max|A_aa| max|A_bb|), which bounds its entries (Cauchy-Schwarz; for a diagonal block
+    its own largest entry), not to the whole 6x6's largest entry (the angular block's, which
+    may be many times the linear block's). ``tolerance``: k · cond · eps (``dynamics_tolerance``:
+    the triangular solves' rounding relative to |W| grows at most with cond(M))."""
+    scales = [float(np.abs(expected[3 * a : 3 * a + 3, 3 * a : 3 * a + 3]).max()) for a in (0, 1)]
+    for a in (0, 1):
+        for b in (0, 1):
+            block = np.s_[3 * a : 3 * a + 3, 3 * b : 3 * b + 3]
+            scale = max(np.sqrt(scales[a] * scales[b]), 1e-300)
+            error = float(np.abs(actual[block] - expected[block]).max()) / scale
+            assert error <= tolerance, f"6 x 6 block {a}{b}: {error:.2e} > {tolerance:.2e}"
 
 
 @needs_numba
@@ -241,7 +261,9 @@ def test_terms_without_optional_fields_are_the_same_numbers(
     name: str, request: pytest.FixtureRequest
 ) -> None:
     """Terms asked without an optional field (or with none) have every other field bit for
-    bit as with all."""
+    bit as with all, and the optional fields not asked are not computed: each call's terms
+    land in kept memory filled with NaN first, so that a field asked but skipped would be
+    NaN (not the numbers an earlier call left there)."""
     robot: RobotModel = request.getfixturevalue(name)
     grasp, evaluation, _, _ = terms_case(robot, 11)
     chain = Backend.for_robot(robot).chain
@@ -250,11 +272,22 @@ def test_terms_without_optional_fields_are_the_same_numbers(
     full, counts = grasps_terms(*args)
     held = [array.copy() for array in full]  # the kept memory comes back to the next call
     del full
+    blocks = terms_module._BLOCKS.blocks
     for optional in (("mobilities_tip_in_base",), ("mass_matrix_inverses",), ()):
+        filled = []  # the addresses of the unreferenced kept blocks, filled with NaN
+        for k in range(len(blocks)):
+            if sys.getrefcount(blocks[k]) == 2:  # the list's and the call's references only
+                blocks[k].fill(np.nan)
+                filled.append(blocks[k].__array_interface__["data"][0])
         lean, _ = grasps_terms(*args, optional=optional)
+        assert lean[0].__array_interface__["data"][0] in filled  # the terms start a block
         for field_name, ours, theirs in zip(SampleTerms._fields, lean, held, strict=True):
+            rows = ours[0, : counts[0]]
             if field_name in optional or field_name not in OPTIONAL_TERMS:
-                assert np.array_equal(ours[0, : counts[0]], theirs[0, : counts[0]]), field_name
+                assert np.array_equal(rows, theirs[0, : counts[0]]), field_name
+            else:
+                assert np.isnan(rows).all(), field_name
+        del lean, ours, rows  # the block is free for the next call
 
 
 @needs_numba
@@ -290,7 +323,7 @@ def test_terms_memory_is_reused_only_once_nothing_refers_to_it(arm7: RobotModel)
 
 
 def test_kept_terms_memory_survives_requests_it_cannot_hold() -> None:
-    """A request larger than KEPT_TERMS_BYTES, or of no samples, neither evicts the kept
+    """A request larger than KEPT_TERMS_SAMPLES, or of no samples, neither evicts the kept
     unreferenced blocks nor adds one: the next ordinary request still gets kept memory."""
 
     def kept_blocks() -> list[int]:  # addresses, so that no reference is held
@@ -298,11 +331,33 @@ def test_kept_terms_memory_survives_requests_it_cannot_hold() -> None:
 
     sample_terms_buffers(2, 10, 7)  # at least one kept block, unreferenced once dropped
     before = kept_blocks()
-    n = 7
-    too_many = KEPT_TERMS_BYTES // (8 * n * n) + 1  # the (n, n) field alone is over the limit
-    large = sample_terms_buffers(1, too_many, n)
-    empty = sample_terms_buffers(0, 0, n)
+    large = sample_terms_buffers(1, KEPT_TERMS_SAMPLES + 1, 7)
+    empty = sample_terms_buffers(0, 0, 7)
     assert kept_blocks() == before
     del large, empty
     again = sample_terms_buffers(2, 10, 7)
     assert again.rotations_joint_to_world.__array_interface__["data"][0] in before
+
+
+@needs_numba
+def test_a_full_chunk_of_a_12_joint_chain_comes_back_to_the_next_chunk() -> None:
+    """The memory each thread keeps holds a chunk of the analyses (TERMS_CHUNK_SAMPLES) of a
+    12-joint chain: the first chunk's terms are a kept block, the second's land in it (no
+    fresh pages to touch)."""
+    from conftest import serial_arm_urdf
+
+    from grasp_safety_ros.core.analyses.base import TERMS_CHUNK_SAMPLES
+
+    robot = RobotModel.from_urdf(serial_arm_urdf(("z", "y", "x") * 4, seed=3), "base_link", "tool")
+    chain = Backend.for_robot(robot).chain
+    assert chain is not None and robot.num_joints == 12
+    path = np.random.default_rng(4).uniform(-1.0, 1.0, (TERMS_CHUNK_SAMPLES, 12))
+    args = (robot, chain, BOX, [pin.SE3.Identity()], [path])
+    first, _ = grasps_terms(*args)
+    blocks = terms_module._BLOCKS.blocks
+    (kept,) = [k for k, b in enumerate(blocks) if np.shares_memory(b, first.mass_matrix_inverses)]
+    address = blocks[kept].__array_interface__["data"][0]
+    del first
+    second, _ = grasps_terms(*args)
+    assert second.mass_matrix_inverses.size == TERMS_CHUNK_SAMPLES * 12 * 12
+    assert second.rotations_joint_to_world.__array_interface__["data"][0] == address

@@ -226,6 +226,15 @@ class Shared:
 
         return ahead_results
 
+    def release(self) -> None:
+        """Drop the chunk calls registered to run ahead (they refer to this Shared: a cycle
+        that only a collection would break), their results and the kept chunks of terms, so
+        that an abandoned request frees its terms' memory at once for the thread's next one
+        (``analyse`` calls it last, whether the analyses returned or raised)."""
+        self._ahead.clear()
+        self._ahead_results.clear()
+        self._cached.clear()
+
     def path_terms(
         self, indices: Sequence[int], paths: Sequence[np.ndarray]
     ) -> tuple[SampleTerms, np.ndarray]:

@@ -317,7 +317,9 @@ def evaluate_exposed_points_on_terms(
     ``counts`` samples each): the mobilities by one compiled call over (grasp, sample, point)
     (``method.points.tip_point_masses``), the points' motions once per distinct motion (an
     object path moves the object's points alike whatever the grasp). Equal to the Pinocchio
-    path to rounding; each grasp's result is the one it gets alone, bit for bit."""
+    path to rounding; each grasp's result is the one it gets alone, bit for bit. It reads the
+    tip's rotations and 6x6 mobility: the terms must have been computed with the optional
+    ``mobilities_tip_in_base`` (``method.terms.OPTIONAL_TERMS``), M⁻¹ is not read."""
     points = check_points_in_object(points_in_object_m)
     count_points, grasp_count = len(points), len(evaluations)
     motion_keys: dict[tuple[int, bytes], int] = {}
@@ -354,11 +356,43 @@ def evaluate_exposed_points_on_terms(
     grasp_directions = directions[motion_of] if len(mobilities) else None  # else shared
     if grasp_directions is not None:
         grasp_directions[mask], masses[mask] = _worst_directions(mobilities)
+    if grasp_directions is None:  # a motion's grasps share its directions
+        grasp_directions, direction_of = directions, motion_of
+    else:  # a still point's worst direction is the grasp's
+        direction_of = np.arange(grasp_count)
+    return _results_on_terms(
+        evaluations,
+        points,
+        motions,
+        motion_of,
+        stationary,
+        leading_moving,
+        masses,
+        grasp_directions,
+        direction_of,
+    )
+
+
+def _results_on_terms(
+    evaluations: Sequence[GraspEvaluation],
+    points: np.ndarray,
+    motions: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
+    motion_of: np.ndarray,
+    stationary: np.ndarray,
+    leading_moving: np.ndarray,
+    masses: np.ndarray,
+    directions: np.ndarray,
+    direction_of: np.ndarray,
+) -> list[ExposedPointsEvaluation]:
+    """``evaluate_exposed_points_on_terms``' results, read-only views of its arrays: motion
+    m's (times, positions, tangents, speeds), its still points ``stationary[m]`` and moving
+    leading points ``leading_moving[m]``; grasp g's motion ``motion_of[g]``, masses row g,
+    directions ``directions[direction_of[g]]``. Where all points are still, the leading
+    point is the worst (largest mass)."""
     worst = np.argmax(masses, axis=2)
     all_still = stationary[motion_of].all(axis=2)
     leading = np.where(all_still, worst, leading_moving[motion_of])
-    per_grasp = directions if grasp_directions is None else grasp_directions
-    for array in (per_grasp, stationary, masses, leading, worst):  # their views are frozen too
+    for array in (directions, stationary, masses, leading, worst):  # views frozen too
         read_only(array)
     shared = [  # per motion: times (a copy), positions, speeds
         (read_only(times, copy=True), read_only(positions), read_only(speeds))
@@ -376,7 +410,7 @@ def evaluate_exposed_points_on_terms(
                 times_s=times,
                 points_in_object_m=points,
                 positions_in_base_m=positions,
-                directions_in_base=per_grasp[m if grasp_directions is None else g, :count],
+                directions_in_base=directions[direction_of[g], :count],
                 direction_is_worst_case=stationary[m, :count],
                 speed_m_s=speeds,
                 effective_mass_kg=masses[g, :count],

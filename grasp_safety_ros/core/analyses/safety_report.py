@@ -157,11 +157,14 @@ def analyse(
         step=step,
         optional={name for analysis in wanted for name in analysis.optional_terms},
     )
-    for analysis in wanted:
-        analysis.prepare(shared)
-    parts = Parts()
-    for analysis in wanted:
-        parts = analysis.run(shared, parts)
+    try:
+        for analysis in wanted:
+            analysis.prepare(shared)
+        parts = Parts()
+        for analysis in wanted:
+            parts = analysis.run(shared, parts)
+    finally:
+        shared.release()  # at once: what ran ahead refers to shared
     quality = rank_with_quality(
         parts.scores,
         None if options.grasp_quality is None else np.array(options.grasp_quality),

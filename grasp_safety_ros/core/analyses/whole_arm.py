@@ -431,7 +431,9 @@ def evaluate_whole_arm_on_terms(
     masses by one compiled call over (grasp, sample, site) (``method.points.arm_site_exposure``:
     the sites on one body share its mobility), the mobilities of the sites at rest by another,
     ISO/TS 15066's peaks compiled (``method.points.region_peaks``, numpy's bits).
-    Equal to the Pinocchio path to rounding; each grasp's result is the one it gets alone."""
+    Equal to the Pinocchio path to rounding; each grasp's result is the one it gets alone.
+    It reads the joints' frames and motion subspaces, the tip Jacobians and M⁻¹: the terms
+    must carry the optional ``WHOLE_ARM_TERMS``; the tip's 6 x 6 mobility is not read."""
     grasp_count, samples = len(evaluations), terms.jacobians_tip_in_world.shape[1]
     paths = (
         [e.joint_positions for e in evaluations] if joint_positions is None else joint_positions

@@ -54,7 +54,6 @@ class Backend:
         object_inertia: ObjectInertia,
         transforms_tip_to_object: Sequence[pin.SE3],
         joint_positions: Sequence[np.ndarray],
-        out: SampleTerms | None = None,
         optional: Collection[str] = OPTIONAL_TERMS,
     ) -> tuple[SampleTerms, np.ndarray]:
         """``terms.grasps_terms`` on this backend's chain (the per-sample terms of G grasps
@@ -67,6 +66,5 @@ class Backend:
             object_inertia,
             transforms_tip_to_object,
             joint_positions,
-            out,
             optional,
         )

@@ -35,7 +35,9 @@ def tip_point_masses(
     """Effective masses of K points fixed to the tip of G grasps, per sample.
 
     Args:
-        terms, counts: The grasps' terms (axis 0 the grasp, N rows) and sample counts (G,).
+        terms, counts: The grasps' terms (axis 0 the grasp, N rows) and sample counts (G,):
+            the tip's rotations and 6x6 mobility are read, so they must have been computed
+            with the optional ``mobilities_tip_in_base`` (``terms.OPTIONAL_TERMS``).
         base_rotation: (3, 3) the base frame's rotation in the world frame.
         points_in_tip_m: (G, K, 3) the points in each grasp's tip frame [m].
         directions_in_base: (M, N, K, 3) unit directions of the points per motion, base axes.
@@ -134,7 +136,9 @@ def arm_site_exposure(
     (``kernels.points.arm_site_exposure``).
 
     Args:
-        terms, counts: The grasps' terms (axis 0 the grasp, N rows) and sample counts (G,).
+        terms, counts: The grasps' terms (axis 0 the grasp, N rows) and sample counts (G,):
+            the joints' frames, motion subspaces and M⁻¹ are read, so they must have been
+            computed with the optional ``mass_matrix_inverses`` (``terms.OPTIONAL_TERMS``).
         transform_base_to_world: (rotation (3, 3), translation (3,) [m]) of the base frame.
         site_joints: (K,) the chain joint (0-based) whose frame carries each site.
         points_in_joint_m: (K, 3) the sites in those frames [m].

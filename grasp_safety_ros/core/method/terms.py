@@ -1,16 +1,19 @@
 """The per-(grasp, sample) terms the analyses share, computed once along each grasp's joint
-path: joint and tip poses, the tip Jacobian and the inverse joint-space inertia of the augmented
-chain (robot + object), by the compiled kernel ``kernels.terms.sample_terms``: for many grasps
-in one call (``grasps_terms``, how ``analyses.safety_report.analyse`` takes them for every
-feasible grasp at once) or for one (``grasp_terms``, the same numbers bit for bit).
+path: joint and tip poses, the tip Jacobian and, only when a wanted analysis reads them
+(``OPTIONAL_TERMS``), the tip's 6x6 mobility J M⁻¹ Jᵀ and the inverse joint-space inertia M⁻¹
+of the augmented chain (robot + object), by the compiled kernel ``kernels.terms.sample_terms``:
+for many grasps in one call (``grasps_terms``, how ``analyses.safety_report.analyse`` takes them
+for chunks of feasible grasps) or for one (``grasp_terms``, the same numbers bit for bit).
 
-It is the one traversal every analysis reads from (pinocchio's ``computeAllTerms`` pattern):
-exposed points (``analyses.exposed_points``), effort (``analyses.effort``) and whole-arm
-points take Jacobians, poses and M⁻¹ from a ``SampleTerms`` instead of rerunning kinematics per
-sample. M is the ranking's own (``kernels.effective_mass._mobility_from_frames``), so whatever
-the ranking's M includes, the analyses' does too. Chains the kernels do not support have no
-terms; the analyses then run Pinocchio per sample, their
-reference path (``test_performance_paths`` holds both equal).
+It is the one traversal every analysis reads from (pinocchio's ``computeAllTerms`` pattern)
+instead of rerunning kinematics per sample: the exposed points (``analyses.exposed_points``)
+read the tip's poses and 6x6 mobility, effort (``analyses.effort``) the joint frames, motion
+subspaces and the tip's origin and Jacobian, the whole-arm sites the joint frames, motion
+subspaces, the tip Jacobian and M⁻¹. M is the ranking's own
+(``kernels.effective_mass._mobility_from_frames``), so whatever the ranking's M includes, the
+analyses' does too. The terms' memory is kept per thread and reused once nothing refers to it
+(``KEPT_TERMS_SAMPLES``). Chains the kernels do not support have no terms; the analyses then
+run Pinocchio per sample, their reference path (``test_performance_paths`` holds both equal).
 """
 
 from __future__ import annotations
@@ -61,11 +64,18 @@ OPTIONAL_TERMS = ("mobilities_tip_in_base", "mass_matrix_inverses")
 """The fields of SampleTerms computed only when asked (``batch_terms``' ``optional``): for a
 7-joint arm the tip's mobility costs a tenth of the kernel's time, M⁻¹ a quarter."""
 
-KEPT_TERMS_BYTES = 64 << 20
-"""Memory of released terms each thread keeps for the next ``sample_terms_buffers`` (bytes):
-returned to the allocator, freed terms come back as fresh pages whose first touch cost as much
-as the kernel that fills them (whole arm of 10 grasps x 201 samples: 0.5 µs per sample of 1.0,
-measured); a chunk of TERMS_CHUNK_SAMPLES of a 7-joint arm fits."""
+KEPT_TERMS_SAMPLES = 30_000
+"""Each thread keeps the memory of released terms, up to this many samples' worth for the
+chain asked (``field_shapes``), for the next ``sample_terms_buffers``: returned to the
+allocator, freed terms come back as fresh pages whose first touch costs as much as the kernel
+that fills them (whole arm of 10 grasps x 201 samples: 0.5 µs per sample of 1.0, measured). A
+chunk of ``analyses.base.TERMS_CHUNK_SAMPLES`` (25,000) of any chain fits with a fifth to spare
+(64 MB for a 7-joint arm, 115 MB for a 12-joint one; ``test_terms`` holds the chunk within)."""
+
+
+def field_shapes(n: int) -> tuple[tuple[int, ...], ...]:
+    """The shapes of one sample's fields of SampleTerms (in field order), n joints."""
+    return ((n, 3, 3), (n, 3), (n, 6), (3, 3), (3,), (6, n), (6, 6), (n, n))
 
 
 class _Blocks(threading.local):
@@ -78,12 +88,12 @@ class _Blocks(threading.local):
 _BLOCKS = _Blocks()
 
 
-def _block(size: int) -> np.ndarray | None:
+def _block(size: int, kept: int) -> np.ndarray | None:
     """A float64 block of at least ``size`` elements: a kept one no array refers to any longer
     (only this list holds it: every view of a block, SampleTerms' fields and their slices,
-    holds a reference to it), else a new one when the kept stay within KEPT_TERMS_BYTES with
+    holds a reference to it), else a new one when the kept stay within ``kept`` elements with
     it (the oldest unreferenced ones dropped first), else None."""
-    limit = KEPT_TERMS_BYTES - 8 * size
+    limit = kept - size
     if size == 0 or limit < 0:  # nothing to keep, or more than is kept: the kept stay
         return None
     blocks = _BLOCKS.blocks
@@ -91,11 +101,11 @@ def _block(size: int) -> np.ndarray | None:
         if blocks[k].size >= size and sys.getrefcount(blocks[k]) == 2:  # the list's, the call's
             return blocks[k]
     for k in range(len(blocks) - 1, -1, -1):
-        if sum(b.nbytes for b in blocks) <= limit:
+        if sum(b.size for b in blocks) <= limit:
             break
         if sys.getrefcount(blocks[k]) == 2:
             del blocks[k]
-    if sum(b.nbytes for b in blocks) > limit:
+    if sum(b.size for b in blocks) > limit:
         return None
     blocks.insert(0, np.empty(size))
     return blocks[0]
@@ -105,9 +115,9 @@ def sample_terms_buffers(grasps: int, count: int, n: int) -> SampleTerms:
     """Uninitialised SampleTerms for ``grasps`` grasps of ``count`` samples, n joints: views of
     one kept block (``_block``; the memory of earlier terms no longer referenced when there is
     one), else an array per field (terms beyond what the threads keep)."""
-    shapes = ((n, 3, 3), (n, 3), (n, 6), (3, 3), (3,), (6, n), (6, 6), (n, n))
+    shapes = field_shapes(n)
     sizes = [grasps * count * math.prod(shape) for shape in shapes]
-    block = _block(sum(sizes))
+    block = _block(sum(sizes), KEPT_TERMS_SAMPLES * sum(math.prod(shape) for shape in shapes))
     if block is None:
         return SampleTerms(*(np.empty((grasps, count, *shape)) for shape in shapes))
     fields, start = [], 0
@@ -154,19 +164,17 @@ def grasps_terms(
     object_inertia: ObjectInertia,
     transforms_tip_to_object: Sequence[pin.SE3],
     joint_positions: Sequence[np.ndarray],
-    out: SampleTerms | None = None,
     optional: Collection[str] = OPTIONAL_TERMS,
 ) -> tuple[SampleTerms, np.ndarray]:
     """The terms of G grasps along their joint paths ((N_g, n) positions each, chain order),
     in one kernel call, and the sample counts N_g (G,). Axis 1 has max N_g rows; grasp g's
     rows from N_g on are undefined (``SampleTerms.of_grasp(g, N_g)`` drops them). Each grasp's
     terms are those ``grasp_terms`` gives it alone, bit for bit (the same kernel code per
-    grasp). ``chain``: ``compiled.chain_arrays(robot)`` (numba must be installed); ``out``:
-    terms no longer needed, overwritten when their shape is (G, max N_g); ``optional``: the
-    OPTIONAL_TERMS computed (``batch_terms``)."""
+    grasp). ``chain``: ``compiled.chain_arrays(robot)`` (numba must be installed);
+    ``optional``: the OPTIONAL_TERMS computed (``batch_terms``)."""
     bodies = augmented_bodies(robot, object_inertia, *pose_arrays(transforms_tip_to_object))
     q_all, counts = padded_configurations(robot, joint_positions)
-    return batch_terms(chain, bodies, q_all, counts, out, optional), counts
+    return batch_terms(chain, bodies, q_all, counts, optional), counts
 
 
 def padded_configurations(
@@ -186,22 +194,19 @@ def batch_terms(
     bodies: BodyInertias,
     q_all: np.ndarray,
     counts: np.ndarray,
-    out: SampleTerms | None = None,
     optional: Collection[str] = OPTIONAL_TERMS,
 ) -> SampleTerms:
     """The terms of G grasps in one kernel call: grasp g's augmented ``bodies`` (axis 0 the
     grasp, ``compiled.augmented_bodies``) along its first counts[g] configurations of
-    ``q_all`` (G, N, nq); its rows from counts[g] on are left uninitialised. ``out``: terms
-    no longer needed, overwritten (no new allocation, whose first touch of fresh pages costs
-    as much as the kernel) when their first two axes are (G, N); else new buffers.
-    ``optional``: the OPTIONAL_TERMS computed (the others undefined)."""
+    ``q_all`` (G, N, nq); its rows from counts[g] on are left uninitialised, and so are the
+    OPTIONAL_TERMS not in ``optional``. The buffers are ``sample_terms_buffers``' (kept
+    memory when there is some)."""
     from ..kernels.ik import thread_workspace
     from ..kernels.terms import sample_terms
 
     q_all = plain_array(q_all)
     n = chain.axes.shape[0]
-    if out is None or out.jacobians_tip_in_world.shape[:2] != q_all.shape[:2]:
-        out = sample_terms_buffers(q_all.shape[0], q_all.shape[1], n)
+    out = sample_terms_buffers(q_all.shape[0], q_all.shape[1], n)
     if q_all.shape[0]:
         scratch = (np.empty((n, n)), np.empty((n, 3)))
         counts = np.ascontiguousarray(counts, dtype=np.int64)
