@@ -482,3 +482,23 @@ def test_compiled_region_peaks_are_numpys_bit_for_bit() -> None:
     tied = np.isin(where[:2] // 5, [3, 7]) | np.isin(where[:2] % 5, [1, 4])
     assert tied.any()  # the ties decide somewhere: the first of them
     assert not (np.isin(where[:2] // 5, [7]) | np.isin(where[:2] % 5, [4])).any()
+
+
+def test_whole_arm_outputs_and_a_chunk_of_terms_are_kept_side_by_side() -> None:
+    """The whole arm's outputs (``points._exposure_buffers``) go in the threads' kept blocks
+    beside a full chunk of a 12-joint chain's terms: while those terms are held, a second
+    request of outputs reuses the first's block, and no block is added or evicted."""
+    from grasp_safety_ros.core.analyses.base import TERMS_CHUNK_SAMPLES
+    from grasp_safety_ros.core.method import terms as terms_module
+    from grasp_safety_ros.core.method.points import _exposure_buffers
+
+    gc.collect()
+    held = terms_module.sample_terms_buffers(1, TERMS_CHUNK_SAMPLES, 12)
+    first = _exposure_buffers(1, TERMS_CHUNK_SAMPLES, 14, 12)
+    address = first[0].base.ctypes.data
+    kept = [block.ctypes.data for block in terms_module._BLOCKS.blocks]
+    assert held.mass_matrix_inverses.base.ctypes.data in kept and address in kept
+    del first
+    second = _exposure_buffers(1, TERMS_CHUNK_SAMPLES, 14, 12)
+    assert second[0].base.ctypes.data == address  # the same memory, not fresh pages
+    assert [block.ctypes.data for block in terms_module._BLOCKS.blocks] == kept

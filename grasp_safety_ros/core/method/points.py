@@ -15,7 +15,7 @@ import numpy as np
 
 from ..model.trajectory import ObjectMotion
 from .compiled import call_kernel, plain_array
-from .terms import SampleTerms, _block
+from .terms import SampleTerms, _block, kept_elements
 
 
 def valid_rows(counts: np.ndarray, samples: int) -> np.ndarray:
@@ -99,14 +99,15 @@ def _last_columns(support: np.ndarray) -> np.ndarray:
     return np.where(support.any(axis=1), last, 0).astype(np.int64)
 
 
-def _exposure_buffers(grasps: int, samples: int, count: int) -> list[np.ndarray]:
+def _exposure_buffers(grasps: int, samples: int, count: int, n: int) -> list[np.ndarray]:
     """Uninitialised (G, N, K, 3) positions and directions, (G, N, K) speeds, masses and
     energies and a (G, N, K) bool mask: views of one block of earlier terms or results no
     array refers to any longer (``terms._block``: fresh pages cost as much to touch as the
-    kernel that fills them), else new arrays."""
+    kernel that fills them; the kept blocks may hold an n-joint chain's terms and these),
+    else new arrays."""
     shape = (grasps, samples, count)
     size = grasps * samples * count
-    block = _block(9 * size + (size + 7) // 8)
+    block = _block(9 * size + (size + 7) // 8, kept_elements(n, 9 * count + count // 8 + 1))
     if block is None:
         vectors = [np.empty((*shape, 3)) for _ in range(2)]
         scalars = [np.empty(shape) for _ in range(3)]
@@ -154,7 +155,7 @@ def arm_site_exposure(
     joints = np.ascontiguousarray(site_joints, dtype=np.int64)
     count, n = len(joints), terms.mass_matrix_inverses.shape[-1]
     site_body, body_joints, body_support = _shared_bodies(joints, support)
-    outputs = _exposure_buffers(grasps, samples, count)
+    outputs = _exposure_buffers(grasps, samples, count, n)
     rotation, translation = transform_base_to_world
     call_kernel(
         kernel,

@@ -78,6 +78,13 @@ def field_shapes(n: int) -> tuple[tuple[int, ...], ...]:
     return ((n, 3, 3), (n, 3), (n, 6), (3, 3), (3,), (6, n), (6, 6), (n, n))
 
 
+def kept_elements(n: int, per_sample: int = 0) -> int:
+    """float64 elements the threads' kept blocks may hold: KEPT_TERMS_SAMPLES samples' terms
+    of an n-joint chain, and as many samples of ``per_sample`` elements more (a caller's own
+    outputs in the same blocks, e.g. the whole arm's, so neither evicts the other)."""
+    return KEPT_TERMS_SAMPLES * (sum(math.prod(shape) for shape in field_shapes(n)) + per_sample)
+
+
 class _Blocks(threading.local):
     """Per thread, the memory blocks of earlier terms (one flat float64 array each)."""
 
@@ -117,7 +124,7 @@ def sample_terms_buffers(grasps: int, count: int, n: int) -> SampleTerms:
     one), else an array per field (terms beyond what the threads keep)."""
     shapes = field_shapes(n)
     sizes = [grasps * count * math.prod(shape) for shape in shapes]
-    block = _block(sum(sizes), KEPT_TERMS_SAMPLES * sum(math.prod(shape) for shape in shapes))
+    block = _block(sum(sizes), kept_elements(n))
     if block is None:
         return SampleTerms(*(np.empty((grasps, count, *shape)) for shape in shapes))
     fields, start = [], 0
