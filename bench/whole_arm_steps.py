@@ -27,7 +27,7 @@ from grasp_safety_ros.core.analyses import whole_arm
 from grasp_safety_ros.core.method.terms import grasps_terms
 
 STEPS = (
-    "_spline_rates",
+    "joint_path_velocities",
     "tip_following_rates",
     "tip_twists_into",
     "arm_site_exposure",
@@ -70,6 +70,7 @@ def main(argv: list[str] | None = None) -> int:
             case.obj,
             [grasp.transform_tip_to_object for grasp in grasps],
             [evaluation.joint_positions for evaluation in evaluations],
+            optional=whole_arm.WHOLE_ARM_TERMS,
         )
         _probed(spent, "analysis", whole_arm.evaluate_whole_arm_on_terms)(
             case.robot,

@@ -464,9 +464,9 @@ def _region_peaks_case() -> tuple[np.ndarray, np.ndarray, list]:
 
 @needs_numba
 def test_compiled_region_peaks_are_numpys_bit_for_bit() -> None:
-    """The compiled peaks evaluate few forces (a sample whose bound F(max v, max m) is below
-    a force found holds no maximum) yet give numpy's forces and argmax, ties, rest, inf, 0,
-    negative and NaN masses included."""
+    """The compiled peaks evaluate few forces (a sample whose bound, from its largest v² and
+    largest m v², is below a force found holds no maximum) yet give numpy's forces and
+    argmax, ties, rest, inf, 0, negative and NaN masses included."""
     from grasp_safety_ros.core.analyses.arm_regions import _region_peaks, assess_sites_batch
 
     speeds, masses, regions = _region_peaks_case()
@@ -482,6 +482,38 @@ def test_compiled_region_peaks_are_numpys_bit_for_bit() -> None:
     tied = np.isin(where[:2] // 5, [3, 7]) | np.isin(where[:2] % 5, [1, 4])
     assert tied.any()  # the ties decide somewhere: the first of them
     assert not (np.isin(where[:2] // 5, [7]) | np.isin(where[:2] % 5, [4])).any()
+
+
+@needs_numba
+@pytest.mark.parametrize(
+    ("speeds_m_s", "masses_kg", "human_mass_kg", "spring_n_per_m"),
+    [
+        ([1e-8, 1e-155], [1e-300, 1e300], 40.0, 1e300),  # a*b products beyond 1e±308
+        ([1e-45, 1e-170], [1.0, 1e300], 1e300, 3e4),  # v² subnormal, 1/m_h tiny
+        ([1e120, 2.0], [3.0, 1e-120], np.inf, 3e4),  # v² overflows, m v² underflows
+    ],
+)
+def test_compiled_region_peaks_are_numpys_at_the_ends_of_the_float_range(
+    speeds_m_s: list[float], masses_kg: list[float], human_mass_kg: float, spring_n_per_m: float
+) -> None:
+    """Speeds, masses, m_h and k the region validation accepts whose pruning bounds would
+    overflow or underflow: those samples are evaluated whole, so numpy's peak and its first
+    index (not a pruned -1 or an earlier sample)."""
+    from grasp_safety_ros.core.analyses.arm_regions import _region_peaks
+    from grasp_safety_ros.core.analyses.iso15066 import BodyRegion
+    from grasp_safety_ros.core.method.points import region_peaks
+
+    speeds = np.array(speeds_m_s).reshape(1, 2, 1)
+    masses = np.array(masses_kg).reshape(1, 2, 1)
+    region = BodyRegion("edge", 100.0, 200.0, spring_n_per_m, human_mass_kg)
+    with np.errstate(all="ignore"):
+        where, peak = region_peaks(
+            speeds, masses, np.array([1.0 / human_mass_kg]), np.array([spring_n_per_m])
+        )
+        expected_where, expected_peak = _region_peaks(speeds, masses, [region])
+    np.testing.assert_array_equal(where, expected_where)
+    np.testing.assert_array_equal(peak, expected_peak)
+    assert (peak >= 0.0).all()
 
 
 def test_whole_arm_outputs_and_a_chunk_of_terms_are_kept_side_by_side() -> None:
@@ -502,3 +534,10 @@ def test_whole_arm_outputs_and_a_chunk_of_terms_are_kept_side_by_side() -> None:
     second = _exposure_buffers(1, TERMS_CHUNK_SAMPLES, 14, 12)
     assert second[0].base.ctypes.data == address  # the same memory, not fresh pages
     assert [block.ctypes.data for block in terms_module._BLOCKS.blocks] == kept
+    del second
+    many = _exposure_buffers(1, 2_000, 1000, 12)  # more per sample than the outputs' share
+    still = [block.ctypes.data for block in terms_module._BLOCKS.blocks]
+    assert many[0].base is None or many[0].base.ctypes.data not in still
+    assert held.mass_matrix_inverses.base.ctypes.data in still  # the terms in use stay kept
+    del held, many
+    terms_module._BLOCKS.blocks.clear()  # the next tests' threads start without 140 MB kept

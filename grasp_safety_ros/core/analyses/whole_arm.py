@@ -40,7 +40,7 @@ import pinocchio as pin
 from ..exceptions import InvalidInputError
 from ..input_checks import read_only
 from ..method.effective_mass import augmented_model
-from ..method.executable import clamped_spline_velocities, joint_velocities_accelerations
+from ..method.executable import joint_path_velocities
 from ..method.points import (
     PSEUDO_INVERSE_RCOND,
     arm_site_exposure,
@@ -231,7 +231,8 @@ def tip_following_joint_velocities(
         tip_twists_in_world: (N, 6) tip twists (linear [m/s], angular [rad/s]), world axes.
         times_s, joint_positions: The samples (N,), (N, n); continuous joints are unwrapped.
     """
-    spline_rates = _spline_rates(robot, times_s, [joint_positions])[0]
+    continuous = ~np.isfinite(robot.lower_limits)
+    spline_rates = joint_path_velocities(times_s, [joint_positions], continuous)[0]
     pseudo_inverse = np.linalg.pinv(tip_jacobians, rcond=PSEUDO_INVERSE_RCOND)  # (N, n, 6)
     residual = tip_twists_in_world - (tip_jacobians @ spline_rates[..., None])[..., 0]
     return np.asarray(spline_rates + (pseudo_inverse @ residual[..., None])[..., 0])
@@ -456,14 +457,14 @@ def evaluate_whole_arm_on_terms(
             by_motion.setdefault(key, []).append(g)
         by_times.setdefault(key[1], []).append(g)
     for (trajectory_id, _), group in by_motion.items():
-        times, count = np.asarray(evaluations[group[0]].times_s, dtype=float), counts[group[0]]
+        times = np.asarray(evaluations[group[0]].times_s, dtype=float)
         motion = as_path[trajectory_id].object_motion(times)  # type: ignore[union-attr]
         tips = np.array([grasps[g].transform_tip_to_object.translation for g in group])
         tip_twists_into(motion, tips, robot.transform_base_to_world.rotation, group, twists)
     for group in by_times.values():
         times, count = np.asarray(evaluations[group[0]].times_s, dtype=float), counts[group[0]]
-        spline_rates[group, :count] = _spline_rates(
-            robot, times, [paths[g] for g in group], compiled=True
+        spline_rates[group, :count] = joint_path_velocities(
+            times, [paths[g] for g in group], ~np.isfinite(robot.lower_limits), compiled=True
         )
     rates = tip_following_rates(terms.jacobians_tip_in_world, counts, twists, spline_rates)
     base = robot.transform_base_to_world
@@ -496,30 +497,6 @@ def evaluate_whole_arm_on_terms(
             _whole_arm_result(evaluation, sites, times, SiteExposure(*exposure), *assessment)
         )
     return results
-
-
-def _spline_rates(
-    robot: RobotModel,
-    times: np.ndarray,
-    joint_positions: Sequence[np.ndarray],
-    compiled: bool = False,
-) -> np.ndarray:
-    """q̇_s (G, N, n) of G joint paths (N, n) sampled at the same ``times``: the clamped
-    spline's rates through the samples, continuous joints unwrapped, all paths in one spline
-    (its columns are independent: each path's rates are those of a spline through it alone);
-    ``compiled``: by the kernel (``executable.clamped_spline_velocities``, the same bits).
-    """
-    positions = np.array(joint_positions, dtype=float)  # (G, N, n)
-    continuous = ~np.isfinite(robot.lower_limits)
-    if continuous.any() and positions.shape[1] > 1:
-        positions[..., continuous] = np.unwrap(positions[..., continuous], axis=1)
-    grasps, count, n = positions.shape
-    columns = np.moveaxis(positions, 0, 1).reshape(count, grasps * n)
-    if compiled:
-        rates = clamped_spline_velocities(times, columns)
-    else:
-        rates = joint_velocities_accelerations(times, columns)[0]
-    return np.moveaxis(rates.reshape(count, grasps, n), 1, 0)
 
 
 def whole_arm_score(whole_arm: WholeArmEvaluation, region: str) -> float:

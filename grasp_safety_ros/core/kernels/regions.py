@@ -8,6 +8,9 @@ from ._jit import _jit_exact
 
 PRUNE_MARGIN = 1e-9
 """Relative margin of ``region_peaks``' pruning: far above the few roundings of its bounds."""
+NORMAL_LOW, NORMAL_HIGH = 1e-100, 1e100
+"""The range of a speed, mass, 1/m_h, spring constant and first force within which the
+pruning bounds neither underflow nor overflow (a product of three stays in 1e±300)."""
 
 
 @_jit_exact
@@ -37,9 +40,11 @@ def region_peaks(
     ``site_energies``) and their minima per sample (a bound of the sample's F²). With L the
     largest F of the sample of the largest bound, a sample, then an entry, whose bound is
     below L² by more than PRUNE_MARGIN (the bounds' and F's roundings are a few 1e-16) has
-    no F >= L and is not evaluated. Samples where a moving site's mass is not > 0 (NaN, 0,
-    negative) are evaluated whole, and everything is where L is not within [1e-100, 1e100]
-    (no underflow or overflow in the bounds).
+    no F >= L and is not evaluated. Samples where a moving site's speed or mass is outside
+    [NORMAL_LOW, NORMAL_HIGH] (the mass may be inf; NaN, 0 and negative are outside) are
+    evaluated whole, and everything is where L, 1/m_h (unless 0) or k is outside it (no
+    underflow or overflow in the bounds); should every entry still be pruned, the pass is
+    made again without pruning.
     bounds, sample_speeds, sample_energies (N,), kind (N,) int64 (0: no site moves,
     1: bounded, 2: evaluated), site_speeds, site_energies (N K,): scratch."""
     samples = speeds.shape[1] // sites if sites > 0 else 0
@@ -51,7 +56,10 @@ def region_peaks(
                 v = speeds[g, e]
                 if v > 0.0:
                     m = masses[g, e]
-                    state = max(state, 1 if m > 0.0 else 2)
+                    normal = NORMAL_LOW <= v <= NORMAL_HIGH and (
+                        NORMAL_LOW <= m <= NORMAL_HIGH or m == math.inf
+                    )
+                    state = max(state, 1 if normal else 2)
                     site_speeds[e] = 1.0 / (v * v)
                     site_energies[e] = 1.0 / (m * v * v)
                     smallest_a = min(smallest_a, site_speeds[e])
@@ -70,27 +78,66 @@ def region_peaks(
                 if speeds[g, e] > 0.0:
                     force = speeds[g, e] * math.sqrt(spring * (1.0 / (c + 1.0 / masses[g, e])))
                     low = max(low, force)
-            prune = 1e-100 <= low <= 1e100
-            scale = low * low * (1.0 - PRUNE_MARGIN)
-            at, top = 0, -1.0
-            for i in range(samples):
-                if prune and (kind[i] == 0 or (kind[i] == 1 and bounds[i] * scale > spring)):
-                    continue
-                found = False
-                for k in range(sites):
-                    e = i * sites + k
-                    v = speeds[g, e]
-                    if prune and kind[i] == 1:  # F = 0, or its bound below L
-                        if not v > 0.0 or (c * site_speeds[e] + site_energies[e]) * scale > spring:
-                            continue
-                    force = 0.0
-                    if v > 0.0:
-                        force = v * math.sqrt(spring * (1.0 / (c + 1.0 / masses[g, e])))
-                    if force != force:
-                        at, top, found = e, force, True
-                        break
-                    if force > top:
-                        at, top = e, force
-                if found:
-                    break
+            prune = (
+                NORMAL_LOW <= low <= NORMAL_HIGH
+                and (c == 0.0 or NORMAL_LOW <= c <= NORMAL_HIGH)
+                and NORMAL_LOW <= spring <= NORMAL_HIGH
+            )
+            at, top = _peak(
+                speeds,
+                masses,
+                sites,
+                g,
+                c,
+                spring,
+                low,
+                prune,
+                bounds,
+                kind,
+                site_speeds,
+                site_energies,
+            )
+            if prune and top < 0.0:  # every entry pruned: a bound was wrong, evaluate all
+                at, top = _peak(
+                    speeds,
+                    masses,
+                    sites,
+                    g,
+                    c,
+                    spring,
+                    low,
+                    False,
+                    bounds,
+                    kind,
+                    site_speeds,
+                    site_energies,
+                )
             where[g, r], peak[g, r] = at, top
+
+
+@_jit_exact
+def _peak(
+    speeds, masses, sites, g, c, spring, low, prune, bounds, kind, site_speeds, site_energies
+):
+    """(first entry, force) of motion g's largest F for one region (``region_peaks``),
+    skipping what the bounds prune when ``prune``."""
+    scale = low * low * (1.0 - PRUNE_MARGIN)
+    samples = speeds.shape[1] // sites if sites > 0 else 0
+    at, top = 0, -1.0
+    for i in range(samples):
+        if prune and (kind[i] == 0 or (kind[i] == 1 and bounds[i] * scale > spring)):
+            continue
+        for k in range(sites):
+            e = i * sites + k
+            v = speeds[g, e]
+            if prune and kind[i] == 1:  # F = 0, or its bound below L
+                if not v > 0.0 or (c * site_speeds[e] + site_energies[e]) * scale > spring:
+                    continue
+            force = 0.0
+            if v > 0.0:
+                force = v * math.sqrt(spring * (1.0 / (c + 1.0 / masses[g, e])))
+            if force != force:
+                return e, force
+            if force > top:
+                at, top = e, force
+    return at, top

@@ -257,3 +257,26 @@ def _solve_rows(elimination: Elimination, b: np.ndarray) -> None:
     b[n - 2] = (b[n - 2] - du[n - 2] * b[n - 1]) / d[n - 2]
     for i in range(n - 3, -1, -1):
         b[i] = (b[i] - du[i] * b[i + 1] - dl[i] * b[i + 2]) / d[i]
+
+
+def joint_path_velocities(
+    times_s: np.ndarray,
+    joint_positions: Sequence[np.ndarray],
+    continuous: np.ndarray,
+    compiled: bool = False,
+) -> np.ndarray:
+    """q̇ (G, N, n) [rad/s or m/s] of G joint paths (N, n) sampled at the same ``times_s``:
+    the clamped spline's rates through the samples, the ``continuous`` (n,) joints unwrapped,
+    all paths in one spline (its columns are independent: each path's rates are those of a
+    spline through it alone); ``compiled``: by the kernel (``clamped_spline_velocities``, the
+    same bits)."""
+    positions = np.array(joint_positions, dtype=float)  # (G, N, n)
+    if continuous.any() and positions.shape[1] > 1:
+        positions[..., continuous] = np.unwrap(positions[..., continuous], axis=1)
+    grasps, count, n = positions.shape
+    columns = np.moveaxis(positions, 0, 1).reshape(count, grasps * n)
+    if compiled:
+        rates = clamped_spline_velocities(times_s, columns)
+    else:
+        rates = joint_velocities_accelerations(times_s, columns)[0]
+    return np.moveaxis(rates.reshape(count, grasps, n), 1, 0)

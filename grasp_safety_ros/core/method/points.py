@@ -15,7 +15,7 @@ import numpy as np
 
 from ..model.trajectory import ObjectMotion
 from .compiled import call_kernel, plain_array
-from .terms import SampleTerms, _block, kept_elements
+from .terms import KEPT_TERMS_SAMPLES, SampleTerms, _block, kept_elements
 
 
 def valid_rows(counts: np.ndarray, samples: int) -> np.ndarray:
@@ -103,11 +103,13 @@ def _exposure_buffers(grasps: int, samples: int, count: int, n: int) -> list[np.
     """Uninitialised (G, N, K, 3) positions and directions, (G, N, K) speeds, masses and
     energies and a (G, N, K) bool mask: views of one block of earlier terms or results no
     array refers to any longer (``terms._block``: fresh pages cost as much to touch as the
-    kernel that fills them; the kept blocks may hold an n-joint chain's terms and these),
-    else new arrays."""
+    kernel that fills them; the kept blocks may hold an n-joint chain's terms and as much
+    again for these: more sites than that share take fresh arrays, not kept memory), else new
+    arrays."""
     shape = (grasps, samples, count)
     size = grasps * samples * count
-    block = _block(9 * size + (size + 7) // 8, kept_elements(n, 9 * count + count // 8 + 1))
+    per_sample = min(9 * count + count // 8 + 1, kept_elements(n) // KEPT_TERMS_SAMPLES)
+    block = _block(9 * size + (size + 7) // 8, kept_elements(n, per_sample))
     if block is None:
         vectors = [np.empty((*shape, 3)) for _ in range(2)]
         scalars = [np.empty(shape) for _ in range(3)]
@@ -218,7 +220,7 @@ def site_mobilities(
 def region_peaks(
     speed_m_s: np.ndarray,
     effective_mass_kg: np.ndarray,
-    human_inverse_kg: np.ndarray,
+    inverse_human_masses_per_kg: np.ndarray,
     springs_n_per_m: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """For G motions' (G, N, K) site speeds [m/s] and masses [kg] and R body regions (1/m_h
@@ -229,7 +231,7 @@ def region_peaks(
     from ..kernels.regions import region_peaks as kernel
 
     grasps, samples, sites = speed_m_s.shape
-    regions = len(human_inverse_kg)
+    regions = len(inverse_human_masses_per_kg)
     where = np.zeros((grasps, regions), dtype=np.int64)
     peak = np.zeros((grasps, regions))
     call_kernel(
@@ -237,7 +239,7 @@ def region_peaks(
         plain_array(speed_m_s).reshape(grasps, -1),
         plain_array(effective_mass_kg).reshape(grasps, -1),
         sites,
-        plain_array(human_inverse_kg),
+        plain_array(inverse_human_masses_per_kg),
         plain_array(springs_n_per_m),
         where,
         peak,

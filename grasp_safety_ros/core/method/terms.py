@@ -70,7 +70,8 @@ chain asked (``field_shapes``), for the next ``sample_terms_buffers``: returned 
 allocator, freed terms come back as fresh pages whose first touch costs as much as the kernel
 that fills them (whole arm of 10 grasps x 201 samples: 0.5 µs per sample of 1.0, measured). A
 chunk of ``analyses.base.TERMS_CHUNK_SAMPLES`` (25,000) of any chain fits with a fifth to spare
-(64 MB for a 7-joint arm, 115 MB for a 12-joint one; ``test_terms`` holds the chunk within)."""
+(64 MB for a 7-joint arm, 115 MB for a 12-joint one; ``test_terms`` holds the chunk within).
+The whole arm's outputs may take as much again beside them (``points._exposure_buffers``)."""
 
 
 def field_shapes(n: int) -> tuple[tuple[int, ...], ...]:

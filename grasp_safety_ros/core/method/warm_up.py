@@ -102,14 +102,16 @@ def _warm_up_evaluator(
 def _warm_up_analysis_kernels(
     robot: RobotModel, chain: ChainArrays, box: ObjectInertia, seed_q: np.ndarray
 ) -> None:
-    """Run the analyses' kernels (mobility, terms, points, inertia uncertainty, effort) once
-    at ``seed_q``."""
+    """Run the analyses' kernels (mobility, terms, points, the whole arm's tip twists and
+    spline rates, inertia uncertainty, effort) once at ``seed_q``."""
     import numpy as np
     import pinocchio as pin
 
+    from ..model.trajectory import ObjectMotion
     from .compiled import augmented_bodies
     from .dynamics import joint_dynamics
     from .effective_mass import translational_mobilities_in_base
+    from .executable import clamped_spline_velocities
     from .perturbed import perturbed_effective_masses
     from .points import (
         arm_site_exposure,
@@ -117,6 +119,7 @@ def _warm_up_analysis_kernels(
         site_mobilities,
         tip_following_rates,
         tip_point_masses,
+        tip_twists_into,
     )
     from .terms import configurations, grasps_terms
 
@@ -139,6 +142,10 @@ def _warm_up_analysis_kernels(
     arm_site_exposure(terms, counts, (np.eye(3), np.zeros(3)), *site, rates, 1e-9)
     site_mobilities(terms, *site, np.zeros((1, 3), np.int64))
     region_peaks(np.ones((1, 1, 1)), np.ones((1, 1, 1)), np.ones(1), np.ones(1))
+    still_motion = np.zeros((1, 3))
+    motion = ObjectMotion(np.eye(3)[None], still_motion, still_motion, still_motion, np.zeros(1))
+    tip_twists_into(motion, np.zeros((1, 3)), np.eye(3), [0], np.zeros((1, 1, 6)))
+    clamped_spline_velocities(np.array([0.0, 1.0]), np.zeros((2, 1)))
     tip_following_rates(terms.jacobians_tip_in_world, counts, np.zeros((1, 1, 6)), rates)
     perturbed_effective_masses(  # the inertia-uncertainty kernel
         robot,
