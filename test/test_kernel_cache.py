@@ -151,23 +151,24 @@ print(sum(exp3.stats.cache_hits.values()), on_load, getattr(library, "linking_bi
 """
 
 
+def run_with_cache(code: str, cache: Path) -> list[str]:
+    """The words ``code`` prints, run in a fresh Python with its kernels cached in ``cache``."""
+    return subprocess.run(
+        [sys.executable, "-c", code],
+        env={**os.environ, "GRASP_SAFETY_NUMBA_CACHE": str(cache)},
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=True,
+    ).stdout.split()
+
+
 @pytest.mark.skipif(not compiled_available(), reason="numba is not installed")
 def test_a_cached_kernel_loads_without_its_bitcode_and_still_links(tmp_path: Path) -> None:
     """A kernel loaded from the cache parses no LLVM bitcode (its machine code is loaded); a
     compilation in the same process that calls it parses its linking bitcode then, and the
     kernel it links computes the same bits as the loaded one."""
-    env = {**os.environ, "GRASP_SAFETY_NUMBA_CACHE": str(tmp_path / "cache")}
-    runs = [
-        subprocess.run(
-            [sys.executable, "-c", LINK_AFTER_LOAD],
-            env=env,
-            capture_output=True,
-            text=True,
-            timeout=300,
-            check=True,
-        ).stdout.split()
-        for _ in range(2)
-    ]
+    runs = [run_with_cache(LINK_AFTER_LOAD, tmp_path / "cache") for _ in range(2)]
     assert runs[0][0] == "0" and runs[0][3] == "True"  # compiled in the first process
     assert runs[1] == ["1", "0", "True", "True"]  # loaded, no bitcode parsed until linked
 
@@ -201,18 +202,7 @@ def test_a_cached_kernel_has_its_addresses_and_passes_as_a_first_class_function(
     """A kernel loaded lazily (its bitcode not parsed) still gives numba the address of its
     C wrapper and of its own function (numba's load marks every symbol defined), so it can be
     handed to another kernel as a first-class function and computes the same bits."""
-    env = {**os.environ, "GRASP_SAFETY_NUMBA_CACHE": str(tmp_path / "cache")}
-    runs = [
-        subprocess.run(
-            [sys.executable, "-c", FIRST_CLASS_AFTER_LOAD],
-            env=env,
-            capture_output=True,
-            text=True,
-            timeout=300,
-            check=True,
-        ).stdout.split()
-        for _ in range(2)
-    ]
+    runs = [run_with_cache(FIRST_CLASS_AFTER_LOAD, tmp_path / "cache") for _ in range(2)]
     assert runs[0] == ["0", "True", "True"]  # compiled in the first process
     assert runs[1] == ["1", "True", "True"]  # loaded from the cache in the second
 
@@ -274,20 +264,10 @@ def test_another_numba_loads_cached_kernels_with_its_own_rebuild(tmp_path: Path)
     """A numba version not in LAZY_LOADING_NUMBA: the cached kernel is loaded by numba's own
     rebuild (its code library numba's class), the same machine code as the lazy load's.
     (Faking numba.__version__ would not do: numba's cache index rejects another version.)"""
-    env = {**os.environ, "GRASP_SAFETY_NUMBA_CACHE": str(tmp_path / "cache")}
-
-    def run(code: str) -> list[str]:
-        return subprocess.run(
-            [sys.executable, "-c", code],
-            env=env,
-            capture_output=True,
-            text=True,
-            timeout=300,
-            check=True,
-        ).stdout.split()
-
     checked = OTHER_NUMBA.replace("_jit.LAZY_LOADING_NUMBA = ()", "")
-    compiled, lazy, other = run(checked), run(checked), run(OTHER_NUMBA)
+    compiled, lazy, other = (
+        run_with_cache(code, tmp_path / "cache") for code in (checked, checked, OTHER_NUMBA)
+    )
     assert compiled[0] == "0" and lazy[0] == other[0] == "1"  # loaded from the cache twice
     assert lazy[1] == "LazyLinkingLibrary" and other[1] != "LazyLinkingLibrary"
     assert compiled[2] == lazy[2] == other[2]  # the same machine code
