@@ -45,3 +45,23 @@ def top_functions(profile: cProfile.Profile, total_s: float, count: int = 8) -> 
 
 def rel_diff(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.max(np.abs(a / b - 1.0))) if len(a) else 0.0
+
+
+def python_backend_agreement(pairs: list) -> dict[str, Any]:
+    """How the Python backend's evaluations agree with the compiled ones, ``pairs`` of
+    (Python, compiled) GraspEvaluation: the largest relative difference of the effective
+    masses where both are feasible, and whether feasibility and IK iterations are the same."""
+    return {
+        "python_backend_max_rel_diff": max(
+            (
+                rel_diff(a.effective_mass_kg, b.effective_mass_kg)
+                for a, b in pairs
+                if a.feasible and b.feasible
+            ),
+            default=0.0,
+        ),
+        "python_backend_same_feasibility": all(a.feasible == b.feasible for a, b in pairs),
+        "python_backend_same_ik_iterations": all(
+            np.array_equal(a.ik_iterations, b.ik_iterations) for a, b in pairs
+        ),
+    }

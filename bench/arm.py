@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from _common import rel_diff, summary, timed, top_functions
+from _common import python_backend_agreement, rel_diff, summary, timed, top_functions
 from kdl_chain import build_chain
 from pykdl_peer import PyKDLPipeline
 from reference import ReferenceIK, reference_effective_masses
@@ -294,21 +294,10 @@ def ours_figures(
         "us_per_sample_with_ik_parallel": parallel,
         "parallel_speedup": with_ik["median"] / parallel["median"],
         "python_backend_us_per_sample_with_ik": fallback_s / total * 1e6,
-        "python_backend_max_rel_diff": max(
-            (
-                rel_diff(a.effective_mass_kg, b.effective_mass_kg)
-                for a, b in pairs
-                if a.feasible and b.feasible
-            ),
-            default=0.0,
-        ),
-        "python_backend_same_feasibility": all(a.feasible == b.feasible for a, b in pairs),
+        **python_backend_agreement(pairs),
         # The last iterate of a sample that does not converge (100 iterations) is chaotic: the
         # joints it leaves at a limit, named in the reason, may differ by rounding.
         "python_backend_reasons_differ": [b.name for a, b in pairs if a.reason != b.reason],
-        "python_backend_same_ik_iterations": all(
-            np.array_equal(a.ik_iterations, b.ik_iterations) for a, b in pairs
-        ),
         "floor_us_per_sample": floor,
         "distance_to_floor": with_ik["median"] / floor,
         "distance_to_floor_without_ik": without_ik["median"]

@@ -8,7 +8,7 @@ import time
 from typing import Any
 
 import numpy as np
-from _common import rel_diff, summary, timed
+from _common import python_backend_agreement, summary, timed
 from workload import ArmWorkload, box_object, grasps_around_box
 
 from grasp_safety_ros.core import GraspSafetyEvaluator
@@ -55,16 +55,5 @@ def bench_continuous(arm: ArmWorkload, repeats: int) -> dict[str, Any]:
         "us_per_sample_with_ik": summary([t / total * 1e6 for t in wall]),
         "cpu_us_per_sample_with_ik": summary([t / total * 1e6 for t in cpu]),
         "python_backend_us_per_sample_with_ik": python_s / total * 1e6,
-        "python_backend_max_rel_diff": max(
-            (
-                rel_diff(a.effective_mass_kg, b.effective_mass_kg)
-                for a, b in pairs
-                if a.feasible and b.feasible
-            ),
-            default=0.0,
-        ),
-        "python_backend_same_feasibility": all(a.feasible == b.feasible for a, b in pairs),
-        "python_backend_same_ik_iterations": all(
-            np.array_equal(a.ik_iterations, b.ik_iterations) for a, b in pairs
-        ),
+        **python_backend_agreement(pairs),
     }
