@@ -205,6 +205,12 @@ class Shared:
                     results[c] = on_chunk(c, chunk)
         return cached[c]
 
+    @property
+    def can_run_ahead(self) -> bool:
+        """Whether chunk calls can run ahead: on the compiled backend's shared terms along
+        the evaluated paths (without redundancy, whose paths are known only once it ran)."""
+        return self.backend.compiled and not self.options.redundancy
+
     def run_ahead(self, name: str, on_chunk: ChunkCall[Any]) -> None:
         """Run ``on_chunk(c, chunk)`` (``per_grasp``'s chunk call, reading ``terms(c)``) on
         each chunk right after its terms are computed; ``take_ahead(name)`` gives the

@@ -265,7 +265,7 @@ class Effort:
         return grasps
 
     def prepare(self, shared: Shared) -> None:
-        if shared.backend.compiled and not shared.options.redundancy:  # the evaluated paths
+        if shared.can_run_ahead:
 
             def on_chunk(c: int, chunk: Sequence[int]) -> list[tuple[int, EffortEvaluation]]:
                 terms, _ = shared.terms(c)
@@ -322,7 +322,7 @@ class WholeArm:
         return grasps
 
     def prepare(self, shared: Shared) -> None:
-        if shared.backend.compiled and not shared.options.redundancy:  # the evaluated paths
+        if shared.can_run_ahead:
             sites, regions = _sites_and_regions(shared)
 
             def on_chunk(c: int, chunk: Sequence[int]) -> list[tuple[int, WholeArmEvaluation]]:

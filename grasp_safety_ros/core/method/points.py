@@ -15,7 +15,7 @@ import numpy as np
 
 from ..model.trajectory import ObjectMotion
 from .compiled import call_kernel, plain_array
-from .terms import KEPT_TERMS_SAMPLES, SampleTerms, _block, kept_elements
+from .terms import SampleTerms, _block, kept_elements, sample_elements
 
 
 def valid_rows(counts: np.ndarray, samples: int) -> np.ndarray:
@@ -108,7 +108,7 @@ def _exposure_buffers(grasps: int, samples: int, count: int, n: int) -> list[np.
     arrays."""
     shape = (grasps, samples, count)
     size = grasps * samples * count
-    per_sample = min(9 * count + count // 8 + 1, kept_elements(n) // KEPT_TERMS_SAMPLES)
+    per_sample = min(9 * count + count // 8 + 1, sample_elements(n))
     block = _block(9 * size + (size + 7) // 8, kept_elements(n, per_sample))
     if block is None:
         vectors = [np.empty((*shape, 3)) for _ in range(2)]

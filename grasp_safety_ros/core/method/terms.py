@@ -79,11 +79,16 @@ def field_shapes(n: int) -> tuple[tuple[int, ...], ...]:
     return ((n, 3, 3), (n, 3), (n, 6), (3, 3), (3,), (6, n), (6, 6), (n, n))
 
 
+def sample_elements(n: int) -> int:
+    """float64 elements of one sample's terms, n joints."""
+    return sum(math.prod(shape) for shape in field_shapes(n))
+
+
 def kept_elements(n: int, per_sample: int = 0) -> int:
     """float64 elements the threads' kept blocks may hold: KEPT_TERMS_SAMPLES samples' terms
     of an n-joint chain, and as many samples of ``per_sample`` elements more (a caller's own
     outputs in the same blocks, e.g. the whole arm's, so neither evicts the other)."""
-    return KEPT_TERMS_SAMPLES * (sum(math.prod(shape) for shape in field_shapes(n)) + per_sample)
+    return KEPT_TERMS_SAMPLES * (sample_elements(n) + per_sample)
 
 
 class _Blocks(threading.local):
