@@ -230,9 +230,9 @@ def max_permissible_speed_m_s(robot_effective_mass_kg: Any, region: BodyRegion) 
 
 class _RegionSamples:
     """The per-sample arrays of R regions for M motions of N samples ((M, N) speeds [m/s] and
-    masses [kg], validated): force [N], v_max [m/s] and force ratio (R, M, N), read-only,
-    computed for all at once on the first read (``_region_arrays``). Most callers read only
-    the summaries, which ``_region_peaks`` computes without them."""
+    masses [kg], validated): force [N], v_max [m/s] and force ratio (R·M, N) (region-major),
+    read-only, computed for all at once on the first read (``_region_arrays``). Most
+    callers read only the summaries, which ``_region_peaks`` computes without them."""
 
     def __init__(
         self, speed_m_s: np.ndarray, effective_mass_kg: np.ndarray, regions: tuple[BodyRegion, ...]
@@ -241,9 +241,11 @@ class _RegionSamples:
         self._arrays: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(force, v_max, ratio), each (R, M, N)."""
+        """(force, v_max, ratio), each (R·M, N)."""
         if self._arrays is None:  # (two threads may both compute it: the same bits)
-            self._arrays = _region_arrays(*self._inputs)
+            samples = self._inputs[0].shape[1]
+            force, v_max, ratio = (a.reshape(-1, samples) for a in _region_arrays(*self._inputs))
+            self._arrays = (force, v_max, ratio)
         return self._arrays
 
 
@@ -265,7 +267,7 @@ class RegionAssessment:
 
     The per-sample arrays (N,), ``contact_force_n``, ``max_permissible_speed_m_s`` and
     ``force_ratio``, are properties, computed on first read for every region and motion
-    assessed with this one (``_samples``, at ``_at``: region, motion).
+    assessed with this one (``_samples``, at row ``_at``: region k of motion m at k·M + m).
     """
 
     region: BodyRegion
@@ -276,7 +278,7 @@ class RegionAssessment:
     min_duration_s: float
     min_max_permissible_speed_m_s: float
     _samples: _RegionSamples = field(repr=False, compare=False)
-    _at: tuple[int, int] = field(repr=False, compare=False)
+    _at: int = field(repr=False, compare=False)
 
     @property
     def contact_force_n(self) -> np.ndarray:
@@ -372,16 +374,16 @@ def _assess_batch(
     min_duration = np.where(worst > 0.0, duration_s * worst, 0.0)
     samples = _RegionSamples(speed_m_s, effective_mass_kg, regions)
     columns = (worst, worst_sample, peak, admissible, min_duration, min_speed)
+    count, permitted = len(speed_m_s), _region_columns(regions)[0][:, 0]
     assessed = [  # positional (R per motion): the fields in order
         tuple(
             [
-                RegionAssessment(region, w, s, p, a, d, v, samples, (k, m))
+                RegionAssessment(region, w, s, p, a, d, v, samples, k * count + m)
                 for k, (region, w, s, p, a, d, v) in enumerate(zip(regions, *rows, strict=True))
             ]
         )
         for m, rows in enumerate(zip(*(column.T.tolist() for column in columns), strict=True))
     ]
-    count, permitted = len(assessed), _region_columns(regions)[0][:, 0]
     if permitted.any():  # the limiting region: the first of the largest worst ratio
         limiting = np.flatnonzero(permitted)[np.argmax(worst[permitted], axis=0)]
         durations = min_duration[limiting, np.arange(count)].tolist()
