@@ -390,7 +390,7 @@ def _results_on_terms(
     directions ``directions[direction_of[g]]``. Where all points are still, the leading
     point is the worst (largest mass)."""
     worst = np.argmax(masses, axis=2)
-    all_still = stationary.all(axis=2)[motion_of]  # per motion, then per grasp
+    all_still = np.logical_and.reduce(stationary, axis=2)[motion_of]  # per motion, then grasp
     leading = np.where(all_still, worst, leading_moving[motion_of])
     for array in (directions, stationary, masses, leading, worst):  # views frozen too
         read_only(array)

@@ -248,6 +248,11 @@ class _RegionSamples:
             self._arrays = (force, v_max, ratio)
         return self._arrays
 
+    def row(self, which: int, at: int) -> np.ndarray:
+        """Row ``at`` (N,) of array ``which`` (0 force, 1 v_max, 2 ratio) of ``arrays``."""
+        array: np.ndarray = self.arrays()[which][at]
+        return array
+
 
 @dataclass(frozen=True)
 class RegionAssessment:
@@ -283,18 +288,18 @@ class RegionAssessment:
     @property
     def contact_force_n(self) -> np.ndarray:
         """(N,) predicted transient contact force F(t) [N]."""
-        return self._samples.arrays()[0][self._at]
+        return self._samples.row(0, self._at)
 
     @property
     def max_permissible_speed_m_s(self) -> np.ndarray:
         """(N,) v_max(t) [m/s] for the effective mass at t (0 if not permitted)."""
-        return self._samples.arrays()[1][self._at]
+        return self._samples.row(1, self._at)
 
     @property
     def force_ratio(self) -> np.ndarray:
         """(N,) F(t)/F_tr; where transient contact is not permitted: inf where the tip
         moves, 0 where it is at rest."""
-        return self._samples.arrays()[2][self._at]
+        return self._samples.row(2, self._at)
 
     @property
     def transient_contact_permitted(self) -> bool:
@@ -393,14 +398,27 @@ def _assess_batch(
     not_permitted = tuple(
         region.name for region in regions if not region.transient_contact_permitted
     )
+    all_admissible = np.logical_and.reduce(admissible, axis=0)
+    admissible_where_permitted = np.logical_and.reduce(admissible[permitted], axis=0)
     return [
-        PowerForceLimitAssessment(index, name, True, duration_s, *values, not_permitted)
-        for index, name, *values in zip(
+        PowerForceLimitAssessment(
+            index=index,
+            name=name,
+            feasible=True,
+            duration_s=duration_s,
+            regions=regions_m,
+            admissible=every,
+            admissible_where_permitted=where_permitted,
+            min_duration_s=min_duration_s,
+            limiting_region=limiting_region,
+            regions_not_permitted=not_permitted,
+        )
+        for index, name, regions_m, every, where_permitted, min_duration_s, limiting_region in zip(
             indices,
             names,
             assessed,
-            admissible.all(axis=0).tolist(),
-            admissible[permitted].all(axis=0).tolist(),
+            all_admissible.tolist(),
+            admissible_where_permitted.tolist(),
             durations,
             limiting_names,
             strict=True,
