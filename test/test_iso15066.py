@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import subprocess
 import sys
@@ -29,6 +30,7 @@ from grasp_safety_ros.core.analyses.iso15066 import (
     BodyRegion,
     assess_grasp,
     assess_motion,
+    assess_motions,
     max_permissible_speed_m_s,
     transient_contact_force_n,
 )
@@ -211,6 +213,67 @@ def test_infeasible_grasp_is_not_assessed(baxter: RobotModel) -> None:
     assessment = assess_grasp(evaluation)
     assert not assessment.feasible and not assessment.admissible and assessment.regions == ()
     assert math.isnan(assessment.min_duration_s)
+
+
+def _motions(rng: np.random.Generator, count: int, samples: int) -> tuple[np.ndarray, ...]:
+    """Speeds [m/s] with rests, repeated peaks (ties) and masses [kg] over four decades."""
+    speeds = rng.uniform(0.0, 1.5, (count, samples))
+    speeds[:, :3] = 0.0
+    speeds[:, -5:] = speeds[:, [-5]]  # equal speeds (and masses): equal forces
+    masses = 10.0 ** rng.uniform(-1.0, 3.0, (count, samples))
+    masses[:, -5:] = masses[:, [-5]]
+    speeds[0] = 0.0  # a motionless one
+    return speeds, masses
+
+
+def test_batch_summaries_and_lazy_arrays_are_the_formulas_bit_for_bit() -> None:
+    """assess_motions: per-sample arrays are the elementwise functions' bits, every summary
+    is read off them (argmax, min, all, first largest), the same as motion by motion, and
+    as for motions of differing lengths (assessed one by one)."""
+    rng = np.random.default_rng(7)
+    rigid = BodyRegion("rigid", 100.0, 150.0, 80_000.0, math.inf)
+    twin = dataclasses.replace(rigid, name="rigid_twin")  # ties with rigid: never limits
+    regions = [*BODY_REGIONS.values(), rigid, twin]
+    speeds, masses = _motions(rng, 6, 40)
+    duration = 1.7
+    batch = assess_motions(list(speeds), list(masses), duration, regions, range(6), "abcdef")
+    ragged = assess_motions([speeds[0], speeds[1, :25]], [masses[0], masses[1, :25]], 1.7)
+    for m, assessment in enumerate(batch):
+        alone = assess_motion(speeds[m], masses[m], duration, regions, m, "abcdef"[m])
+        for a, b in zip(assessment.regions, alone.regions, strict=True):
+            assert a == b  # the summaries
+            for name in ("contact_force_n", "max_permissible_speed_m_s", "force_ratio"):
+                np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+        assert assessment == alone  # (the arrays are not compared)
+        for a in assessment.regions:
+            region = a.region
+            force = transient_contact_force_n(speeds[m], masses[m], region)
+            v_max = max_permissible_speed_m_s(masses[m], region)
+            limit = region.max_transient_force_n
+            ratio = force / limit if limit else np.where(speeds[m] > 0.0, np.inf, 0.0)
+            np.testing.assert_array_equal(a.contact_force_n, force)
+            np.testing.assert_array_equal(a.max_permissible_speed_m_s, v_max)
+            np.testing.assert_array_equal(a.force_ratio, ratio)
+            assert a.worst_sample == int(np.argmax(force))
+            assert a.peak_contact_force_n == force.max()
+            assert a.worst_force_ratio == ratio[a.worst_sample]
+            assert a.min_max_permissible_speed_m_s == v_max.min()
+            assert a.min_duration_s == (duration * ratio.max() if ratio.max() > 0 else 0.0)
+            assert a.admissible == (ratio.max() <= 1.0 + iso15066.ADMISSIBLE_RATIO_TOLERANCE)
+        permitted = [a for a in assessment.regions if a.transient_contact_permitted]
+        limiting = max(permitted, key=lambda a: a.worst_force_ratio)
+        assert assessment.limiting_region == limiting.region.name  # the first on ties
+        assert assessment.min_duration_s == limiting.min_duration_s
+        assert assessment.admissible == all(a.admissible for a in assessment.regions)
+        assert assessment.admissible_where_permitted == all(a.admissible for a in permitted)
+    assert batch[0].limiting_region == "back_shoulders"  # motionless: all 0, the first
+    assert {a.limiting_region for a in batch[1:]} == {"rigid"}
+    for motion, count in zip(ragged, (40, 25), strict=True):
+        k = motion.index
+        alone = assess_motion(speeds[k, :count], masses[k, :count], 1.7, None, k)
+        assert motion == alone
+        for a, b in zip(motion.regions, alone.regions, strict=True):
+            np.testing.assert_array_equal(a.force_ratio, b.force_ratio)
 
 
 @pytest.mark.parametrize(

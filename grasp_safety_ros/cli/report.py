@@ -126,7 +126,7 @@ def iso_to_dict(assessment: PowerForceLimitAssessment) -> dict[str, Any]:
                 "worst_force_ratio": number(r.worst_force_ratio),
                 "peak_contact_force_n": number(r.peak_contact_force_n),
                 "max_transient_force_n": r.region.max_transient_force_n,
-                "min_max_permissible_speed_m_s": number(np.min(r.max_permissible_speed_m_s)),
+                "min_max_permissible_speed_m_s": number(r.min_max_permissible_speed_m_s),
                 "admissible": r.admissible,
                 "min_duration_s": number(r.min_duration_s),
             }

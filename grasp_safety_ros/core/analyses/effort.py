@@ -358,7 +358,7 @@ def evaluate_efforts(
         gravity,
         terms,
     )
-    return _compiled_efforts(evaluations, limits, counts, dynamics)
+    return _compiled_efforts(evaluations, limits, counts, motion_of, dynamics)
 
 
 def _packed_paths(
@@ -428,34 +428,43 @@ def _compiled_efforts(
     evaluations: Sequence[GraspEvaluation],
     limits: np.ndarray,
     counts: np.ndarray,
+    motion_of: np.ndarray,
     dynamics: JointDynamics,
 ) -> tuple[EffortEvaluation, ...]:
-    """The EffortEvaluations of the kernel's ``dynamics`` (read-only views of its arrays)."""
+    """The EffortEvaluations of the kernel's ``dynamics`` (read-only views of its arrays; the
+    grasps of a motion group, ``motion_of``, share one copy of their sample times)."""
     shared_limits = read_only(limits, copy=True)
     peak_fractions = read_only(dynamics.peak_abs_torques / limits)
     rms_fractions = read_only(dynamics.rms_torques / limits)
     for array in dynamics:
         read_only(array)
+    samples = dynamics.velocities.shape[1]
+    velocities, accelerations, torques, peaks, rms = (list(array) for array in dynamics)
+    peak_rows, rms_rows = list(peak_fractions), list(rms_fractions)
+    times: dict[int, np.ndarray] = {}
     results = []
     for k, evaluation in enumerate(evaluations):
         if not evaluation.feasible:
             results.append(_infeasible(evaluation, limits))
             continue
-        rows = slice(0, int(counts[k]))
+        count, group = int(counts[k]), int(motion_of[k])
+        if group not in times:
+            times[group] = read_only(evaluation.times_s, copy=True)
+        per_sample = (velocities[k], accelerations[k], torques[k])
+        if count < samples:
+            per_sample = tuple(rows[:count] for rows in per_sample)
         results.append(
-            EffortEvaluation(
-                index=evaluation.index,
-                name=evaluation.name,
-                feasible=True,
-                times_s=read_only(evaluation.times_s, copy=True),
-                joint_velocities=dynamics.velocities[k, rows],
-                joint_accelerations=dynamics.accelerations[k, rows],
-                joint_torques=dynamics.torques[k, rows],
-                peak_abs_torque=dynamics.peak_abs_torques[k],
-                rms_torque=dynamics.rms_torques[k],
-                effort_limits=shared_limits,
-                peak_fraction_of_limit=peak_fractions[k],
-                rms_fraction_of_limit=rms_fractions[k],
+            EffortEvaluation(  # positional: the fields in order
+                evaluation.index,
+                evaluation.name,
+                True,
+                times[group],
+                *per_sample,
+                peaks[k],
+                rms[k],
+                shared_limits,
+                peak_rows[k],
+                rms_rows[k],
             )
         )
     return tuple(results)

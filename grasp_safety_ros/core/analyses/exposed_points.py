@@ -390,32 +390,38 @@ def _results_on_terms(
     directions ``directions[direction_of[g]]``. Where all points are still, the leading
     point is the worst (largest mass)."""
     worst = np.argmax(masses, axis=2)
-    all_still = stationary[motion_of].all(axis=2)
+    all_still = np.logical_and.reduce(stationary, axis=2)[motion_of]  # per motion, then grasp
     leading = np.where(all_still, worst, leading_moving[motion_of])
     for array in (directions, stationary, masses, leading, worst):  # views frozen too
         read_only(array)
-    shared = [  # per motion: times (a copy), positions, speeds
-        (read_only(times, copy=True), read_only(positions), read_only(speeds))
-        for times, positions, _, speeds in motions
+    shared = [  # per motion: times (a copy), positions, speeds, still points
+        (read_only(times, copy=True), read_only(positions), read_only(speeds), still[: len(times)])
+        for (times, positions, _, speeds), still in zip(motions, stationary, strict=True)
     ]
+    samples = masses.shape[1]
+    rows = list(masses), list(leading), list(worst), list(directions)  # views per grasp
     results = []
     for g, evaluation in enumerate(evaluations):
-        times, positions, speeds = shared[motion_of[g]]
-        count, m = len(times), motion_of[g]
+        m = motion_of[g]
+        times, positions, speeds, still = shared[m]
+        per_sample = [row[g] for row in rows[:3]] + [rows[3][direction_of[g]]]
+        if len(times) < samples:
+            per_sample = [row[: len(times)] for row in per_sample]
+        grasp_masses, grasp_leading, grasp_worst, grasp_directions = per_sample
         results.append(
-            ExposedPointsEvaluation(
-                index=evaluation.index,
-                name=evaluation.name,
-                feasible=True,
-                times_s=times,
-                points_in_object_m=points,
-                positions_in_base_m=positions,
-                directions_in_base=directions[direction_of[g], :count],
-                direction_is_worst_case=stationary[m, :count],
-                speed_m_s=speeds,
-                effective_mass_kg=masses[g, :count],
-                leading_point_index=leading[g, :count],
-                worst_point_index=worst[g, :count],
+            ExposedPointsEvaluation(  # positional: the fields in order
+                evaluation.index,
+                evaluation.name,
+                True,
+                times,
+                points,
+                positions,
+                grasp_directions,
+                still,
+                speeds,
+                grasp_masses,
+                grasp_leading,
+                grasp_worst,
             )
         )
     return results

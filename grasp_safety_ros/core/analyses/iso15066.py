@@ -26,7 +26,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
@@ -228,17 +228,38 @@ def max_permissible_speed_m_s(robot_effective_mass_kg: Any, region: BodyRegion) 
     return region.max_transient_force_n / np.sqrt(mu * region.spring_constant_n_per_m)
 
 
+class _RegionSamples:
+    """The per-sample arrays of R regions for M motions of N samples ((M, N) speeds [m/s] and
+    masses [kg], validated): force [N], v_max [m/s] and force ratio (R·M, N) (region-major),
+    read-only, computed for all at once on the first read (``_region_arrays``). Most
+    callers read only the summaries, which ``_region_peaks`` computes without them."""
+
+    def __init__(
+        self, speed_m_s: np.ndarray, effective_mass_kg: np.ndarray, regions: tuple[BodyRegion, ...]
+    ) -> None:
+        self._inputs = (speed_m_s, effective_mass_kg, regions)
+        self._arrays: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(force, v_max, ratio), each (R·M, N)."""
+        if self._arrays is None:  # (two threads may both compute it: the same bits)
+            samples = self._inputs[0].shape[1]
+            force, v_max, ratio = (a.reshape(-1, samples) for a in _region_arrays(*self._inputs))
+            self._arrays = (force, v_max, ratio)
+        return self._arrays
+
+    def row(self, which: int, at: int) -> np.ndarray:
+        """Row ``at`` (N,) of array ``which`` (0 force, 1 v_max, 2 ratio) of ``arrays``."""
+        array: np.ndarray = self.arrays()[which][at]
+        return array
+
+
 @dataclass(frozen=True)
 class RegionAssessment:
-    """Transient contact with one body region along one trajectory (per sample arrays: (N,)).
+    """Transient contact with one body region along one trajectory.
 
     Attributes:
         region: The body region.
-        contact_force_n: Predicted transient contact force F(t) [N].
-        max_permissible_speed_m_s: v_max(t) [m/s] for the effective mass at t (0 if not
-            permitted).
-        force_ratio: F(t)/F_tr; where transient contact is not permitted: inf where the tip
-            moves, 0 where it is at rest.
         worst_force_ratio: max_t of force_ratio (0 for an empty or motionless trajectory).
         worst_sample: Sample index of the peak force (first one on ties), where the ratio is
             worst too (F_tr is a constant; inf wherever moving if not permitted).
@@ -246,17 +267,39 @@ class RegionAssessment:
         admissible: worst_force_ratio <= 1 (+ ADMISSIBLE_RATIO_TOLERANCE).
         min_duration_s: T · worst_force_ratio [s]: the shortest duration of the same quintic
             path for which this region is admissible (inf if not permitted and moving).
+        min_max_permissible_speed_m_s: min_t of max_permissible_speed_m_s [m/s] (0 if not
+            permitted, NaN without samples).
+
+    The per-sample arrays (N,), ``contact_force_n``, ``max_permissible_speed_m_s`` and
+    ``force_ratio``, are properties, computed on first read for every region and motion
+    assessed with this one (``_samples``, at row ``_at``: region k of motion m at k·M + m).
     """
 
     region: BodyRegion
-    contact_force_n: np.ndarray
-    max_permissible_speed_m_s: np.ndarray
-    force_ratio: np.ndarray
     worst_force_ratio: float
     worst_sample: int
     peak_contact_force_n: float
     admissible: bool
     min_duration_s: float
+    min_max_permissible_speed_m_s: float
+    _samples: _RegionSamples = field(repr=False, compare=False)
+    _at: int = field(repr=False, compare=False)
+
+    @property
+    def contact_force_n(self) -> np.ndarray:
+        """(N,) predicted transient contact force F(t) [N]."""
+        return self._samples.row(0, self._at)
+
+    @property
+    def max_permissible_speed_m_s(self) -> np.ndarray:
+        """(N,) v_max(t) [m/s] for the effective mass at t (0 if not permitted)."""
+        return self._samples.row(1, self._at)
+
+    @property
+    def force_ratio(self) -> np.ndarray:
+        """(N,) F(t)/F_tr; where transient contact is not permitted: inf where the tip
+        moves, 0 where it is at rest."""
+        return self._samples.row(2, self._at)
 
     @property
     def transient_contact_permitted(self) -> bool:
@@ -320,66 +363,110 @@ def _region_columns(
     return tuple(read_only(column[:, None]) for column in columns)  # type: ignore[return-value]
 
 
-def assess_regions(
-    speed_m_s: np.ndarray,
-    effective_mass_kg: np.ndarray,
-    duration_s: float,
-    regions: Sequence[BodyRegion],
-) -> tuple[RegionAssessment, ...]:
-    """Assess each region for per-sample speeds [m/s] and effective masses [kg] (validated).
-
-    One array pass over regions x samples (see _assess_regions_batch).
-    """
-    speed = np.asarray(speed_m_s, dtype=float)[None]
-    mass = np.asarray(effective_mass_kg, dtype=float)[None]
-    return _assess_regions_batch(speed, mass, duration_s, tuple(regions))[0]
-
-
-def _assess_regions_batch(
+def _assess_batch(
     speed_m_s: np.ndarray,
     effective_mass_kg: np.ndarray,
     duration_s: float,
     regions: tuple[BodyRegion, ...],
-) -> list[tuple[RegionAssessment, ...]]:
-    """Per motion, the assessment of each region; speeds and masses (M, N), validated.
-
-    One array pass over regions x motions x samples (``_region_arrays``): the same numbers as
-    one region and one motion at a time.
-    """
-    force, v_max, ratio, worst, worst_sample, peak = _region_arrays(
-        speed_m_s, effective_mass_kg, regions
+    indices: Sequence[int],
+    names: Sequence[str],
+) -> list[PowerForceLimitAssessment]:
+    """The assessments of M motions ((M, N) speeds and masses, validated): regions x motions
+    in array passes (``_region_peaks``), the per-sample arrays on first read
+    (``_RegionSamples``); the same numbers as one region and one motion at a time."""
+    worst, worst_sample, peak, min_speed = _region_peaks(speed_m_s, effective_mass_kg, regions)
+    admissible = worst <= 1.0 + ADMISSIBLE_RATIO_TOLERANCE
+    min_duration = np.where(worst > 0.0, duration_s * worst, 0.0)
+    samples = _RegionSamples(speed_m_s, effective_mass_kg, regions)
+    columns = (worst, worst_sample, peak, admissible, min_duration, min_speed)
+    count, permitted = len(speed_m_s), _region_columns(regions)[0][:, 0]
+    assessed = [  # positional (R per motion): the fields in order
+        tuple(
+            [
+                RegionAssessment(region, w, s, p, a, d, v, samples, k * count + m)
+                for k, (region, w, s, p, a, d, v) in enumerate(zip(regions, *rows, strict=True))
+            ]
+        )
+        for m, rows in enumerate(zip(*(column.T.tolist() for column in columns), strict=True))
+    ]
+    if permitted.any():  # the limiting region: the first of the largest worst ratio
+        limiting = np.flatnonzero(permitted)[np.argmax(worst[permitted], axis=0)]
+        durations = min_duration[limiting, np.arange(count)].tolist()
+        limiting_names = [regions[k].name for k in limiting.tolist()]
+    else:
+        durations, limiting_names = [math.nan] * count, [""] * count
+    not_permitted = tuple(
+        region.name for region in regions if not region.transient_contact_permitted
     )
-    worst_list, sample_list, peak_list = worst.tolist(), worst_sample.tolist(), peak.tolist()
-    rows = [(list(force[k]), list(v_max[k]), list(ratio[k])) for k in range(len(regions))]
-    motions = []
-    for m in range(ratio.shape[1]):
-        assessed = []
-        for k, region in enumerate(regions):
-            worst_k = worst_list[k][m]
-            forces, speeds, ratios = rows[k]
-            assessed.append(
-                RegionAssessment(  # positional (12 per motion): the fields in order
-                    region,
-                    forces[m],
-                    speeds[m],
-                    ratios[m],
-                    worst_k,
-                    sample_list[k][m],
-                    peak_list[k][m],
-                    worst_k <= 1.0 + ADMISSIBLE_RATIO_TOLERANCE,
-                    duration_s * worst_k if worst_k > 0.0 else 0.0,
-                )
-            )
-        motions.append(tuple(assessed))
-    return motions
+    all_admissible = np.logical_and.reduce(admissible, axis=0)
+    admissible_where_permitted = np.logical_and.reduce(admissible[permitted], axis=0)
+    return [
+        PowerForceLimitAssessment(
+            index=index,
+            name=name,
+            feasible=True,
+            duration_s=duration_s,
+            regions=regions_m,
+            admissible=every,
+            admissible_where_permitted=where_permitted,
+            min_duration_s=min_duration_s,
+            limiting_region=limiting_region,
+            regions_not_permitted=not_permitted,
+        )
+        for index, name, regions_m, every, where_permitted, min_duration_s, limiting_region in zip(
+            indices,
+            names,
+            assessed,
+            all_admissible.tolist(),
+            admissible_where_permitted.tolist(),
+            durations,
+            limiting_names,
+            strict=True,
+        )
+    ]
+
+
+def _region_peaks(
+    speed_m_s: np.ndarray, effective_mass_kg: np.ndarray, regions: tuple[BodyRegion, ...]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per (region, motion) (R, M) of M motions of N samples ((M, N) speeds and masses,
+    validated): the worst force ratio, its sample (that of the first peak force), the peak
+    force [N] and the smallest v_max [m/s]: ``_region_arrays``' numbers there, region by
+    region in (M, N) buffers, without its (R, M, N) arrays.
+
+    v_max is smallest where the mass is largest (every operation of the formula is
+    monotonic, rounding included), so it is computed at that mass only.
+    """
+    permitted, human_mass, stiffness, limit = _region_columns(regions)
+    count, samples = speed_m_s.shape
+    if not samples:
+        zeros = np.zeros((len(regions), count))
+        return zeros, zeros.astype(int), zeros, np.full_like(zeros, np.nan)
+    inverse_mass = 1.0 / effective_mass_kg
+    root, force = np.empty_like(speed_m_s), np.empty_like(speed_m_s)
+    worst_sample = np.empty((len(regions), count), dtype=int)
+    peak = np.empty((len(regions), count))
+    for k, region in enumerate(regions):  # transient_contact_force_n's operations
+        np.add(1.0 / region.effective_mass_kg, inverse_mass, out=root)
+        np.divide(1.0, root, out=root)
+        np.multiply(root, region.spring_constant_n_per_m, out=root)
+        np.sqrt(root, out=root)
+        np.multiply(speed_m_s, root, out=force)
+        worst_sample[k] = np.argmax(force, axis=1)
+        peak[k] = np.take_along_axis(force, worst_sample[k, :, None], axis=1)[:, 0]
+    moving = np.take_along_axis(speed_m_s, worst_sample.T, axis=1).T > 0.0
+    worst = np.where(permitted, peak / limit, np.where(moving, np.inf, 0.0))
+    heaviest = effective_mass_kg.max(axis=1)  # max_permissible_speed_m_s's operations
+    root_max = np.sqrt(1.0 / (1.0 / human_mass + 1.0 / heaviest) * stiffness)
+    min_speed = np.where(permitted, limit / root_max, 0.0)
+    return worst, worst_sample, peak, min_speed
 
 
 def _region_arrays(
     speed_m_s: np.ndarray, effective_mass_kg: np.ndarray, regions: tuple[BodyRegion, ...]
-) -> tuple[np.ndarray, ...]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Force [N], v_max [m/s] and force ratio (R, M, N) (read-only) of R regions for M motions
-    of N samples ((M, N) speeds and masses, validated), and per (region, motion) the worst
-    ratio, its sample and the peak force (R, M).
+    of N samples ((M, N) speeds and masses, validated).
 
     The elementwise formulas of transient_contact_force_n and max_permissible_speed_m_s, in
     the same operation order (so the same bits), written in place: one (R, M, N) buffer per
@@ -398,14 +485,7 @@ def _region_arrays(
     if not_permitted.any():
         v_max[not_permitted] = 0.0
         ratio[not_permitted] = np.where(speed_m_s > 0.0, np.inf, 0.0)
-    if shape[2]:  # at the peak force (where F/F_tr is largest, or inf wherever moving)
-        worst_sample = np.argmax(force, axis=2)
-        worst = np.take_along_axis(ratio, worst_sample[:, :, None], axis=2)[:, :, 0]
-        peak = np.take_along_axis(force, worst_sample[:, :, None], axis=2)[:, :, 0]
-    else:
-        worst_sample = np.zeros(shape[:2], dtype=int)
-        worst = peak = np.zeros(shape[:2])
-    return read_only(force), read_only(v_max), read_only(ratio), worst, worst_sample, peak
+    return read_only(force), read_only(v_max), read_only(ratio)
 
 
 def _checked_motion(speed_m_s: Any, effective_mass_kg: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -460,16 +540,11 @@ def assess_motions(
     selected = select_regions(regions)
     batch = _checked_batch(speeds_m_s, effective_masses_kg)
     if batch is not None:
-        assessed = _assess_regions_batch(*batch, duration, selected)
-    else:
-        checked = [
-            _checked_motion(v, m) for v, m in zip(speeds_m_s, effective_masses_kg, strict=True)
-        ]
-        assessed = [assess_regions(speed, mass, duration, selected) for speed, mass in checked]
-    permitted = [region.transient_contact_permitted for region in selected]
+        return _assess_batch(*batch, duration, selected, indices, names)
+    checked = [_checked_motion(v, m) for v, m in zip(speeds_m_s, effective_masses_kg, strict=True)]
     return [
-        _motion_assessment(regions_k, permitted, duration, index, name)
-        for regions_k, index, name in zip(assessed, indices, names, strict=True)
+        _assess_batch(speed[None], mass[None], duration, selected, [index], [name])[0]
+        for (speed, mass), index, name in zip(checked, indices, names, strict=True)
     ]
 
 
@@ -492,33 +567,6 @@ def _checked_batch(
         and bool((speeds >= 0.0).all() and (masses > 0.0).all())
     )
     return (speeds, masses) if valid else None
-
-
-def _motion_assessment(
-    assessed: tuple[RegionAssessment, ...],
-    permitted_flags: Sequence[bool],
-    duration: float,
-    index: int,
-    name: str,
-) -> PowerForceLimitAssessment:
-    """The assessment of one motion from its regions' (``permitted_flags``: whether each
-    region permits transient contact)."""
-    permitted = [a for a, flag in zip(assessed, permitted_flags, strict=True) if flag]
-    limiting = max(permitted, key=lambda a: a.worst_force_ratio) if permitted else None
-    return PowerForceLimitAssessment(
-        index=index,
-        name=name,
-        feasible=True,
-        duration_s=duration,
-        regions=assessed,
-        admissible=all(a.admissible for a in assessed),
-        admissible_where_permitted=all(a.admissible for a in permitted),
-        min_duration_s=limiting.min_duration_s if limiting is not None else math.nan,
-        limiting_region=limiting.region.name if limiting is not None else "",
-        regions_not_permitted=tuple(
-            a.region.name for a, flag in zip(assessed, permitted_flags, strict=True) if not flag
-        ),
-    )
 
 
 def assess_grasp(

@@ -365,47 +365,29 @@ _body_region_assessment = (
 )
 
 
-def region_assessment_msg(
-    assessment: RegionAssessment, min_speed_m_s: float | None = None
-) -> BodyRegionAssessment:
+def region_assessment_msg(assessment: RegionAssessment) -> BodyRegionAssessment:
     """grasp_safety_msgs/BodyRegionAssessment of one region's ISO/TS 15066 assessment.
 
     Where transient contact is not permitted, the core's ratio (inf while the point moves)
     becomes NaN, as does the null limit F_tr; ``min_duration_s`` keeps the core's inf.
-    ``min_speed_m_s``: the smallest of its ``max_permissible_speed_m_s`` if already known.
     """
     region = assessment.region
     permitted = region.transient_contact_permitted
     limit = region.max_transient_force_n
-    if min_speed_m_s is None:
-        speeds = assessment.max_permissible_speed_m_s
-        min_speed_m_s = float(speeds.min()) if len(speeds) else NAN
     return _body_region_assessment(
         region.name,
         bool(permitted),
         float(assessment.worst_force_ratio) if permitted else NAN,
         float(assessment.peak_contact_force_n),
         float(limit) if limit is not None else NAN,
-        min_speed_m_s,
+        assessment.min_max_permissible_speed_m_s,
         bool(assessment.admissible),
         float(assessment.min_duration_s),
     )
 
 
-def _min_speeds(speeds: Sequence[np.ndarray]) -> list[float]:
-    """The smallest value of each array (NaN for an empty one); one array pass when they all
-    have the same length (the regions of one motion)."""
-    if len({len(s) for s in speeds}) == 1 and len(speeds[0]) > 0:
-        return np.min(speeds, axis=1).tolist()
-    return [float(s.min()) if len(s) else NAN for s in speeds]
-
-
 def _set_iso(message: GraspEvaluationMsg, assessment: PowerForceLimitAssessment) -> None:
-    regions = assessment.regions
-    lowest = _min_speeds([r.max_permissible_speed_m_s for r in regions]) if regions else []
-    message.iso_ts_15066 = [
-        region_assessment_msg(r, v) for r, v in zip(regions, lowest, strict=True)
-    ]
+    message.iso_ts_15066 = [region_assessment_msg(r) for r in assessment.regions]
     message.iso_admissible = bool(assessment.feasible and assessment.admissible_where_permitted)
     message.iso_min_duration_s = float(assessment.min_duration_s)
     message.iso_limiting_region = assessment.limiting_region
