@@ -24,7 +24,7 @@ from .ik import IKConfig, IKSolver, check_backend
 from .joint_trajectory import JointSpaceTrajectory
 from .metrics import METRICS, aggregate, check_metric, score_bound_weights
 from .packed import CompiledGraspResult
-from .pool import evaluate_jobs, executor_for
+from .pool import evaluate_jobs, executor_for, grasps_per_job
 from .results import FollowedPosture, Grasp, GraspEvaluation, Ranking
 
 __all__ = [  # the public API, re-exported names included (Grasp ... from results, metrics)
@@ -44,8 +44,8 @@ __all__ = [  # the public API, re-exported names included (Grasp ... from result
 ]
 
 BATCH_GRASPS = 16
-"""Grasps per call of the fused kernel in ``rank``: one job of the worker pool (its results,
-and the ``progress`` calls, come together)."""
+"""Most grasps per call of the fused kernel in ``rank``: one job of the worker pool (its
+results, and the ``progress`` calls, come together), fewer so that every worker gets one."""
 
 
 @dataclass(frozen=True)
@@ -246,10 +246,8 @@ class GraspSafetyEvaluator:
         """
         motion = sampled_trajectory.object_motion
         if not self.backend.compiled or motion is None:
-            evaluations = self.evaluate_batch(
-                indices, grasps, object_inertia, sampled_trajectory, metric, seeds_q
-            )
-            return [FollowedPosture.of(evaluation) for evaluation in evaluations]
+            batch = (indices, grasps, object_inertia, sampled_trajectory, metric, seeds_q)
+            return [FollowedPosture.of(evaluation) for evaluation in self.evaluate_batch(*batch)]
         times = sampled_trajectory.times_s
         is_max, weights, margin = score_bound_weights(times, metric)
         bounds = np.asarray(stop_above, dtype=float)
@@ -478,19 +476,20 @@ class GraspSafetyEvaluator:
         for grasp in grasps:
             self.trajectory_for(grasp, sampled.trajectory)  # planned trajectories: validate
         executor = executor_for(self, len(grasps) * len(sampled.times_s))
+        size = grasps_per_job(executor, len(grasps), BATCH_GRASPS)  # a few grasps: every worker
         jobs = [
             (
-                range(start, min(start + BATCH_GRASPS, len(grasps))),
-                grasps[start : start + BATCH_GRASPS],
+                range(start, min(start + size, len(grasps))),
+                grasps[start : start + size],
                 object_inertia,
                 sampled,
                 metric,
                 seed_q,
                 start_positions,
             )
-            for start in range(0, len(grasps), BATCH_GRASPS)
+            for start in range(0, len(grasps), size)
         ]
-        if executor is None:
+        if executor is None or len(jobs) == 1:  # one job: no hand-off to a worker
             batches: Generator[list[GraspEvaluation], None, None] = (
                 self.evaluate_batch(*job) for job in jobs
             )
