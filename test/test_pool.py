@@ -53,7 +53,7 @@ def test_a_pooled_ranking_gives_every_worker_a_job(
     jobs: list[tuple[int, str]] = []
     evaluate_batch = GraspSafetyEvaluator.evaluate_batch
 
-    def recorded(self: GraspSafetyEvaluator, indices, *rest):  # type: ignore[no-untyped-def]
+    def recorded(self: GraspSafetyEvaluator, indices, *rest):
         jobs.append((len(indices), threading.current_thread().name))
         return evaluate_batch(self, indices, *rest)
 

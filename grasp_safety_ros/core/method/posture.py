@@ -62,13 +62,19 @@ from ..model.waypoint_trajectory import WaypointTrajectory
 from .pool import evaluate_jobs, executor_for, grasps_per_job
 from .ranking import (
     BATCH_GRASPS,
-    FollowedPosture,
     GraspSafetyEvaluator,
     SampledTrajectory,
     order_by_score,
     sample_trajectory,
 )
-from .results import SCORE_CRITERION, Grasp, GraspEvaluation, PostureSelection, Ranking
+from .results import (
+    SCORE_CRITERION,
+    FollowedPosture,
+    Grasp,
+    GraspEvaluation,
+    PostureSelection,
+    Ranking,
+)
 
 MAX_RESTARTS = 1000
 """Largest number of posture restarts accepted per grasp."""
