@@ -27,18 +27,25 @@ def running_node(
 
     ``overrides``: node parameters on top of the benchmark's (robot, seed, ``dt_s``). The
     node runs on a random ROS domain with localhost discovery; the environment names both.
+    Its middleware is set up as its console script sets it up (ros.runtime.middleware); the
+    clients' is not (Fast DDS's defaults, as a user's client).
     """
     import rclpy
     from rclpy.context import Context
     from rclpy.parameter import Parameter
 
     from grasp_safety_ros.ros.node import EXECUTOR_THREADS, GraspSafetyNode
+    from grasp_safety_ros.ros.runtime.middleware import (
+        PROFILE_VARIABLE,
+        size_shared_memory_for_large_responses,
+    )
     from grasp_safety_ros.ros.runtime.process import spin_until
     from grasp_safety_ros.ros.runtime.rclpy_private import NodeExecutor, join_callbacks
 
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     domain_id = random.SystemRandom().randint(0, 101)
     context = Context()
+    profile = size_shared_memory_for_large_responses()  # as the console script (node.main)
     rclpy.init(context=context, domain_id=domain_id)
     parameters = {
         "urdf": arm.urdf,
@@ -54,6 +61,8 @@ def running_node(
         context=context,
         parameter_overrides=[Parameter(k, value=v) for k, v in parameters.items()],
     )
+    if profile is not None:  # the node's participant has it; the clients are a user's
+        del os.environ[PROFILE_VARIABLE]
     executor = NodeExecutor(num_threads=EXECUTOR_THREADS, context=context)
     executor.add_node(node)
     spinning = threading.Event()

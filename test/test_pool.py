@@ -38,6 +38,34 @@ def test_parallel_ranking_is_identical_to_serial(backend: str, arm7: RobotModel)
     assert_identical_ranking(pooled.rank(grasps, BOX, trajectory, seed_positions=seed), expected)
 
 
+def test_a_pooled_ranking_gives_every_worker_a_job(
+    arm7: RobotModel, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Fewer grasps than two batches of BATCH_GRASPS: one job per worker (9 grasps on 2: 5
+    and 4, on the workers' threads), and a single grasp stays in the calling thread (no
+    hand-off); the results are the serial ones (test_parallel_ranking_is_identical_to_serial)."""
+    if not compiled_available():
+        pytest.skip("numba is not installed")  # threads share the patched method
+    rng = np.random.default_rng(11)
+    seed = random_positions(arm7, rng)
+    trajectory = reach_trajectory(arm7, seed, dt=0.05)
+    pooled = GraspSafetyEvaluator(arm7, EvaluationConfig(workers=2, parallel_min_samples=1))
+    jobs: list[tuple[int, str]] = []
+    evaluate_batch = GraspSafetyEvaluator.evaluate_batch
+
+    def recorded(self: GraspSafetyEvaluator, indices, *rest):
+        jobs.append((len(indices), threading.current_thread().name))
+        return evaluate_batch(self, indices, *rest)
+
+    monkeypatch.setattr(GraspSafetyEvaluator, "evaluate_batch", recorded)
+    pooled.rank(grasps_near_identity(9), BOX, trajectory, seed_positions=seed)
+    assert sorted(size for size, _ in jobs) == [4, 5]
+    assert all(name != threading.current_thread().name for _, name in jobs)
+    jobs.clear()
+    pooled.rank(grasps_near_identity(1), BOX, trajectory, seed_positions=seed)
+    assert jobs == [(1, threading.current_thread().name)]
+
+
 def test_warm_up_runs_with_and_without_an_evaluator(arm6: RobotModel) -> None:
     from grasp_safety_ros.core.method.warm_up import warm_up
 

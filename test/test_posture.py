@@ -605,12 +605,38 @@ def test_early_stop_stops_only_postures_that_score_higher(baxter_book) -> None:
         full = evaluator.evaluate_batch(rows, grasps, BOOK, sampled, metric, seeds)
         scores = np.array([e.score for e in full])
         same = evaluator.follow_postures(rows, grasps, BOOK, sampled, metric, seeds, scores)
-        for a, b in zip(same, full, strict=True):
-            assert a is not None and a.score == b.score
+        for followed, b in zip(same, full, strict=True):
+            assert followed is not None and followed.feasible
+            a = followed.evaluation()  # built on demand; the score read before it is its own
+            assert followed.score == a.score == b.score
             assert np.array_equal(a.effective_mass_kg, b.effective_mass_kg)
+            assert np.array_equal(a.directions_in_base, b.directions_in_base)
             assert np.array_equal(a.joint_positions, b.joint_positions)
         halves = evaluator.follow_postures(rows, grasps, BOOK, sampled, metric, seeds, scores / 2)
         assert halves == [None] * len(grasps), metric
+
+
+def test_a_followed_postures_score_is_its_evaluations_where_the_tip_only_rotates(baxter) -> None:
+    """follow_postures scores a posture before its GraspEvaluation is built (on demand): where
+    the tip does not translate (the object turns about it: every sample's direction and mass
+    the worst case, filled in after the kernel) that score is the built evaluation's and
+    evaluate_batch's, bit for bit, for every metric."""
+    evaluator = GraspSafetyEvaluator(baxter, EvaluationConfig(workers=1))
+    start = baxter.transform_tip_to_base(BAXTER_SEED)
+    turned = start * pin.SE3(pin.utils.rotate("z", 0.4), np.zeros(3))
+    sampled = sample_trajectory(ObjectTrajectory(start, turned, 1.0, 0.05))
+    grasps, seeds = [Grasp(pin.SE3.Identity())], baxter.q_from_positions(BAXTER_SEED)[None]
+    for metric in METRICS:
+        (full,) = evaluator.evaluate_batch([0], grasps, BOOK, sampled, metric, seeds)
+        assert full.feasible and full.direction_is_worst_case.all(), metric
+        (followed,) = evaluator.follow_postures(
+            [0], grasps, BOOK, sampled, metric, seeds, np.array([np.inf])
+        )
+        assert followed is not None and followed.feasible
+        built = followed.evaluation()
+        assert followed.score == built.score == full.score, metric
+        assert np.array_equal(built.effective_mass_kg, full.effective_mass_kg)
+        assert np.array_equal(built.directions_in_base, full.directions_in_base)
 
 
 def _unchecked_mass(mass_kg: float):
@@ -643,8 +669,9 @@ def test_early_stop_never_stops_a_posture_whose_masses_bound_nothing(baxter_book
         bounds = np.where(np.isnan(scores), -1.0, scores / 2)
         assert not np.any(scores > bounds)  # no row scores above its bound
         followed = evaluator.follow_postures(rows, grasps, book, sampled, metric, seeds, bounds)
-        for a, b in zip(followed, full, strict=True):
-            assert a is not None, metric
+        for row, b in zip(followed, full, strict=True):
+            assert row is not None, metric
+            a = row.evaluation()
             assert np.array_equal(a.effective_mass_kg, b.effective_mass_kg, equal_nan=True)
             assert np.array_equal(a.joint_positions, b.joint_positions)
     if mass_kg < 0.0:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import pickle
 from dataclasses import replace
+from functools import partial
 
 import numpy as np
 import pytest
@@ -16,7 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from grasp_safety_ros.core.method.posture import PostureConfig, _choose, _new_start_postures
-from grasp_safety_ros.core.method.results import GraspEvaluation
+from grasp_safety_ros.core.method.results import FollowedPosture, GraspEvaluation
 
 SCORES = st.one_of(
     st.sampled_from([1.0, 1.5, 2.0]),  # ties
@@ -46,7 +47,10 @@ def _evaluation(k: int, score: float) -> GraspEvaluation:
 
 
 def _choice(single: float, outcomes: list[float | None]):
-    followed = [None if s is None else _evaluation(k + 1, s) for k, s in enumerate(outcomes)]
+    followed = [
+        None if s is None else FollowedPosture.of(_evaluation(k + 1, s))
+        for k, s in enumerate(outcomes)
+    ]
     config = PostureConfig(restarts=len(outcomes))
     return _choose(
         None,  # type: ignore[arg-type]  # used by a criterion only
@@ -111,6 +115,32 @@ def test_stopping_postures_that_score_above_one_found_changes_no_choice(
     counts = ("postures_stopped", "postures_feasible", "score_range")
     unchanged = replace(record_early, **{name: getattr(record, name) for name in counts})
     assert pickle.dumps(unchanged) == pickle.dumps(record)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.one_of(st.just(math.nan), SCORES), st.lists(OUTCOMES, max_size=10))
+def test_only_the_kept_restart_posture_is_built(
+    single: float, outcomes: list[float | None]
+) -> None:
+    """Selecting by the score, ``_choose`` reads the followed postures' feasibility and score
+    and builds the GraspEvaluation of the kept one only (none when the single IK is kept or
+    nothing is feasible): the others' were posture selection's largest Python cost."""
+    built: list[int] = []
+
+    def build(k: int, score: float) -> GraspEvaluation:
+        built.append(k)
+        return _evaluation(k, score)
+
+    followed = [
+        None if s is None else FollowedPosture(not math.isnan(s), s, partial(build, k + 1, s))
+        for k, s in enumerate(outcomes)
+    ]
+    config = PostureConfig(restarts=len(outcomes))
+    case = (config, len(outcomes) + 1, True)
+    single_ik = _evaluation(0, single)
+    kept, record = _choose(None, None, single_ik, followed, case, None)  # type: ignore[arg-type]
+    assert built == ([record.selected] if record.selected > 0 else [])
+    assert kept.score == record.score or record.selected == -1
 
 
 def _followed_one_at_a_time(robot, single_iks, q, converged, tolerance):

@@ -68,6 +68,7 @@ from .parameters.declaration import declare_node_parameters, typed_parameters
 from .robot.bundle import build_robot
 from .robot.source import RobotSource
 from .runtime.memory import IdleTrim
+from .runtime.middleware import size_shared_memory_for_large_responses
 from .runtime.process import run_node
 from .runtime.rclpy_private import request_header
 from .runtime.read_only import answer_read_only_parameters
@@ -567,6 +568,7 @@ def main(args: list[str] | None = None) -> NoReturn:
     would destroy what native code still holds in an order that ends in std::terminate about
     one stop in two ("terminate called without an active exception", SIGABRT, after the last
     line; measured by repeated SIGINT stops of the node)."""
+    size_shared_memory_for_large_responses()  # before rclpy starts the middleware
     status = run_node(GraspSafetyNode, NODE_NAME, EXECUTOR_THREADS, args)
     sys.stdout.flush()
     sys.stderr.flush()

@@ -67,7 +67,14 @@ from .ranking import (
     order_by_score,
     sample_trajectory,
 )
-from .results import SCORE_CRITERION, Grasp, GraspEvaluation, PostureSelection, Ranking
+from .results import (
+    SCORE_CRITERION,
+    FollowedPosture,
+    Grasp,
+    GraspEvaluation,
+    PostureSelection,
+    Ranking,
+)
 
 MAX_RESTARTS = 1000
 """Largest number of posture restarts accepted per grasp."""
@@ -431,9 +438,9 @@ def _follow(
     metric: str,
     starts: list[tuple[int, list[np.ndarray]]],
     by_score: bool,
-) -> dict[int, list[GraspEvaluation | None]]:
-    """Each grasp k's new start postures followed (None: stopped early), in kernel calls of
-    up to FOLLOW_ROWS postures.
+) -> dict[int, list[FollowedPosture | None]]:
+    """Each grasp k's new start postures followed (None: stopped early; each one's
+    GraspEvaluation is built on demand), in kernel calls of up to FOLLOW_ROWS postures.
 
     With the early stop (selecting by the score) the first FIRST_WAVE postures of all grasps
     go in one wave, the rest in a second, and a posture is stopped once its score certainly
@@ -454,7 +461,7 @@ def _follow(
         [(k, positions) for k, found in starts for positions in found[first:last]]
         for first, last in itertools.pairwise(cuts)
     ]
-    followed: dict[int, list[GraspEvaluation | None]] = {k: [] for k, _ in starts}
+    followed: dict[int, list[FollowedPosture | None]] = {k: [] for k, _ in starts}
     for wave in rows:
         for first in range(0, len(wave), FOLLOW_ROWS):
             batch = wave[first : first + FOLLOW_ROWS]
@@ -478,15 +485,16 @@ def _choose(
     evaluator: GraspSafetyEvaluator,
     case: tuple[Grasp, ObjectInertia, ObjectTrajectory | WaypointTrajectory],
     single_ik: GraspEvaluation,
-    followed: list[GraspEvaluation | None],
+    followed: list[FollowedPosture | None],
     config_tried_reached: tuple[PostureConfig, int, bool],
     criterion: PostureCriterion | None,
 ) -> tuple[GraspEvaluation, PostureSelection]:
     """The kept posture of one grasp among the single IK's and its ``followed`` start
     postures (None: stopped early) and its record; ``config_tried_reached``: the config, the
-    IK seeds tried (restarts + 1) and whether any of them converged at the start pose."""
+    IK seeds tried (restarts + 1) and whether any of them converged at the start pose. Only
+    the kept one's GraspEvaluation is built (all the feasible ones' for a criterion)."""
     config, tried, converged_any = config_tried_reached
-    candidates = [single_ik, *followed]
+    candidates = [FollowedPosture.of(single_ik), *followed]
     feasible = [k for k, e in enumerate(candidates) if e is not None and e.feasible]
     if not feasible:
         detail = "" if converged_any else ", none reached the start pose"
@@ -510,7 +518,8 @@ def _choose(
     scores = np.array([e.score for e in kept])
     values = scores
     if criterion is not None:
-        values = np.asarray(criterion(evaluator, *case, kept), dtype=float)
+        evaluations = [e.evaluation() for e in kept]
+        values = np.asarray(criterion(evaluator, *case, evaluations), dtype=float)
         if values.shape != scores.shape or not np.all(np.isfinite(values)):
             raise InvalidInputError(
                 "posture.criterion",
@@ -518,7 +527,7 @@ def _choose(
             )
     chosen_k = int(np.argmin(values))  # argmin keeps the first of equal values
     best = feasible[chosen_k]
-    chosen = kept[chosen_k] if best == 0 else _detached(kept[chosen_k])
+    chosen = single_ik if best == 0 else _detached(kept[chosen_k].evaluation())
     return chosen, PostureSelection(
         index=single_ik.index,
         restarts=config.restarts,

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Generator, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 
@@ -23,8 +24,8 @@ from .ik import IKConfig, IKSolver, check_backend
 from .joint_trajectory import JointSpaceTrajectory
 from .metrics import METRICS, aggregate, check_metric, score_bound_weights
 from .packed import CompiledGraspResult
-from .pool import evaluate_jobs, executor_for
-from .results import Grasp, GraspEvaluation, Ranking
+from .pool import evaluate_jobs, executor_for, grasps_per_job
+from .results import FollowedPosture, Grasp, GraspEvaluation, Ranking
 
 __all__ = [  # the public API, re-exported names included (Grasp ... from results, metrics)
     "BATCH_GRASPS",
@@ -43,8 +44,8 @@ __all__ = [  # the public API, re-exported names included (Grasp ... from result
 ]
 
 BATCH_GRASPS = 16
-"""Grasps per call of the fused kernel in ``rank``: one job of the worker pool (its results,
-and the ``progress`` calls, come together)."""
+"""Most grasps per call of the fused kernel in ``rank``: one job of the worker pool (its
+results, and the ``progress`` calls, come together), fewer so that every worker gets one."""
 
 
 @dataclass(frozen=True)
@@ -233,10 +234,11 @@ class GraspSafetyEvaluator:
         metric: str,
         seeds_q: np.ndarray,
         stop_above: np.ndarray,
-    ) -> list[GraspEvaluation | None]:
+    ) -> list[FollowedPosture | None]:
         """``evaluate_batch`` of start postures (seeds_q (G, nq): row g an IK solution of its
         grasp's first tip pose), each stopped as soon as its score certainly exceeds
-        stop_above[g] (inf: never): None for a stopped row.
+        stop_above[g] (inf: never): None for a stopped row, else its feasibility and score,
+        its GraspEvaluation built on demand.
 
         The early stop runs in the fused kernel (``follow_postures_compiled``); a row that is
         not stopped equals ``evaluate_batch``'s bit for bit. Without the fused kernel
@@ -244,11 +246,8 @@ class GraspSafetyEvaluator:
         """
         motion = sampled_trajectory.object_motion
         if not self.backend.compiled or motion is None:
-            return list(
-                self.evaluate_batch(
-                    indices, grasps, object_inertia, sampled_trajectory, metric, seeds_q
-                )
-            )
+            batch = (indices, grasps, object_inertia, sampled_trajectory, metric, seeds_q)
+            return [FollowedPosture.of(evaluation) for evaluation in self.evaluate_batch(*batch)]
         times = sampled_trajectory.times_s
         is_max, weights, margin = score_bound_weights(times, metric)
         bounds = np.asarray(stop_above, dtype=float)
@@ -262,20 +261,20 @@ class GraspSafetyEvaluator:
             seeds_q,
             (is_max, weights, bounds),
         )
-        return [
-            None
-            if result is None
-            else self._from_compiled(
-                index,
-                grasp,
-                result,
-                motion,
-                times,
-                metric,
-                (object_inertia, self.robot.positions_from_q(seed)),
-            )
-            for index, grasp, result, seed in zip(indices, grasps, results, seeds_q, strict=True)
-        ]
+        followed: list[FollowedPosture | None] = []
+        for index, grasp, result, seed in zip(indices, grasps, results, seeds_q, strict=True):
+            if result is None:
+                followed.append(None)
+                continue
+            score = float("nan")
+            if not result.reason:  # _feasible's score: of the masses with the worst filled in
+                masses = result.effective_masses
+                _fill_worst(result.mobilities, masses, result.directions, result.worst)
+                score = aggregate(masses, times, metric)
+            start = (object_inertia, self.robot.positions_from_q(seed))
+            build = partial(self._from_compiled, index, grasp, result, motion, times, metric)
+            followed.append(FollowedPosture(not result.reason, score, partial(build, start)))
+        return followed
 
     def _from_compiled(
         self,
@@ -400,9 +399,7 @@ class GraspSafetyEvaluator:
         (``inertia_seed``: the object's inertia and the seed's positions, chain order), or
         the ``planned`` ones."""
         masses, directions, worst = masses_directions_worst
-        if np.count_nonzero(worst):
-            for i in np.flatnonzero(worst):
-                directions[i], masses[i] = worst_direction(mobilities[i])
+        _fill_worst(mobilities, masses, directions, worst)
         object_inertia, start = inertia_seed
         links_only = masses  # no armature, or explicit zeros: these are the links' own
         if np.any(self.robot.armature_kgm2 > 0):
@@ -479,19 +476,20 @@ class GraspSafetyEvaluator:
         for grasp in grasps:
             self.trajectory_for(grasp, sampled.trajectory)  # planned trajectories: validate
         executor = executor_for(self, len(grasps) * len(sampled.times_s))
+        size = grasps_per_job(executor, len(grasps), BATCH_GRASPS)  # a few grasps: every worker
         jobs = [
             (
-                range(start, min(start + BATCH_GRASPS, len(grasps))),
-                grasps[start : start + BATCH_GRASPS],
+                range(start, min(start + size, len(grasps))),
+                grasps[start : start + size],
                 object_inertia,
                 sampled,
                 metric,
                 seed_q,
                 start_positions,
             )
-            for start in range(0, len(grasps), BATCH_GRASPS)
+            for start in range(0, len(grasps), size)
         ]
-        if executor is None:
+        if executor is None or len(jobs) == 1:  # one job: no hand-off to a worker
             batches: Generator[list[GraspEvaluation], None, None] = (
                 self.evaluate_batch(*job) for job in jobs
             )
@@ -574,6 +572,14 @@ def _masses_along(
     directions[moving] = tangents[moving] / tangent_norms[moving, None]
     masses[moving] = effective_masses_along(mobilities[moving], directions[moving])
     return masses, directions, worst
+
+
+def _fill_worst(
+    mobilities: np.ndarray, masses: np.ndarray, directions: np.ndarray, worst: np.ndarray
+) -> None:
+    """Where the tip does not translate (``worst``): the largest effective mass, in place."""
+    for i in np.flatnonzero(worst):
+        directions[i], masses[i] = worst_direction(mobilities[i])
 
 
 def _infeasible(index: int, name: str, reason: str, num_joints: int) -> GraspEvaluation:

@@ -5,7 +5,9 @@ which read them)."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 import pinocchio as pin
@@ -88,6 +90,37 @@ class GraspEvaluation:
     def mean_effective_mass_kg(self) -> float:
         """Mean per-sample effective mass [kg]; NaN if infeasible."""
         return float(self.effective_mass_kg.mean()) if self.feasible else float("nan")
+
+
+@dataclass(frozen=True)
+class FollowedPosture:
+    """A start posture followed along the whole trajectory (GraspSafetyEvaluator's
+    ``follow_postures``): whether it is feasible and its score, and its GraspEvaluation built
+    on demand, as posture selection needs it for the kept posture only (``score`` and
+    ``feasible`` are the evaluation's, bit for bit).
+
+    Attributes:
+        feasible: Whether the whole trajectory is feasible.
+        score: The score (as GraspEvaluation.score); NaN if infeasible.
+        build: Makes the GraspEvaluation (call ``evaluation()``).
+    """
+
+    feasible: bool
+    score: float
+    build: Callable[[], GraspEvaluation]
+
+    @classmethod
+    def of(cls, evaluation: GraspEvaluation) -> FollowedPosture:
+        """An evaluation already built."""
+        return cls(evaluation.feasible, evaluation.score, partial(_given, evaluation))
+
+    def evaluation(self) -> GraspEvaluation:
+        """The posture's GraspEvaluation (built at each call)."""
+        return self.build()
+
+
+def _given(evaluation: GraspEvaluation) -> GraspEvaluation:
+    return evaluation
 
 
 SAMPLE_ARRAYS = (
