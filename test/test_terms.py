@@ -18,6 +18,7 @@ from tolerances import (
 )
 
 from grasp_safety_ros.core import RobotModel
+from grasp_safety_ros.core.exceptions import InvalidInputError
 from grasp_safety_ros.core.method import terms as terms_module
 from grasp_safety_ros.core.method.backend import Backend
 from grasp_safety_ros.core.method.effective_mass import (
@@ -288,6 +289,18 @@ def test_terms_without_optional_fields_are_the_same_numbers(
             else:
                 assert np.isnan(rows).all(), field_name
         del lean, ours, rows  # the block is free for the next call
+
+
+@needs_numba
+def test_an_unknown_optional_term_is_refused_by_name(arm7: RobotModel) -> None:
+    """A misspelt optional field would silently leave stale numbers: it is an error naming
+    the argument and the valid names."""
+    grasp, evaluation, _, _ = terms_case(arm7, 11)
+    chain = Backend.for_robot(arm7).chain
+    assert chain is not None
+    args = (arm7, chain, BOX, [grasp.transform_tip_to_object], [evaluation.joint_positions])
+    with pytest.raises(InvalidInputError, match=r"^optional: unknown terms \['mobilities'\]"):
+        grasps_terms(*args, optional=("mobilities",))
 
 
 @needs_numba

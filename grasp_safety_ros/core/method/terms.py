@@ -27,6 +27,7 @@ from typing import NamedTuple
 import numpy as np
 import pinocchio as pin
 
+from ..exceptions import InvalidInputError
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
 from .compiled import augmented_bodies, call_kernel, plain_array, pose_arrays
@@ -212,10 +213,14 @@ def batch_terms(
     """The terms of G grasps in one kernel call: grasp g's augmented ``bodies`` (axis 0 the
     grasp, ``compiled.augmented_bodies``) along its first counts[g] configurations of
     ``q_all`` (G, N, nq); its rows from counts[g] on are left uninitialised, and so are the
-    OPTIONAL_TERMS not in ``optional``. The buffers are ``sample_terms_buffers``' (kept
-    memory when there is some)."""
+    OPTIONAL_TERMS not in ``optional`` (another name: InvalidInputError). The buffers are
+    ``sample_terms_buffers``' (kept memory when there is some)."""
     from ..kernels.ik import thread_workspace
     from ..kernels.terms import sample_terms
+
+    unknown = sorted(set(optional).difference(OPTIONAL_TERMS))
+    if unknown:  # a misspelt name would leave its field as an earlier call filled it
+        raise InvalidInputError("optional", f"unknown terms {unknown}; valid: {OPTIONAL_TERMS}")
 
     q_all = plain_array(q_all)
     n = chain.axes.shape[0]
