@@ -276,6 +276,38 @@ def test_batch_summaries_and_lazy_arrays_are_the_formulas_bit_for_bit() -> None:
             np.testing.assert_array_equal(a.force_ratio, b.force_ratio)
 
 
+def test_an_empty_motion_has_empty_arrays_and_nan_min_speed() -> None:
+    """No samples: each region's arrays are (0,), its summaries 0 (ratio, force, duration)
+    and its smallest v_max NaN (the minimum of nothing)."""
+    assessment = assess_motion([], [], 1.0)
+    for region in assessment.regions:
+        for name in ("contact_force_n", "max_permissible_speed_m_s", "force_ratio"):
+            assert getattr(region, name).shape == (0,), name
+        assert (region.worst_force_ratio, region.peak_contact_force_n) == (0.0, 0.0)
+        assert math.isnan(region.min_max_permissible_speed_m_s)
+
+
+def test_a_pickled_or_copied_assessment_carries_its_own_arrays_only() -> None:
+    """One region of one motion of a batch of 50 pickles to about its own three arrays (3 x
+    201 float64, 4.8 kB), not the batch's (50 motions x 12 regions of them: 2.9 MB): bound
+    40 kB, a twelfth of one motion's share. Equal fields and arrays after the round trip and
+    after a deep copy."""
+    import copy
+    import pickle
+
+    speeds, masses = _motions(np.random.default_rng(3), 50, 201)
+    batch = assess_motions(list(speeds), list(masses), 2.0)
+    one = batch[7].regions[4]
+    for restored in (pickle.loads(pickle.dumps(one)), copy.deepcopy(one)):
+        assert restored == one
+        for name in ("contact_force_n", "max_permissible_speed_m_s", "force_ratio"):
+            np.testing.assert_array_equal(getattr(restored, name), getattr(one, name))
+            assert not getattr(restored, name).flags.writeable
+    assert len(pickle.dumps(one)) < 40_000
+    _ = batch[7].regions[5].force_ratio  # the batch's arrays computed: the same bound
+    assert len(pickle.dumps(batch[7].regions[5])) < 40_000
+
+
 @pytest.mark.parametrize(
     ("call", "field"),
     [

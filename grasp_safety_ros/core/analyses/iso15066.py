@@ -26,7 +26,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
@@ -240,11 +240,19 @@ class _RegionSamples:
         self._inputs = (speed_m_s, effective_mass_kg, regions)
         self._arrays: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
+    @classmethod
+    def of_rows(cls, force: np.ndarray, v_max: np.ndarray, ratio: np.ndarray) -> _RegionSamples:
+        """One region and motion's arrays (N,) as a batch of one (row 0), already computed."""
+        samples = cls.__new__(cls)
+        samples._arrays = (read_only(force[None]), read_only(v_max[None]), read_only(ratio[None]))
+        return samples
+
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(force, v_max, ratio), each (R·M, N)."""
         if self._arrays is None:  # (two threads may both compute it: the same bits)
-            samples = self._inputs[0].shape[1]
-            force, v_max, ratio = (a.reshape(-1, samples) for a in _region_arrays(*self._inputs))
+            speed, _, regions = self._inputs
+            shape = (len(regions) * speed.shape[0], speed.shape[1])
+            force, v_max, ratio = (a.reshape(shape) for a in _region_arrays(*self._inputs))
             self._arrays = (force, v_max, ratio)
         return self._arrays
 
@@ -273,6 +281,8 @@ class RegionAssessment:
     The per-sample arrays (N,), ``contact_force_n``, ``max_permissible_speed_m_s`` and
     ``force_ratio``, are properties, computed on first read for every region and motion
     assessed with this one (``_samples``, at row ``_at``: region k of motion m at k·M + m).
+    Pickled or copied, an assessment carries its own three arrays, not its batch's
+    (``dataclasses.asdict`` lists ``_samples`` and ``_at``, not the arrays).
     """
 
     region: BodyRegion
@@ -284,6 +294,12 @@ class RegionAssessment:
     min_max_permissible_speed_m_s: float
     _samples: _RegionSamples = field(repr=False, compare=False)
     _at: int = field(repr=False, compare=False)
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        """The fields and this assessment's own arrays (``_restored_assessment``)."""
+        values = tuple(getattr(self, f.name) for f in fields(self)[:-2])
+        rows = (self.contact_force_n, self.max_permissible_speed_m_s, self.force_ratio)
+        return (_restored_assessment, (values, rows))
 
     @property
     def contact_force_n(self) -> np.ndarray:
@@ -305,6 +321,15 @@ class RegionAssessment:
     def transient_contact_permitted(self) -> bool:
         """Whether the TS permits transient contact with this region."""
         return self.region.transient_contact_permitted
+
+
+def _restored_assessment(
+    values: tuple[Any, ...], rows: tuple[np.ndarray, np.ndarray, np.ndarray]
+) -> RegionAssessment:
+    """A RegionAssessment from its summary fields and its own three arrays (N,)."""
+    region, worst, sample, peak, admissible, duration, min_speed = values
+    own = _RegionSamples.of_rows(*rows)
+    return RegionAssessment(region, worst, sample, peak, admissible, duration, min_speed, own, 0)
 
 
 @dataclass(frozen=True)

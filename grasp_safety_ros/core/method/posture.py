@@ -517,6 +517,7 @@ def _choose(
     kept = [e for e in candidates if e is not None and e.feasible]
     scores = np.array([e.score for e in kept])
     values = scores
+    evaluations = None  # built for a criterion only; else the kept one alone
     if criterion is not None:
         evaluations = [e.evaluation() for e in kept]
         values = np.asarray(criterion(evaluator, *case, evaluations), dtype=float)
@@ -527,7 +528,11 @@ def _choose(
             )
     chosen_k = int(np.argmin(values))  # argmin keeps the first of equal values
     best = feasible[chosen_k]
-    chosen = single_ik if best == 0 else _detached(kept[chosen_k].evaluation())
+    chosen = single_ik
+    if best != 0:
+        chosen = _detached(
+            kept[chosen_k].evaluation() if evaluations is None else evaluations[chosen_k]
+        )
     return chosen, PostureSelection(
         index=single_ik.index,
         restarts=config.restarts,

@@ -22,7 +22,10 @@ from ..parameters.arm_points import check_arm_point_links
 PARALLEL_MIN_SAMPLES = 1000
 """The node's evaluator ranks on its workers from this many grasps x samples (the core's
 default is 4000): its pool is kept between requests, and 10 grasps x 101 samples on the two
-workers take 0.84 ms against 1.09 serial (fastest of 57, docs/performance_pipeline.md)."""
+workers take 0.84 ms against 1.09 serial (fastest of 57, docs/performance_pipeline.md). The
+same threshold gates the evaluator's other pooled stages, not measured apart: posture
+selection (from grasps x samples x (restarts + 1) = 1000: with 8 restarts, 112 grasp-samples
+instead of 445) and the inertia-uncertainty analysis's chunks."""
 
 
 @dataclass(frozen=True)

@@ -4,9 +4,9 @@ shared-memory segment sized for large responses (``data/fastdds_large_responses.
 Fast DDS's default segment (512 KiB) is smaller than a large response (1.4 MB at 100 grasps x
 201 samples): the response then reached the client 10-20 ms after the node sent it beyond its
 deserialisation, against none with a segment that holds it (docs/performance_pipeline.md,
-"Service"). Only the writer's segment counts, so the node's process alone needs it; its pages
-are taken only as written. A process that configures Fast DDS itself (a profile file, its
-built-in transports, another middleware) keeps its own settings.
+"Service"). Only the writer's segment counts, so the node's process alone needs it; Fast DDS
+reserves all of it in /dev/shm at start-up (4.4 MB). A process that configures Fast DDS itself
+(a profile file or none, its built-in transports, another middleware) keeps its own settings.
 """
 
 from __future__ import annotations
@@ -20,7 +20,12 @@ PROFILE_FILE = "fastdds_large_responses.xml"
 """The profile, in the package's ``data`` folder."""
 PROFILE_VARIABLE = "FASTRTPS_DEFAULT_PROFILES_FILE"
 """Where Fast DDS 2 reads its profile file's path (Jazzy's rmw_fastrtps_cpp)."""
-OWN_SETTINGS = (PROFILE_VARIABLE, "FASTDDS_DEFAULT_PROFILES_FILE", "FASTDDS_BUILTIN_TRANSPORTS")
+OWN_SETTINGS = (
+    PROFILE_VARIABLE,
+    "FASTDDS_DEFAULT_PROFILES_FILE",
+    "FASTDDS_BUILTIN_TRANSPORTS",
+    "SKIP_DEFAULT_XML",
+)
 """Variables by which a process configures Fast DDS itself."""
 FAST_DDS = ("", "rmw_fastrtps_cpp", "rmw_fastrtps_dynamic_cpp")
 """RMW_IMPLEMENTATION values that mean Fast DDS (empty: the default, in Jazzy)."""
