@@ -35,13 +35,9 @@ from grasp_safety_ros.core.analyses.whole_arm import (
 )
 from grasp_safety_ros.core.input_checks import pose_from_position_quat
 from grasp_safety_ros.core.method.executable import joint_velocities_accelerations
+from grasp_safety_ros.core.method.halton import scrambled_halton
 from grasp_safety_ros.core.method.metrics import METRICS
-from grasp_safety_ros.core.method.posture import (
-    PostureConfig,
-    restart_seeds,
-    scrambled_halton,
-    select_postures,
-)
+from grasp_safety_ros.core.method.posture import PostureConfig, restart_seeds, select_postures
 from grasp_safety_ros.core.method.ranking import sample_trajectory
 
 BOOK = solid_box(0.34, (0.15, 0.22, 0.015))
@@ -494,7 +490,7 @@ def test_scrambled_halton_is_scipys_bit_for_bit() -> None:
 def test_scrambled_halton_is_kept_per_process_and_handed_out_as_copies() -> None:
     """The points of one (dimensions, count, seed) are computed once; a caller that writes
     into its copy changes nobody else's."""
-    from grasp_safety_ros.core.method.posture import _scrambled_halton
+    from grasp_safety_ros.core.method.halton import _scrambled_halton
 
     first = scrambled_halton(7, 8, 99)
     expected = first.copy()

@@ -44,7 +44,6 @@ posture. A grasp is infeasible only when no start posture gives a feasible traje
 
 from __future__ import annotations
 
-import functools
 import itertools
 import math
 from collections.abc import Callable, Sequence
@@ -59,6 +58,7 @@ from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
 from ..model.trajectory import ObjectTrajectory
 from ..model.waypoint_trajectory import WaypointTrajectory
+from .halton import scrambled_halton
 from .pool import evaluate_jobs, executor_for, grasps_per_job
 from .ranking import (
     BATCH_GRASPS,
@@ -208,55 +208,6 @@ def restart_seeds(evaluator: GraspSafetyEvaluator, config: PostureConfig) -> np.
     unit = scrambled_halton(robot.num_joints, config.restarts, config.seed)
     seeds: np.ndarray = lower + unit * (upper - lower)
     return seeds
-
-
-def scrambled_halton(dimensions: int, count: int, seed: int) -> np.ndarray:
-    """The first ``count`` points (count, dimensions) in [0, 1) of the Halton sequence with
-    Owen's digit scrambling: those of ``scipy.stats.qmc.Halton(d=dimensions, scramble=True,
-    seed=seed).random(count)`` (scipy 1.17; its ``rng=`` keyword draws others) bit for bit
-    (tested), without importing scipy.stats (0.5-1 s).
-
-    Dimension k is the van der Corput sequence in the k-th prime base b, point i the sum over
-    its base-b digits d_j(i) (j = 0, 1, ...) of perm_j[d_j(i)] b^-(j+1), with one random
-    permutation perm_j of the digits per position j (ceil(54 / log2 b) - 1 positions, as far
-    as a double resolves), drawn by ``numpy.random.default_rng(seed).shuffle`` in the order
-    of the bases and positions. The points of each (dimensions, count, seed) are computed
-    once per process (a request of a few grasps spent more time here than in its IK) and
-    copied out.
-    """
-    return _scrambled_halton(dimensions, count, seed).copy()
-
-
-@functools.lru_cache(maxsize=16)
-def _scrambled_halton(dimensions: int, count: int, seed: int) -> np.ndarray:
-    """``scrambled_halton``'s points, kept (read-only)."""
-    rng = np.random.default_rng(seed)
-    points = np.zeros((count, dimensions))
-    for k, base in enumerate(_primes(dimensions)):
-        positions = math.ceil(54 / math.log2(base)) - 1
-        permutations = np.repeat(np.arange(base)[None], positions, axis=0)
-        for permutation in permutations:
-            rng.shuffle(permutation)
-        quotient = np.arange(count)
-        scale = 1.0 / base
-        column = points[:, k]
-        for j in range(positions):  # the same operations, in the same order, as scipy's
-            column += permutations[j, quotient % base] * scale
-            quotient //= base
-            scale /= base
-    points.setflags(write=False)
-    return points
-
-
-def _primes(count: int) -> list[int]:
-    """The first ``count`` primes."""
-    primes: list[int] = []
-    candidate = 2
-    while len(primes) < count:
-        if all(candidate % p for p in primes if p * p <= candidate):
-            primes.append(candidate)
-        candidate += 1
-    return primes
 
 
 def single_posture(evaluation: GraspEvaluation, restarts: int = 0) -> PostureSelection:
