@@ -401,6 +401,28 @@ def test_scenario_posture_section_and_cli_json() -> None:
         assert grasp["samples"]["qd"] == qd.tolist()
 
 
+def test_a_criterion_builds_each_feasible_posture_once(baxter_book, monkeypatch) -> None:
+    """With a criterion every feasible posture's GraspEvaluation is built once (the criterion
+    reads them all; the kept one is not built again); without, the kept new posture alone."""
+    from grasp_safety_ros.core.method.results import FollowedPosture
+
+    evaluator, grasps, trajectory, ranking = baxter_book
+    built: list[int] = []
+    evaluation = FollowedPosture.evaluation
+    monkeypatch.setattr(
+        FollowedPosture, "evaluation", lambda self: built.append(1) or evaluation(self)
+    )
+    options = AnalysisOptions(rank_by="whole_arm", whole_arm_region="upper_arm_elbow")
+    criterion = posture_criterion(evaluator.robot, options)
+    config = PostureConfig(restarts=8)
+    by_arm = select_postures(evaluator, grasps, BOOK, trajectory, ranking, config, None, criterion)
+    assert len(built) == sum(p.postures_feasible for p in by_arm.postures)
+    assert any(p.selected > 0 for p in by_arm.postures)  # a kept new posture: a rebuild counts
+    built.clear()
+    by_tip = select_postures(evaluator, grasps, BOOK, trajectory, ranking, config)
+    assert len(built) == sum(p.selected > 0 for p in by_tip.postures)
+
+
 def test_selection_by_the_whole_arm(baxter_book) -> None:
     """rank_by whole_arm: each grasp keeps the start posture of least worst predicted force
     over the arm's sites for the region; never worse than the single IK by it, deterministic,

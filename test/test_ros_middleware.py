@@ -15,6 +15,7 @@ from grasp_safety_ros.ros.runtime.middleware import (
     DEFAULT_PROFILE_FILE,
     OWN_SETTINGS,
     PROFILE_VARIABLE,
+    SKIP_DEFAULT_FILE,
     size_shared_memory_for_large_responses,
 )
 
@@ -69,6 +70,14 @@ def test_a_profile_in_the_working_directory_is_kept(tmp_path: Path) -> None:
     assert environ == {}
 
 
+def test_a_skipped_profile_in_the_working_directory_does_not_count(tmp_path: Path) -> None:
+    """Fast DDS ignores the working directory's profile when SKIP_DEFAULT_FILE is set."""
+    (tmp_path / DEFAULT_PROFILE_FILE).write_text("<profiles/>")
+    environ = {SKIP_DEFAULT_FILE: "1"}
+    path = size_shared_memory_for_large_responses(environ, tmp_path)
+    assert path is not None and environ == {SKIP_DEFAULT_FILE: "1", PROFILE_VARIABLE: path}
+
+
 def test_fast_dds_loads_the_profile(tmp_path: Path) -> None:
     """A process with the profile starts rclpy and a node without any Fast DDS error, and the
     shared-memory segment it maps is the profile's size (at least; Fast DDS adds its own
@@ -78,21 +87,31 @@ def test_fast_dds_loads_the_profile(tmp_path: Path) -> None:
     path = size_shared_memory_for_large_responses(environ, tmp_path)
     assert path is not None
     script = (
-        "import os, rclpy; from std_msgs.msg import String; rclpy.init(); "
+        "import rclpy; from std_msgs.msg import String; rclpy.init(); "
         "node = rclpy.create_node('middleware_check'); node.create_publisher(String, 'check', 1); "
-        "maps = open('/proc/self/maps').read().split(); "
-        "segments = {w for w in maps if w.startswith('/dev/shm/fastrtps_') and "
-        "not w.endswith('_el')}; "
-        "print(max(os.stat(w).st_size for w in segments)); "
-        "node.destroy_node(); rclpy.shutdown()"
+        "print(open('/proc/self/maps').read()); node.destroy_node(); rclpy.shutdown()"
     )
+    inherited = {
+        name: value
+        for name, value in os.environ.items()
+        if name not in (*OWN_SETTINGS, "RMW_IMPLEMENTATION")
+    }
     run = subprocess.run(
         [sys.executable, "-c", script],
-        env={**os.environ, PROFILE_VARIABLE: path, "ROS_DOMAIN_ID": "97"},
+        env={**inherited, PROFILE_VARIABLE: path, "ROS_DOMAIN_ID": "97"},
         capture_output=True,
         text=True,
         timeout=60,
     )
     assert run.returncode == 0, run.stderr
     assert "error" not in run.stderr.lower(), run.stderr
-    assert int(run.stdout.strip()) >= _segment_size(path)
+    mapped = [  # "start-end perms offset device inode path" of each segment's mapping
+        line.split() for line in run.stdout.splitlines() if "/dev/shm/fastrtps_" in line
+    ]
+    sizes = [
+        int(end, 16) - int(start, 16)
+        for (start, end), name in ((f[0].split("-"), f[-1]) for f in mapped)
+        if not name.endswith("_el")
+    ]
+    assert sizes, "no Fast DDS shared-memory segment mapped"
+    assert max(sizes) >= _segment_size(path)

@@ -232,20 +232,39 @@ class _RegionSamples:
     """The per-sample arrays of R regions for M motions of N samples ((M, N) speeds [m/s] and
     masses [kg], validated): force [N], v_max [m/s] and force ratio (R·M, N) (region-major),
     read-only, computed for all at once on the first read (``_region_arrays``). Most
-    callers read only the summaries, which ``_region_peaks`` computes without them."""
+    callers read only the summaries, which ``_region_peaks`` computes without them.
+    Immutable once made (copies share it); pickled as its inputs."""
 
     def __init__(
         self, speed_m_s: np.ndarray, effective_mass_kg: np.ndarray, regions: tuple[BodyRegion, ...]
     ) -> None:
         self._inputs = (speed_m_s, effective_mass_kg, regions)
         self._arrays: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._motions: dict[int, _RegionSamples] = {}
 
-    @classmethod
-    def of_rows(cls, force: np.ndarray, v_max: np.ndarray, ratio: np.ndarray) -> _RegionSamples:
-        """One region and motion's arrays (N,) as a batch of one (row 0), already computed."""
-        samples = cls.__new__(cls)
-        samples._arrays = (read_only(force[None]), read_only(v_max[None]), read_only(ratio[None]))
-        return samples
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (type(self), self._inputs)
+
+    def __copy__(self) -> _RegionSamples:
+        return self
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> _RegionSamples:
+        return self
+
+    @property
+    def motions(self) -> int:
+        """M, the motions assessed together."""
+        return int(self._inputs[0].shape[0])
+
+    def of_motion(self, m: int) -> _RegionSamples:
+        """Motion m's inputs alone (rows k of its R regions), the same object at every call:
+        what a pickled assessment carries instead of the whole batch."""
+        if m not in self._motions:
+            speed, mass, regions = self._inputs
+            self._motions[m] = _RegionSamples(
+                speed[m : m + 1].copy(), mass[m : m + 1].copy(), regions
+            )
+        return self._motions[m]
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(force, v_max, ratio), each (R·M, N)."""
@@ -281,8 +300,8 @@ class RegionAssessment:
     The per-sample arrays (N,), ``contact_force_n``, ``max_permissible_speed_m_s`` and
     ``force_ratio``, are properties, computed on first read for every region and motion
     assessed with this one (``_samples``, at row ``_at``: region k of motion m at k·M + m).
-    Pickled or copied, an assessment carries its own three arrays, not its batch's
-    (``dataclasses.asdict`` lists ``_samples`` and ``_at``, not the arrays).
+    Pickled or deep-copied, an assessment carries its own motion's inputs (speeds and masses),
+    not its batch's; its arrays are computed again from them, the same bits.
     """
 
     region: BodyRegion
@@ -296,10 +315,11 @@ class RegionAssessment:
     _at: int = field(repr=False, compare=False)
 
     def __reduce__(self) -> tuple[Any, ...]:
-        """The fields and this assessment's own arrays (``_restored_assessment``)."""
-        values = tuple(getattr(self, f.name) for f in fields(self)[:-2])
-        rows = (self.contact_force_n, self.max_permissible_speed_m_s, self.force_ratio)
-        return (_restored_assessment, (values, rows))
+        """Its fields, with its own motion's samples (``_RegionSamples.of_motion``)."""
+        region, m = divmod(self._at, self._samples.motions)
+        values = {f.name: getattr(self, f.name) for f in fields(self)}
+        values.update(_samples=self._samples.of_motion(m), _at=region)
+        return (_restored_assessment, (type(self), values))
 
     @property
     def contact_force_n(self) -> np.ndarray:
@@ -323,13 +343,9 @@ class RegionAssessment:
         return self.region.transient_contact_permitted
 
 
-def _restored_assessment(
-    values: tuple[Any, ...], rows: tuple[np.ndarray, np.ndarray, np.ndarray]
-) -> RegionAssessment:
-    """A RegionAssessment from its summary fields and its own three arrays (N,)."""
-    region, worst, sample, peak, admissible, duration, min_speed = values
-    own = _RegionSamples.of_rows(*rows)
-    return RegionAssessment(region, worst, sample, peak, admissible, duration, min_speed, own, 0)
+def _restored_assessment(cls: type[RegionAssessment], values: dict[str, Any]) -> RegionAssessment:
+    """A pickled RegionAssessment (or subclass) from its fields by name."""
+    return cls(**values)
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,7 @@ Fast DDS's default segment (512 KiB) is smaller than a large response (1.4 MB at
 deserialisation, against none with a segment that holds it (docs/performance_pipeline.md,
 "Service"). Only the writer's segment counts, so the node's process alone needs it; Fast DDS
 reserves all of it in /dev/shm at start-up (4.4 MB). A process that configures Fast DDS itself
-(a profile file or none, its built-in transports, another middleware) keeps its own settings.
+(a profile file, its built-in transports, another middleware) keeps its own settings.
 """
 
 from __future__ import annotations
@@ -20,17 +20,14 @@ PROFILE_FILE = "fastdds_large_responses.xml"
 """The profile, in the package's ``data`` folder."""
 PROFILE_VARIABLE = "FASTRTPS_DEFAULT_PROFILES_FILE"
 """Where Fast DDS 2 reads its profile file's path (Jazzy's rmw_fastrtps_cpp)."""
-OWN_SETTINGS = (
-    PROFILE_VARIABLE,
-    "FASTDDS_DEFAULT_PROFILES_FILE",
-    "FASTDDS_BUILTIN_TRANSPORTS",
-    "SKIP_DEFAULT_XML",
-)
+OWN_SETTINGS = (PROFILE_VARIABLE, "FASTDDS_DEFAULT_PROFILES_FILE", "FASTDDS_BUILTIN_TRANSPORTS")
 """Variables by which a process configures Fast DDS itself."""
 FAST_DDS = ("", "rmw_fastrtps_cpp", "rmw_fastrtps_dynamic_cpp")
 """RMW_IMPLEMENTATION values that mean Fast DDS (empty: the default, in Jazzy)."""
 DEFAULT_PROFILE_FILE = "DEFAULT_FASTRTPS_PROFILES.xml"
-"""The profile Fast DDS reads from the working directory when no variable names one."""
+"""The profile Fast DDS reads from the working directory (unless SKIP_DEFAULT_FILE is set)."""
+SKIP_DEFAULT_FILE = "SKIP_DEFAULT_XML_FILE"
+"""Fast DDS 2's variable that makes it ignore DEFAULT_PROFILE_FILE."""
 
 
 def size_shared_memory_for_large_responses(
@@ -38,13 +35,14 @@ def size_shared_memory_for_large_responses(
 ) -> str | None:
     """Point Fast DDS at the profile with the large shared-memory segment, when this process
     uses Fast DDS and configures it in no other way (OWN_SETTINGS, a DEFAULT_PROFILE_FILE in
-    the working directory). Call before rclpy.init. Returns the profile's path, or None when
-    left alone."""
+    the working directory that SKIP_DEFAULT_FILE does not skip). Call before rclpy.init.
+    Returns the profile's path, or None when left alone."""
     if environ.get("RMW_IMPLEMENTATION", "") not in FAST_DDS:
         return None
     if any(environ.get(name) for name in OWN_SETTINGS):
         return None
-    if ((working_directory or Path.cwd()) / DEFAULT_PROFILE_FILE).exists():
+    in_directory = (working_directory or Path.cwd()) / DEFAULT_PROFILE_FILE
+    if not environ.get(SKIP_DEFAULT_FILE) and in_directory.exists():
         return None
     path = Path(str(resources.files("grasp_safety_ros").joinpath("data", PROFILE_FILE)))
     if not path.is_file():  # not installed with the package: Fast DDS's defaults
