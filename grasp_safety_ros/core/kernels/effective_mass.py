@@ -11,6 +11,20 @@ from .kinematics import _forward_kinematics, _joint_axis_in_world
 
 
 @_jit_inline
+def _substituted_row(factor, inverse_diagonal, solved, i, x0, x1, x2):
+    """Row i of X = L^-1 B for three columns: (b_i - sum_k<i L_ik X_k) / L_ii, from B's row i
+    (x0, x1, x2) and X's rows k < i (``solved`` (n, 3)); L's strict lower triangle in
+    ``factor``, 1/L_ii in ``inverse_diagonal`` (the Cholesky of ``_mobility_from_frames``)."""
+    for k in range(i):
+        f = factor[i, k]
+        x0 -= f * solved[k, 0]
+        x1 -= f * solved[k, 1]
+        x2 -= f * solved[k, 2]
+    inverse = inverse_diagonal[i]
+    return x0 * inverse, x1 * inverse, x2 * inverse
+
+
+@_jit_inline
 def _mobility_from_frames(chain, bodies, g, ws, out):
     """[J M^-1 J^T]_3x3 at the tip origin, base axes [1/kg], from the joint and tip poses in ws.
 
@@ -117,14 +131,9 @@ def _mobility_from_frames(chain, bodies, g, ws, out):
             mass_matrix[i, j] = total * inverse
     a00 = a01 = a02 = a11 = a12 = a22 = 0.0
     for i in range(n):
-        x0, x1, x2 = jt[i, 0], jt[i, 1], jt[i, 2]
-        for k in range(i):
-            factor = mass_matrix[i, k]
-            x0 -= factor * jt[k, 0]
-            x1 -= factor * jt[k, 1]
-            x2 -= factor * jt[k, 2]
-        inverse = inverse_diagonal[i]
-        x0, x1, x2 = x0 * inverse, x1 * inverse, x2 * inverse
+        x0, x1, x2 = _substituted_row(
+            mass_matrix, inverse_diagonal, jt, i, jt[i, 0], jt[i, 1], jt[i, 2]
+        )
         jt[i, 0], jt[i, 1], jt[i, 2] = x0, x1, x2
         a00 += x0 * x0
         a01 += x0 * x1

@@ -6,7 +6,7 @@ M is the one ``_mobility_from_frames`` builds and factorises for the ranking, so
 the analyses read the same mass matrix (whatever it includes: object, armature)."""
 
 from ._jit import _jit, _jit_inline
-from .effective_mass import _mobility_from_frames
+from .effective_mass import _mobility_from_frames, _substituted_row
 from .kinematics import _forward_kinematics, _joint_axis_in_world
 
 
@@ -85,13 +85,8 @@ def _tip_mobility(base_rotation, ws, jacobian, angular, top, mobility):
         x0 = r[0, 0] * w0 + r[1, 0] * w1 + r[2, 0] * w2
         x1 = r[0, 1] * w0 + r[1, 1] * w1 + r[2, 1] * w2
         x2 = r[0, 2] * w0 + r[1, 2] * w1 + r[2, 2] * w2
-        for k in range(i):
-            f = factor[i, k]
-            x0 -= f * angular[k, 0]
-            x1 -= f * angular[k, 1]
-            x2 -= f * angular[k, 2]
-        inverse = inverse_diagonal[i]
-        angular[i, 0], angular[i, 1], angular[i, 2] = x0 * inverse, x1 * inverse, x2 * inverse
+        x0, x1, x2 = _substituted_row(factor, inverse_diagonal, angular, i, x0, x1, x2)
+        angular[i, 0], angular[i, 1], angular[i, 2] = x0, x1, x2
     for a in range(3):
         for b in range(3):
             mobility[a, b] = top[a, b]
