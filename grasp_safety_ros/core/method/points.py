@@ -80,6 +80,20 @@ SHARED_BODY_SITES = 4
 (``arm_site_exposure``): forming it costs about as much as this many sites computed alone."""
 
 
+def _joint_terms(terms: SampleTerms) -> tuple[np.ndarray, ...]:
+    """The joint frames, motion subspaces and M⁻¹ of ``terms``, as the site kernels read them
+    (``arm_site_exposure``, ``site_mobilities``)."""
+    return tuple(
+        plain_array(array)
+        for array in (
+            terms.rotations_joint_to_world,
+            terms.translations_joint_in_world,
+            terms.motions_joint_in_world,
+            terms.mass_matrix_inverses,
+        )
+    )
+
+
 def _shared_bodies(site_joints: np.ndarray, support: np.ndarray) -> tuple[np.ndarray, ...]:
     """(K,) each site's shared body (-1: computed alone), the shared bodies' chain joints (B,)
     and their supports (B, n): the bodies carrying at least SHARED_BODY_SITES sites."""
@@ -161,10 +175,7 @@ def arm_site_exposure(
     rotation, translation = transform_base_to_world
     call_kernel(
         kernel,
-        plain_array(terms.rotations_joint_to_world),
-        plain_array(terms.translations_joint_in_world),
-        plain_array(terms.motions_joint_in_world),
-        plain_array(terms.mass_matrix_inverses),
+        *_joint_terms(terms),
         np.ascontiguousarray(counts, dtype=np.int64),
         plain_array(rotation),
         plain_array(translation),
@@ -203,10 +214,7 @@ def site_mobilities(
     out = np.empty((len(at), 3, 3))
     call_kernel(
         kernel,
-        plain_array(terms.rotations_joint_to_world),
-        plain_array(terms.translations_joint_in_world),
-        plain_array(terms.motions_joint_in_world),
-        plain_array(terms.mass_matrix_inverses),
+        *_joint_terms(terms),
         np.ascontiguousarray(site_joints, dtype=np.int64),
         plain_array(points_in_joint_m),
         plain_array(support, bool),
