@@ -24,10 +24,9 @@ from grasp_safety_ros.core import (
     RobotModel,
     solid_box,
 )
-from grasp_safety_ros.core.analyses import iso15066
+from grasp_safety_ros.core.analyses import body_regions, iso15066
+from grasp_safety_ros.core.analyses.body_regions import BODY_REGIONS, BodyRegion
 from grasp_safety_ros.core.analyses.iso15066 import (
-    BODY_REGIONS,
-    BodyRegion,
     assess_grasp,
     assess_motion,
     assess_motions,
@@ -51,16 +50,16 @@ FAST = EvaluationConfig(ik=IKConfig(check_velocity_limits=False))
 
 
 def test_package_data_file_agrees_with_the_constant_table() -> None:
-    assert iso15066.load_body_regions() == dict(BODY_REGIONS)
-    content = yaml.safe_load(iso15066.data_file_path().read_text(encoding="utf-8"))
-    assert list(content["regions"]) == [row[0] for row in iso15066.REGION_TABLE]
+    assert body_regions.load_body_regions() == dict(BODY_REGIONS)
+    content = yaml.safe_load(body_regions.data_file_path().read_text(encoding="utf-8"))
+    assert list(content["regions"]) == [row[0] for row in body_regions.REGION_TABLE]
     assert content["units"]["k"] == "N/mm"
 
 
 @pytest.mark.skipif(not SHARED_TABLE.is_file(), reason="shared data folder not present")
 def test_package_table_carries_the_shared_facts() -> None:
     shared = yaml.safe_load(SHARED_TABLE.read_text(encoding="utf-8"))["regions"]
-    package = yaml.safe_load(iso15066.data_file_path().read_text(encoding="utf-8"))["regions"]
+    package = yaml.safe_load(body_regions.data_file_path().read_text(encoding="utf-8"))["regions"]
     assert package == shared
 
 
@@ -327,7 +326,7 @@ def test_a_pickled_or_copied_assessment_carries_its_own_motion_only() -> None:
         (lambda: assess_motion([0.1], [1.0], 1.0, ["chest", "chest"]), "iso15066.regions"),
         (lambda: BodyRegion("x", 10.0, -1.0, 1.0, 1.0), r"region 'x'\.F_tr"),
         (lambda: BodyRegion("x", 10.0, None, 1.0, 0.0), r"region 'x'\.m_h"),
-        (lambda: iso15066.body_regions_from_mapping({"a": {"F_qs": 1}}), r"regions\.a"),
+        (lambda: body_regions.body_regions_from_mapping({"a": {"F_qs": 1}}), r"regions\.a"),
     ],
 )
 def test_bad_input_is_refused(call: object, field: str) -> None:
@@ -336,6 +335,7 @@ def test_bad_input_is_refused(call: object, field: str) -> None:
 
 
 NEW_MODULES = (
+    "body_regions",
     "iso15066",
     "exposed_points",
     "uncertainty",
@@ -351,7 +351,7 @@ def test_new_core_modules_import_without_yaml_or_ros() -> None:
         "for name in ('rclpy', 'yaml', 'matplotlib', 'scipy'):\n"
         "    sys.modules[name] = None\n"
         + "".join(f"import grasp_safety_ros.core.analyses.{m}\n" for m in NEW_MODULES)
-        + "from grasp_safety_ros.core.analyses.iso15066 import BODY_REGIONS\n"
+        + "from grasp_safety_ros.core.analyses.body_regions import BODY_REGIONS\n"
         "print(len(BODY_REGIONS))\n"
     )
     completed = subprocess.run(

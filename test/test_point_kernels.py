@@ -34,11 +34,11 @@ from grasp_safety_ros.core import (
     ObjectInertia,
     RobotModel,
 )
+from grasp_safety_ros.core.analyses.body_regions import select_regions
 from grasp_safety_ros.core.analyses.exposed_points import (
     box_corners_in_object,
     evaluate_exposed_points_on_terms,
 )
-from grasp_safety_ros.core.analyses.iso15066 import select_regions
 from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions, analyse
 from grasp_safety_ros.core.analyses.whole_arm import (
     evaluate_whole_arm_on_terms,
@@ -443,7 +443,7 @@ def _region_peaks_case() -> tuple[np.ndarray, np.ndarray, list]:
     """Speeds and masses (G, N, K) with what argmax's order decides: exact ties (a repeated
     sample, a repeated site), sites and samples at rest, masses inf, 0 and negative, a NaN
     force in one motion; regions of finite and infinite m_h, without F_tr too."""
-    from grasp_safety_ros.core.analyses.iso15066 import BodyRegion
+    from grasp_safety_ros.core.analyses.body_regions import BodyRegion
 
     rng = np.random.default_rng(25)
     speeds = rng.uniform(0.0, 2.0, (4, 30, 5)) ** 3
@@ -503,7 +503,7 @@ def test_compiled_region_peaks_are_numpys_at_the_ends_of_the_float_range(
     overflow or underflow: those samples are evaluated whole, so numpy's peak and its first
     index (not a pruned -1 or an earlier sample)."""
     from grasp_safety_ros.core.analyses.arm_regions import _region_peaks
-    from grasp_safety_ros.core.analyses.iso15066 import BodyRegion
+    from grasp_safety_ros.core.analyses.body_regions import BodyRegion
     from grasp_safety_ros.core.method.points import region_peaks
 
     speeds = np.array(speeds_m_s).reshape(1, 2, 1)
