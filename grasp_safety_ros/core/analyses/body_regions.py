@@ -6,6 +6,7 @@ assessment asks for). The assessment itself is ``iso15066``'s.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,6 +20,13 @@ from ..input_checks import finite_float
 
 N_PER_MM_IN_N_PER_M = 1000.0
 """1 N/mm = 1000 N/m: the table gives k in N/mm, the core works in N/m."""
+
+MIN_VALUE, MAX_VALUE = 1e-100, 1e100
+"""The range of a region's F_qs [N], F_tr [N], k [N/m] and finite m_h [kg], and of the speeds
+[m/s] (or 0) and effective masses [kg] assessed against it (``iso15066``): then μ·k > 0 and
+μ·k, sqrt(μ·k), F = v·sqrt(μ·k), v_max = F_tr/sqrt(μ·k) and F/F_tr are at most about 1e300,
+never inf or NaN (a custom region of m_h = inf and a mass of 1e305 kg at rest made μ·k inf and
+F = 0·inf NaN). Far beyond any physical value: the table's k is 1e4-1.5e5 N/m, m_h 0.6-75 kg."""
 
 DATA_FILE_NAME = "iso_ts_15066_body_regions.yaml"
 """Name of the package's data file (in grasp_safety_ros/data/) holding the same table."""
@@ -51,10 +59,12 @@ class BodyRegion:
 
     Attributes:
         name: Region name, e.g. ``chest``.
-        max_quasi_static_force_n: F_qs [N], > 0.
-        max_transient_force_n: F_tr [N], > 0; None when transient contact is not permitted.
-        spring_constant_n_per_m: k [N/m], > 0 (the table's N/mm times 1000).
-        effective_mass_kg: m_h [kg], > 0; may be inf (an immovable region: μ = m_r).
+        max_quasi_static_force_n: F_qs [N].
+        max_transient_force_n: F_tr [N]; None when transient contact is not permitted.
+        spring_constant_n_per_m: k [N/m] (the table's N/mm times 1000).
+        effective_mass_kg: m_h [kg]; may be inf (an immovable region: μ = m_r).
+
+    Each number is in [MIN_VALUE, MAX_VALUE] (m_h: or inf).
     """
 
     name: str
@@ -69,16 +79,19 @@ class BodyRegion:
                 "region.name", f"must be a non-empty string, got {self.name!r}"
             )
         where = f"region '{self.name}'"
-        f_qs = finite_float(self.max_quasi_static_force_n, f"{where}.F_qs", 0.0, None, True)
+        f_qs = finite_float(self.max_quasi_static_force_n, f"{where}.F_qs", MIN_VALUE, MAX_VALUE)
         f_tr = self.max_transient_force_n
         if f_tr is not None:
-            f_tr = finite_float(f_tr, f"{where}.F_tr", 0.0, None, True)
-        k = finite_float(self.spring_constant_n_per_m, f"{where}.k", 0.0, None, True)
+            f_tr = finite_float(f_tr, f"{where}.F_tr", MIN_VALUE, MAX_VALUE)
+        k = finite_float(self.spring_constant_n_per_m, f"{where}.k", MIN_VALUE, MAX_VALUE)
         m_h = self.effective_mass_kg
         if not (isinstance(m_h, (int, float, np.floating)) and not isinstance(m_h, bool)) or not (
-            m_h > 0.0
+            MIN_VALUE <= m_h <= MAX_VALUE or m_h == math.inf
         ):
-            raise InvalidInputError(f"{where}.m_h", f"must be a number in (0, inf], got {m_h!r}")
+            raise InvalidInputError(
+                f"{where}.m_h",
+                f"must be a number in [{MIN_VALUE:g}, {MAX_VALUE:g}] or inf, got {m_h!r}",
+            )
         object.__setattr__(self, "max_quasi_static_force_n", f_qs)
         object.__setattr__(self, "max_transient_force_n", f_tr)
         object.__setattr__(self, "spring_constant_n_per_m", k)
@@ -94,7 +107,8 @@ class BodyRegion:
         cls, name: str, f_qs_n: float, f_tr_n: float | None, k_n_per_mm: float, m_h_kg: float
     ) -> BodyRegion:
         """Build from the table's units: forces [N], k [N/mm], m_h [kg]."""
-        k = finite_float(k_n_per_mm, f"region '{name}'.k", 0.0, None, True)
+        low, high = (bound / N_PER_MM_IN_N_PER_M for bound in (MIN_VALUE, MAX_VALUE))
+        k = finite_float(k_n_per_mm, f"region '{name}'.k", low, high)
         return cls(name, f_qs_n, f_tr_n, k * N_PER_MM_IN_N_PER_M, m_h_kg)
 
 

@@ -34,7 +34,7 @@ import numpy as np
 from ..exceptions import InvalidInputError
 from ..input_checks import finite_array, finite_float, read_only
 from ..method.results import GraspEvaluation
-from .body_regions import BodyRegion, select_regions
+from .body_regions import MAX_VALUE, MIN_VALUE, BodyRegion, select_regions
 
 ADMISSIBLE_RATIO_TOLERANCE = 1e-9
 """A force ratio F/F_tr up to 1 + this counts as admissible (absorbs rounding only)."""
@@ -364,13 +364,25 @@ def _region_arrays(
 
 
 def _checked_motion(speed_m_s: Any, effective_mass_kg: Any) -> tuple[np.ndarray, np.ndarray]:
+    """One motion's speeds [m/s] in [0, MAX_VALUE] and masses [kg] in [MIN_VALUE, MAX_VALUE]
+    (``body_regions.MIN_VALUE``: no force, speed limit or ratio overflows)."""
     speed = finite_array(speed_m_s, "iso15066.speed_m_s")
-    if speed.ndim != 1 or np.any(speed < 0.0):
-        raise InvalidInputError("iso15066.speed_m_s", "must be a 1-D array of speeds >= 0")
+    if speed.ndim != 1 or not _within(speed, 0.0):
+        raise InvalidInputError(
+            "iso15066.speed_m_s", f"must be a 1-D array of speeds in [0, {MAX_VALUE:g}]"
+        )
     mass = finite_array(effective_mass_kg, "iso15066.effective_mass_kg", speed.shape)
-    if np.any(mass <= 0.0):
-        raise InvalidInputError("iso15066.effective_mass_kg", "must be > 0 at every sample")
+    if not _within(mass, MIN_VALUE):
+        raise InvalidInputError(
+            "iso15066.effective_mass_kg",
+            f"must be in [{MIN_VALUE:g}, {MAX_VALUE:g}] at every sample",
+        )
     return speed, mass
+
+
+def _within(values: np.ndarray, low: float) -> bool:
+    """Every value in [low, MAX_VALUE] (NaN is not)."""
+    return bool(((values >= low) & (values <= MAX_VALUE)).all())
 
 
 def assess_motion(
@@ -381,7 +393,8 @@ def assess_motion(
     index: int = 0,
     name: str = "",
 ) -> PowerForceLimitAssessment:
-    """Assess per-sample speeds [m/s] and effective masses [kg] of a quintic of duration T [s].
+    """Assess per-sample speeds [m/s] and effective masses [kg] of a quintic of duration T [s]
+    (speeds in [0, 1e100], masses in [1e-100, 1e100]: ``body_regions.MIN_VALUE``).
 
     Use this for any point of the moving body (e.g. an exposed point of the object); for the
     tip of an evaluated grasp use ``assess_grasp``.
@@ -438,8 +451,8 @@ def _checked_batch(
         speeds.ndim == 2
         and len(speeds) > 0
         and masses.shape == speeds.shape
-        and bool(np.isfinite(speeds).all() and np.isfinite(masses).all())
-        and bool((speeds >= 0.0).all() and (masses > 0.0).all())
+        and _within(speeds, 0.0)
+        and _within(masses, MIN_VALUE)
     )
     return (speeds, masses) if valid else None
 
