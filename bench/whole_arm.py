@@ -40,8 +40,8 @@ import numpy as np
 from workload import ARMS, BOX_SIZE_M, ArmWorkload, box_object, grasps_around_box
 
 from grasp_safety_ros.core import EvaluationConfig, GraspSafetyEvaluator
+from grasp_safety_ros.core.analyses.body_regions import select_regions
 from grasp_safety_ros.core.analyses.exposed_points import box_corners_in_object
-from grasp_safety_ros.core.analyses.iso15066 import select_regions
 from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions
 from grasp_safety_ros.core.analyses.whole_arm import (
     WHOLE_ARM_TERMS,

@@ -24,10 +24,9 @@ from grasp_safety_ros.core import (
     RobotModel,
     solid_box,
 )
-from grasp_safety_ros.core.analyses import iso15066
+from grasp_safety_ros.core.analyses import body_regions, iso15066
+from grasp_safety_ros.core.analyses.body_regions import BODY_REGIONS, BodyRegion
 from grasp_safety_ros.core.analyses.iso15066 import (
-    BODY_REGIONS,
-    BodyRegion,
     assess_grasp,
     assess_motion,
     assess_motions,
@@ -51,16 +50,16 @@ FAST = EvaluationConfig(ik=IKConfig(check_velocity_limits=False))
 
 
 def test_package_data_file_agrees_with_the_constant_table() -> None:
-    assert iso15066.load_body_regions() == dict(BODY_REGIONS)
-    content = yaml.safe_load(iso15066.data_file_path().read_text(encoding="utf-8"))
-    assert list(content["regions"]) == [row[0] for row in iso15066.REGION_TABLE]
+    assert body_regions.load_body_regions() == dict(BODY_REGIONS)
+    content = yaml.safe_load(body_regions.data_file_path().read_text(encoding="utf-8"))
+    assert list(content["regions"]) == [row[0] for row in body_regions.REGION_TABLE]
     assert content["units"]["k"] == "N/mm"
 
 
 @pytest.mark.skipif(not SHARED_TABLE.is_file(), reason="shared data folder not present")
 def test_package_table_carries_the_shared_facts() -> None:
     shared = yaml.safe_load(SHARED_TABLE.read_text(encoding="utf-8"))["regions"]
-    package = yaml.safe_load(iso15066.data_file_path().read_text(encoding="utf-8"))["regions"]
+    package = yaml.safe_load(body_regions.data_file_path().read_text(encoding="utf-8"))["regions"]
     assert package == shared
 
 
@@ -327,7 +326,12 @@ def test_a_pickled_or_copied_assessment_carries_its_own_motion_only() -> None:
         (lambda: assess_motion([0.1], [1.0], 1.0, ["chest", "chest"]), "iso15066.regions"),
         (lambda: BodyRegion("x", 10.0, -1.0, 1.0, 1.0), r"region 'x'\.F_tr"),
         (lambda: BodyRegion("x", 10.0, None, 1.0, 0.0), r"region 'x'\.m_h"),
-        (lambda: iso15066.body_regions_from_mapping({"a": {"F_qs": 1}}), r"regions\.a"),
+        (lambda: body_regions.body_regions_from_mapping({"a": {"F_qs": 1}}), r"regions\.a"),
+        (lambda: BodyRegion("x", 10.0, 20.0, 1e101, 1.0), r"region 'x'\.k.*1e\+100\]"),
+        (lambda: BodyRegion("x", 1e-101, None, 1.0, 1.0), r"region 'x'\.F_qs.*\[1e-100"),
+        (lambda: BodyRegion("x", 10.0, 20.0, 1.0, 1e101), r"region 'x'\.m_h.*1e\+100\] or inf"),
+        (lambda: BodyRegion.from_table_units("x", 1, 2, 1e98, 1), r"region 'x'\.k.*1e\+97\]"),
+        (lambda: assess_motion([1e101], [1.0], 1.0), r"iso15066\.speed_m_s.*\[0, 1e\+100\]"),
     ],
 )
 def test_bad_input_is_refused(call: object, field: str) -> None:
@@ -335,7 +339,37 @@ def test_bad_input_is_refused(call: object, field: str) -> None:
         call()  # type: ignore[operator]
 
 
+def test_unphysical_magnitudes_are_refused_and_the_extremes_stay_finite() -> None:
+    """A region of m_h = inf and a mass of 1e305 kg at rest made μ·k overflow and F = 0·inf
+    NaN, which np.argmax took for the worst ratio (and the limiting region): such a mass is
+    refused, naming the field and its range. At the ends of the ranges (a region's numbers,
+    speeds and masses: body_regions.MIN_VALUE and MAX_VALUE) every force, speed limit, ratio
+    and summary is finite, and every speed limit > 0."""
+    wall = BodyRegion("wall", 100.0, 200.0, 50_000.0, math.inf)
+    with pytest.raises(
+        InvalidInputError, match=r"iso15066\.effective_mass_kg: must be in \[1e-100, 1e\+100\]"
+    ):
+        assess_motion([0.0, 0.1], [1e305, 1.0], 1.0, [wall, "chest"])
+    low, high = body_regions.MIN_VALUE, body_regions.MAX_VALUE
+    regions = [
+        BodyRegion("stiff", high, low, high, math.inf),  # F/F_tr up to 1e200 / 1e-100
+        BodyRegion("soft", low, high, low, low),  # v_max up to 1e100 / sqrt(5e-201)
+        BodyRegion("forbidden", low, None, high, high),
+    ]
+    speeds, masses = [0.0, high, low, high, 1.0], [high, high, low, low, 1.0]
+    assessment = assess_motion(speeds, masses, 1.0, regions)
+    for a in assessment.regions:
+        for name in ("contact_force_n", "max_permissible_speed_m_s"):
+            assert np.isfinite(getattr(a, name)).all(), (a.region.name, name)
+        if a.transient_contact_permitted:
+            assert np.isfinite(a.force_ratio).all() and math.isfinite(a.min_duration_s)
+            assert (a.max_permissible_speed_m_s > 0.0).all()
+        assert math.isfinite(a.peak_contact_force_n)
+    assert assessment.limiting_region == "stiff" and math.isfinite(assessment.min_duration_s)
+
+
 NEW_MODULES = (
+    "body_regions",
     "iso15066",
     "exposed_points",
     "uncertainty",
@@ -351,7 +385,7 @@ def test_new_core_modules_import_without_yaml_or_ros() -> None:
         "for name in ('rclpy', 'yaml', 'matplotlib', 'scipy'):\n"
         "    sys.modules[name] = None\n"
         + "".join(f"import grasp_safety_ros.core.analyses.{m}\n" for m in NEW_MODULES)
-        + "from grasp_safety_ros.core.analyses.iso15066 import BODY_REGIONS\n"
+        + "from grasp_safety_ros.core.analyses.body_regions import BODY_REGIONS\n"
         "print(len(BODY_REGIONS))\n"
     )
     completed = subprocess.run(

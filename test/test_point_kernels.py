@@ -6,6 +6,7 @@ Pinocchio reference path, infeasible grasps mixed in."""
 from __future__ import annotations
 
 import gc
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -34,11 +35,11 @@ from grasp_safety_ros.core import (
     ObjectInertia,
     RobotModel,
 )
+from grasp_safety_ros.core.analyses.body_regions import select_regions
 from grasp_safety_ros.core.analyses.exposed_points import (
     box_corners_in_object,
     evaluate_exposed_points_on_terms,
 )
-from grasp_safety_ros.core.analyses.iso15066 import select_regions
 from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions, analyse
 from grasp_safety_ros.core.analyses.whole_arm import (
     evaluate_whole_arm_on_terms,
@@ -443,7 +444,7 @@ def _region_peaks_case() -> tuple[np.ndarray, np.ndarray, list]:
     """Speeds and masses (G, N, K) with what argmax's order decides: exact ties (a repeated
     sample, a repeated site), sites and samples at rest, masses inf, 0 and negative, a NaN
     force in one motion; regions of finite and infinite m_h, without F_tr too."""
-    from grasp_safety_ros.core.analyses.iso15066 import BodyRegion
+    from grasp_safety_ros.core.analyses.body_regions import BodyRegion
 
     rng = np.random.default_rng(25)
     speeds = rng.uniform(0.0, 2.0, (4, 30, 5)) ** 3
@@ -499,16 +500,18 @@ def test_compiled_region_peaks_are_numpys_bit_for_bit() -> None:
 def test_compiled_region_peaks_are_numpys_at_the_ends_of_the_float_range(
     speeds_m_s: list[float], masses_kg: list[float], human_mass_kg: float, spring_n_per_m: float
 ) -> None:
-    """Speeds, masses, m_h and k the region validation accepts whose pruning bounds would
-    overflow or underflow: those samples are evaluated whole, so numpy's peak and its first
-    index (not a pruned -1 or an earlier sample)."""
+    """Speeds, masses, m_h and k whose pruning bounds would overflow or underflow: those
+    samples are evaluated whole, so numpy's peak and its first index (not a pruned -1 or an
+    earlier sample). k and m_h of 1e300 are beyond what a BodyRegion accepts (1e±100), not
+    beyond what the kernel takes: numpy's side reads them from a stand-in."""
     from grasp_safety_ros.core.analyses.arm_regions import _region_peaks
-    from grasp_safety_ros.core.analyses.iso15066 import BodyRegion
     from grasp_safety_ros.core.method.points import region_peaks
 
     speeds = np.array(speeds_m_s).reshape(1, 2, 1)
     masses = np.array(masses_kg).reshape(1, 2, 1)
-    region = BodyRegion("edge", 100.0, 200.0, spring_n_per_m, human_mass_kg)
+    region = SimpleNamespace(
+        effective_mass_kg=human_mass_kg, spring_constant_n_per_m=spring_n_per_m
+    )
     with np.errstate(all="ignore"):
         where, peak = region_peaks(
             speeds, masses, np.array([1.0 / human_mass_kg]), np.array([spring_n_per_m])

@@ -5,6 +5,7 @@ from __future__ import annotations
 import copy
 import math
 import pickle
+from unittest.mock import Mock
 
 import numpy as np
 import pinocchio as pin
@@ -34,11 +35,14 @@ from grasp_safety_ros.core.analyses.whole_arm import (
     whole_arm_score,
 )
 from grasp_safety_ros.core.input_checks import pose_from_position_quat
+from grasp_safety_ros.core.method import ranking as ranking_module
+from grasp_safety_ros.core.method.effective_mass import worst_direction
 from grasp_safety_ros.core.method.executable import joint_velocities_accelerations
 from grasp_safety_ros.core.method.halton import scrambled_halton
 from grasp_safety_ros.core.method.metrics import METRICS
 from grasp_safety_ros.core.method.posture import PostureConfig, restart_seeds, select_postures
 from grasp_safety_ros.core.method.ranking import sample_trajectory
+from grasp_safety_ros.core.method.results import SAMPLE_ARRAYS
 
 BOOK = solid_box(0.34, (0.15, 0.22, 0.015))
 
@@ -634,11 +638,14 @@ def test_early_stop_stops_only_postures_that_score_higher(baxter_book) -> None:
         assert halves == [None] * len(grasps), metric
 
 
-def test_a_followed_postures_score_is_its_evaluations_where_the_tip_only_rotates(baxter) -> None:
+def test_a_followed_postures_score_is_its_evaluations_where_the_tip_only_rotates(
+    baxter, monkeypatch
+) -> None:
     """follow_postures scores a posture before its GraspEvaluation is built (on demand): where
     the tip does not translate (the object turns about it: every sample's direction and mass
     the worst case, filled in after the kernel) that score is the built evaluation's and
-    evaluate_batch's, bit for bit, for every metric."""
+    evaluate_batch's, bit for bit, for every metric. Each sample's worst case is computed
+    once: the evaluation is built on the masses filled for the score."""
     evaluator = GraspSafetyEvaluator(baxter, EvaluationConfig(workers=1))
     start = baxter.transform_tip_to_base(BAXTER_SEED)
     turned = start * pin.SE3(pin.utils.rotate("z", 0.4), np.zeros(3))
@@ -647,14 +654,18 @@ def test_a_followed_postures_score_is_its_evaluations_where_the_tip_only_rotates
     for metric in METRICS:
         (full,) = evaluator.evaluate_batch([0], grasps, BOOK, sampled, metric, seeds)
         assert full.feasible and full.direction_is_worst_case.all(), metric
+        spy = Mock(wraps=worst_direction)
+        monkeypatch.setattr(ranking_module, "worst_direction", spy)
         (followed,) = evaluator.follow_postures(
             [0], grasps, BOOK, sampled, metric, seeds, np.array([np.inf])
         )
         assert followed is not None and followed.feasible
         built = followed.evaluation()
+        monkeypatch.undo()
+        assert spy.call_count == len(sampled.times_s)
         assert followed.score == built.score == full.score, metric
-        assert np.array_equal(built.effective_mass_kg, full.effective_mass_kg)
-        assert np.array_equal(built.directions_in_base, full.directions_in_base)
+        for name in (*SAMPLE_ARRAYS, "links_only_effective_mass_kg"):  # every number
+            assert np.array_equal(getattr(built, name), getattr(full, name)), name
 
 
 def _unchecked_mass(mass_kg: float):

@@ -13,7 +13,7 @@ from test_site_speeds import IndependentSites, admissible_speed, one_link
 
 from grasp_safety_ros.core import ObjectInertia, RobotModel
 from grasp_safety_ros.core.analyses.arm_sites import resolve_arm_sites
-from grasp_safety_ros.core.analyses.iso15066 import BODY_REGIONS
+from grasp_safety_ros.core.analyses.body_regions import BODY_REGIONS
 from grasp_safety_ros.core.analyses.retime import AT_REST, RetimeLimits, retime_path
 from grasp_safety_ros.core.analyses.site_speeds import SiteSpeedModel
 from grasp_safety_ros.core.exceptions import InvalidInputError

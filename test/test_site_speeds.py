@@ -11,7 +11,7 @@ from conftest import ARM6_AXES, serial_arm_urdf
 
 from grasp_safety_ros.core import ObjectInertia, RobotModel
 from grasp_safety_ros.core.analyses.arm_sites import resolve_arm_sites
-from grasp_safety_ros.core.analyses.iso15066 import BODY_REGIONS
+from grasp_safety_ros.core.analyses.body_regions import BODY_REGIONS
 from grasp_safety_ros.core.analyses.site_speeds import SiteSpeedModel, site_speeds
 from grasp_safety_ros.core.exceptions import InvalidInputError
 

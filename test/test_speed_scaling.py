@@ -16,8 +16,8 @@ import pytest
 from conftest import ARM7_AXES, serial_arm_urdf
 
 from grasp_safety_ros.core.analyses.arm_sites import resolve_arm_sites
+from grasp_safety_ros.core.analyses.body_regions import BODY_REGIONS
 from grasp_safety_ros.core.analyses.exposed_points import box_corners_in_object
-from grasp_safety_ros.core.analyses.iso15066 import BODY_REGIONS
 from grasp_safety_ros.core.analyses.speed_scaling import (
     IncreaseLimiter,
     SpeedScaling,

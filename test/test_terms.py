@@ -192,7 +192,7 @@ def test_whole_arm_from_shared_terms_equals_pinocchio(
 ) -> None:
     """Sites of the whole arm (the defaults and a point on every link) on the compiled path:
     positions, directions, speeds, masses, energies and the regions' worst cases."""
-    from grasp_safety_ros.core.analyses.iso15066 import select_regions
+    from grasp_safety_ros.core.analyses.body_regions import select_regions
     from grasp_safety_ros.core.analyses.whole_arm import (
         evaluate_whole_arm,
         evaluate_whole_arm_on_terms,

@@ -19,12 +19,8 @@ from grasp_safety_ros.core import (
     RobotModel,
     solid_box,
 )
-from grasp_safety_ros.core.analyses.iso15066 import (
-    BODY_REGIONS,
-    BodyRegion,
-    assess_motion,
-    select_regions,
-)
+from grasp_safety_ros.core.analyses.body_regions import BODY_REGIONS, BodyRegion, select_regions
+from grasp_safety_ros.core.analyses.iso15066 import assess_motion
 from grasp_safety_ros.core.analyses.whole_arm import (
     ArmTerms,
     assess_sites,

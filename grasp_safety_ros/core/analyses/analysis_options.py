@@ -12,13 +12,13 @@ from typing import Any
 import numpy as np
 
 from ..exceptions import InvalidInputError
+from .body_regions import BODY_REGIONS, select_regions
 from .effort import check_effort_criterion
 from .exposed_points import (
     check_metric_point,
     check_metric_point_has_points,
     check_points_in_object,
 )
-from .iso15066 import BODY_REGIONS, select_regions
 from .redundancy import RedundancyConfig
 from .safe_duration import RetimeOptions
 from .uncertainty import InertiaUncertainty

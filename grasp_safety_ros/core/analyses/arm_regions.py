@@ -11,7 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .iso15066 import ADMISSIBLE_RATIO_TOLERANCE, BodyRegion
+from .body_regions import BodyRegion
+from .iso15066 import ADMISSIBLE_RATIO_TOLERANCE
 
 
 @dataclass(frozen=True)

@@ -27,183 +27,17 @@ import functools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields
-from pathlib import Path
-from types import MappingProxyType
 from typing import Any
 
 import numpy as np
 
-from ..exceptions import GraspSafetyError, InvalidInputError
+from ..exceptions import InvalidInputError
 from ..input_checks import finite_array, finite_float, read_only
 from ..method.results import GraspEvaluation
-
-N_PER_MM_IN_N_PER_M = 1000.0
-"""1 N/mm = 1000 N/m: the table gives k in N/mm, the core works in N/m."""
+from .body_regions import MAX_VALUE, MIN_VALUE, BodyRegion, select_regions
 
 ADMISSIBLE_RATIO_TOLERANCE = 1e-9
 """A force ratio F/F_tr up to 1 + this counts as admissible (absorbs rounding only)."""
-
-DATA_FILE_NAME = "iso_ts_15066_body_regions.yaml"
-"""Name of the package's data file (in grasp_safety_ros/data/) holding the same table."""
-
-# ISO/TS 15066:2016 Annex A, Tables A.2 and A.3, as commonly quoted; carried over from the
-# project's shared data file (shared/data/iso_ts_15066_body_regions.yaml), cross-checked between
-# several public transcriptions; the TS itself is the authority. The package ships the same
-# table as data/iso_ts_15066_body_regions.yaml; test/test_iso15066.py checks that both agree.
-# Columns: name, F_qs [N], F_tr [N] (None: transient contact not permitted), k [N/mm], m_h [kg].
-REGION_TABLE: tuple[tuple[str, float, float | None, float, float], ...] = (
-    ("skull_forehead", 130.0, None, 150.0, 4.4),
-    ("face", 65.0, None, 75.0, 4.4),
-    ("neck", 150.0, None, 50.0, 1.2),
-    ("back_shoulders", 210.0, 420.0, 35.0, 40.0),
-    ("chest", 140.0, 280.0, 25.0, 40.0),
-    ("abdomen", 110.0, 220.0, 10.0, 40.0),
-    ("pelvis", 180.0, 360.0, 25.0, 40.0),
-    ("upper_arm_elbow", 150.0, 300.0, 30.0, 3.0),
-    ("lower_arm_wrist", 160.0, 320.0, 40.0, 2.0),
-    ("hand_fingers", 140.0, 280.0, 75.0, 0.6),
-    ("thigh_knee", 220.0, 440.0, 50.0, 75.0),
-    ("lower_leg", 130.0, 260.0, 60.0, 75.0),
-)
-"""The body-region table in the data file's own units (k in N/mm)."""
-
-
-@dataclass(frozen=True)
-class BodyRegion:
-    """One body region's limits and biomechanical model, in SI units.
-
-    Attributes:
-        name: Region name, e.g. ``chest``.
-        max_quasi_static_force_n: F_qs [N], > 0.
-        max_transient_force_n: F_tr [N], > 0; None when transient contact is not permitted.
-        spring_constant_n_per_m: k [N/m], > 0 (the table's N/mm times 1000).
-        effective_mass_kg: m_h [kg], > 0; may be inf (an immovable region: μ = m_r).
-    """
-
-    name: str
-    max_quasi_static_force_n: float
-    max_transient_force_n: float | None
-    spring_constant_n_per_m: float
-    effective_mass_kg: float
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.name, str) or not self.name:
-            raise InvalidInputError(
-                "region.name", f"must be a non-empty string, got {self.name!r}"
-            )
-        where = f"region '{self.name}'"
-        f_qs = finite_float(self.max_quasi_static_force_n, f"{where}.F_qs", 0.0, None, True)
-        f_tr = self.max_transient_force_n
-        if f_tr is not None:
-            f_tr = finite_float(f_tr, f"{where}.F_tr", 0.0, None, True)
-        k = finite_float(self.spring_constant_n_per_m, f"{where}.k", 0.0, None, True)
-        m_h = self.effective_mass_kg
-        if not (isinstance(m_h, (int, float, np.floating)) and not isinstance(m_h, bool)) or not (
-            m_h > 0.0
-        ):
-            raise InvalidInputError(f"{where}.m_h", f"must be a number in (0, inf], got {m_h!r}")
-        object.__setattr__(self, "max_quasi_static_force_n", f_qs)
-        object.__setattr__(self, "max_transient_force_n", f_tr)
-        object.__setattr__(self, "spring_constant_n_per_m", k)
-        object.__setattr__(self, "effective_mass_kg", float(m_h))
-
-    @property
-    def transient_contact_permitted(self) -> bool:
-        """False for regions where the TS permits no transient contact (F_tr is None)."""
-        return self.max_transient_force_n is not None
-
-    @classmethod
-    def from_table_units(
-        cls, name: str, f_qs_n: float, f_tr_n: float | None, k_n_per_mm: float, m_h_kg: float
-    ) -> BodyRegion:
-        """Build from the table's units: forces [N], k [N/mm], m_h [kg]."""
-        k = finite_float(k_n_per_mm, f"region '{name}'.k", 0.0, None, True)
-        return cls(name, f_qs_n, f_tr_n, k * N_PER_MM_IN_N_PER_M, m_h_kg)
-
-
-BODY_REGIONS: Mapping[str, BodyRegion] = MappingProxyType(
-    {row[0]: BodyRegion.from_table_units(*row) for row in REGION_TABLE}
-)
-"""Every region of REGION_TABLE by name, in table order."""
-
-
-def body_regions_from_mapping(
-    table: Mapping[str, Any], field: str = "regions"
-) -> dict[str, BodyRegion]:
-    """Regions from a mapping name -> {F_qs [N], F_tr [N] or None, k [N/mm], m_h [kg]}.
-
-    This is the ``regions`` mapping of the YAML data file, parsed by any YAML loader.
-    """
-    if not isinstance(table, Mapping) or not table:
-        raise InvalidInputError(field, f"must be a non-empty mapping, got {table!r}")
-    regions: dict[str, BodyRegion] = {}
-    for name, row in table.items():
-        keys = ("F_qs", "F_tr", "k", "m_h")
-        if not isinstance(row, Mapping) or set(row) != set(keys):
-            raise InvalidInputError(
-                f"{field}.{name}", f"must be a mapping with exactly the keys {keys}, got {row!r}"
-            )
-        regions[str(name)] = BodyRegion.from_table_units(
-            str(name), row["F_qs"], row["F_tr"], row["k"], row["m_h"]
-        )
-    return regions
-
-
-def data_file_path() -> Path:
-    """Path of the package's copy of the table (grasp_safety_ros/data/)."""
-    return Path(__file__).resolve().parents[2] / "data" / DATA_FILE_NAME
-
-
-def load_body_regions(path: str | Path | None = None) -> dict[str, BodyRegion]:
-    """Read a region table file (default: the package's data file). Needs PyYAML.
-
-    The core itself does not need this: BODY_REGIONS holds the same table.
-    """
-    try:
-        import yaml
-    except ImportError:
-        raise GraspSafetyError(
-            "reading a body-region file needs PyYAML; use iso15066.BODY_REGIONS instead"
-        ) from None
-    file = Path(path) if path is not None else data_file_path()
-    try:
-        content = yaml.safe_load(file.read_text(encoding="utf-8"))
-    except (OSError, yaml.YAMLError) as error:
-        raise InvalidInputError(
-            "iso15066.regions_file", f"cannot read '{file}': {error}"
-        ) from None
-    if not isinstance(content, Mapping) or "regions" not in content:
-        raise InvalidInputError("iso15066.regions_file", f"'{file}' has no 'regions' mapping")
-    return body_regions_from_mapping(content["regions"])
-
-
-def select_regions(
-    regions: Sequence[str | BodyRegion] | Mapping[str, BodyRegion] | None = None,
-) -> tuple[BodyRegion, ...]:
-    """Regions to assess: None -> all of BODY_REGIONS; names are looked up in BODY_REGIONS."""
-    if regions is None:
-        return tuple(BODY_REGIONS.values())
-    if isinstance(regions, Mapping):
-        regions = list(regions.values())
-    if isinstance(regions, str) or not isinstance(regions, Sequence) or not regions:
-        raise InvalidInputError(
-            "iso15066.regions", f"must be a non-empty list of region names, got {regions!r}"
-        )
-    selected: list[BodyRegion] = []
-    for region in regions:
-        if isinstance(region, BodyRegion):
-            selected.append(region)
-        elif region in BODY_REGIONS:
-            selected.append(BODY_REGIONS[region])
-        else:
-            raise InvalidInputError(
-                "iso15066.regions",
-                f"unknown body region {region!r}; regions: {', '.join(BODY_REGIONS)}",
-            )
-    names = [region.name for region in selected]
-    if len(set(names)) != len(names):
-        raise InvalidInputError("iso15066.regions", f"regions repeat: {names}")
-    return tuple(selected)
 
 
 def reduced_mass_kg(human_mass_kg: float, robot_effective_mass_kg: Any) -> np.ndarray:
@@ -530,13 +364,25 @@ def _region_arrays(
 
 
 def _checked_motion(speed_m_s: Any, effective_mass_kg: Any) -> tuple[np.ndarray, np.ndarray]:
+    """One motion's speeds [m/s] in [0, MAX_VALUE] and masses [kg] in [MIN_VALUE, MAX_VALUE]
+    (``body_regions.MIN_VALUE``: no force, speed limit or ratio overflows)."""
     speed = finite_array(speed_m_s, "iso15066.speed_m_s")
-    if speed.ndim != 1 or np.any(speed < 0.0):
-        raise InvalidInputError("iso15066.speed_m_s", "must be a 1-D array of speeds >= 0")
+    if speed.ndim != 1 or not _within(speed, 0.0):
+        raise InvalidInputError(
+            "iso15066.speed_m_s", f"must be a 1-D array of speeds in [0, {MAX_VALUE:g}]"
+        )
     mass = finite_array(effective_mass_kg, "iso15066.effective_mass_kg", speed.shape)
-    if np.any(mass <= 0.0):
-        raise InvalidInputError("iso15066.effective_mass_kg", "must be > 0 at every sample")
+    if not _within(mass, MIN_VALUE):
+        raise InvalidInputError(
+            "iso15066.effective_mass_kg",
+            f"must be in [{MIN_VALUE:g}, {MAX_VALUE:g}] at every sample",
+        )
     return speed, mass
+
+
+def _within(values: np.ndarray, low: float) -> bool:
+    """Every value in [low, MAX_VALUE] (NaN is not)."""
+    return bool(((values >= low) & (values <= MAX_VALUE)).all())
 
 
 def assess_motion(
@@ -547,7 +393,8 @@ def assess_motion(
     index: int = 0,
     name: str = "",
 ) -> PowerForceLimitAssessment:
-    """Assess per-sample speeds [m/s] and effective masses [kg] of a quintic of duration T [s].
+    """Assess per-sample speeds [m/s] and effective masses [kg] of a quintic of duration T [s]
+    (speeds in [0, 1e100], masses in [1e-100, 1e100]: ``body_regions.MIN_VALUE``).
 
     Use this for any point of the moving body (e.g. an exposed point of the object); for the
     tip of an evaluated grasp use ``assess_grasp``.
@@ -604,8 +451,8 @@ def _checked_batch(
         speeds.ndim == 2
         and len(speeds) > 0
         and masses.shape == speeds.shape
-        and bool(np.isfinite(speeds).all() and np.isfinite(masses).all())
-        and bool((speeds >= 0.0).all() and (masses > 0.0).all())
+        and _within(speeds, 0.0)
+        and _within(masses, MIN_VALUE)
     )
     return (speeds, masses) if valid else None
 

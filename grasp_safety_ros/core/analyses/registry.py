@@ -19,6 +19,7 @@ from ..method.ranking import aggregate
 from ..method.terms import SampleTerms
 from .analysis_options import AnalysisOptions
 from .base import Analysis, Parts, Shared, per_grasp
+from .body_regions import BodyRegion, select_regions
 from .effort import EffortEvaluation, evaluate_effort, evaluate_efforts
 from .exposed_points import (
     ExposedPointsEvaluation,
@@ -26,13 +27,7 @@ from .exposed_points import (
     evaluate_exposed_points_on_terms,
     metric_point_series,
 )
-from .iso15066 import (
-    BodyRegion,
-    PowerForceLimitAssessment,
-    assess_grasp,
-    assess_motions,
-    select_regions,
-)
+from .iso15066 import PowerForceLimitAssessment, assess_grasp, assess_motions
 from .redundancy import resolve_redundancy
 from .uncertainty import analyse_inertia_uncertainty
 from .whole_arm import (

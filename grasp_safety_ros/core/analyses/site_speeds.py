@@ -35,7 +35,8 @@ from ..method.effective_mass import augmented_model
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
 from .arm_sites import ArmSites
-from .iso15066 import BodyRegion, max_permissible_speed_m_s, select_regions
+from .body_regions import BodyRegion, select_regions
+from .iso15066 import max_permissible_speed_m_s
 from .whole_arm import ArmTerms, pinocchio_kinematic_terms, site_exposure
 
 OBJECT_SITE_PREFIX = "object"

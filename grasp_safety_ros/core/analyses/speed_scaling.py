@@ -38,7 +38,8 @@ from ..input_checks import finite_array, finite_float
 from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
 from .arm_sites import ArmSites
-from .iso15066 import BodyRegion, max_permissible_speed_m_s
+from .body_regions import BodyRegion
+from .iso15066 import max_permissible_speed_m_s
 from .site_speeds import SiteSpeedModel, permitted_regions, site_speeds
 
 

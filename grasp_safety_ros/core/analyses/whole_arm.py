@@ -60,7 +60,7 @@ from .arm_sites import MAX_SITES as MAX_SITES
 from .arm_sites import ArmSites as ArmSites
 from .arm_sites import check_exposed_points_m as check_exposed_points_m
 from .arm_sites import resolve_arm_sites as resolve_arm_sites
-from .iso15066 import BodyRegion, select_regions
+from .body_regions import BodyRegion, select_regions
 
 STATIONARY_SPEED_M_S = 1e-9
 """Below this speed [m/s] a site does not move: flagged, no direction of its own."""

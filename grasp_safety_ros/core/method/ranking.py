@@ -273,7 +273,7 @@ class GraspSafetyEvaluator:
                 score = aggregate(masses, times, metric)
             start = (object_inertia, self.robot.positions_from_q(seed))
             build = partial(self._from_compiled, index, grasp, result, motion, times, metric)
-            followed.append(FollowedPosture(not result.reason, score, partial(build, start)))
+            followed.append(FollowedPosture(not result.reason, score, partial(build, start, True)))
         return followed
 
     def _from_compiled(
@@ -285,11 +285,15 @@ class GraspSafetyEvaluator:
         times: np.ndarray,
         metric: str,
         inertia_seed: tuple[ObjectInertia, np.ndarray],
+        filled: bool = False,
     ) -> GraspEvaluation:
-        """The GraspEvaluation of one grasp's ``evaluate_grasps_compiled`` result
-        (``inertia_seed``: the object's inertia and the grasp's seed positions)."""
+        """The GraspEvaluation of one grasp's ``evaluate_grasps_compiled`` result, its worst
+        case filled in unless ``filled`` (``inertia_seed``: object inertia, seed positions)."""
         if result.reason:
             return _infeasible(index, grasp.name, result.reason, self.robot.num_joints)
+        masses_directions_worst = (result.effective_masses, result.directions, result.worst)
+        if not filled:
+            _fill_worst(result.mobilities, *masses_directions_worst)
         return self._feasible(
             index,
             grasp,
@@ -297,8 +301,7 @@ class GraspSafetyEvaluator:
             metric,
             result.q,
             result.iterations,
-            result.mobilities,
-            (result.effective_masses, result.directions, result.worst),
+            masses_directions_worst,
             result.tangent_norms * motion.speed_per_tangent,
             inertia_seed,
         )
@@ -334,7 +337,6 @@ class GraspSafetyEvaluator:
                 metric,
                 q_all,
                 np.zeros(len(times), dtype=np.int64),
-                mobilities,
                 _masses_along(mobilities, tip.tangents),
                 tip.speeds,
                 (object_inertia, start),
@@ -373,7 +375,6 @@ class GraspSafetyEvaluator:
             metric,
             ik.q,
             ik.iterations,
-            mobilities,
             _masses_along(mobilities, tip.tangents),
             tip.speeds,
             (object_inertia, start),
@@ -387,19 +388,17 @@ class GraspSafetyEvaluator:
         metric: str,
         q_all: np.ndarray,
         iterations: np.ndarray,
-        mobilities: np.ndarray,
         masses_directions_worst: tuple[np.ndarray, np.ndarray, np.ndarray],
         tip_speeds: np.ndarray,
         inertia_seed: tuple[ObjectInertia, np.ndarray],
         planned: JointSpaceTrajectory | None = None,
     ) -> GraspEvaluation:
-        """The GraspEvaluation of a feasible grasp: where the tip does not translate
-        (``worst``), the direction of largest effective mass and its mass are filled in; with
-        armature, the links-only masses too; joint positions unwrapped from the IK seed
+        """The GraspEvaluation of a feasible grasp from its masses and directions, the worst case
+        already in where the tip does not translate (``_fill_worst``); with armature, the
+        links-only masses too; joint positions unwrapped from the IK seed
         (``inertia_seed``: the object's inertia and the seed's positions, chain order), or
         the ``planned`` ones."""
         masses, directions, worst = masses_directions_worst
-        _fill_worst(mobilities, masses, directions, worst)
         object_inertia, start = inertia_seed
         links_only = masses  # no armature, or explicit zeros: these are the links' own
         if np.any(self.robot.armature_kgm2 > 0):
@@ -562,7 +561,7 @@ def _masses_along(
     mobilities: np.ndarray, tangents: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Effective masses along the unit tangents, the directions, and the samples where the tip
-    does not translate (their direction and mass are left for ``worst_direction``)."""
+    does not translate (their direction and mass: the worst case, ``_fill_worst``)."""
     count = len(tangents)
     masses = np.empty(count)
     directions = np.empty((count, 3))
@@ -571,6 +570,7 @@ def _masses_along(
     moving = ~worst
     directions[moving] = tangents[moving] / tangent_norms[moving, None]
     masses[moving] = effective_masses_along(mobilities[moving], directions[moving])
+    _fill_worst(mobilities, masses, directions, worst)
     return masses, directions, worst
 
 

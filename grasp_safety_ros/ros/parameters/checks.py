@@ -14,9 +14,9 @@ from typing import Any
 
 import numpy as np
 
+from ...core.analyses.body_regions import BODY_REGIONS
 from ...core.analyses.effort import EFFORT_CRITERIA
 from ...core.analyses.exposed_points import METRIC_POINTS
-from ...core.analyses.iso15066 import BODY_REGIONS
 from ...core.analyses.safety_report import RANK_BY
 from ...core.analyses.whole_arm import MAX_SITES
 from ...core.exceptions import InvalidInputError
