@@ -147,7 +147,7 @@ class GraspSafetyNode(RobotSource):
         )
         self._started = True
         if self._robot is not None:
-            self._log_robot(self._robot)
+            self._robot_ready(self._robot)
 
     def _declare_parameters(self) -> None:
         """Declares the parameters with their callbacks, then builds the settings and the robot

@@ -48,6 +48,7 @@ from ...core.exceptions import GraspSafetyError
 from ..conversions import check_frame_id, object_inertia_from_msg
 from ..parameters.declaration import declare_node_parameters, typed_parameters
 from ..robot.bundle import build_robot
+from ..runtime.collector import freeze_long_lived, thaw
 from ..service.errors import StartupError
 from ..topics.qos import LATCHED
 from .governor import Decision, Governor
@@ -131,6 +132,8 @@ class MonitorNode(Node):
         self.create_timer(self._settings.node.diagnostics_period_s, self._publish_diagnostics)
         self._started = True
         self._publish(self._governor.fail("no /joint_states yet", time.monotonic()), None)
+        if self._bundle is not None:
+            freeze_long_lived()  # the robot serves: full collections no longer walk its heap
 
     # --- Inputs ------------------------------------------------------------------------------
 
@@ -180,6 +183,8 @@ class MonitorNode(Node):
         except GraspSafetyError as error:
             self._bundle = None
             self._refuse("/robot_description", error)
+            return
+        freeze_long_lived()
 
     def _rebuild(self) -> None:
         """The analysis for the current robot and payload (nothing before a robot)."""
@@ -255,6 +260,11 @@ class MonitorNode(Node):
     def publish_stop(self) -> None:
         """Factor 0 on shutdown: the latched factor must not outlive the monitor."""
         self._factor_pub.publish(SpeedScalingFactor(factor=0.0))
+
+    def destroy_node(self) -> None:
+        """Destroy the node and unfreeze the heap frozen for its robot (runtime.collector)."""
+        super().destroy_node()
+        thaw()
 
     def _send(self, decision: Decision, stamp: Time | None) -> None:
         first_failure = decision.fail_safe and (

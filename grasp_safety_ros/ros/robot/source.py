@@ -15,6 +15,7 @@ from std_msgs.msg import String
 from ...core.exceptions import GraspSafetyError, InvalidInputError
 from ..parameters import PARAMETERS, NodeSettings, settings_from_parameters
 from ..parameters.arm_points import check_arm_point_links
+from ..runtime.collector import freeze_long_lived, thaw
 from ..service.errors import StartupError, internal_error
 from ..topics.diagnostics import DiagnosticsNode
 from .bundle import RobotBundle, build_robot
@@ -33,12 +34,21 @@ class RobotSource(DiagnosticsNode):
     _startup_failure: str
     _diagnostics_timer: Timer
 
-    def _log_robot(self, bundle: RobotBundle) -> None:
+    def _robot_ready(self, bundle: RobotBundle) -> None:
+        """``bundle`` now serves (built, warmed up): log it and freeze the long-lived heap
+        (runtime.collector: no full collection walks it again; the previous robot's is
+        unfrozen and collected first)."""
+        freeze_long_lived()
         robot = bundle.robot
         self.get_logger().info(
             f"robot from {bundle.origin}: {robot.base_frame} -> {robot.tip_frame}, "
             f"{robot.num_joints} joints ({', '.join(robot.joint_names)})"
         )
+
+    def destroy_node(self) -> None:
+        """Destroy the node and unfreeze the heap frozen for its robot (_robot_ready)."""
+        super().destroy_node()
+        thaw()
 
     @property
     def has_robot(self) -> bool:
@@ -131,7 +141,7 @@ class RobotSource(DiagnosticsNode):
         if robot_changed and pending:
             self._publish_diagnostics()  # the pending state, if any, is cleared
         if robot_changed and bundle is not None:
-            self._log_robot(bundle)
+            self._robot_ready(bundle)
         if period_changed:
             self._diagnostics_timer.cancel()
             self.destroy_timer(self._diagnostics_timer)
@@ -182,7 +192,7 @@ class RobotSource(DiagnosticsNode):
             self._robot = bundle
             self._status.robot_description_error = ""
         if bundle is not None:
-            self._log_robot(bundle)
+            self._robot_ready(bundle)
 
 
 def robot_key(settings: NodeSettings) -> tuple[str, str, str, tuple[float, ...] | None]:
