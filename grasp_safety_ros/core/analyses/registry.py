@@ -14,7 +14,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..method.pool import executor_for
 from ..method.ranking import aggregate
 from ..method.terms import SampleTerms
 from .analysis_options import AnalysisOptions
@@ -74,6 +73,7 @@ class ExposedPoints:
                 [motions[k] for k in chunk],
                 points,
                 *shared.terms(c),
+                shared.executor,
             )
             return list(zip(chunk, results, strict=True))
 
@@ -231,8 +231,6 @@ class Uncertainty:
         """Nothing runs ahead."""
 
     def run(self, shared: Shared, parts: Parts) -> Parts:
-        chain = shared.backend.chain
-        samples = sum(len(e.times_s) for e in shared.evaluations if e.feasible)
         uncertainty = analyse_inertia_uncertainty(
             shared.robot,
             shared.evaluations,
@@ -240,8 +238,8 @@ class Uncertainty:
             shared.object_inertia,
             shared.options.uncertainty,
             shared.metric,
-            chain,
-            executor_for(shared.evaluator, samples) if chain is not None else None,
+            shared.backend.chain,
+            shared.executor,
         )
         shared.step()
         return replace(parts, uncertainty=uncertainty)
@@ -277,6 +275,7 @@ class Effort:
                     [shared.motions[k] for k in chunk],
                     terms=terms,
                     chain=shared.backend.chain,
+                    executor=shared.executor,
                 )
                 return list(zip(chunk, results, strict=True))
 
@@ -299,6 +298,7 @@ class Effort:
             shared.motions,
             parts.resolved_paths(),
             chain=shared.backend.chain,
+            executor=shared.executor,
         )
         for _ in shared.grasps:
             shared.step()
