@@ -139,18 +139,28 @@ def split_grasps(executor: Executor | None, grasps: int, run: Callable[[int, int
         return
     size = math.ceil(grasps / min(workers, grasps))
     ranges = [(start, min(start + size, grasps)) for start in range(0, grasps, size)]
-    futures = [executor.submit(run, *bounds) for bounds in ranges[1:]]
+    # a range not started is taken back with its slot emptied: the pool's queue, which keeps
+    # a cancelled task until a thread takes it, then holds no reference to the outputs
+    slots: list[list[Any]] = [[run, *bounds] for bounds in ranges[1:]]
+    futures = [executor.submit(_run_slot, slot) for slot in slots]
     try:
         run(*ranges[0])
-        for future, bounds in zip(futures, ranges[1:], strict=True):
+        for future, slot, bounds in zip(futures, slots, ranges[1:], strict=True):
             if future.cancel():
+                slot.clear()
                 run(*bounds)
             else:
                 future.result()
     finally:  # on an exception too: no range still writes once this returns
-        for future in futures:
-            future.cancel()
-        wait(futures)
+        for future, slot in zip(futures, slots, strict=True):
+            if future.cancel():
+                slot.clear()
+        wait([future for future in futures if not future.cancelled()])
+
+
+def _run_slot(slot: list[Any]) -> None:
+    run, start, stop = slot
+    run(start, stop)
 
 
 def evaluate_jobs(
