@@ -79,7 +79,6 @@ def joint_dynamics(
         np.zeros((grasps, n)),
         np.zeros((grasps, n)),
     )
-    wide, narrow = max(n, 6), min(n, 6)
     shared = (
         plain_array(paths),
         plain_array(object_rotations),
@@ -89,25 +88,6 @@ def joint_dynamics(
     translations, gravity = plain_array(grasp_translations), plain_array(gravity)
 
     def run(start: int, stop: int) -> None:
-        factors = (
-            np.empty((narrow, wide)),
-            np.empty(narrow),
-            np.empty(narrow),
-            np.empty((narrow, narrow)),
-            np.empty((narrow, narrow)),
-            np.empty((narrow, narrow)),
-            np.empty(narrow),
-            np.empty(wide),
-            np.empty(narrow),
-        )
-        ws = (
-            *(np.empty((samples, n)) for _ in range(3)),
-            *(np.empty((n, 3)) for _ in range(8)),
-            np.empty((3, 6)),
-            np.empty((2, n)),
-            np.empty((n, 6)),
-            np.empty((6, n)),
-        )
         call_kernel(
             kernel,
             chain,
@@ -122,10 +102,35 @@ def joint_dynamics(
             translations[start:stop],
             gravity,
             tuple(array[start:stop] for array in out),
-            factors,
-            ws,
+            *_scratch(samples, n),
             thread_workspace(n),
         )
 
     split_grasps(executor, grasps, run)
     return out
+
+
+def _scratch(samples: int, n: int) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
+    """The kernel's scratch (factors, ws) for paths of ``samples`` samples, n joints: one per
+    kernel call (each thread its own)."""
+    wide, narrow = max(n, 6), min(n, 6)
+    factors = (
+        np.empty((narrow, wide)),
+        np.empty(narrow),
+        np.empty(narrow),
+        np.empty((narrow, narrow)),
+        np.empty((narrow, narrow)),
+        np.empty((narrow, narrow)),
+        np.empty(narrow),
+        np.empty(wide),
+        np.empty(narrow),
+    )
+    ws = (
+        *(np.empty((samples, n)) for _ in range(3)),
+        *(np.empty((n, 3)) for _ in range(8)),
+        np.empty((3, 6)),
+        np.empty((2, n)),
+        np.empty((n, 6)),
+        np.empty((6, n)),
+    )
+    return factors, ws
