@@ -9,9 +9,12 @@ defaults together (with and without effort, with the whole arm). Each figure is 
 time over repeats (wall, or with ``--cpu`` the process's CPU time, which other processes on a
 shared machine disturb less) and its ratio to the median time of the ranking measured in the
 same loop. Only options of ``AnalysisOptions`` are used, so the same file measures older
-checkouts.
+checkouts. ``--workers 2`` gives the evaluator the node's pool (two threads from the node's
+threshold, ``ros.robot.bundle.PARALLEL_MIN_SAMPLES``): the ranking and the analyses' kernels
+then share out (wall time: ``--cpu`` would count every thread's CPU).
 
 Run alone: .venv/bin/python bench/analyses_parts.py [--grasps 1000] [--repeats 3] [--cpu]
+[--workers 1]
 """
 
 from __future__ import annotations
@@ -28,17 +31,23 @@ from typing import Any
 from pipeline import book_scenario
 
 
-def bench_parts(grasps: int, repeats: int = 3, cpu: bool = False) -> dict[str, Any]:
+def bench_parts(
+    grasps: int, repeats: int = 3, cpu: bool = False, workers: int = 1
+) -> dict[str, Any]:
     """Median seconds (CPU time if ``cpu``, else wall) per part and per ranking, and each
-    part's ratio to the ranking."""
+    part's ratio to the ranking; the evaluator has ``workers`` (above 1: the node's pool)."""
     from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions, analyse
     from grasp_safety_ros.core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
+    from grasp_safety_ros.ros.robot.bundle import PARALLEL_MIN_SAMPLES
     from grasp_safety_ros.scenario.schema import load_scenario
 
     with tempfile.TemporaryDirectory() as folder:
         scenario = load_scenario(book_scenario(grasps, Path(folder)))
     robot = scenario.robot.load(scenario.base_dir)
-    evaluator = GraspSafetyEvaluator(robot, EvaluationConfig(metric=scenario.metric, workers=1))
+    config = EvaluationConfig(
+        metric=scenario.metric, workers=workers, parallel_min_samples=PARALLEL_MIN_SAMPLES
+    )
+    evaluator = GraspSafetyEvaluator(robot, config)
     args = (scenario.grasps, scenario.object_inertia, scenario.trajectory)
     corners = scenario.options.points_in_object_m
     parts = {
@@ -72,6 +81,7 @@ def bench_parts(grasps: int, repeats: int = 3, cpu: bool = False) -> dict[str, A
     seconds = {name: statistics.median(values) for name, values in timings.items()}
     return {
         "grasps": grasps,
+        "workers": workers,
         "clock": "CPU" if cpu else "wall",
         "feasible": sum(e.feasible for e in ranking.evaluations),
         "seconds": seconds,
@@ -83,7 +93,8 @@ def print_parts(results: dict[str, Any]) -> None:
     seconds = results["seconds"]
     print(
         f"analyses alone, book on Baxter, {results['grasps']} grasps x 201 "
-        f"({results['feasible']} feasible), {results['clock']} time; ranking "
+        f"({results['feasible']} feasible), {results['clock']} time, "
+        f"{results.get('workers', 1)} worker(s); ranking "
         f"{1e3 * seconds['ranking']:.0f} ms"
     )
     for name, ratio in results["vs_ranking"].items():
@@ -95,8 +106,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--grasps", type=int, default=1000)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--cpu", action="store_true", help="CPU time of this process")
+    parser.add_argument("--workers", type=int, default=1, help="2: the node's pool")
     args = parser.parse_args(argv)
-    print_parts(bench_parts(args.grasps, args.repeats, args.cpu))
+    print_parts(bench_parts(args.grasps, args.repeats, args.cpu, args.workers))
     return 0
 
 

@@ -7,9 +7,11 @@ from __future__ import annotations
 
 import gc
 import inspect
+import itertools
 import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields, is_dataclass, replace
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -26,6 +28,7 @@ from grasp_safety_ros.core.analyses.registry import ANALYSES
 from grasp_safety_ros.core.analyses.uncertainty import InertiaUncertainty
 from grasp_safety_ros.core.method.backend import Backend
 from grasp_safety_ros.core.method.ranking import Grasp
+from grasp_safety_ros.core.model.trajectory import ObjectTrajectory
 
 
 @dataclass(frozen=True)
@@ -371,19 +374,83 @@ def test_no_analysis_reads_an_optional_terms_field_it_did_not_declare(
         assert _same(ours, theirs), options
 
 
+@needs_numba
+def test_analyses_on_the_pool_give_the_serial_numbers_bit_for_bit(
+    arm7: RobotModel, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """On an evaluator with a pool of 2 (``parallel_min_samples`` 1), the kernels of the
+    terms, the exposed points and effort are each given the pool (``pool.split_grasps``: a
+    range of each call's grasps per thread) and every report is the serial one bit for bit:
+    every analysis on, with redundancy (terms along its own paths), effort without terms;
+    along a reach and a turn about the object's origin (an exposed point there does not
+    translate: its mobility comes back from the points kernel); with the pool's threshold
+    above the request, no kernel is given the pool."""
+    from grasp_safety_ros.core.method import dynamics, points, terms
+
+    serial, grasps, (reach, _) = _ranked(arm7, 5)
+    seed = random_positions(arm7, np.random.default_rng(18))  # _ranked's
+    start = reach.transform_object_to_base_start
+    turn = ObjectTrajectory(
+        start,
+        pin.SE3(start.rotation @ pin.exp3(np.array([0.2, -0.1, 0.3])), start.translation),
+        1.0,
+        0.02,
+    )
+    pooled = GraspSafetyEvaluator(arm7, EvaluationConfig(workers=2, parallel_min_samples=1))
+    large = GraspSafetyEvaluator(arm7, EvaluationConfig(workers=2, parallel_min_samples=10**6))
+    splits: list[tuple[str, int, bool]] = []  # module, grasps of the call, pool given
+    for module in (terms, points, dynamics):
+        split = module.split_grasps
+
+        def spy(executor: Any, count: int, run: Any, split: Any = split, name: str = "") -> None:
+            splits.append((name, count, executor is not None))
+            split(executor, count, run)
+
+        monkeypatch.setattr(module, "split_grasps", partial(spy, name=module.__name__))
+    every = AnalysisOptions(
+        points_in_object_m=np.array([[0.0, 0.0, 0.0], [0.04, 0.06, 0.1], [-0.04, -0.06, -0.1]]),
+        uncertainty=InertiaUncertainty(mass_fraction=0.2, num_random_samples=2),
+        effort=True,
+        whole_arm=True,
+    )
+    requests = (every, replace(every, redundancy=True), AnalysisOptions(effort=True))
+    for trajectory, options in itertools.product((reach, turn), requests):
+        ranking = serial.rank(grasps, BOX, trajectory, seed_positions=seed)
+        reports, given = [], []
+        for evaluator in (serial, pooled, large):
+            splits.clear()
+            reports.append(
+                safety_report.analyse(evaluator, grasps, BOX, trajectory, options, ranking=ranking)
+            )
+            given.append({(name, count >= 2, pool) for name, count, pool in splits})
+        modules = {name for name, _, _ in given[0]}
+        assert given[0] == given[2] == {(name, True, False) for name in modules}, options
+        assert given[1] == {(name, True, True) for name in modules}, options
+        assert _same(reports[1], reports[0]) and _same(reports[2], reports[0]), options
+        if trajectory is turn and options.points_in_object_m is not None:
+            still = [e.direction_is_worst_case for e in reports[0].exposed if e.feasible]
+            assert len(still) >= 2 and all(s[:, 0].all() and not s[:, 1:].any() for s in still)
+    assert modules == {dynamics.__name__}  # the last: effort alone, without terms
+
+
 class AbandonedError(Exception):
     """Raised by a progress callback to abandon a request."""
 
 
 @needs_numba
-def test_an_abandoned_request_frees_its_terms_at_once(arm7: RobotModel) -> None:
+@pytest.mark.parametrize("workers", (1, 2))
+def test_an_abandoned_request_frees_its_terms_at_once(arm7: RobotModel, workers: int) -> None:
     """A request abandoned mid-way (its progress raises after the first grasp, the whole arm
     and effort registered to run ahead: their chunk calls refer to the Shared) leaves no
     Shared alive and no reference to the kept terms' memory, without a garbage collection:
-    the thread's next request reuses the memory at once."""
+    the thread's next request reuses the memory at once; so does one whose kernels ran on a
+    pool of 2."""
     from grasp_safety_ros.core.method import terms as terms_module
 
     evaluator, grasps, (trajectory, ranking) = _ranked(arm7, 3)
+    if workers > 1:
+        config = EvaluationConfig(workers=workers, parallel_min_samples=1)
+        evaluator = GraspSafetyEvaluator(arm7, config)
     options = AnalysisOptions(
         points_in_object_m=np.array([[0.04, 0.06, 0.1]]), effort=True, whole_arm=True
     )

@@ -4,6 +4,9 @@ small requests, stops per job when abandoned; the warm-up runs with or without a
 from __future__ import annotations
 
 import threading
+import weakref
+from collections.abc import Callable
+from functools import partial
 
 import numpy as np
 import pinocchio as pin
@@ -133,3 +136,78 @@ def test_progress_that_raises_abandons_a_pooled_ranking(arm7: RobotModel) -> Non
     assert_identical_ranking(
         pooled.rank(grasps, BOX, trajectory, seed), serial.rank(grasps, BOX, trajectory, seed)
     )
+
+
+def test_split_grasps_covers_the_grasps_once_and_never_waits_for_a_busy_pool() -> None:
+    """One range per worker, together every grasp once, the first on the calling thread;
+    with every thread of the pool busy, the caller runs the other range itself (else it
+    would wait for the gate) and the pool keeps no reference to the call's outputs; without
+    a thread pool, one call on the caller."""
+    from concurrent.futures import Executor, ThreadPoolExecutor
+
+    from grasp_safety_ros.core.method.pool import split_grasps
+
+    me = threading.current_thread().name
+    ran: list[tuple[int, int, str]] = []
+    lock = threading.Lock()
+
+    def run(start: int, stop: int) -> None:
+        with lock:
+            ran.append((start, stop, threading.current_thread().name))
+
+    class OtherPool(Executor):  # e.g. a process pool: its workers do not share the outputs
+        _max_workers = 2
+
+    for executor in (None, OtherPool()):
+        ran.clear()
+        split_grasps(executor, 7, run)
+        assert ran == [(0, 7, me)]
+    gate = threading.Event()
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        ran.clear()
+        split_grasps(pool, 7, run)
+        assert sorted(bounds for *bounds, _ in ran) == [[0, 4], [4, 7]]
+        assert (0, 4, me) in ran
+        ran.clear()
+        split_grasps(pool, 1, run)
+        assert ran == [(0, 1, me)]
+        busy = [pool.submit(gate.wait, 30.0) for _ in range(2)]
+        outputs = np.zeros(7)
+        held = weakref.ref(outputs)
+        ran.clear()
+        split_grasps(pool, 7, partial(_fill, outputs, run))
+        assert ran == [(0, 4, me), (4, 7, me)] and not any(f.done() for f in busy)
+        assert outputs.sum() == 7.0
+        del outputs
+        assert held() is None  # the range taken back left no reference in the pool's queue
+        gate.set()
+
+
+def _fill(outputs: np.ndarray, run: Callable[[int, int], None], start: int, stop: int) -> None:
+    outputs[start:stop] = 1.0
+    run(start, stop)
+
+
+def test_split_grasps_raises_once_no_range_runs() -> None:
+    """A range that raises (the caller's) is raised only once the pool's range, started
+    before, has finished writing: nothing writes to the outputs after the call."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from grasp_safety_ros.core.method.pool import split_grasps
+
+    started, release = threading.Event(), threading.Event()
+    finished: list[int] = []
+
+    def run(start: int, stop: int) -> None:
+        if start == 0:
+            assert started.wait(30.0)  # the pool's range runs: it cannot be taken back
+            threading.Timer(0.05, release.set).start()
+            raise _AbandonError
+        started.set()
+        release.wait(30.0)
+        finished.append(start)
+
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        with pytest.raises(_AbandonError):
+            split_grasps(pool, 4, run)
+        assert finished == [2]

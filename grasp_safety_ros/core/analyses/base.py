@@ -26,6 +26,7 @@ import pinocchio as pin
 
 from ..method.backend import Backend
 from ..method.effective_mass import augmented_model
+from ..method.pool import executor_for
 from ..method.ranking import Grasp, GraspEvaluation, GraspSafetyEvaluator
 from ..method.terms import OPTIONAL_TERMS, SampleTerms
 from ..model.inertia import ObjectInertia
@@ -146,6 +147,10 @@ class Shared:
         backend: Compiled or Pinocchio, the evaluator's.
         chunks: The feasible grasps in consecutive chunks of at most TERMS_CHUNK_SAMPLES
             samples (compiled backend; none on the Pinocchio one).
+        executor: The evaluator's thread pool when the feasible samples are enough to share
+            out (``pool.executor_for``, as the ranking's; compiled backend): the kernels of
+            the terms, the exposed points and effort then run on a range of each call's
+            grasps per thread (``pool.split_grasps``), the same bits; None: serial.
 
     ``keepers``: the names of the wanted analyses that read chunks an earlier one read
     (``Analysis.keeps_terms``); ``optional``: the optional fields of the terms to compute
@@ -174,6 +179,7 @@ class Shared:
         feasible = [k for k, e in enumerate(evaluations) if e.feasible]
         samples = [len(evaluations[k].times_s) for k in feasible]
         self.chunks = chunks(feasible, samples) if self.backend.compiled else []
+        self.executor = executor_for(evaluator, sum(samples)) if self.backend.compiled else None
         self._keepers, self._optional = set(keepers), tuple(optional)
         self._cached: dict[int, tuple[SampleTerms, np.ndarray]] = {}
         self._models: dict[int, pin.Model] = {}
@@ -248,7 +254,7 @@ class Shared:
         (compiled backend)."""
         transforms = [self.grasps[k].transform_tip_to_object for k in indices]
         return self.backend.grasps_terms(
-            self.robot, self.object_inertia, transforms, paths, optional=self._optional
+            self.robot, self.object_inertia, transforms, paths, self._optional, self.executor
         )
 
     def model_of(self, k: int) -> pin.Model | None:

@@ -24,6 +24,7 @@ N m for revolute joints and N for prismatic ones; limits are the URDF's ``effort
 from __future__ import annotations
 
 from collections.abc import Sequence
+from concurrent.futures import Executor
 from dataclasses import dataclass
 
 import numpy as np
@@ -297,6 +298,7 @@ def evaluate_efforts(
     joint_positions: Sequence[np.ndarray | None] | None = None,
     terms: SampleTerms | None = None,
     chain: ChainArrays | None = None,
+    executor: Executor | None = None,
 ) -> tuple[EffortEvaluation, ...]:
     """``evaluate_effort`` of every grasp, equal to its Pinocchio reference to rounding
     (test_effort_batch): compiled, the per-sample work of all grasps in one kernel call
@@ -314,6 +316,8 @@ def evaluate_efforts(
             the kinematics it needs (cheaper than storing them).
         chain: ``method.compiled.chain_arrays(robot)``: the compiled path; None: Pinocchio
             grasp by grasp (the reference).
+        executor: On the compiled path, a thread pool that shares the kernel call out
+            (``method.pool.split_grasps``; the same bits); None: serial.
     """
     count = len(evaluations)
     if isinstance(trajectories, Sequence):
@@ -357,6 +361,7 @@ def evaluate_efforts(
         translations,
         gravity,
         terms,
+        executor,
     )
     return _compiled_efforts(evaluations, limits, counts, motion_of, dynamics)
 

@@ -17,6 +17,7 @@ one with the largest effective mass. Ties go to the lower point index.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from concurrent.futures import Executor
 from dataclasses import dataclass
 from typing import Any
 
@@ -311,6 +312,7 @@ def evaluate_exposed_points_on_terms(
     points_in_object_m: Any,
     terms: SampleTerms,
     counts: np.ndarray,
+    executor: Executor | None = None,
 ) -> list[ExposedPointsEvaluation]:
     """``evaluate_exposed_points`` of G feasible grasps at once, on their shared terms
     (``method.terms.grasps_terms``: axis 0 the grasp, in the order of ``evaluations``, with
@@ -319,7 +321,9 @@ def evaluate_exposed_points_on_terms(
     object path moves the object's points alike whatever the grasp). Equal to the Pinocchio
     path to rounding; each grasp's result is the one it gets alone, bit for bit. It reads the
     tip's rotations and 6x6 mobility: the terms must have been computed with the optional
-    ``mobilities_tip_in_base`` (``method.terms.OPTIONAL_TERMS``), M⁻¹ is not read."""
+    ``mobilities_tip_in_base`` (``method.terms.OPTIONAL_TERMS``), M⁻¹ is not read.
+    ``executor``: a thread pool that shares the compiled call out (``method.pool.split_grasps``;
+    the same bits); None: serial."""
     points = check_points_in_object(points_in_object_m)
     count_points, grasp_count = len(points), len(evaluations)
     motion_keys: dict[tuple[int, bytes], int] = {}
@@ -352,6 +356,7 @@ def evaluate_exposed_points_on_terms(
         directions,
         stationary,
         motion_of,
+        executor,
     )
     grasp_directions = directions[motion_of] if len(mobilities) else None  # else shared
     if grasp_directions is not None:

@@ -14,7 +14,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..method.pool import executor_for
 from ..method.ranking import aggregate
 from ..method.terms import SampleTerms
 from .analysis_options import AnalysisOptions
@@ -69,6 +68,7 @@ class ExposedPoints:
                 [motions[k] for k in chunk],
                 points,
                 *shared.terms(c),
+                shared.executor,
             )
             return list(zip(chunk, results, strict=True))
 
@@ -226,8 +226,6 @@ class Uncertainty:
         """Nothing runs ahead."""
 
     def run(self, shared: Shared, parts: Parts) -> Parts:
-        chain = shared.backend.chain
-        samples = sum(len(e.times_s) for e in shared.evaluations if e.feasible)
         uncertainty = analyse_inertia_uncertainty(
             shared.robot,
             shared.evaluations,
@@ -235,8 +233,8 @@ class Uncertainty:
             shared.object_inertia,
             shared.options.uncertainty,
             shared.metric,
-            chain,
-            executor_for(shared.evaluator, samples) if chain is not None else None,
+            shared.backend.chain,
+            shared.executor,
         )
         shared.step()
         return replace(parts, uncertainty=uncertainty)
@@ -272,6 +270,7 @@ class Effort:
                     [shared.motions[k] for k in chunk],
                     terms=terms,
                     chain=shared.backend.chain,
+                    executor=shared.executor,
                 )
                 return list(zip(chunk, results, strict=True))
 
@@ -294,6 +293,7 @@ class Effort:
             shared.motions,
             parts.resolved_paths(),
             chain=shared.backend.chain,
+            executor=shared.executor,
         )
         for _ in shared.grasps:
             shared.step()

@@ -11,6 +11,7 @@ Pinocchio reference path, which ``test_performance_paths`` holds equal to the co
 from __future__ import annotations
 
 from collections.abc import Collection, Sequence
+from concurrent.futures import Executor
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,9 +56,11 @@ class Backend:
         transforms_tip_to_object: Sequence[pin.SE3],
         joint_positions: Sequence[np.ndarray],
         optional: Collection[str] = OPTIONAL_TERMS,
+        executor: Executor | None = None,
     ) -> tuple[SampleTerms, np.ndarray]:
         """``terms.grasps_terms`` on this backend's chain (the per-sample terms of G grasps
-        and their counts); only the compiled backend has them (ValueError otherwise)."""
+        and their counts; ``executor``: the thread pool that shares the kernel call out); only
+        the compiled backend has them (ValueError otherwise)."""
         if self.chain is None:
             raise ValueError("the Pinocchio backend has no shared terms")
         return grasps_terms(
@@ -67,4 +70,5 @@ class Backend:
             transforms_tip_to_object,
             joint_positions,
             optional,
+            executor,
         )

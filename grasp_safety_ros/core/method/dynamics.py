@@ -4,12 +4,14 @@ of the compiled kernel ``kernels.effort.joint_dynamics`` (the effort analysis's 
 
 from __future__ import annotations
 
+from concurrent.futures import Executor
 from typing import NamedTuple
 
 import numpy as np
 
 from .compiled import call_kernel, plain_array
 from .packed import BodyInertias, ChainArrays
+from .pool import split_grasps
 from .terms import SampleTerms, sample_terms_buffers
 
 
@@ -38,8 +40,11 @@ def joint_dynamics(
     grasp_translations: np.ndarray,
     gravity: np.ndarray,
     terms: SampleTerms | None = None,
+    executor: Executor | None = None,
 ) -> JointDynamics:
-    """q̇, q̈ and τ of every grasp in one kernel call.
+    """q̇, q̈ and τ of every grasp in one kernel call (``executor``: a thread pool whose
+    threads and the caller each run it on a range of the grasps, ``pool.split_grasps``; the
+    same bits).
 
     Args:
         chain: ``compiled.chain_arrays`` of the robot (numba must be installed).
@@ -74,6 +79,40 @@ def joint_dynamics(
         np.zeros((grasps, n)),
         np.zeros((grasps, n)),
     )
+    shared = (
+        plain_array(paths),
+        plain_array(object_rotations),
+        plain_array(object_twists),
+    )
+    motion_of = np.ascontiguousarray(motion_of, dtype=np.int64)
+    translations, gravity = plain_array(grasp_translations), plain_array(gravity)
+
+    def run(start: int, stop: int) -> None:
+        call_kernel(
+            kernel,
+            chain,
+            BodyInertias(*(array[start:stop] for array in bodies)),
+            use_terms,
+            SampleTerms(*(array[start:stop] for array in terms)),
+            positions[start:stop],
+            q_all[start:stop],
+            counts[start:stop],
+            motion_of[start:stop],
+            *shared,
+            translations[start:stop],
+            gravity,
+            tuple(array[start:stop] for array in out),
+            *_scratch(samples, n),
+            thread_workspace(n),
+        )
+
+    split_grasps(executor, grasps, run)
+    return out
+
+
+def _scratch(samples: int, n: int) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
+    """The kernel's scratch (factors, ws) for paths of ``samples`` samples, n joints: one per
+    kernel call (each thread its own)."""
     wide, narrow = max(n, 6), min(n, 6)
     factors = (
         np.empty((narrow, wide)),
@@ -94,24 +133,4 @@ def joint_dynamics(
         np.empty((n, 6)),
         np.empty((6, n)),
     )
-    call_kernel(
-        kernel,
-        chain,
-        bodies,
-        use_terms,
-        terms,
-        positions,
-        q_all,
-        counts,
-        np.ascontiguousarray(motion_of, dtype=np.int64),
-        plain_array(paths),
-        plain_array(object_rotations),
-        plain_array(object_twists),
-        plain_array(grasp_translations),
-        plain_array(gravity),
-        tuple(out),
-        factors,
-        ws,
-        thread_workspace(n),
-    )
-    return out
+    return factors, ws

@@ -11,10 +11,13 @@ direction of largest effective mass (an eigen-decomposition, as on the Pinocchio
 
 from __future__ import annotations
 
+from concurrent.futures import Executor
+
 import numpy as np
 
 from ..model.trajectory import ObjectMotion
 from .compiled import call_kernel, plain_array
+from .pool import split_grasps
 from .terms import SampleTerms, _block, kept_elements, sample_elements
 
 
@@ -31,6 +34,7 @@ def tip_point_masses(
     directions_in_base: np.ndarray,
     stationary: np.ndarray,
     motion_of: np.ndarray,
+    executor: Executor | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Effective masses of K points fixed to the tip of G grasps, per sample.
 
@@ -43,6 +47,8 @@ def tip_point_masses(
         directions_in_base: (M, N, K, 3) unit directions of the points per motion, base axes.
         stationary: (M, N, K) True where a point has no direction (then ignored).
         motion_of: (G,) the motion (axis 0 of the two above) of each grasp.
+        executor: A thread pool whose threads and the caller each run the kernel on a range
+            of the grasps (``pool.split_grasps``; the same bits); None: one call here.
 
     Returns:
         masses (G, N, K) [kg] (undefined where stationary and in rows beyond a grasp's
@@ -57,21 +63,29 @@ def tip_point_masses(
     mask = still[motion_of, :samples] & valid_rows(counts, samples)[..., None]
     mobilities = np.empty((int(mask.sum()), 3, 3))
     masses = np.empty((grasps, samples, points_in_tip_m.shape[1]))
-    call_kernel(
-        kernel,
-        plain_array(terms.mobilities_tip_in_base),
-        plain_array(terms.rotations_tip_to_world),
-        np.ascontiguousarray(counts, dtype=np.int64),
-        plain_array(base_rotation),
-        plain_array(points_in_tip_m),
-        plain_array(directions_in_base),
-        still,
-        motion_of,
-        masses,
-        mobilities,
-        np.empty((3, 3)),
-        np.empty((3, 6)),
-    )
+    fields = plain_array(terms.mobilities_tip_in_base), plain_array(terms.rotations_tip_to_world)
+    counts = np.ascontiguousarray(counts, dtype=np.int64)
+    base_rotation, points = plain_array(base_rotation), plain_array(points_in_tip_m)
+    directions = plain_array(directions_in_base)
+    rows = np.concatenate(([0], np.cumsum(mask.sum(axis=(1, 2)))))  # first mobility per grasp
+
+    def run(start: int, stop: int) -> None:
+        call_kernel(
+            kernel,
+            *(array[start:stop] for array in fields),
+            counts[start:stop],
+            base_rotation,
+            points[start:stop],
+            directions,
+            still,
+            motion_of[start:stop],
+            masses[start:stop],
+            mobilities[rows[start] : rows[stop]],
+            np.empty((3, 3)),
+            np.empty((3, 6)),
+        )
+
+    split_grasps(executor, grasps, run)
     return masses, mask, mobilities
 
 

@@ -5,7 +5,8 @@ results come back in input order and each grasp is computed by the same code as 
 path, so they equal the serial ones bit for bit. The pool knows the evaluator only by its
 type PooledEvaluator (``config``, ``robot``, ``backend``: what GraspSafetyEvaluator has,
 which imports this module; a process worker rebuilds it as ``type(evaluator)(robot, config)``)
-and runs the callable it is given on each job.
+and runs the callable it is given on each job. ``split_grasps`` shares one kernel call's grasps
+out over a thread pool's threads and the caller (the analyses' kernels on the shared terms).
 """
 
 from __future__ import annotations
@@ -17,14 +18,19 @@ import threading
 import weakref
 from collections import deque
 from collections.abc import Callable, Generator, Iterator, Sequence
-from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures import (
+    Executor,
+    Future,
+    ProcessPoolExecutor,
+    ThreadPoolExecutor,
+    wait,
+)
 from dataclasses import replace
 from functools import partial
 from itertools import islice
 from typing import Any, ClassVar, Protocol, TypeVar
 
 from ..model.robot import RobotModel
-from .backend import Backend
 
 Job = tuple[Any, ...]
 """Arguments of one call of the ``evaluate`` callable given to ``evaluate_jobs``."""
@@ -45,6 +51,13 @@ class PoolConfig(Protocol):
     def parallel_min_samples(self) -> int: ...
 
 
+class PoolBackend(Protocol):
+    """What the pool reads of an evaluator's backend (backend.Backend)."""
+
+    @property
+    def compiled(self) -> bool: ...
+
+
 class PooledEvaluator(Protocol):
     """What the pool needs of an evaluator (ranking.GraspSafetyEvaluator)."""
 
@@ -55,7 +68,7 @@ class PooledEvaluator(Protocol):
     def robot(self) -> RobotModel: ...
 
     @property
-    def backend(self) -> Backend: ...
+    def backend(self) -> PoolBackend: ...
 
 
 def default_workers() -> int:
@@ -107,6 +120,47 @@ def grasps_per_job(executor: Executor | None, grasps: int, largest: int) -> int:
         return largest
     workers = max(1, getattr(executor, "_max_workers", 2))
     return max(1, min(largest, math.ceil(grasps / workers)))
+
+
+def split_grasps(executor: Executor | None, grasps: int, run: Callable[[int, int], None]) -> None:
+    """``run(start, stop)`` on consecutive ranges of ``range(grasps)`` that cover it: one per
+    worker of a thread pool (``executor_for``), the first on the calling thread and each other
+    on the pool, unless it has not started when the caller's is done (the caller then runs it:
+    a pool busy with other work, or whose threads are the callers, does not keep it waiting);
+    else (None: serial; a process pool) ``run(0, grasps)`` on the calling thread.
+
+    ``run`` must write only its range's part of its outputs, with scratch of its own (e.g. its
+    thread's ``kernels.ik.thread_workspace``), so that every grasp's numbers are the serial
+    ones bit for bit. Returns when no range runs any longer; the first exception is raised.
+    """
+    workers = max(1, getattr(executor, "_max_workers", 1))
+    if not isinstance(executor, ThreadPoolExecutor) or workers == 1 or grasps < 2:
+        run(0, grasps)
+        return
+    size = math.ceil(grasps / min(workers, grasps))
+    ranges = [(start, min(start + size, grasps)) for start in range(0, grasps, size)]
+    # a range not started is taken back with its slot emptied: the pool's queue, which keeps
+    # a cancelled task until a thread takes it, then holds no reference to the outputs
+    slots: list[list[Any]] = [[run, *bounds] for bounds in ranges[1:]]
+    futures = [executor.submit(_run_slot, slot) for slot in slots]
+    try:
+        run(*ranges[0])
+        for future, slot, bounds in zip(futures, slots, ranges[1:], strict=True):
+            if future.cancel():
+                slot.clear()
+                run(*bounds)
+            else:
+                future.result()
+    finally:  # on an exception too: no range still writes once this returns
+        for future, slot in zip(futures, slots, strict=True):
+            if future.cancel():
+                slot.clear()
+        wait([future for future in futures if not future.cancelled()])
+
+
+def _run_slot(slot: list[Any]) -> None:
+    run, start, stop = slot
+    run(start, stop)
 
 
 def evaluate_jobs(

@@ -22,6 +22,7 @@ import math
 import sys
 import threading
 from collections.abc import Collection, Sequence
+from concurrent.futures import Executor
 from typing import NamedTuple
 
 import numpy as np
@@ -32,6 +33,7 @@ from ..model.inertia import ObjectInertia
 from ..model.robot import RobotModel
 from .compiled import augmented_bodies, call_kernel, plain_array, pose_arrays
 from .packed import BodyInertias, ChainArrays
+from .pool import split_grasps
 
 
 class SampleTerms(NamedTuple):
@@ -179,16 +181,18 @@ def grasps_terms(
     transforms_tip_to_object: Sequence[pin.SE3],
     joint_positions: Sequence[np.ndarray],
     optional: Collection[str] = OPTIONAL_TERMS,
+    executor: Executor | None = None,
 ) -> tuple[SampleTerms, np.ndarray]:
     """The terms of G grasps along their joint paths ((N_g, n) positions each, chain order),
     in one kernel call, and the sample counts N_g (G,). Axis 1 has max N_g rows; grasp g's
     rows from N_g on are undefined (``SampleTerms.of_grasp(g, N_g)`` drops them). Each grasp's
     terms are those ``grasp_terms`` gives it alone, bit for bit (the same kernel code per
     grasp). ``chain``: ``compiled.chain_arrays(robot)`` (numba must be installed);
-    ``optional``: the OPTIONAL_TERMS computed (``batch_terms``)."""
+    ``optional``: the OPTIONAL_TERMS computed, ``executor``: the pool that shares the call
+    out (``batch_terms``)."""
     bodies = augmented_bodies(robot, object_inertia, *pose_arrays(transforms_tip_to_object))
     q_all, counts = padded_configurations(robot, joint_positions)
-    return batch_terms(chain, bodies, q_all, counts, optional), counts
+    return batch_terms(chain, bodies, q_all, counts, optional, executor), counts
 
 
 def padded_configurations(
@@ -209,12 +213,15 @@ def batch_terms(
     q_all: np.ndarray,
     counts: np.ndarray,
     optional: Collection[str] = OPTIONAL_TERMS,
+    executor: Executor | None = None,
 ) -> SampleTerms:
     """The terms of G grasps in one kernel call: grasp g's augmented ``bodies`` (axis 0 the
     grasp, ``compiled.augmented_bodies``) along its first counts[g] configurations of
     ``q_all`` (G, N, nq); its rows from counts[g] on are left uninitialised, and so are the
     OPTIONAL_TERMS not in ``optional`` (another name: InvalidInputError). The buffers are
-    ``sample_terms_buffers``' (kept memory when there is some)."""
+    ``sample_terms_buffers``' (kept memory when there is some). ``executor``: a thread pool
+    (``pool.executor_for``) whose threads and the caller each run the kernel on a range of
+    the grasps (``pool.split_grasps``; the same bits); None: one call on this thread."""
     from ..kernels.ik import thread_workspace
     from ..kernels.terms import sample_terms
 
@@ -225,20 +232,25 @@ def batch_terms(
     q_all = plain_array(q_all)
     n = chain.axes.shape[0]
     out = sample_terms_buffers(q_all.shape[0], q_all.shape[1], n)
-    if q_all.shape[0]:
-        scratch = (np.empty((n, n)), np.empty((n, 3)))
-        counts = np.ascontiguousarray(counts, dtype=np.int64)
-        call_kernel(
-            sample_terms,
-            chain,
-            bodies,
-            q_all,
-            counts,
-            tuple(name in optional for name in OPTIONAL_TERMS),
-            out,
-            *scratch,
-            thread_workspace(n),
-        )
+    counts = np.ascontiguousarray(counts, dtype=np.int64)
+    flags = tuple(name in optional for name in OPTIONAL_TERMS)
+
+    def run(start: int, stop: int) -> None:
+        if start < stop:
+            call_kernel(
+                sample_terms,
+                chain,
+                BodyInertias(*(array[start:stop] for array in bodies)),
+                q_all[start:stop],
+                counts[start:stop],
+                flags,
+                SampleTerms(*(array[start:stop] for array in out)),
+                np.empty((n, n)),
+                np.empty((n, 3)),
+                thread_workspace(n),
+            )
+
+    split_grasps(executor, q_all.shape[0], run)
     return out
 
 

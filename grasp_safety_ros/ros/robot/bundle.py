@@ -25,7 +25,8 @@ default is 4000): its pool is kept between requests, and 10 grasps x 101 samples
 workers take 0.84 ms against 1.09 serial (fastest of 57, docs/performance_pipeline.md). The
 same threshold gates the evaluator's other pooled stages, not measured apart: posture
 selection (from grasps x samples x (restarts + 1) = 1000: with 8 restarts, 112 grasp-samples
-instead of 445) and the inertia-uncertainty analysis's chunks."""
+instead of 445), the inertia-uncertainty analysis's chunks and the kernel calls of the
+analyses on the shared terms (from 1000 feasible grasps x samples: 10 x 101 included)."""
 
 
 @dataclass(frozen=True)
