@@ -38,15 +38,16 @@ def bench_parts(
     part's ratio to the ranking; the evaluator has ``workers`` (above 1: the node's pool)."""
     from grasp_safety_ros.core.analyses.safety_report import AnalysisOptions, analyse
     from grasp_safety_ros.core.method.ranking import EvaluationConfig, GraspSafetyEvaluator
-    from grasp_safety_ros.ros.robot.bundle import PARALLEL_MIN_SAMPLES
     from grasp_safety_ros.scenario.schema import load_scenario
 
     with tempfile.TemporaryDirectory() as folder:
         scenario = load_scenario(book_scenario(grasps, Path(folder)))
     robot = scenario.robot.load(scenario.base_dir)
-    config = EvaluationConfig(
-        metric=scenario.metric, workers=workers, parallel_min_samples=PARALLEL_MIN_SAMPLES
-    )
+    config = EvaluationConfig(metric=scenario.metric, workers=workers)
+    if workers > 1:  # (only then: older checkouts have no such constant)
+        from grasp_safety_ros.ros.robot.bundle import PARALLEL_MIN_SAMPLES
+
+        config = replace(config, parallel_min_samples=PARALLEL_MIN_SAMPLES)
     evaluator = GraspSafetyEvaluator(robot, config)
     args = (scenario.grasps, scenario.object_inertia, scenario.trajectory)
     corners = scenario.options.points_in_object_m

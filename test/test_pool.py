@@ -211,3 +211,42 @@ def test_split_grasps_raises_once_no_range_runs() -> None:
         with pytest.raises(_AbandonError):
             split_grasps(pool, 4, run)
         assert finished == [2]
+
+
+def test_split_grasps_takes_back_what_has_not_started_before_waiting() -> None:
+    """Three workers, two of them busy: the range that started on the pool's free thread runs
+    on, the one still queued is the caller's before the caller waits (it never waits while a
+    range is queued); a pool that is shut down (the interpreter exits) leaves every range to
+    the caller."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from grasp_safety_ros.core.method.pool import split_grasps
+
+    me = threading.current_thread().name
+    started, release = threading.Event(), threading.Event()
+    ran: list[tuple[int, str]] = []
+
+    def run(start: int, stop: int) -> None:
+        if start == 3:  # on the pool: it holds until the caller has run the queued range
+            started.set()
+            release.wait(5.0)
+        elif start == 0:
+            assert started.wait(30.0)
+        ran.append((start, threading.current_thread().name))
+        if start == 6:
+            release.set()
+
+    gate = threading.Event()
+    with ThreadPoolExecutor(max_workers=3) as pool:
+        busy = [pool.submit(gate.wait, 30.0) for _ in range(2)]
+        split_grasps(pool, 9, run)
+        gate.set()
+        for future in busy:
+            future.result()
+    assert ran == [(0, me), (6, me), (3, ran[2][1])] and ran[2][1] != me
+
+    closed = ThreadPoolExecutor(max_workers=2)
+    closed.shutdown()
+    ran.clear()
+    split_grasps(closed, 4, run)
+    assert ran == [(0, me), (2, me)]

@@ -26,7 +26,8 @@ MIN_VALUE, MAX_VALUE = 1e-100, 1e100
 [m/s] (or 0) and effective masses [kg] assessed against it (``iso15066``): then μ·k > 0 and
 μ·k, sqrt(μ·k), F = v·sqrt(μ·k), v_max = F_tr/sqrt(μ·k) and F/F_tr are at most about 1e300,
 never inf or NaN (a custom region of m_h = inf and a mass of 1e305 kg at rest made μ·k inf and
-F = 0·inf NaN). Far beyond any physical value: the table's k is 1e4-1.5e5 N/m, m_h 0.6-75 kg."""
+F = 0·inf NaN; the shortest admissible duration T·F/F_tr may still overflow to inf there, never
+NaN). Far beyond any physical value: the table's k is 1e4-1.5e5 N/m, m_h 0.6-75 kg."""
 
 DATA_FILE_NAME = "iso_ts_15066_body_regions.yaml"
 """Name of the package's data file (in grasp_safety_ros/data/) holding the same table."""

@@ -142,17 +142,25 @@ def split_grasps(executor: Executor | None, grasps: int, run: Callable[[int, int
     # a range not started is taken back with its slot emptied: the pool's queue, which keeps
     # a cancelled task until a thread takes it, then holds no reference to the outputs
     slots: list[list[Any]] = [[run, *bounds] for bounds in ranges[1:]]
-    futures = [executor.submit(_run_slot, slot) for slot in slots]
+    futures: list[Future[None]] = []
+    try:
+        futures.extend(executor.submit(_run_slot, slot) for slot in slots)
+    except RuntimeError:  # the pool is shut down (the interpreter exits): the caller runs the rest
+        pass
     try:
         run(*ranges[0])
-        for future, slot, bounds in zip(futures, slots, ranges[1:], strict=True):
+        for bounds in ranges[1 + len(futures) :]:
+            run(*bounds)
+        submitted = zip(futures, slots, ranges[1:], strict=False)  # (all, unless shut down)
+        for future, slot, bounds in submitted:  # first what has not started
             if future.cancel():
                 slot.clear()
                 run(*bounds)
-            else:
+        for future in futures:  # then wait for what runs
+            if not future.cancelled():
                 future.result()
     finally:  # on an exception too: no range still writes once this returns
-        for future, slot in zip(futures, slots, strict=True):
+        for future, slot in zip(futures, slots, strict=False):
             if future.cancel():
                 slot.clear()
         wait([future for future in futures if not future.cancelled()])
