@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import os
-import random
 import subprocess
 import sys
 import threading
@@ -18,6 +17,10 @@ from typing import Any
 
 from workload import ArmWorkload
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))  # a ROS domain of our own
+
+from ros_domains import claim_ros_domain
+
 
 @contextmanager
 def running_node(
@@ -26,7 +29,9 @@ def running_node(
     """The node for ``arm`` spinning in a thread; yields (node, environment of its clients).
 
     ``overrides``: node parameters on top of the benchmark's (robot, seed, ``dt_s``). The
-    node runs on a random ROS domain with localhost discovery; the environment names both.
+    node runs on a ROS domain claimed for it (``test/ros_domains.py``: never one a test suite
+    or another bench on the machine uses; a random one was, and a test's node then served the
+    bench's requests) with localhost discovery; the environment names both.
     Its middleware is set up as its console script sets it up (ros.runtime.middleware); the
     clients' is not (Fast DDS's defaults, as a user's client).
     """
@@ -43,7 +48,8 @@ def running_node(
     from grasp_safety_ros.ros.runtime.rclpy_private import NodeExecutor, join_callbacks
 
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    domain_id = random.SystemRandom().randint(0, 101)
+    claim = claim_ros_domain()
+    domain_id = claim.domain_id
     context = Context()
     profile = size_shared_memory_for_large_responses()  # as the console script (node.main)
     rclpy.init(context=context, domain_id=domain_id)
@@ -78,6 +84,7 @@ def running_node(
         join_callbacks(executor)
         node.destroy_node()
         rclpy.shutdown(context=context)
+        claim.release()
 
 
 class ClientProcess:
