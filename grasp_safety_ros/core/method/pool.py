@@ -140,8 +140,7 @@ def job_ranges(executor: Executor | None, grasps: int, largest: int) -> list[tup
     if jobs > workers:
         ends = sorted(bounds)[jobs - workers :]
         bounds |= {start + (stop - start + 1) // 2 for start, stop in pairwise(ends)}
-    ordered = sorted(bounds)
-    return list(pairwise(ordered))
+    return list(pairwise(sorted(bounds)))
 
 
 def split_grasps(executor: Executor | None, grasps: int, run: Callable[[int, int], None]) -> None:
