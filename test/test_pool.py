@@ -250,3 +250,74 @@ def test_split_grasps_takes_back_what_has_not_started_before_waiting() -> None:
     ran.clear()
     split_grasps(closed, 4, run)
     assert ran == [(0, me), (2, me)]
+
+
+def test_job_ranges_cover_the_grasps_once_with_the_short_jobs_last() -> None:
+    """Consecutive ranges covering every grasp once, none above ``largest``; serial: batches
+    of ``largest``; on a pool, every worker a job and, past one job per worker, the last job
+    of each worker cut in two (sizes within one of each other). 100 grasps on 2 workers, at
+    most 16: 8 jobs of 100 k // 8 bounds (12, 13, ...), the last two (75-87, 87-100) halved
+    into 6 + 6 and 7 + 6."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from grasp_safety_ros.core.method.pool import job_ranges
+
+    assert job_ranges(None, 40, 16) == [(0, 16), (16, 32), (32, 40)]
+    for workers in (1, 2, 3):
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            for grasps in range(0, 80):
+                for largest in (1, 4, 16):
+                    ranges = job_ranges(pool, grasps, largest)
+                    sizes = [stop - start for start, stop in ranges]
+                    assert [start for start, _ in ranges] == list(np.cumsum([0, *sizes])[:-1])
+                    assert sum(sizes) == grasps and all(1 <= s <= largest for s in sizes)
+                    assert len(ranges) >= min(grasps, workers)
+                    if grasps > largest * workers > workers:  # halves end the request
+                        firsts, seconds = sizes[-2 * workers :: 2], sizes[1 - 2 * workers :: 2]
+                        jobs = [*sizes[: -2 * workers], *np.add(firsts, seconds)]
+                        assert max(jobs) - min(jobs) <= 1 and len(jobs) % workers == 0
+                        assert np.abs(np.subtract(firsts, seconds)).max() <= 1
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        sizes = [stop - start for start, stop in job_ranges(pool, 100, 16)]
+    assert sizes == [12, 13, 12, 13, 12, 13, 6, 6, 7, 6]
+
+
+def test_posture_jobs_of_any_size_give_the_serial_selection(
+    arm7: RobotModel, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Posture selection's jobs only regroup grasps: with batches of 2 (job_ranges: 9
+    grasps on 2 workers, 6 jobs of 1-2, the last one halved) every evaluation, order and
+    selection record equals the serial one's (batches of BATCH_GRASPS), bit for bit."""
+    import pickle
+
+    from grasp_safety_ros.core.method import posture
+    from grasp_safety_ros.core.method.pool import job_ranges
+
+    if not compiled_available():
+        pytest.skip("numba is not installed")  # threads share the patched function
+    rng = np.random.default_rng(5)
+    seed = random_positions(arm7, rng)
+    trajectory = reach_trajectory(arm7, seed, dt=0.05)
+    grasps = [*grasps_near_identity(8), Grasp(pin.SE3(np.eye(3), np.array([0, 0, 5.0])), "far")]
+    config = posture.PostureConfig(restarts=4)
+    sizes: list[int] = []
+    batch = posture.select_posture_batch
+
+    def recorded(evaluator: GraspSafetyEvaluator, job_grasps: list[Grasp], *rest):
+        sizes.append(len(job_grasps))
+        return batch(evaluator, job_grasps, *rest)
+
+    kept = []
+    for workers in (1, 2):
+        evaluator = GraspSafetyEvaluator(
+            arm7, EvaluationConfig(workers=workers, parallel_min_samples=1)
+        )
+        ranking = evaluator.rank(grasps, BOX, trajectory, seed_positions=seed)
+        kept.append(posture.select_postures(evaluator, grasps, BOX, trajectory, ranking, config))
+        monkeypatch.setattr(posture, "BATCH_GRASPS", 2)
+        monkeypatch.setattr(posture, "select_posture_batch", recorded)
+    serial, shared = kept
+    assert sorted(sizes) == sorted(b - a for a, b in job_ranges(evaluator._grasp_pool, 9, 2))
+    assert shared.order == serial.order and not serial.evaluations[-1].feasible
+    assert pickle.dumps(shared.evaluations) == pickle.dumps(serial.evaluations)
+    assert pickle.dumps(shared.postures) == pickle.dumps(serial.postures)

@@ -27,7 +27,7 @@ from concurrent.futures import (
 )
 from dataclasses import replace
 from functools import partial
-from itertools import islice
+from itertools import islice, pairwise
 from typing import Any, ClassVar, Protocol, TypeVar
 
 from ..model.robot import RobotModel
@@ -120,6 +120,27 @@ def grasps_per_job(executor: Executor | None, grasps: int, largest: int) -> int:
         return largest
     workers = max(1, getattr(executor, "_max_workers", 2))
     return max(1, min(largest, math.ceil(grasps / workers)))
+
+
+def job_ranges(executor: Executor | None, grasps: int, largest: int) -> list[tuple[int, int]]:
+    """Consecutive ``(start, stop)`` ranges that cover ``range(grasps)``, one per job of a
+    request of ``grasps``: serial (None), batches of ``largest`` (one kernel call's).
+
+    On a pool, a multiple of its workers in number (every worker gets a job), of at most
+    ``largest`` grasps, sizes differing by at most one; when that is more than one job per
+    worker, the last job of each worker is cut in two: the workers take the jobs in order as
+    they free up, so short jobs at the end let them finish close together however the
+    grasps' costs vary (posture selection on the node's 2 workers, 100 grasps: 10 jobs of
+    12-13 and 6-7 grasps, docs/performance_pipeline.md)."""
+    if executor is None:
+        return [(start, min(start + largest, grasps)) for start in range(0, grasps, largest)]
+    workers = max(1, getattr(executor, "_max_workers", 2))
+    jobs = min(grasps, workers * math.ceil(grasps / (largest * workers)))
+    bounds = {grasps * k // jobs for k in range(jobs + 1)} if jobs else set()
+    if jobs > workers:
+        ends = sorted(bounds)[jobs - workers :]
+        bounds |= {start + (stop - start + 1) // 2 for start, stop in pairwise(ends)}
+    return list(pairwise(sorted(bounds)))
 
 
 def split_grasps(executor: Executor | None, grasps: int, run: Callable[[int, int], None]) -> None:

@@ -59,7 +59,7 @@ from ..model.robot import RobotModel
 from ..model.trajectory import ObjectTrajectory
 from ..model.waypoint_trajectory import WaypointTrajectory
 from .halton import scrambled_halton
-from .pool import evaluate_jobs, executor_for, grasps_per_job
+from .pool import evaluate_jobs, executor_for, job_ranges
 from .ranking import (
     BATCH_GRASPS,
     GraspSafetyEvaluator,
@@ -535,20 +535,19 @@ def select_postures(
     sampled = sample_trajectory(trajectory)  # once for every grasp and posture
     # Work estimate: every grasp followed from up to restarts + 1 postures.
     executor = executor_for(evaluator, len(grasps) * len(sampled.times_s) * (len(seeds) + 1))
-    size = grasps_per_job(executor, len(grasps), BATCH_GRASPS)  # a few grasps: every worker
     jobs = [
         (
-            grasps[first : first + size],
+            grasps[first:stop],
             object_inertia,
             trajectory,
-            ranking.evaluations[first : first + size],
+            ranking.evaluations[first:stop],
             config,
             ranking.metric,
             seeds,
             sampled,
             criterion,
         )
-        for first in range(0, len(grasps), size)
+        for first, stop in job_ranges(executor, len(grasps), BATCH_GRASPS)
     ]
     batches = (
         (select_posture_batch(evaluator, *job) for job in jobs)
