@@ -528,17 +528,6 @@ def test_scrambled_halton_is_kept_per_process_and_handed_out_as_copies() -> None
     assert again.flags.writeable and again is not first
 
 
-def test_grasps_per_job_gives_every_worker_a_job() -> None:
-    from concurrent.futures import ThreadPoolExecutor
-
-    from grasp_safety_ros.core.method.pool import grasps_per_job
-
-    assert grasps_per_job(None, 10, 16) == 16  # serial: one kernel batch
-    with ThreadPoolExecutor(max_workers=2) as pool:
-        # 10 grasps: two jobs of 5 (was one job of 10 and an idle worker), 40: at most 16
-        assert [grasps_per_job(pool, n, 16) for n in (1, 2, 3, 10, 17, 40)] == [1, 1, 2, 5, 9, 16]
-
-
 def test_restart_seeds_do_not_import_scipy_stats() -> None:
     """scipy.stats costs 0.5-1 s to import; posture selection's seeds do not need it."""
     import subprocess
@@ -743,7 +732,7 @@ def test_selection_is_deterministic_and_independent_of_the_workers(baxter) -> No
 
 def test_a_small_request_shared_out_over_the_workers_keeps_every_record(baxter) -> None:
     """10 grasps (one out of reach) on a 2-worker pool go out as two jobs of 5
-    (grasps_per_job); every evaluation and selection record equals the serial one's."""
+    (pool.job_ranges); every evaluation and selection record equals the serial one's."""
     trajectory = book_trajectory(dt_s=0.05)
     grasps = [
         Grasp(pose_from_position_quat([-0.075, y, 0.0], [0, 0, 0, 1], "g"), f"spine_{y:.3f}")

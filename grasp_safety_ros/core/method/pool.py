@@ -112,16 +112,6 @@ def executor_for(evaluator: PooledEvaluator, total_samples: int) -> Executor | N
     return pool
 
 
-def grasps_per_job(executor: Executor | None, grasps: int, largest: int) -> int:
-    """Grasps per job of a request of ``grasps``: at most ``largest`` (one kernel call's
-    batch), and few enough that every worker of ``executor`` gets a job (None: serial, all
-    in batches of ``largest``)."""
-    if executor is None:
-        return largest
-    workers = max(1, getattr(executor, "_max_workers", 2))
-    return max(1, min(largest, math.ceil(grasps / workers)))
-
-
 def job_ranges(executor: Executor | None, grasps: int, largest: int) -> list[tuple[int, int]]:
     """Consecutive ``(start, stop)`` ranges that cover ``range(grasps)``, one per job of a
     request of ``grasps``: serial (None), batches of ``largest`` (one kernel call's).

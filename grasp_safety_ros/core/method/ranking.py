@@ -24,7 +24,7 @@ from .ik import IKConfig, IKSolver, check_backend
 from .joint_trajectory import JointSpaceTrajectory
 from .metrics import METRICS, aggregate, check_metric, score_bound_weights
 from .packed import CompiledGraspResult
-from .pool import evaluate_jobs, executor_for, grasps_per_job
+from .pool import evaluate_jobs, executor_for, job_ranges
 from .results import FollowedPosture, Grasp, GraspEvaluation, Ranking
 
 __all__ = [  # the public API, re-exported names included (Grasp ... from results, metrics)
@@ -475,18 +475,17 @@ class GraspSafetyEvaluator:
         for grasp in grasps:
             self.trajectory_for(grasp, sampled.trajectory)  # planned trajectories: validate
         executor = executor_for(self, len(grasps) * len(sampled.times_s))
-        size = grasps_per_job(executor, len(grasps), BATCH_GRASPS)  # a few grasps: every worker
         jobs = [
             (
-                range(start, min(start + size, len(grasps))),
-                grasps[start : start + size],
+                range(start, stop),
+                grasps[start:stop],
                 object_inertia,
                 sampled,
                 metric,
                 seed_q,
                 start_positions,
             )
-            for start in range(0, len(grasps), size)
+            for start, stop in job_ranges(executor, len(grasps), BATCH_GRASPS)
         ]
         if executor is None or len(jobs) == 1:  # one job: no hand-off to a worker
             batches: Generator[list[GraspEvaluation], None, None] = (
