@@ -112,6 +112,12 @@ def executor_for(evaluator: PooledEvaluator, total_samples: int) -> Executor | N
     return pool
 
 
+def _workers(executor: Executor) -> int:
+    """The threads or processes of ``executor`` (the standard pools' ``_max_workers``; 2 for
+    another executor)."""
+    return max(1, getattr(executor, "_max_workers", 2))
+
+
 def job_ranges(executor: Executor | None, grasps: int, largest: int) -> list[tuple[int, int]]:
     """Consecutive ``(start, stop)`` ranges that cover ``range(grasps)``, one per job of a
     request of ``grasps``: serial (None), batches of ``largest`` (one kernel call's).
@@ -124,7 +130,7 @@ def job_ranges(executor: Executor | None, grasps: int, largest: int) -> list[tup
     12-13 and 6-7 grasps, docs/performance_pipeline.md)."""
     if executor is None:
         return [(start, min(start + largest, grasps)) for start in range(0, grasps, largest)]
-    workers = max(1, getattr(executor, "_max_workers", 2))
+    workers = _workers(executor)
     jobs = min(grasps, workers * math.ceil(grasps / (largest * workers)))
     bounds = {grasps * k // jobs for k in range(jobs + 1)} if jobs else set()
     if jobs > workers:
@@ -144,7 +150,7 @@ def split_grasps(executor: Executor | None, grasps: int, run: Callable[[int, int
     thread's ``kernels.ik.thread_workspace``), so that every grasp's numbers are the serial
     ones bit for bit. Returns when no range runs any longer; the first exception is raised.
     """
-    workers = max(1, getattr(executor, "_max_workers", 1))
+    workers = 1 if executor is None else _workers(executor)
     if not isinstance(executor, ThreadPoolExecutor) or workers == 1 or grasps < 2:
         run(0, grasps)
         return
@@ -202,10 +208,9 @@ def evaluate_jobs(
     thread task finishes its one job.
     """
     if isinstance(executor, ThreadPoolExecutor):
-        ahead = 2 * max(1, getattr(executor, "_max_workers", 2))
+        ahead = 2 * _workers(executor)
         return _ahead(executor, partial(_evaluate_job, evaluate, evaluator), jobs, ahead)
-    workers = max(1, getattr(executor, "_max_workers", 2))
-    size = max(1, math.ceil(len(jobs) / (4 * workers)))
+    size = max(1, math.ceil(len(jobs) / (4 * _workers(executor))))
     chunks = [jobs[k : k + size] for k in range(0, len(jobs), size)]
     return _close_early(executor.map(partial(_evaluate_chunk_in_worker, evaluate), chunks))
 
